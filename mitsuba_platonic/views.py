@@ -1,0 +1,175 @@
+"""Views: directions on the unit sphere and the orthographic cameras they define.
+
+A *view* is a unit vector ω ∈ S² pointing from the object's centre to an
+orthographic camera that looks at the origin with upright orientation (up = +y).
+The input view of PlatonicGAN is the front view ω₀ = (0, 0, 1).
+
+Angles (used only to build views, never stored):
+
+    ω(φ, θ) = (cos θ · sin φ,  sin θ,  cos θ · cos φ)
+
+with azimuth φ measured from +z towards +x and elevation θ from the xz-plane
+towards +y, so ω(0, 0) = ω₀ and θ = ±90° are the poles ±y.
+
+Camera frame (``camera_frames``), right-handed, looking along −ω:
+
+    right = (cos φ, 0, −sin φ) = normalize((ω_z, 0, −ω_x))
+    up    = ω × right
+
+For every ω off the poles this is the usual look-at frame with world up +y.
+At the poles the look-at frame is undefined (ω ∥ up); there we use right = +x,
+which is the limit of the frame along the meridian φ = 0 (the front meridian),
+so the frame is continuous along that meridian through both poles and defined
+everywhere. (No frame field on S² is continuous everywhere: hairy-ball theorem.)
+"""
+
+from __future__ import annotations
+
+import math
+from typing import Optional, Tuple, Union
+
+import torch
+
+__all__ = [
+    "front_view",
+    "from_angles",
+    "to_angles",
+    "sample_views",
+    "turntable",
+    "camera_frames",
+    "validate_views",
+]
+
+Seed = Union[int, torch.Generator, None]
+
+#: Horizontal norm below which ω counts as a pole (computed in float64).
+POLE_EPS = 1e-12
+
+#: Tolerance on |ω| − 1 accepted as "unit" at the public boundary.
+UNIT_TOL = 1e-4
+
+
+def front_view(batch: Optional[int] = None, dtype: torch.dtype = torch.float32) -> torch.Tensor:
+    """The input view ω₀ = (0, 0, 1): shape ``(3,)``, or ``(batch, 3)`` when ``batch`` is given."""
+    w = torch.tensor([0.0, 0.0, 1.0], dtype=dtype)
+    return w if batch is None else w.expand(batch, 3).clone()
+
+
+def from_angles(azimuth: torch.Tensor | float, elevation: torch.Tensor | float,
+                degrees: bool = True) -> torch.Tensor:
+    """Views from azimuth φ and elevation θ: ``ω = (cos θ sin φ, sin θ, cos θ cos φ)``.
+
+    Accepts scalars or broadcastable tensors; returns ``(..., 3)`` float32.
+    """
+    phi = torch.as_tensor(azimuth, dtype=torch.float64)
+    theta = torch.as_tensor(elevation, dtype=torch.float64)
+    if degrees:
+        phi, theta = torch.deg2rad(phi), torch.deg2rad(theta)
+    phi, theta = torch.broadcast_tensors(phi, theta)
+    w = torch.stack([torch.cos(theta) * torch.sin(phi), torch.sin(theta),
+                     torch.cos(theta) * torch.cos(phi)], dim=-1)
+    return w.to(torch.float32)
+
+
+def to_angles(views: torch.Tensor, degrees: bool = True) -> Tuple[torch.Tensor, torch.Tensor]:
+    """Inverse of :func:`from_angles`: ``(azimuth, elevation)``; azimuth is 0 at the poles."""
+    w = views.to(torch.float64)
+    phi = torch.atan2(w[..., 0], w[..., 2])
+    theta = torch.asin(w[..., 1].clamp(-1.0, 1.0))
+    if degrees:
+        phi, theta = torch.rad2deg(phi), torch.rad2deg(theta)
+    return phi, theta
+
+
+def _generator(seed: Seed) -> torch.Generator:
+    if isinstance(seed, torch.Generator):
+        return seed
+    g = torch.Generator()
+    g.manual_seed(0 if seed is None else int(seed))
+    return g
+
+
+def sample_views(n: int, distribution: str = "sphere", seed: Seed = 0,
+                 elevation: Tuple[float, float] | float = (-90.0, 90.0)) -> torch.Tensor:
+    """Draw ``n`` random views, deterministic under ``seed`` (an int or a ``torch.Generator``).
+
+    ``distribution``:
+      - ``"sphere"``: uniform on S² (y uniform in [−1, 1], φ uniform), the paper's p_view.
+      - ``"band"``: uniform *by area* on the band of elevations ``elevation = (θ_lo, θ_hi)``
+        degrees, i.e. y = sin θ uniform in [sin θ_lo, sin θ_hi].
+      - ``"ring"``: fixed elevation ``elevation = θ`` (degrees, a single number), φ uniform:
+        an azimuth-only ring (turntable-like training).
+
+    Returns ``(n, 3)`` float32 unit vectors.
+    """
+    if not isinstance(n, int) or n < 0:
+        raise ValueError(f"n must be a non-negative int, got {n!r}")
+    g = _generator(seed)
+    phi = torch.rand(n, generator=g, dtype=torch.float64) * (2.0 * math.pi)
+    if distribution == "sphere":
+        lo, hi = -1.0, 1.0
+    elif distribution == "band":
+        if isinstance(elevation, (int, float)) or len(elevation) != 2:
+            raise ValueError(f"'band' needs elevation=(low, high) in degrees, got {elevation!r}")
+        e0, e1 = float(elevation[0]), float(elevation[1])
+        if not -90.0 <= e0 <= e1 <= 90.0:
+            raise ValueError(f"'band' needs -90 <= low <= high <= 90 degrees, got {elevation!r}")
+        lo, hi = math.sin(math.radians(e0)), math.sin(math.radians(e1))
+    elif distribution == "ring":
+        if not isinstance(elevation, (int, float)):
+            raise ValueError(f"'ring' needs a single elevation in degrees, got {elevation!r}")
+        if not -90.0 <= float(elevation) <= 90.0:
+            raise ValueError(f"'ring' needs an elevation in [-90, 90] degrees, got {elevation!r}")
+        lo = hi = math.sin(math.radians(float(elevation)))
+    else:
+        raise ValueError(f"distribution must be 'sphere', 'band' or 'ring', got {distribution!r}")
+    y = lo + (hi - lo) * torch.rand(n, generator=g, dtype=torch.float64)
+    r = torch.sqrt((1.0 - y * y).clamp_min(0.0))
+    w = torch.stack([r * torch.sin(phi), y, r * torch.cos(phi)], dim=-1)
+    return w.to(torch.float32)
+
+
+def turntable(n: int, elevation: float = 0.0, start: float = 0.0) -> torch.Tensor:
+    """``n`` evenly spaced azimuths starting at ``start`` degrees, at a fixed elevation: ``(n, 3)``."""
+    if not isinstance(n, int) or n < 1:
+        raise ValueError(f"n must be a positive int, got {n!r}")
+    phi = start + torch.arange(n, dtype=torch.float64) * (360.0 / n)
+    return from_angles(phi, torch.full_like(phi, float(elevation)))
+
+
+def validate_views(views: torch.Tensor, batch: Optional[int] = None) -> None:
+    """Raise ``ValueError`` unless ``views`` is a finite ``(B, 3)`` tensor of unit vectors."""
+    if not isinstance(views, torch.Tensor):
+        raise ValueError(f"views must be a torch.Tensor of shape (B, 3), got {type(views).__name__}")
+    if views.dim() != 2 or views.shape[1] != 3:
+        raise ValueError(f"views must have shape (B, 3), got {tuple(views.shape)}")
+    if batch is not None and views.shape[0] != batch:
+        raise ValueError(f"views has batch {views.shape[0]} but the volume has batch {batch}: "
+                         "one view per volume is expected")
+    if not torch.isfinite(views).all():
+        raise ValueError("views contain NaN or Inf")
+    norm = views.detach().to(torch.float64).norm(dim=1)
+    bad = (norm - 1.0).abs() > UNIT_TOL
+    if bad.any():
+        i = int(bad.nonzero()[0])
+        raise ValueError(f"views must be unit vectors (|ω| = 1 ± {UNIT_TOL}); view {i} has "
+                         f"|ω| = {float(norm[i]):.6g}")
+
+
+def camera_frames(views: torch.Tensor) -> Tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
+    """Orthonormal camera frames ``(right, up, ω)``, each ``(B, 3)`` float64.
+
+    ``right = normalize((ω_z, 0, −ω_x))`` (= (cos φ, 0, −sin φ)), falling back to +x at the
+    poles (|(ω_x, ω_z)| ≤ 1e-12); ``up = ω × right``. The camera looks along −ω; image
+    columns grow along ``right`` and rows grow along ``−up`` (row 0 at the top).
+    """
+    w = views.detach().to(torch.float64)
+    w = w / w.norm(dim=-1, keepdim=True)
+    horiz = torch.stack([w[..., 2], torch.zeros_like(w[..., 0]), -w[..., 0]], dim=-1)
+    hn = horiz.norm(dim=-1, keepdim=True)
+    pole = hn <= POLE_EPS
+    x_axis = torch.tensor([1.0, 0.0, 0.0], dtype=torch.float64).expand_as(w)
+    right = torch.where(pole, x_axis, horiz / torch.where(pole, torch.ones_like(hn), hn))
+    up = torch.linalg.cross(w, right, dim=-1)
+    up = up / up.norm(dim=-1, keepdim=True)
+    return right, up, w
