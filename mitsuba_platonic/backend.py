@@ -71,7 +71,7 @@ class BackendError(ImportError):
 
 
 def _version_of(path: str) -> int:
-    m = re.search(r"libLLVM[-.]?(\d+)", os.path.basename(path))
+    m = re.search(r"libLLVM(?:-|\.so\.)(\d+)", os.path.basename(path))
     return int(m.group(1)) if m else -1
 
 

@@ -113,7 +113,7 @@ def sample_views(n: int, distribution: str = "sphere", seed: Seed = 0,
             raise ValueError(f"'band' needs elevation=(low, high) in degrees, got {elevation!r}")
         e0, e1 = float(elevation[0]), float(elevation[1])
         if not -90.0 <= e0 <= e1 <= 90.0:
-            raise ValueError(f"'band' needs -90 <= low <= high <= 90 degrees, got {elevation!r}")
+            raise ValueError(f"'band' needs elevation=(low, high) with -90 <= low <= high <= 90 degrees, got {elevation!r}")
         lo, hi = math.sin(math.radians(e0)), math.sin(math.radians(e1))
     elif distribution == "ring":
         if not isinstance(elevation, (int, float)):

@@ -1,0 +1,207 @@
+"""The Mitsuba ray marcher against the closed form, finite differences and analytic cases."""
+
+import numpy as np
+import pytest
+import torch
+
+from mitsuba_platonic import render
+from mitsuba_platonic import views as V
+from mitsuba_platonic.volume import test_volume
+
+MODELS = ["vh", "ao", "ea"]
+FILTERS = ["nearest", "trilinear"]
+OBLIQUE = V.from_angles(torch.tensor([37.0, -128.0, 75.0]), torch.tensor([23.0, -41.0, 8.0]))
+
+
+def _pair(model, n=16, kind="figure", batch=1):
+    vol = test_volume(n, kind, model).expand(batch, -1, -1, -1, -1).contiguous()
+    return vol
+
+
+def _both(vol, views, model, filter, **options):
+    a = render(vol, views, model, "closed_form", filter=filter)
+    b = render(vol, views, model, "mitsuba", filter=filter, **options)
+    return a, b
+
+
+@pytest.mark.parametrize("model", MODELS)
+@pytest.mark.parametrize("filter", FILTERS)
+@pytest.mark.parametrize("kind", ["figure", "cloud"])
+def test_front_view_agrees_with_closed_form(model, filter, kind):
+    vol = _pair(model, 32, kind)
+    a, b = _both(vol, V.front_view(1), model, filter)
+    assert a.shape == b.shape
+    assert (a - b).abs().max() <= 1e-5
+
+
+@pytest.mark.parametrize("model", MODELS)
+@pytest.mark.parametrize("filter", FILTERS)
+def test_oblique_views_agree_with_closed_form(model, filter):
+    vol = _pair(model, 32, "figure", batch=3)
+    a, b = _both(vol, OBLIQUE, model, filter)
+    assert (a - b).abs().max() <= 1e-4
+
+
+@pytest.mark.parametrize("model", MODELS)
+@pytest.mark.parametrize("filter", FILTERS)
+def test_gradients_agree_with_closed_form(model, filter):
+    vol = _pair(model, 16, "cloud", batch=2)
+    views = torch.cat([V.front_view(1), OBLIQUE[:1]])
+    weights = torch.rand(2, 4 if model == "ea" else 1, 16, 16)
+    grads = []
+    for backend in ["closed_form", "mitsuba"]:
+        x = vol.clone().requires_grad_()
+        (render(x, views, model, backend, filter=filter) * weights).sum().backward()
+        grads.append(x.grad)
+    rel = (grads[0] - grads[1]).norm() / grads[0].norm()
+    assert rel <= 1e-3
+
+
+@pytest.mark.parametrize("model", ["ao", "ea"])
+@pytest.mark.parametrize("step", [0.5, 1.5])
+def test_gradients_at_other_steps_match_finite_differences(model, step):
+    """The log-domain path (step != 1) has no closed form to compare with: check it against FD."""
+    vol = _pair(model, 8, "cloud")
+    view = OBLIQUE[:1]
+    weights = torch.rand(1, 4 if model == "ea" else 1, 8, 8)
+
+    def f(x):
+        return float((render(x, view, model, "mitsuba", step=step) * weights).double().sum())
+
+    x = vol.clone().requires_grad_()
+    (render(x, view, model, "mitsuba", step=step) * weights).sum().backward()
+    direction = torch.randn_like(vol) * (vol > 0.02)
+    ε = 2e-3
+    fd = (f((vol + ε * direction).clamp(0, 1)) - f((vol - ε * direction).clamp(0, 1))) / (2 * ε)
+    analytic = float((x.grad * direction).sum())
+    assert abs(fd - analytic) <= 1e-2 * abs(analytic) + 1e-4
+
+
+@pytest.mark.parametrize("model", ["ao", "ea"])
+def test_error_against_fine_step_reference_falls_monotonically(model):
+    vol = _pair(model, 16, "cloud")
+    view = OBLIQUE[:1]
+    reference = render(vol, view, model, "mitsuba", step=1 / 16)
+    errors = [float((render(vol, view, model, "mitsuba", step=s) - reference).abs().mean())
+              for s in [4.0, 2.0, 1.0, 0.5]]
+    assert all(a > b for a, b in zip(errors, errors[1:])), errors
+
+
+@pytest.mark.parametrize("step", [1.0, 0.5, 0.25])
+@pytest.mark.parametrize("v", [0.05, 0.5, 0.9])
+def test_constant_slab_matches_beer_lambert(step, v):
+    """A slab of L voxels of density v, seen head-on: T = exp(−σ L Δ) = (1 − v)^L, C = c (1 − T)."""
+    n, first, L = 16, 5, 6
+    vol = torch.zeros(1, 4, n, n, n)
+    vol[:, :3, first:first + L] = torch.tensor([0.2, 0.5, 0.8])[:, None, None, None]
+    vol[:, 3, first:first + L] = v
+    view = V.front_view(1)
+    T = (1 - v) ** L
+    ao = render(vol[:, 3:], view, "ao", "mitsuba", filter="nearest", step=step)
+    assert torch.allclose(ao, torch.full_like(ao, 1 - T), atol=1e-5)
+    vh = render(vol[:, 3:], view, "vh", "mitsuba", filter="nearest", step=step)
+    assert torch.allclose(vh, torch.full_like(vh, 1 - np.exp(-v * L)), atol=1e-5)
+    ea = render(vol, view, "ea", "mitsuba", filter="nearest", step=step)
+    want = torch.tensor([0.2 * (1 - T), 0.5 * (1 - T), 0.8 * (1 - T), 1 - T])
+    assert torch.allclose(ea[0, :, 3, 7], want, atol=1e-5)
+
+
+DENSITIES = [0.0, 1e-8, 0.5, 1 - 1e-7, 1.0]
+
+
+@pytest.mark.parametrize("model", MODELS)
+@pytest.mark.parametrize("n", [8, 64])
+def test_numerical_extremes_stay_finite_and_in_range(model, n):
+    c = 4 if model == "ea" else 1
+    vols = []
+    for d in DENSITIES:  # constant volumes at each extreme density
+        x = torch.rand(1, c, n, n, n)
+        x[:, -1] = d
+        vols.append(x)
+    mixed = torch.rand(1, c, n, n, n)
+    mixed[:, -1] = torch.tensor(DENSITIES)[torch.randint(0, 5, (n, n, n))]
+    vols.append(mixed)
+    vol = torch.cat(vols)
+    b = vol.shape[0]
+    views = torch.tensor([[0.0, 1.0, 0.0], [0.0, -1.0, 0.0]]).repeat(b, 1)[:b]
+    views[0] = torch.tensor([0.0, 0.0, 1.0])
+    backends = [("closed_form", {}), ("mitsuba", {"step": 1.0}), ("mitsuba", {"step": 0.5, "jitter": True})]
+    for backend, opts in backends:
+        x = vol.clone().requires_grad_()
+        out = render(x, views, model, backend, **opts)
+        assert torch.isfinite(out).all() and out.min() >= 0 and out.max() <= 1 + 1e-6, backend
+        out.sum().backward()
+        assert torch.isfinite(x.grad).all(), (backend, opts)
+    # empty → transparent, solid → opaque
+    empty = torch.zeros(1, c, n, n, n)
+    solid = torch.ones(1, c, n, n, n)
+    for backend in ["closed_form", "mitsuba"]:
+        assert render(empty, V.front_view(1), model, backend).abs().max() == 0
+        full = render(solid, V.front_view(1), model, backend)
+        if model == "vh":
+            assert torch.allclose(full, torch.full_like(full, 1 - np.exp(-n)), atol=1e-6)
+        else:
+            assert torch.allclose(full, torch.ones_like(full), atol=1e-6)
+
+
+@pytest.mark.parametrize("model", MODELS)
+def test_poles_agree_with_closed_form(model):
+    vol = _pair(model, 16, "figure", batch=2)
+    poles = torch.tensor([[0.0, 1.0, 0.0], [0.0, -1.0, 0.0]])
+    a, b = _both(vol, poles, model, "trilinear")
+    assert (a - b).abs().max() <= 1e-4
+
+
+def test_each_pair_of_a_batch_renders_and_differentiates_on_its_own():
+    """Two renders of one volume in one graph (Algorithm 1's input and random views)."""
+    vol = _pair("ea", 16, "figure")
+    w1, w2 = V.front_view(1), OBLIQUE[1:2]
+    x = vol.clone().requires_grad_()
+    (render(x, w1, "ea", "mitsuba").sum() + 2 * render(x, w2, "ea", "mitsuba").sum()).backward()
+    y = vol.clone().requires_grad_()
+    (render(y, w1, "ea", "closed_form").sum() + 2 * render(y, w2, "ea", "closed_form").sum()).backward()
+    assert (x.grad - y.grad).norm() / y.grad.norm() <= 1e-3
+    batch = render(torch.cat([vol, vol.flip(2)]), torch.cat([w1, w2]), "ea", "mitsuba")
+    alone = render(vol.flip(2), w2, "ea", "mitsuba")
+    assert torch.allclose(batch[1:], alone, atol=1e-6)
+
+
+def test_supersampling_and_jitter():
+    vol = _pair("ea", 16, "figure")
+    view = OBLIQUE[:1]
+    reference = render(vol, view, "ea", "mitsuba", spp=64, step=0.25)
+    a = render(vol, view, "ea", "mitsuba", jitter=True, spp=4, seed=1)
+    b = render(vol, view, "ea", "mitsuba", jitter=True, spp=4, seed=1)
+    c = render(vol, view, "ea", "mitsuba", jitter=True, spp=4, seed=2)
+    assert torch.equal(a, b) and not torch.equal(a, c)
+    errors = [float((render(vol, view, "ea", "mitsuba", jitter=True, spp=s, seed=3) - reference).abs().mean())
+              for s in [1, 16, 256]]
+    assert errors[0] > errors[1] > errors[2], errors
+    # a regular sub-pixel grid converges to the same image
+    assert float((render(vol, view, "ea", "mitsuba", spp=16, step=0.25) - reference).abs().mean()) < errors[0]
+
+
+def test_early_termination_bias_is_bounded_by_its_threshold():
+    vol = _pair("ea", 32, "figure")
+    view = OBLIQUE[:1]
+    exact = render(vol, view, "ea", "mitsuba")
+    for eps in [1e-3, 1e-2]:
+        fast = render(vol, view, "ea", "mitsuba", termination=eps)
+        assert (fast - exact).abs().max() <= eps + 1e-6
+
+
+def test_colour_grid_only_for_ea():
+    from mitsuba_platonic.render.mitsuba_renderer import MitsubaOptions, _bundle
+    for model in MODELS:
+        keys = _bundle(8, model, MitsubaOptions()).keys
+        assert keys == (("medium.sigma_t.data", "medium.albedo.data") if model == "ea" else ("medium.sigma_t.data",))
+
+
+@pytest.mark.parametrize("bad, match", [
+    ({"step": 0}, "step"), ({"spp": 3}, "perfect square"), ({"spp": 0}, "spp"),
+    ({"filter": "cubic"}, "filter"), ({"termination": 1.5}, "termination"), ({"colour": 1}, "unknown option"),
+])
+def test_bad_options(bad, match):
+    vol = _pair("vh", 8)
+    with pytest.raises(ValueError, match=match):
+        render(vol, V.front_view(1), "vh", "mitsuba", **bad)
