@@ -67,10 +67,9 @@ def validate_volume(volume: torch.Tensor, model: str) -> None:
         raise ValueError(f"volume resolution must be at least 2, got {d}")
     if not volume.is_floating_point():
         raise ValueError(f"volume must be a floating-point tensor, got {volume.dtype}")
-    v = volume.detach()
-    if not torch.isfinite(v).all():
-        raise ValueError("volume contains NaN or Inf")
-    lo, hi = float(v.min()), float(v.max())
+    lo, hi = (float(x) for x in torch.aminmax(volume.detach()))  # one pass; NaN and ±Inf propagate
+    if math.isnan(lo) or math.isnan(hi):
+        raise ValueError("volume contains NaN")
     if lo < 0.0 or hi > 1.0:
         raise ValueError(f"volume values must lie in [0, 1], got range [{lo:.6g}, {hi:.6g}]")
 

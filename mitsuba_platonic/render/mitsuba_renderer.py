@@ -6,10 +6,13 @@ Per (volume, view) pair the volume's grids are written into a cached Mitsuba sce
 a PyTorch autograd function, so gradients flow back to the torch volume.
 
 Grid layout (DESIGN §2, §3). A torch ``(C, D, H, W)`` volume becomes a Mitsuba ``[Z, Y, X, C]``
-grid by a permute and two flips (Z = N−1−d, Y = N−1−h, X = w), padded with one voxel of
-zeros on every side and mapped to [−1−Δ, 1+Δ]³. The zero border makes Mitsuba's trilinear
-lookups blend towards empty space at the boundary exactly as ``grid_sample`` with zero padding
-does, and nearest lookups outside the cube return 0.
+grid by a permute and two flips (Z = N−1−d, Y = N−1−h, X = w) that maps onto [−1, 1]³
+(``to_world`` = translate(−1)·scale(2)). Outside the cube the closed form sees zeros
+(``grid_sample`` zero padding); the ray marcher reproduces that by weighting each lookup with
+the zero-padding ramp (see :mod:`.raymarch`) instead of padding the data, which keeps the grid
+a power of two wide: for N = 2^k, texture coordinates of dyadic points are exact in float32.
+Together with a dyadic near-clip distance this makes the front view's samples land exactly on
+voxel centres, so the front view agrees with the closed form to accumulation round-off.
 """
 
 from __future__ import annotations
@@ -64,9 +67,18 @@ class MitsubaOptions:
 
 
 def to_mitsuba_grid(v: torch.Tensor) -> torch.Tensor:
-    """``(C, D, H, W)`` torch volume → zero-bordered ``(N+2, N+2, N+2, C)`` Mitsuba grid [Z, Y, X, C]."""
-    g = v.permute(1, 2, 3, 0).flip(0, 1)                      # [d, h, w, c] → [Z, Y, X, C]
-    return F.pad(g, (0, 0, 1, 1, 1, 1, 1, 1)).contiguous()
+    """``(C, D, H, W)`` torch volume → ``(N, N, N, C)`` Mitsuba grid ``[Z, Y, X, C]`` (one copy)."""
+    return v.permute(1, 2, 3, 0).flip(0, 1)                   # [d, h, w, c] → [Z, Y, X, C]
+
+
+def grid_to_world(mi: Any) -> Any:
+    """Map a grid's local [0, 1]³ to the world cube [−1, 1]³ (x = 2u − 1 per axis).
+
+    Built from the explicit matrix: ``translate(−1) @ scale(2)`` stores its inverse scale as a
+    reciprocal, 0.49999997, which moves every lookup by up to 6e-8 in local coordinates.
+    """
+    return mi.ScalarTransform4f(mi.ScalarMatrix4f([[2.0, 0.0, 0.0, -1.0], [0.0, 2.0, 0.0, -1.0],
+                                                   [0.0, 0.0, 2.0, -1.0], [0.0, 0.0, 0.0, 1.0]]))
 
 
 @dataclass
@@ -78,6 +90,9 @@ class _Bundle:
 
 _SCENES: Dict[Tuple, _Bundle] = {}
 
+#: Near clip distance of the orthographic sensors: 2⁻⁷, exactly representable.
+NEAR_CLIP = 2.0 ** -7
+
 
 def build_scene(n: int, model: str, options: MitsubaOptions) -> Dict[str, Any]:
     """The Mitsuba scene dictionary for an N³ volume under ``model`` (grids start empty)."""
@@ -85,19 +100,19 @@ def build_scene(n: int, model: str, options: MitsubaOptions) -> Dict[str, Any]:
     import drjit as dr
     from . import raymarch  # noqa: F401  (registers the integrator)
     Δ = voxel_size(n)
-    to_world = mi.ScalarTransform4f().translate([-1.0 - Δ] * 3).scale(2.0 + 2.0 * Δ)
+    to_world = grid_to_world(mi)
 
     def grid(channels: int):
         return mi.load_dict({
             "type": "gridvolume", "filter_type": options.filter, "raw": True, "to_world": to_world,
-            "grid": mi.VolumeGrid(dr.zeros(mi.TensorXf, (n + 2, n + 2, n + 2, channels))),
+            "grid": mi.VolumeGrid(dr.zeros(mi.TensorXf, (n, n, n, channels))),
         })
 
     density = grid(1)
     medium = {"type": "heterogeneous", "sigma_t": density, "scale": 1.0 / Δ}
     integrator = {"type": raymarch.INTEGRATOR_NAME, "model": model, "resolution": n,
                   "step": float(options.step), "jitter": bool(options.jitter),
-                  "termination": float(options.termination), "density": density}
+                  "termination": float(options.termination), "filter": options.filter, "density": density}
     if model == "ea":                                         # VH and AO carry no colour grid
         albedo = grid(3)
         medium["albedo"] = albedo
@@ -109,6 +124,8 @@ def build_scene(n: int, model: str, options: MitsubaOptions) -> Dict[str, Any]:
         "sensor": {
             "type": "orthographic",
             "to_world": mi.ScalarTransform4f().look_at(origin=[0, 0, 2], target=[0, 0, 0], up=[0, 1, 0]),
+            # dyadic clip distances keep ray origins and depths exact in float32 at the front view
+            "near_clip": NEAR_CLIP, "far_clip": 8.0,
             "medium": {"type": "ref", "id": "medium"},
             "film": {"type": "hdrfilm", "width": n, "height": n, "pixel_format": "rgb",
                      "rfilter": {"type": "box"}, "sample_border": False},

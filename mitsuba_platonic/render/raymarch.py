@@ -57,7 +57,7 @@ V_MAX = 1.0 - 1e-6
 class RayMarcher(mi.ad.integrators.common.RBIntegrator):
     """Ray-marching VH / AO / EA integrator (see the module docstring for the maths).
 
-    Properties: ``model`` ('vh' | 'ao' | 'ea'), ``resolution`` N (voxels per side),
+    Properties: ``model`` ('vh' | 'ao' | 'ea'), ``resolution`` N (voxels per side), ``filter``,
     ``step`` (voxels, > 0), ``jitter`` (bool), ``termination`` (transmittance threshold ≥ 0),
     ``density`` (a ``gridvolume`` holding v) and, for EA, ``albedo`` (a ``gridvolume`` of colour).
     """
@@ -69,6 +69,7 @@ class RayMarcher(mi.ad.integrators.common.RBIntegrator):
         self.step = float(props.get("step", 1.0))
         self.jitter = bool(props.get("jitter", False))
         self.termination = float(props.get("termination", 0.0))
+        self.filter = props.get("filter", "trilinear")
         self.density = props.get("density")
         self.albedo = props.get("albedo") if self.model == "ea" else None
         self.Δ = 2.0 / self.resolution
@@ -112,18 +113,35 @@ class RayMarcher(mi.ad.integrators.common.RBIntegrator):
         t = t0 + (kf * self.step + u * s) * self.Δ
         return ray(t), s
 
+    def _padding_weight(self, p):
+        """Weight that turns a clamped grid lookup at p into a zero-padded one (as ``grid_sample``).
+
+        Per axis, with q the continuous voxel index (centres at 0 … N−1), trilinear lookups
+        blend towards an empty voxel beyond each face: w(q) = clamp(min(q + 1, N − q), 0, 1),
+        and the 3D weight is the product (trilinear is separable). Nearest lookups are 1 inside
+        the cube (q ∈ [−½, N − ½)) and 0 outside.
+        """
+        N = self.resolution
+        q = (p + 1.0) * (N / 2.0) - 0.5                       # continuous voxel index per axis
+        if self.filter == "nearest":
+            inside = dr.all((q >= -0.5) & (q < N - 0.5))
+            return dr.select(inside, 1.0, 0.0)
+        w = dr.clip(dr.minimum(q + 1.0, N - q), 0.0, 1.0)
+        return w.x * w.y * w.z
+
     def _lookup(self, p, s, colour: bool = True):
         """Transmittance τ of a segment of s voxels at p, and the emitted colour c (EA only)."""
         it = dr.zeros(mi.Interaction3f)
         it.p = p
-        v = self.density.eval_1(it)
+        pad = self._padding_weight(p)
+        v = self.density.eval_1(it) * pad
         if self.model == "vh":
             τ = dr.exp(-s * v)
         elif self.step == 1.0:
             τ = 1.0 - v                                       # exact product form at step 1
         else:
             τ = dr.exp(s * dr.log(1.0 - dr.minimum(v, V_MAX)))  # log domain, density clamped
-        c = self.albedo.eval(it) if (colour and self.albedo is not None) else None
+        c = self.albedo.eval(it) * pad if (colour and self.albedo is not None) else None
         return τ, c
 
     # -- Primal and adjoint marches ----------------------------------------------------------
