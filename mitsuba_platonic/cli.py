@@ -1,0 +1,274 @@
+"""The ``platonic`` command line.
+
+Subcommands (one ``argparse`` subparser each; add new ones in :func:`build_parser` with a
+``handler`` default taking the parsed arguments and returning an exit code):
+
+- ``compare``: render a volume with the closed-form layers and the Mitsuba ray marcher from a
+  few views and report how far apart and how fast they are (:mod:`mitsuba_platonic.compare`).
+
+Exit codes: 0 on success, 2 on bad input (usage errors, unreadable or invalid files, invalid
+options); the message goes to stderr without a traceback.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+from pathlib import Path
+from typing import Callable, List, Optional, Sequence
+
+import numpy as np
+import torch
+
+__all__ = ["main", "build_parser", "load_volume", "parse_models"]
+
+PROG = "platonic"
+BUILTIN_PREFIX = "builtin:"
+
+
+class CLIError(ValueError):
+    """A user error: reported as ``platonic <command>: error: <message>``, exit code 2."""
+
+
+# --------------------------------------------------------------------------- volume input
+
+
+def _load_npz(path: Path) -> torch.Tensor:
+    """Read and validate the array ``volume`` of a ``.npz`` file → ``(1, C, N, N, N)`` float32."""
+    name = str(path)
+    if not path.exists():
+        raise CLIError(f"volume file {name!r} does not exist")
+    if not path.is_file():
+        raise CLIError(f"volume file {name!r} is not a file")
+    try:
+        archive = np.load(path, allow_pickle=False)
+    except Exception as e:  # numpy raises several types for non-npz content
+        raise CLIError(f"could not read {name!r} as a .npz archive: {e}") from None
+    if not isinstance(archive, np.lib.npyio.NpzFile):
+        raise CLIError(f"{name!r} is a single .npy array, not a .npz archive; save it with "
+                       f"numpy.savez({name!r}, volume=array)")
+    with archive:
+        if "volume" not in archive.files:
+            found = ", ".join(archive.files) or "no arrays"
+            raise CLIError(f"{name!r} has no array named 'volume' (found: {found}); save it with "
+                           f"numpy.savez(path, volume=array)")
+        try:
+            v = archive["volume"]
+        except Exception as e:
+            raise CLIError(f"could not read array 'volume' from {name!r}: {e}") from None
+    expected = ("must have shape (C, N, N, N) or (1, C, N, N, N) with C = 4 [r, g, b, density] "
+                "or C = 1 [density]")
+    if v.ndim == 5:
+        if v.shape[0] != 1:
+            raise CLIError(f"{name!r}: array 'volume' {expected}, got shape {v.shape} (batch {v.shape[0]} ≠ 1)")
+        v = v[0]
+    if v.ndim != 4:
+        raise CLIError(f"{name!r}: array 'volume' {expected}, got shape {v.shape}")
+    if v.shape[0] not in (1, 4):
+        raise CLIError(f"{name!r}: array 'volume' {expected}, got shape {v.shape} with C = {v.shape[0]}")
+    if not v.shape[1] == v.shape[2] == v.shape[3]:
+        raise CLIError(f"{name!r}: array 'volume' must be cubic (N, N, N), got spatial shape {v.shape[1:]}")
+    if v.shape[1] < 2:
+        raise CLIError(f"{name!r}: array 'volume' needs a resolution N of at least 2, got {v.shape[1]}")
+    if not (np.issubdtype(v.dtype, np.floating) or np.issubdtype(v.dtype, np.integer) or v.dtype == bool):
+        raise CLIError(f"{name!r}: array 'volume' must hold numbers, got dtype {v.dtype}")
+    v = v.astype(np.float32)
+    if not np.isfinite(v).all():
+        raise CLIError(f"{name!r}: array 'volume' contains NaN or Inf")
+    lo, hi = float(v.min()), float(v.max())
+    if lo < 0.0 or hi > 1.0:
+        bad = np.argwhere((v < 0.0) | (v > 1.0))
+        raise CLIError(f"{name!r}: array 'volume' values must lie in [0, 1], got range [{lo:.6g}, {hi:.6g}] "
+                       f"({len(bad)} value(s) outside, the first at index {tuple(int(i) for i in bad[0])}, "
+                       f"channel first)")
+    return torch.from_numpy(np.ascontiguousarray(v))[None]
+
+
+def load_volume(spec: str, resolution: Optional[int] = None) -> torch.Tensor:
+    """``builtin:<kind>`` (a :func:`~mitsuba_platonic.volume.test_volume` at ``resolution``, default
+    32) or a path to a ``.npz`` file holding ``volume`` → ``(1, C, N, N, N)``, C = 4 or 1.
+
+    For a file, ``resolution`` (if given) must match the file's N.
+    """
+    from .volume import TEST_VOLUMES, test_volume
+
+    if spec.startswith(BUILTIN_PREFIX):
+        kind = spec[len(BUILTIN_PREFIX):]
+        if kind not in TEST_VOLUMES:
+            choices = ", ".join(BUILTIN_PREFIX + k for k in TEST_VOLUMES)
+            raise CLIError(f"unknown built-in volume {spec!r}; expected one of {choices} or a .npz file")
+        n = 32 if resolution is None else resolution
+        return test_volume(n, kind, "ea")
+    path = Path(spec)
+    if path.suffix.lower() != ".npz":
+        raise CLIError(f"--volume must be builtin:figure, builtin:cloud or a .npz file, got {spec!r}")
+    v = _load_npz(path)
+    if resolution is not None and resolution != v.shape[-1]:
+        raise CLIError(f"--resolution {resolution} does not match {spec!r}, whose volume is "
+                       f"{v.shape[-1]}³ (leave --resolution out for files)")
+    return v
+
+
+def parse_models(text: str) -> List[str]:
+    """``"vh,ao,ea"`` → ``['vh', 'ao', 'ea']`` (validated, duplicates dropped, order kept)."""
+    from .volume import MODELS
+
+    models: List[str] = []
+    for m in (s.strip().lower() for s in text.split(",")):
+        if not m:
+            continue
+        if m not in MODELS:
+            raise CLIError(f"unknown model {m!r} in --models {text!r}; expected a comma-separated "
+                           f"subset of {','.join(MODELS)}")
+        if m not in models:
+            models.append(m)
+    if not models:
+        raise CLIError(f"--models {text!r} names no model; expected e.g. vh,ao,ea")
+    return models
+
+
+# --------------------------------------------------------------------------- argument types
+
+
+def _positive_int(text: str) -> int:
+    try:
+        value = int(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected a positive integer, got {text!r}") from None
+    if value < 1:
+        raise argparse.ArgumentTypeError(f"expected a positive integer, got {value}")
+    return value
+
+
+def _non_negative_int(text: str) -> int:
+    try:
+        value = int(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected a non-negative integer, got {text!r}") from None
+    if value < 0:
+        raise argparse.ArgumentTypeError(f"expected a non-negative integer, got {value}")
+    return value
+
+
+def _positive_float(text: str) -> float:
+    try:
+        value = float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected a positive number, got {text!r}") from None
+    if not (value > 0 and value != float("inf")):
+        raise argparse.ArgumentTypeError(f"expected a positive finite number, got {text!r}")
+    return value
+
+
+# --------------------------------------------------------------------------- compare
+
+
+def _cmd_compare(args: argparse.Namespace) -> int:
+    from .compare import compare, format_table
+    from .views import front_view, sample_views
+
+    volume = load_volume(args.volume, args.resolution)
+    models = parse_models(args.models)
+    if volume.shape[1] == 1 and "ea" in models:
+        models.remove("ea")
+        print(f"{args.volume}: density-only volume (C = 1): skipping EA, which needs "
+              f"[r, g, b, density]", file=sys.stderr)
+        if not models:
+            raise CLIError("nothing to compare: the volume has no colour, so EA cannot be rendered; "
+                           "pass --models vh,ao")
+    views = torch.cat([front_view(1), sample_views(args.views - 1, seed=args.seed)])
+    options = {"step": args.step, "spp": args.spp, "jitter": args.jitter, "seed": args.seed}
+    out = Path(args.out)
+    if out.exists() and not out.is_dir():
+        raise CLIError(f"--out {str(out)!r} exists and is not a folder")
+    results = compare(volume, views, models, filter=args.filter, options=options, out_dir=out,
+                      repeats=args.repeats)
+
+    n = volume.shape[-1]
+    print(f"closed form vs Mitsuba: {args.volume} at {n}³, {len(views)} view(s), filter={args.filter}, "
+          f"step={args.step:g}, spp={args.spp}, jitter={args.jitter}; "
+          f"times: best of {args.repeats} after a warm-up, forward only")
+    print(format_table(results))
+    summary = out / "compare.json"
+    keep = ("model", "resolution", "views", "filter", "options", "max_abs_diff", "mean_abs_diff",
+            "closed_form_ms", "mitsuba_ms", "ratio", "png", "exrs")
+    summary.write_text(json.dumps({"volume": args.volume, "repeats": args.repeats,
+                                   "view_vectors": views.tolist(),
+                                   "results": [{k: r[k] for k in keep} for r in results]}, indent=2))
+    print("wrote:")
+    for r in results:
+        print(f"  {r['png']}")
+        for p in r["exrs"]:
+            print(f"  {p}")
+    print(f"  {summary}")
+    return 0
+
+
+def _add_compare(sub: "argparse._SubParsersAction") -> None:
+    p = sub.add_parser(
+        "compare", help="compare the closed-form and Mitsuba renderers on one volume",
+        description="Render a volume with the closed-form layers and the Mitsuba ray marcher from "
+                    "the front view plus random views; print max/mean absolute differences and "
+                    "forward times, write comparison figures (PNG) and the Mitsuba renders (EXR).")
+    p.add_argument("--volume", default="builtin:figure",
+                   help="builtin:figure | builtin:cloud | a .npz file with an array 'volume' of shape "
+                        "(C,N,N,N) or (1,C,N,N,N), C = 4 [r,g,b,density] or 1 [density], values in "
+                        "[0,1] (default: %(default)s)")
+    p.add_argument("--resolution", type=_positive_int, default=None,
+                   help="N for built-in volumes (default 32); must match a file's N if given")
+    p.add_argument("--models", default="vh,ao,ea", help="comma-separated models (default: %(default)s)")
+    p.add_argument("--views", type=_positive_int, default=4,
+                   help="number of views: the front view, then random views (default: %(default)s)")
+    p.add_argument("--filter", choices=("trilinear", "nearest"), default="trilinear",
+                   help="volume lookups, both backends (default: %(default)s)")
+    p.add_argument("--step", type=_positive_float, default=1.0,
+                   help="Mitsuba ray-marching step in voxels (default: %(default)s)")
+    p.add_argument("--spp", type=_positive_int, default=1,
+                   help="Mitsuba samples per pixel; a perfect square unless --jitter (default: %(default)s)")
+    p.add_argument("--jitter", action="store_true",
+                   help="Mitsuba: random sub-pixel positions and sample depths")
+    p.add_argument("--out", default="compare", help="output folder (default: %(default)s/)")
+    p.add_argument("--seed", type=_non_negative_int, default=0,
+                   help="seed of the random views and of Mitsuba's sampler (default: %(default)s)")
+    p.add_argument("--repeats", type=_positive_int, default=3,
+                   help="timed runs per backend after one warm-up; the best counts (default: %(default)s)")
+    p.set_defaults(handler=_cmd_compare)
+
+
+# --------------------------------------------------------------------------- entry point
+
+#: Subcommand registrars, in help order. Add ``_add_<command>`` functions here.
+SUBCOMMANDS: Sequence[Callable[["argparse._SubParsersAction"], None]] = (_add_compare,)
+
+
+def build_parser() -> argparse.ArgumentParser:
+    """The ``platonic`` parser with one subparser per subcommand."""
+    parser = argparse.ArgumentParser(
+        prog=PROG, description="PlatonicGAN with closed-form and Mitsuba 3 rendering layers.")
+    sub = parser.add_subparsers(dest="command", metavar="COMMAND", required=True)
+    for add in SUBCOMMANDS:
+        add(sub)
+    return parser
+
+
+def main(argv: Optional[Sequence[str]] = None) -> int:
+    """Run ``platonic`` with ``argv`` (default ``sys.argv[1:]``); return the exit code.
+
+    Usage errors (argparse) and invalid input (``ValueError``, ``FileNotFoundError``, other
+    ``OSError``) print a one-line message on stderr and return 2; ``--help`` returns 0.
+    """
+    parser = build_parser()
+    try:
+        args = parser.parse_args(argv)
+    except SystemExit as e:  # argparse has printed usage / help already
+        return int(e.code) if isinstance(e.code, int) else 2
+    try:
+        return int(args.handler(args))
+    except (ValueError, OSError) as e:
+        print(f"{PROG} {args.command}: error: {e}", file=sys.stderr)
+        return 2
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,235 @@
+"""Closed form vs Mitsuba: render one volume from several views with both backends and compare.
+
+For each image formation model the volume is rendered (one batch, one view per batch entry)
+by ``render(..., backend="closed_form")`` and ``render(..., backend="mitsuba")`` with the same
+lookup filter. Reported per model:
+
+- ``max_abs_diff`` / ``mean_abs_diff``: over all pixels, channels and views (EA: premultiplied
+  R, G, B and A).
+- ``closed_form_ms`` / ``mitsuba_ms``: forward-only wall time per image, the best of
+  ``repeats`` timed runs after one untimed warm-up run (which absorbs Mitsuba's kernel
+  compilation and scene building), measured with :func:`time.perf_counter` around a whole batch
+  and divided by the batch size. ``ratio`` = ``mitsuba_ms / closed_form_ms``.
+
+Files written to ``out_dir`` (when given): ``compare_<model>.png`` (one row per view:
+closed form | Mitsuba | |difference| heat map with a colour bar) and
+``mitsuba_<model>_view<i>.exr`` (the Mitsuba render, float32, with its alpha channel; channel
+names as in :func:`mitsuba_platonic.images.save_exr`: ``R, G, B, A`` for EA, ``Y, A`` for
+VH/AO, where ``A`` is the opacity).
+"""
+
+from __future__ import annotations
+
+import time
+from pathlib import Path
+from typing import Any, Callable, Dict, List, Mapping, Optional, Sequence, Union
+
+import numpy as np
+import torch
+
+from .images import composite, heatmap, save_exr, to_hwc
+from .render import MODELS, render
+from .render.mitsuba_renderer import MitsubaOptions
+from .views import to_angles, validate_views
+from .volume import CHANNELS
+
+__all__ = ["compare", "format_table", "time_render", "DISPLAY_BACKGROUND", "HEATMAP_CMAP"]
+
+#: Grey level EA renders (premultiplied RGBA) are composited over for display.
+DISPLAY_BACKGROUND = 0.5
+#: Colour map of the |difference| heat maps.
+HEATMAP_CMAP = "inferno"
+_MITSUBA_ONLY = {"step", "spp", "jitter", "termination", "seed"}
+
+
+def _sync() -> None:
+    if torch.cuda.is_available():
+        torch.cuda.synchronize()
+
+
+def time_render(fn: Callable[[], torch.Tensor], repeats: int = 3) -> tuple[torch.Tensor, float]:
+    """Run ``fn`` once untimed (warm-up), then ``repeats`` timed runs; return (first output, best s).
+
+    The warm-up output is returned: with fixed options and seeds every run gives the same images.
+    """
+    if not isinstance(repeats, int) or isinstance(repeats, bool) or repeats < 1:
+        raise ValueError(f"repeats must be a positive int, got {repeats!r}")
+    with torch.no_grad():
+        out = fn()
+        _sync()
+        best = float("inf")
+        for _ in range(repeats):
+            t0 = time.perf_counter()
+            fn()
+            _sync()
+            best = min(best, time.perf_counter() - t0)
+    return out, best
+
+
+def _model_volume(volume: torch.Tensor, model: str, batch: int) -> torch.Tensor:
+    """The channels ``model`` needs (VH/AO: the density, the last channel), expanded to ``batch``."""
+    v = volume if CHANNELS[model] == volume.shape[1] else volume[:, -1:]
+    return v.expand(batch, -1, -1, -1, -1)
+
+
+def _check_inputs(volume: torch.Tensor, views: torch.Tensor, models: Sequence[str],
+                  options: Mapping[str, Any]) -> torch.Tensor:
+    if not isinstance(volume, torch.Tensor):
+        raise ValueError(f"volume must be a torch.Tensor, got {type(volume).__name__}")
+    if volume.dim() == 4:
+        volume = volume[None]
+    if volume.dim() != 5 or volume.shape[0] != 1:
+        raise ValueError(f"volume must have shape (C, N, N, N) or (1, C, N, N, N), got {tuple(volume.shape)}")
+    if volume.shape[1] not in (1, 4):
+        raise ValueError(f"volume must have 1 channel [density] or 4 [r, g, b, density], "
+                         f"got {volume.shape[1]}")
+    validate_views(views)
+    if views.shape[0] < 1:
+        raise ValueError("at least one view is needed")
+    if isinstance(models, str):
+        raise ValueError(f"models must be a sequence of model names, e.g. ('vh', 'ao', 'ea'), got {models!r}")
+    if not models:
+        raise ValueError("at least one model is needed")
+    for m in models:
+        if m not in MODELS:
+            raise ValueError(f"unknown model {m!r}; expected some of {MODELS}")
+        if CHANNELS[m] > volume.shape[1]:
+            raise ValueError(f"model {m!r} needs {CHANNELS[m]} channels [r, g, b, density], "
+                             f"the volume has {volume.shape[1]} [density]")
+    if len(set(models)) != len(models):
+        raise ValueError(f"models repeat: {tuple(models)}")
+    unknown = set(options) - _MITSUBA_ONLY
+    if unknown:
+        raise ValueError(f"unknown Mitsuba option(s) {sorted(unknown)}; expected some of "
+                         f"{sorted(_MITSUBA_ONLY)} (pass the filter as filter=...)")
+    return volume
+
+
+def _figure(model: str, cf: torch.Tensor, mi: torch.Tensor, views: torch.Tensor, title: str, path: Path) -> None:
+    """One row per view: closed form | Mitsuba | |difference| heat map with a colour bar."""
+    from matplotlib.backends.backend_agg import FigureCanvasAgg
+    from matplotlib.cm import ScalarMappable
+    from matplotlib.colors import Normalize
+    from matplotlib.figure import Figure
+
+    b = cf.shape[0]
+    azimuth, elevation = to_angles(views)
+    fig = Figure(figsize=(10.5, 3.1 * b + 0.9), layout="constrained")
+    FigureCanvasAgg(fig)
+    axes = fig.subplots(b, 3, squeeze=False)
+    ea = model == "ea"
+    for i in range(b):
+        a, m = to_hwc(cf[i]), to_hwc(mi[i])
+        diff = np.abs(a.astype(np.float64) - m.astype(np.float64)).max(axis=2)
+        if ea:
+            shown = [composite(a, DISPLAY_BACKGROUND), composite(m, DISPLAY_BACKGROUND)]
+            kw = {}
+        else:
+            shown = [a[..., 0], m[..., 0]]
+            kw = {"cmap": "gray", "vmin": 0.0, "vmax": 1.0}
+        vmax = float(diff.max()) if diff.max() > 0 else 1e-12
+        for j, img in enumerate(shown):
+            axes[i, j].imshow(img, interpolation="nearest", **kw)
+        axes[i, 2].imshow(heatmap(diff, vmax=vmax, cmap=HEATMAP_CMAP), interpolation="nearest")
+        bar = fig.colorbar(ScalarMappable(Normalize(0.0, vmax), cmap=HEATMAP_CMAP), ax=axes[i, 2],
+                           fraction=0.046, pad=0.04)
+        bar.formatter.set_powerlimits((-2, 2))
+        bar.update_ticks()
+        bar.set_label("|closed form − Mitsuba|")
+        axes[i, 0].set_ylabel(f"view {i}\nazimuth {float(azimuth[i]):.1f}°\n"
+                              f"elevation {float(elevation[i]):.1f}°", fontsize=10)
+        axes[i, 2].set_title(f"max {diff.max():.2e}, mean {diff.mean():.2e}", fontsize=9)
+        for ax in axes[i]:
+            ax.set_xticks([])
+            ax.set_yticks([])
+    what = "premultiplied RGBA over grey 0.5" if ea else "opacity, black = 0, white = 1"
+    axes[0, 0].set_title(f"closed form\n({what})", fontsize=10)
+    axes[0, 1].set_title(f"Mitsuba\n({what})", fontsize=10)
+    axes[0, 2].set_title(f"|difference| ({'max over R, G, B, A' if ea else 'opacity'})\n"
+                         + axes[0, 2].get_title(), fontsize=9)
+    fig.suptitle(title, fontsize=11)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    fig.savefig(path, dpi=100)
+
+
+def compare(volume: torch.Tensor, views: torch.Tensor, models: Sequence[str] = ("vh", "ao", "ea"),
+            filter: str = "trilinear", options: Optional[Mapping[str, Any]] = None,
+            out_dir: Union[str, Path, None] = None, repeats: int = 3) -> List[Dict[str, Any]]:
+    """Render ``volume`` from ``views`` with both backends for each model and compare them.
+
+    Args:
+        volume: ``(C, N, N, N)`` or ``(1, C, N, N, N)`` in [0, 1]; C = 4 ``[r, g, b, density]``
+            (all models; VH/AO use the density, the last channel) or C = 1 ``[density]``
+            (VH/AO only). It is expanded to one batch entry per view.
+        views: ``(V, 3)`` unit vectors.
+        models: image formation models to compare, a subset of ``('vh', 'ao', 'ea')``.
+        filter: 'trilinear' or 'nearest' lookups, for both backends.
+        options: Mitsuba-only options passed to ``render`` (``step``, ``spp``, ``jitter``,
+            ``termination``, ``seed``); default: the renderer's defaults.
+        out_dir: where to write ``compare_<model>.png`` and ``mitsuba_<model>_view<i>.exr``;
+            ``None`` writes nothing.
+        repeats: timed runs per backend after one warm-up run; the best is reported.
+
+    Returns:
+        One dict per model: ``model``, ``resolution``, ``views``, ``filter``, ``options``,
+        ``max_abs_diff``, ``mean_abs_diff``, ``closed_form_ms``, ``mitsuba_ms``, ``ratio``
+        (Mitsuba / closed form), ``png`` (path or None), ``exrs`` (list of paths), and the
+        images themselves as ``closed_form`` / ``mitsuba`` (``(V, C, N, N)`` tensors).
+
+    Raises:
+        ValueError: on invalid volumes, views, models, options or ``repeats``.
+    """
+    options = dict(options or {})
+    volume = _check_inputs(volume, views, models, options)
+    if not isinstance(repeats, int) or isinstance(repeats, bool) or repeats < 1:
+        raise ValueError(f"repeats must be a positive int, got {repeats!r}")
+    MitsubaOptions(filter=filter, **options).validate()     # bad options fail before any rendering
+    views = views.to(torch.float32)
+    b, n = views.shape[0], volume.shape[-1]
+    out = Path(out_dir) if out_dir is not None else None
+    if out is not None:
+        out.mkdir(parents=True, exist_ok=True)              # fail before rendering, not after
+    results = []
+    for model in models:
+        v = _model_volume(volume, model, b)
+        cf, cf_s = time_render(lambda: render(v, views, model, "closed_form", filter=filter), repeats)
+        mi, mi_s = time_render(lambda: render(v, views, model, "mitsuba", filter=filter, **options), repeats)
+        diff = (cf.detach().cpu().double() - mi.detach().cpu().double()).abs()
+        result: Dict[str, Any] = {
+            "model": model, "resolution": n, "views": b, "filter": filter, "options": dict(options),
+            "max_abs_diff": float(diff.max()), "mean_abs_diff": float(diff.mean()),
+            "closed_form_ms": 1e3 * cf_s / b, "mitsuba_ms": 1e3 * mi_s / b,
+            "ratio": mi_s / cf_s if cf_s > 0 else float("inf"),
+            "png": None, "exrs": [], "closed_form": cf.detach().cpu(), "mitsuba": mi.detach().cpu(),
+        }
+        if out is not None:
+            opts = ", ".join(f"{k}={options[k]}" for k in sorted(options)) or "defaults"
+            title = (f"{model.upper()} at {n}³, filter={filter}, Mitsuba options: {opts}\n"
+                     f"max |diff| {result['max_abs_diff']:.2e}, mean {result['mean_abs_diff']:.2e}; "
+                     f"closed form {result['closed_form_ms']:.2f} ms/image, "
+                     f"Mitsuba {result['mitsuba_ms']:.2f} ms/image")
+            if model == "ea":
+                title += "\nEA shown as premultiplied RGBA composited over a mid-grey (0.5) background"
+            png = out / f"compare_{model}.png"
+            _figure(model, result["closed_form"], result["mitsuba"], views, title, png)
+            result["png"] = str(png)
+            for i in range(b):
+                exr = out / f"mitsuba_{model}_view{i}.exr"
+                save_exr(exr, to_hwc(result["mitsuba"][i]))   # EA: R,G,B,A; VH/AO: Y,A (A = opacity)
+                result["exrs"].append(str(exr))
+        results.append(result)
+    return results
+
+
+def format_table(results: Sequence[Mapping[str, Any]]) -> str:
+    """A plain-text table: model | max abs diff | mean abs diff | closed-form ms/image |
+    Mitsuba ms/image | ratio (Mitsuba / closed form)."""
+    header = ("model", "max abs diff", "mean abs diff", "closed-form ms/image", "Mitsuba ms/image",
+              "ratio (Mitsuba/CF)")
+    rows = [(r["model"], f"{r['max_abs_diff']:.3e}", f"{r['mean_abs_diff']:.3e}",
+             f"{r['closed_form_ms']:.3f}", f"{r['mitsuba_ms']:.3f}", f"{r['ratio']:.2f}")
+            for r in results]
+    widths = [max(len(h), *(len(row[i]) for row in rows)) if rows else len(h) for i, h in enumerate(header)]
+    line = lambda cells: " | ".join(c.ljust(w) if i == 0 else c.rjust(w)  # noqa: E731
+                                    for i, (c, w) in enumerate(zip(cells, widths)))
+    return "\n".join([line(header), "-+-".join("-" * w for w in widths)] + [line(r) for r in rows])
