@@ -6,9 +6,13 @@
 set -euo pipefail
 cd "$(dirname "$0")/.."
 
-have_llvm() {
-  ls /usr/lib/*/libLLVM-{16,17,18,19,20,21}.so* /usr/lib/libLLVM-{16,17,18,19,20,21}.so* \
-     /usr/lib/llvm-{16,17,18,19,20,21}/lib/libLLVM*.so* 2>/dev/null | grep -q .
+have_llvm() {  # a shared libLLVM with major version >= 16 where Dr.Jit looks for it
+  local f
+  for f in /usr/lib/*/libLLVM-{16,17,18,19,20,21}.so* /usr/lib/libLLVM-{16,17,18,19,20,21}.so* \
+           /usr/lib/llvm-{16,17,18,19,20,21}/lib/libLLVM*.so*; do
+    [ -e "$f" ] && return 0
+  done
+  return 1
 }
 
 if [ -n "${DRJIT_LIBLLVM_PATH:-}" ] && [ -f "$DRJIT_LIBLLVM_PATH" ]; then
