@@ -22,6 +22,7 @@ __all__ = [
     "CHANNELS",
     "voxel_size",
     "world_to_grid",
+    "voxel_centres",
     "validate_volume",
     "test_volume",
     "TEST_VOLUMES",
@@ -74,8 +75,8 @@ def validate_volume(volume: torch.Tensor, model: str) -> None:
         raise ValueError(f"volume values must lie in [0, 1], got range [{lo:.6g}, {hi:.6g}]")
 
 
-def _grid(n: int) -> torch.Tensor:
-    """World coordinates of the voxel centres: ``(N, N, N, 3)`` indexed [d, h, w]."""
+def voxel_centres(n: int) -> torch.Tensor:
+    """World coordinates ``(x, y, z)`` of the voxel centres: ``(N, N, N, 3)`` float64 indexed [d, h, w]."""
     c = -1.0 + (torch.arange(n, dtype=torch.float64) + 0.5) * voxel_size(n)
     z, y, x = torch.meshgrid(-c, -c, c, indexing="ij")
     return torch.stack([x, y, z], dim=-1)
@@ -91,7 +92,7 @@ def _figure(n: int) -> torch.Tensor:
 
     Asymmetric in x, y and z, so a flipped axis in either renderer shows at once.
     """
-    p = _grid(n)
+    p = voxel_centres(n)
     x, y, z = p.unbind(-1)
     sphere = (p - p.new_tensor([-0.25, 0.2, 0.1])).norm(dim=-1) - 0.45
     q = (p - p.new_tensor([0.35, -0.35, -0.2])).abs() - p.new_tensor([0.25, 0.3, 0.35])
@@ -109,7 +110,7 @@ def _figure(n: int) -> torch.Tensor:
 
 def _cloud(n: int) -> torch.Tensor:
     """A smooth, semi-transparent cloud: densities spread over (0, 1), the AO/x-ray regime."""
-    p = _grid(n)
+    p = voxel_centres(n)
     x, y, z = p.unbind(-1)
     r2 = (x * x + 1.5 * y * y + z * z)
     density = 0.35 * torch.exp(-3.0 * r2) * (1.0 + 0.5 * torch.sin(4.0 * x + 2.0 * z) * torch.cos(3.0 * y))
