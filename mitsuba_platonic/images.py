@@ -33,6 +33,9 @@ __all__ = [
     "exr_channel_names",
     "composite",
     "heatmap",
+    "linear_to_srgb",
+    "srgb_to_linear",
+    "to_png_rgba",
 ]
 
 PathLike = Union[str, Path]
@@ -236,3 +239,29 @@ def heatmap(err: np.ndarray, vmax: Optional[float] = None, cmap: str = "inferno"
     except KeyError:
         raise ValueError(f"unknown matplotlib colour map {cmap!r}") from None
     return np.asarray(colour_map(np.clip(arr / vmax, 0.0, 1.0))[..., :3], dtype=np.float64)
+
+
+def linear_to_srgb(x: np.ndarray) -> np.ndarray:
+    """Encode linear values with the sRGB transfer function (colour-science), clipped to [0, 1]."""
+    import colour
+    return np.asarray(colour.cctf_encoding(np.clip(np.asarray(x, dtype=np.float64), 0.0, 1.0), "sRGB"))
+
+
+def srgb_to_linear(x: np.ndarray) -> np.ndarray:
+    """Decode sRGB-encoded values in [0, 1] to linear (colour-science)."""
+    import colour
+    return np.asarray(colour.cctf_decoding(np.clip(np.asarray(x, dtype=np.float64), 0.0, 1.0), "sRGB"))
+
+
+def to_png_rgba(img: np.ndarray) -> np.ndarray:
+    """A premultiplied *linear* render → straight-alpha sRGB RGBA ``(H, W, 4)`` for an 8-bit PNG.
+
+    C = 4 (premultiplied RGB + A): RGB is divided by A where A > 0 (0 where A = 0) and
+    sRGB-encoded. C = 1 (an opacity image): a white object, RGB = 1, alpha = the opacity.
+    """
+    arr = _as_image(img, channels=(1, 4)).astype(np.float64)
+    alpha = np.clip(arr[..., -1:], 0.0, 1.0)
+    if arr.shape[2] == 1:
+        return np.concatenate([np.ones_like(arr).repeat(3, axis=2), alpha], axis=2)
+    straight = np.where(alpha > 0, arr[..., :3] / np.maximum(alpha, 1e-12), 0.0)
+    return np.concatenate([linear_to_srgb(straight), alpha], axis=2)

@@ -1,0 +1,324 @@
+"""Rendered collections: a procedural shape class → an unstructured image collection with 3D truth.
+
+``make_collection(out, spec)`` renders ``n_shapes`` shapes × ``views_per_shape`` images, each
+from its own random view, in one image formation:
+
+- ``vh`` / ``ao`` / ``ea``: the PlatonicGAN layers, with either renderer (closed form or Mitsuba);
+- ``physical``: Mitsuba's volumetric path tracer on the same medium under random natural light
+  (:mod:`mitsuba_platonic.render.physical`).
+
+Layout of a collection folder::
+
+    collection.json          the spec (checked on resume: a different spec is an error)
+    images/SSSSS_KK.png      8-bit sRGB, straight alpha: the training input
+    exr/SSSSS_KK.exr         linear, premultiplied, with alpha (OpenEXR)
+    volumes/SSSSS.npz        ground truth: ``volume`` (4, N, N, N) RGBA, ``shape_class``, ``seed``
+    volumes/SSSSS.vol        the same grid in Mitsuba's .vol format ([Z, Y, X, C] layout)
+    records.jsonl            one line per finished image (appended as images are written)
+    manifest.json            every image's file, shape id and view (+ lighting, exposure):
+                             metadata for evaluation only, never read by training
+
+Crash safety and resume: every file is written to a temporary name and renamed into place, and an
+image counts as done only once its PNG, EXR and record line all exist. Re-running the same
+command skips finished images and shapes, so a half-written collection is completed without
+re-rendering what is done. Views, shape seeds and lighting derive from ``seed`` and the image's
+index alone, so a resumed run renders exactly what an uninterrupted one would.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import time
+from dataclasses import asdict, dataclass, field, fields
+from pathlib import Path
+from typing import Any, Callable, Dict, Iterator, List, Optional, Sequence, Tuple, Union
+
+import numpy as np
+import torch
+
+from .. import views as V
+from ..images import save_exr, save_png, to_hwc, to_png_rgba
+from ..render import render
+from ..volume import CHANNELS
+from . import shapes
+
+__all__ = ["CollectionSpec", "make_collection", "load_manifest", "FORMATIONS", "RENDERERS",
+           "default_envmaps"]
+
+FORMATIONS = ("vh", "ao", "ea", "physical")
+RENDERERS = ("closed_form", "mitsuba")
+VIEW_DISTRIBUTIONS = ("sphere", "band", "ring")
+LIGHTINGS = ("sunsky", "envmap", "mixed")
+SCENES = Path(__file__).resolve().parents[2] / "scenes"
+
+
+def default_envmaps() -> List[str]:
+    """Environment maps shipped in or dropped into ``scenes/envmaps/`` (``*.exr``)."""
+    return sorted(str(p) for p in (SCENES / "envmaps").glob("*.exr"))
+
+
+@dataclass
+class CollectionSpec:
+    """Everything that determines a rendered collection (saved as ``collection.json``).
+
+    shape_class: a registered class (:func:`mitsuba_platonic.data.shapes.list_classes`).
+    n_shapes, views_per_shape: the collection has n_shapes × views_per_shape images.
+    resolution: volume and image resolution N (16 … 128).
+    formation: 'vh' | 'ao' | 'ea' | 'physical'.
+    renderer: 'closed_form' | 'mitsuba' (vh/ao/ea; physical always path-traces with Mitsuba).
+    filter: 'trilinear' | 'nearest' lookups.
+    views: 'sphere' (uniform), 'band' (elevation range, degrees) or 'ring' (one elevation).
+    elevation: (low, high) for 'band', a number for 'ring', ignored for 'sphere'.
+    lighting: 'sunsky' | 'envmap' | 'mixed' (physical only); envmaps: EXR paths for 'envmap'.
+    spp, max_depth: path tracer samples per pixel and path length (physical only).
+    seed: master seed of shapes, views and lighting.
+    """
+
+    shape_class: str
+    n_shapes: int = 100
+    views_per_shape: int = 10
+    resolution: int = 64
+    formation: str = "ea"
+    renderer: str = "closed_form"
+    filter: str = "trilinear"
+    views: str = "sphere"
+    elevation: Union[float, Tuple[float, float], None] = None
+    lighting: str = "sunsky"
+    envmaps: Tuple[str, ...] = ()
+    spp: int = 32
+    max_depth: int = 8
+    seed: int = 0
+
+    def validate(self) -> "CollectionSpec":
+        """Check every field; raise ``ValueError`` naming the first bad one. Returns self."""
+        if self.shape_class not in shapes.list_classes():
+            raise ValueError(f"shape_class must be one of {shapes.list_classes()}, got {self.shape_class!r}")
+        for name in ("n_shapes", "views_per_shape", "spp", "max_depth"):
+            value = getattr(self, name)
+            if not isinstance(value, int) or isinstance(value, bool) or value < 1:
+                raise ValueError(f"{name} must be a positive int, got {value!r}")
+        if not isinstance(self.seed, int) or self.seed < 0:
+            raise ValueError(f"seed must be a non-negative int, got {self.seed!r}")
+        if not isinstance(self.resolution, int) or not 16 <= self.resolution <= 128:
+            raise ValueError(f"resolution must be an int in [16, 128], got {self.resolution!r}")
+        if self.formation not in FORMATIONS:
+            raise ValueError(f"formation must be one of {FORMATIONS}, got {self.formation!r}")
+        if self.renderer not in RENDERERS:
+            raise ValueError(f"renderer must be one of {RENDERERS}, got {self.renderer!r}")
+        if self.filter not in ("trilinear", "nearest"):
+            raise ValueError(f"filter must be 'trilinear' or 'nearest', got {self.filter!r}")
+        if self.views not in VIEW_DISTRIBUTIONS:
+            raise ValueError(f"views must be one of {VIEW_DISTRIBUTIONS}, got {self.views!r}")
+        if self.lighting not in LIGHTINGS:
+            raise ValueError(f"lighting must be one of {LIGHTINGS}, got {self.lighting!r}")
+        if self.formation == "physical" and self.lighting in ("envmap", "mixed") and not self.envmaps:
+            if self.lighting == "envmap":
+                raise ValueError("lighting 'envmap' needs at least one environment map (.exr): pass "
+                                 "envmaps or drop EXR files into scenes/envmaps/")
+        for path in self.envmaps:
+            if not Path(path).is_file():
+                raise ValueError(f"environment map {path!r} does not exist")
+        V.sample_views(1, self.views, seed=0, **self._view_kwargs())  # checks the elevation
+        return self
+
+    def _view_kwargs(self) -> Dict[str, Any]:
+        if self.views == "sphere" or self.elevation is None:
+            default = {"sphere": None, "band": (0.0, 60.0), "ring": 20.0}[self.views]
+            return {} if default is None else {"elevation": default}
+        e = self.elevation
+        return {"elevation": tuple(float(x) for x in e) if isinstance(e, (list, tuple)) else float(e)}
+
+    def to_dict(self) -> Dict[str, Any]:
+        d = asdict(self)
+        d["envmaps"] = list(self.envmaps)
+        if isinstance(d["elevation"], tuple):
+            d["elevation"] = list(d["elevation"])
+        return d
+
+    @classmethod
+    def from_dict(cls, d: Dict[str, Any]) -> "CollectionSpec":
+        known = {f.name for f in fields(cls)}
+        unknown = set(d) - known
+        if unknown:
+            raise ValueError(f"unknown collection setting(s) {sorted(unknown)}")
+        d = dict(d)
+        d["envmaps"] = tuple(d.get("envmaps", ()))
+        if isinstance(d.get("elevation"), list):
+            d["elevation"] = tuple(d["elevation"])
+        return cls(**d)
+
+    # -- the deterministic plan ------------------------------------------------------------
+
+    def shape_seed(self, i: int) -> int:
+        """Seed of shape i: a hash of (seed, i), so shapes don't depend on the collection size."""
+        return int(np.random.SeedSequence([self.seed, i]).generate_state(1)[0] & 0x7FFFFFFF)
+
+    def view(self, i: int, k: int) -> torch.Tensor:
+        """The view ``(3,)`` of image (shape i, view k), from a generator seeded by (seed, i, k)."""
+        g = torch.Generator()
+        g.manual_seed(int(np.random.SeedSequence([self.seed, i, k, 1]).generate_state(1)[0]))
+        return V.sample_views(1, self.views, seed=g, **self._view_kwargs())[0]
+
+    def lighting_of(self, i: int, k: int):
+        from ..render.physical import sample_lighting
+        rng = np.random.default_rng([self.seed, i, k, 2])
+        return sample_lighting(rng, self.lighting, self.envmaps)
+
+
+def image_id(i: int, k: int) -> str:
+    return f"{i:05d}_{k:02d}"
+
+
+def _atomic(path: Path, write: Callable[[Path], Any]) -> None:
+    """Write ``path`` through a temporary sibling and rename it into place (no torn files)."""
+    path.parent.mkdir(parents=True, exist_ok=True)
+    tmp = path.with_name(f".{path.stem}.tmp{os.getpid()}{path.suffix}")
+    try:
+        write(tmp)
+        os.replace(tmp, path)
+    finally:
+        if tmp.exists():
+            tmp.unlink()
+
+
+def _write_json(path: Path, data: Any) -> None:
+    _atomic(path, lambda p: p.write_text(json.dumps(data, indent=1)))
+
+
+def _write_volume(folder: Path, i: int, spec: CollectionSpec, vol: torch.Tensor) -> None:
+    from ..render.mitsuba_renderer import to_mitsuba_grid
+    from ..render.variant import ensure_variant
+    npz = folder / f"{i:05d}.npz"
+    vol_file = folder / f"{i:05d}.vol"
+    if not npz.exists():
+        _atomic(npz, lambda p: np.savez_compressed(p, volume=vol.numpy(), shape_class=spec.shape_class,
+                                                   seed=spec.shape_seed(i)))
+    if not vol_file.exists():
+        mi = ensure_variant()
+        grid = to_mitsuba_grid(vol).contiguous().numpy()
+        _atomic(vol_file, lambda p: mi.VolumeGrid(grid).write(str(p)))
+
+
+def _read_records(path: Path) -> Dict[str, Dict[str, Any]]:
+    records: Dict[str, Dict[str, Any]] = {}
+    if path.exists():
+        for line in path.read_text().splitlines():
+            try:
+                r = json.loads(line)
+                records[r["id"]] = r
+            except (ValueError, KeyError):
+                continue  # a torn last line from a crash: that image is simply redone
+    return records
+
+
+def _render_shape(spec: CollectionSpec, vol: torch.Tensor, views: torch.Tensor,
+                  lights: Optional[list]) -> Tuple[torch.Tensor, List[float]]:
+    """Render one shape from several views → ``(K, C, N, N)`` linear premultiplied, exposures."""
+    if spec.formation == "physical":
+        from ..render.physical import render_physical
+        batch = vol[None].expand(len(views), -1, -1, -1, -1)
+        return render_physical(batch, views, lights, spp=spec.spp, max_depth=spec.max_depth,
+                               seed=spec.seed, filter=spec.filter)
+    v = vol if CHANNELS[spec.formation] == 4 else vol[3:]
+    with torch.no_grad():
+        images = render(v[None].expand(len(views), -1, -1, -1, -1).contiguous(), views,
+                        spec.formation, spec.renderer, filter=spec.filter)
+    return images, [1.0] * len(views)
+
+
+def make_collection(out: Union[str, Path], spec: CollectionSpec, overwrite: bool = False,
+                    progress: bool = True) -> Path:
+    """Render (or finish rendering) the collection ``spec`` into ``out``; return the manifest path.
+
+    Raises ``ValueError`` if ``out`` holds a collection made with a different spec (unless
+    ``overwrite``, which starts it over).
+    """
+    from tqdm.auto import tqdm
+
+    spec.validate()
+    out = Path(out)
+    spec_file = out / "collection.json"
+    if spec_file.exists() and not overwrite:
+        old = json.loads(spec_file.read_text())
+        if old != spec.to_dict():
+            diff = [f"{k}: {old.get(k)!r} → {v!r}" for k, v in spec.to_dict().items() if old.get(k) != v]
+            raise ValueError(f"{out} holds a collection made with other settings ({'; '.join(diff)}); "
+                             f"use another folder, or overwrite=True (--overwrite) to start over")
+    if overwrite and out.exists():
+        for sub in ("images", "exr", "volumes"):
+            for f in (out / sub).glob("*"):
+                f.unlink()
+        for name in ("records.jsonl", "manifest.json"):
+            (out / name).unlink(missing_ok=True)
+    out.mkdir(parents=True, exist_ok=True)
+    for sub in ("images", "exr", "volumes"):         # temporaries a killed run left behind
+        for stray in (out / sub).glob(".*.tmp*"):
+            stray.unlink()
+    _write_json(spec_file, spec.to_dict())
+
+    records_file = out / "records.jsonl"
+    records = _read_records(records_file)
+    n, K = spec.n_shapes, spec.views_per_shape
+
+    def done(i: int, k: int) -> bool:
+        iid = image_id(i, k)
+        return (iid in records and (out / "images" / f"{iid}.png").exists()
+                and (out / "exr" / f"{iid}.exr").exists())
+
+    total = n * K
+    finished = sum(done(i, k) for i in range(n) for k in range(K))
+    bar = tqdm(total=total, initial=finished, disable=not progress, unit="img",
+               desc=f"{spec.shape_class} {spec.formation}", dynamic_ncols=True)
+    t0 = time.perf_counter()
+    with open(records_file, "a+") as log:
+        log.seek(0, os.SEEK_END)
+        if log.tell() > 0:                           # end a torn last line before appending
+            log.seek(log.tell() - 1)
+            if log.read(1) != "\n":
+                log.write("\n")
+        for i in range(n):
+            pending = [k for k in range(K) if not done(i, k)]
+            if not pending and (out / "volumes" / f"{i:05d}.npz").exists():
+                continue
+            vol = shapes.generate(spec.shape_class, spec.shape_seed(i), spec.resolution)
+            _write_volume(out / "volumes", i, spec, vol)
+            if not pending:
+                continue
+            views = torch.stack([spec.view(i, k) for k in pending])
+            lights = [spec.lighting_of(i, k) for k in pending] if spec.formation == "physical" else None
+            images, exposures = _render_shape(spec, vol, views, lights)
+            for j, k in enumerate(pending):
+                iid = image_id(i, k)
+                img = to_hwc(images[j])
+                _atomic(out / "exr" / f"{iid}.exr", lambda p: save_exr(p, img))
+                _atomic(out / "images" / f"{iid}.png", lambda p: save_png(p, to_png_rgba(img)))
+                record = {"id": iid, "image": f"images/{iid}.png", "exr": f"exr/{iid}.exr",
+                          "shape": i, "shape_seed": spec.shape_seed(i), "volume": f"volumes/{i:05d}.npz",
+                          "view": [float(x) for x in views[j]]}
+                if lights is not None:
+                    record["lighting"] = lights[j].to_dict()
+                    record["exposure"] = exposures[j]
+                log.write(json.dumps(record) + "\n")
+                log.flush()
+                os.fsync(log.fileno())
+                records[iid] = record
+            bar.update(len(pending))
+    bar.close()
+    manifest = {
+        "spec": spec.to_dict(),
+        "note": "evaluation metadata: training must not read views or shape ids",
+        "seconds": time.perf_counter() - t0,
+        "images": [records[image_id(i, k)] for i in range(n) for k in range(K)],
+    }
+    _write_json(out / "manifest.json", manifest)
+    return out / "manifest.json"
+
+
+def load_manifest(folder: Union[str, Path]) -> Dict[str, Any]:
+    """Read a finished collection's ``manifest.json`` (raises ``FileNotFoundError`` if unfinished)."""
+    path = Path(folder) / "manifest.json"
+    if not path.exists():
+        raise FileNotFoundError(f"{folder} has no manifest.json: the collection is unfinished "
+                                f"(re-run make-dataset with the same settings to finish it)")
+    return json.loads(path.read_text())
