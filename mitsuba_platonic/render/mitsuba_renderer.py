@@ -148,21 +148,19 @@ def _bundle(n: int, model: str, options: MitsubaOptions) -> _Bundle:
 
 
 class _Binding:
-    """One pair's grids (still attached to the AD graph) and sensor transform.
+    """One render's grids (still attached to the AD graph) and other scene settings.
 
     A plain object, so ``dr.custom`` passes it through without detaching its arrays.
     """
 
-    def __init__(self, bundle: _Bundle, grids: Dict[str, Any], transform: Any):
-        self.bundle, self.grids, self.transform = bundle, grids, transform
+    def __init__(self, scene: Any, params: Any, grids: Dict[str, Any], settings: Dict[str, Any]):
+        self.scene, self.params, self.grids, self.settings = scene, params, grids, settings
 
     def bind(self) -> None:
-        """Write this pair's grids and sensor transform into the shared cached scene."""
-        params = self.bundle.params
-        for key, g in self.grids.items():
-            params[key] = g
-        params["sensor.to_world"] = self.transform
-        params.update()
+        """Write this render's grids and settings (view, lighting) into the shared cached scene."""
+        for key, value in list(self.grids.items()) + list(self.settings.items()):
+            self.params[key] = value
+        self.params.update()
 
 
 def _pair_render_op():
@@ -182,15 +180,15 @@ def _pair_render_op():
             def eval(self, _grids, binding, spp, seed):
                 self.binding, self.spp, self.seed = binding, spp, seed
                 binding.bind()
-                scene = binding.bundle.scene
+                scene = binding.scene
                 with dr.suspend_grad():
                     return scene.integrator().render(scene, sensor=0, seed=seed, spp=spp,
                                                      develop=True, evaluate=False)
 
             def backward(self):
                 self.binding.bind()
-                scene = self.binding.bundle.scene
-                scene.integrator().render_backward(scene, self.binding.bundle.params, self.grad_out(),
+                scene = self.binding.scene
+                scene.integrator().render_backward(scene, self.binding.params, self.grad_out(),
                                                    sensor=0, seed=self.seed + 1, spp=self.spp)
 
             def name(self):
@@ -201,6 +199,25 @@ def _pair_render_op():
 
 
 _PairRender = None
+
+
+def differentiable_render(scene: Any, params: Any, grids: Dict[str, torch.Tensor], settings: Dict[str, Any],
+                          spp: int, seed: int) -> torch.Tensor:
+    """Render ``scene`` with ``grids`` (torch tensors) and ``settings`` bound; differentiable in torch.
+
+    ``drjit.wrap`` turns the render into a torch autograd function whose backward runs the
+    integrator's ``render_backward`` (with ``seed + 1``) after re-binding this render's inputs.
+    Returns the ``(H, W, C)`` image as a torch tensor.
+    """
+    import drjit as dr
+    keys = list(grids)
+
+    @dr.wrap(source="torch", target="drjit")
+    def render_one(*arrays):
+        binding = _Binding(scene, params, dict(zip(keys, arrays)), settings)
+        return dr.custom(_pair_render_op(), dict(binding.grids), binding, spp, seed)
+
+    return render_one(*grids.values())
 
 
 def _sensor_transform(mi, right, up, w):
@@ -219,8 +236,6 @@ def render_mitsuba(volume: torch.Tensor, views: torch.Tensor, model: str,
     options = options or MitsubaOptions()
     options.validate()
     mi = ensure_variant()
-    import drjit as dr
-
     n = volume.shape[-1]
     bundle = _bundle(n, model, options)
     device = variant_device()
@@ -230,16 +245,10 @@ def render_mitsuba(volume: torch.Tensor, views: torch.Tensor, model: str,
 
     images = []
     for b in range(volume.shape[0]):
-        transform = _sensor_transform(mi, right[b], up[b], w[b])
-        seed = options.seed + 2 * b
-
-        @dr.wrap(source="torch", target="drjit")
-        def render_pair(*grids):
-            binding = _Binding(bundle, dict(zip(bundle.keys, grids)), transform)
-            return dr.custom(_pair_render_op(), dict(binding.grids), binding, options.spp, seed)
-
         v = src[b]
         grids = (to_mitsuba_grid(v[-1:]),) if model != "ea" else (to_mitsuba_grid(v[3:4]), to_mitsuba_grid(v[:3]))
-        image = render_pair(*grids)                           # (H, W, 3 or 4)
+        settings = {"sensor.to_world": _sensor_transform(mi, right[b], up[b], w[b])}
+        image = differentiable_render(bundle.scene, bundle.params, dict(zip(bundle.keys, grids)), settings,
+                                      options.spp, options.seed + 2 * b)     # (H, W, 3 or 4)
         images.append(image[..., :out_channels].permute(2, 0, 1))
     return torch.stack(images).to(volume.device)

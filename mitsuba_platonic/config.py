@@ -1,0 +1,317 @@
+"""Experiment configuration: every knob in one validated tree, loaded from YAML.
+
+A config has five sections (``run``, ``data``, ``model``, ``render``, ``train``), each a
+dataclass below whose docstring says what its fields mean. Loading checks every key and type:
+an unknown key or a wrong type is an error that names the key (``train.batch_size: expected
+int, got 'eight'``). Command-line overrides use dotted keys, ``--set train.steps=500``; values
+are parsed as YAML scalars (``true``, ``1e-4``, ``[0.5, 0.9]``, ``null``).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import re
+import typing
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any, Dict, List, Optional, Sequence, Tuple, Union
+
+import yaml
+
+__all__ = ["Config", "RunConfig", "DataConfig", "ModelConfig", "RenderConfig", "TrainConfig",
+           "load_config", "apply_overrides", "ConfigError"]
+
+
+_FLOAT = re.compile(r"[-+]?(\d+\.?\d*|\.\d+)[eE][-+]?\d+")
+
+
+class ConfigError(ValueError):
+    """A bad configuration; the message names the key."""
+
+
+@dataclass
+class RunConfig:
+    """name: run folder name under ``out_dir``; seed: master seed; device: 'auto' | 'cpu' | 'cuda';
+    steps: training steps; log_every / sample_every / checkpoint_every: in steps;
+    threads: torch and Dr.Jit CPU threads (0 = all cores); keep_checkpoints: how many to keep."""
+
+    name: str = "run"
+    out_dir: str = "runs"
+    seed: int = 0
+    device: str = "auto"
+    steps: int = 2000
+    log_every: int = 10
+    sample_every: int = 250
+    checkpoint_every: int = 250
+    threads: int = 0
+    keep_checkpoints: int = 3
+
+
+@dataclass
+class DataConfig:
+    """source: 'procedural' (render a built-in class with make-dataset, cached under ``cache``)
+    or 'folder' (an unstructured photo collection at ``path``).
+    Procedural: shape_class, n_shapes, views_per_shape, formation ('vh'|'ao'|'ea'|'physical'),
+    view_distribution ('sphere'|'band'|'ring'), elevation, seed.
+    Folder: background (null | 'white') and threshold for RGB photos on white, crop ('image'|'bbox').
+    split: the train split's share; the rest is held out (val/test) for evaluation."""
+
+    source: str = "procedural"
+    path: Optional[str] = None
+    cache: str = "data"
+    shape_class: str = "chair"
+    n_shapes: int = 200
+    views_per_shape: int = 4
+    formation: str = "ea"
+    view_distribution: str = "sphere"
+    elevation: Optional[Union[float, List[float]]] = None
+    background: Optional[str] = None
+    threshold: float = 0.05
+    crop: str = "image"
+    split: float = 0.9
+    seed: int = 0
+
+
+@dataclass
+class ModelConfig:
+    """resolution: volume and image size R (16 | 32 | 64 | 128); latent: size of z;
+    width: channels at the highest resolution (the paper: 64); norm: 'batch' | 'instance' | 'none'."""
+
+    resolution: int = 32
+    latent: int = 64
+    width: int = 16
+    norm: str = "batch"
+
+
+@dataclass
+class RenderConfig:
+    """backend: 'closed_form' | 'mitsuba' (ray marcher) | 'physical' (path tracer under natural light);
+    model: 'vh' | 'ao' | 'ea' (physical renders RGBA); filter: 'trilinear' | 'nearest';
+    step, spp, jitter: the ray marcher's options; lighting, physical_spp, max_depth: the path tracer's."""
+
+    backend: str = "closed_form"
+    model: str = "ea"
+    filter: str = "trilinear"
+    step: float = 1.0
+    spp: int = 1
+    jitter: bool = False
+    lighting: str = "sunsky"
+    physical_spp: int = 4
+    max_depth: int = 4
+
+
+@dataclass
+class TrainConfig:
+    """task: 'reconstruction' (E encodes the input image; L2 at the input view) or 'generation'
+    (z ~ N(0, I)); mode: 'platonic' (2D discriminator only), 'platonic3d' (+ a 3D discriminator on
+    ground-truth volumes) or 'gan3d' (the 3D-GAN baseline: WGAN-GP on volumes, no rendering).
+    batch_size: global batch (split across processes); random_views: random views per volume per step;
+    view_distribution / elevation: p_view; loss: 'nonsaturating' | 'wgan-gp'; gp_weight: WGAN-GP λ;
+    rec_weight: λ of the reconstruction term; weight_3d: weight of the 3D adversarial term;
+    lr_g, lr_e, lr_d: Adam learning rates; betas: Adam betas; d_gate: update D only while its
+    accuracy ≤ this (null: always); d_steps: D updates per G update (WGAN-GP)."""
+
+    task: str = "reconstruction"
+    mode: str = "platonic"
+    batch_size: int = 8
+    random_views: int = 1
+    view_distribution: str = "sphere"
+    elevation: Optional[Union[float, List[float]]] = None
+    loss: str = "nonsaturating"
+    gp_weight: float = 10.0
+    rec_weight: float = 5.0
+    weight_3d: float = 1.0
+    lr_g: float = 1e-3
+    lr_e: float = 1e-3
+    lr_d: float = 1e-4
+    betas: List[float] = field(default_factory=lambda: [0.5, 0.9])
+    d_gate: Optional[float] = 0.6
+    d_steps: int = 1
+
+
+@dataclass
+class Config:
+    run: RunConfig = field(default_factory=RunConfig)
+    data: DataConfig = field(default_factory=DataConfig)
+    model: ModelConfig = field(default_factory=ModelConfig)
+    render: RenderConfig = field(default_factory=RenderConfig)
+    train: TrainConfig = field(default_factory=TrainConfig)
+
+    def to_dict(self) -> Dict[str, Any]:
+        return dataclasses.asdict(self)
+
+    def validate(self) -> "Config":
+        """Check value ranges and combinations; raise :class:`ConfigError` naming the key."""
+        _choice("run.device", self.run.device, ("auto", "cpu", "cuda"))
+        for key in ("steps", "log_every", "sample_every", "checkpoint_every", "keep_checkpoints"):
+            _positive(f"run.{key}", getattr(self.run, key))
+        _non_negative("run.threads", self.run.threads)
+        _non_negative("run.seed", self.run.seed)
+        _choice("data.source", self.data.source, ("procedural", "folder"))
+        if self.data.source == "folder" and not self.data.path:
+            raise ConfigError("data.path: required when data.source is 'folder'")
+        _choice("data.formation", self.data.formation, ("vh", "ao", "ea", "physical"))
+        _choice("data.view_distribution", self.data.view_distribution, ("sphere", "band", "ring"))
+        _choice("data.background", self.data.background, (None, "white"))
+        _choice("data.crop", self.data.crop, ("image", "bbox"))
+        _positive("data.n_shapes", self.data.n_shapes)
+        _positive("data.views_per_shape", self.data.views_per_shape)
+        if not 0.0 < self.data.split <= 1.0:
+            raise ConfigError(f"data.split: expected a share in (0, 1], got {self.data.split!r}")
+        _choice("model.resolution", self.model.resolution, (16, 32, 64, 128))
+        _positive("model.latent", self.model.latent)
+        _positive("model.width", self.model.width)
+        _choice("model.norm", self.model.norm, ("batch", "instance", "none"))
+        _choice("render.backend", self.render.backend, ("closed_form", "mitsuba", "physical"))
+        _choice("render.model", self.render.model, ("vh", "ao", "ea"))
+        _choice("render.filter", self.render.filter, ("trilinear", "nearest"))
+        _choice("render.lighting", self.render.lighting, ("sunsky", "envmap", "mixed"))
+        if not self.render.step > 0:
+            raise ConfigError(f"render.step: expected a positive number, got {self.render.step!r}")
+        _positive("render.spp", self.render.spp)
+        _positive("render.physical_spp", self.render.physical_spp)
+        _positive("render.max_depth", self.render.max_depth)
+        if self.render.backend == "physical" and self.render.model != "ea":
+            raise ConfigError("render.model: the physical backend renders colour; use 'ea' images")
+        _choice("train.task", self.train.task, ("reconstruction", "generation"))
+        _choice("train.mode", self.train.mode, ("platonic", "platonic3d", "gan3d"))
+        _choice("train.view_distribution", self.train.view_distribution, ("sphere", "band", "ring"))
+        _choice("train.loss", self.train.loss, ("nonsaturating", "wgan-gp"))
+        _positive("train.batch_size", self.train.batch_size)
+        _positive("train.random_views", self.train.random_views)
+        _positive("train.d_steps", self.train.d_steps)
+        for key in ("lr_g", "lr_e", "lr_d"):
+            if not getattr(self.train, key) > 0:
+                raise ConfigError(f"train.{key}: expected a positive learning rate, got {getattr(self.train, key)!r}")
+        if len(self.train.betas) != 2 or not all(0.0 <= b < 1.0 for b in self.train.betas):
+            raise ConfigError(f"train.betas: expected two numbers in [0, 1), got {self.train.betas!r}")
+        if self.train.d_gate is not None and not 0.0 < self.train.d_gate <= 1.0:
+            raise ConfigError(f"train.d_gate: expected null or a number in (0, 1], got {self.train.d_gate!r}")
+        if self.train.mode != "platonic" and self.data.source != "procedural":
+            raise ConfigError(f"train.mode: {self.train.mode!r} needs 3D ground truth, i.e. data.source 'procedural'")
+        if self.train.mode == "gan3d" and self.train.task != "generation":
+            raise ConfigError("train.task: the 3D-GAN baseline ('gan3d') is a generation task")
+        if self.data.source == "procedural" and self.data.formation != "physical" \
+                and self.render.backend != "physical" and self.data.formation != self.render.model:
+            raise ConfigError(f"render.model: {self.render.model!r} differs from data.formation "
+                              f"{self.data.formation!r}; the renderer must match how the images were formed")
+        return self
+
+
+def _choice(key: str, value: Any, choices: Sequence[Any]) -> None:
+    if value not in choices:
+        raise ConfigError(f"{key}: expected one of {list(choices)}, got {value!r}")
+
+
+def _positive(key: str, value: Any) -> None:
+    if not value > 0:
+        raise ConfigError(f"{key}: expected a positive value, got {value!r}")
+
+
+def _non_negative(key: str, value: Any) -> None:
+    if value < 0:
+        raise ConfigError(f"{key}: expected a non-negative value, got {value!r}")
+
+
+def _check_type(key: str, value: Any, annotation: Any) -> Any:
+    """Return ``value`` if it fits ``annotation`` (ints are accepted for floats), else raise."""
+    origin = typing.get_origin(annotation)
+    if origin is Union:
+        errors = []
+        for option in typing.get_args(annotation):
+            try:
+                return _check_type(key, value, option)
+            except ConfigError as e:
+                errors.append(e)
+        names = " or ".join(_type_name(a) for a in typing.get_args(annotation))
+        raise ConfigError(f"{key}: expected {names}, got {value!r}")
+    if annotation is type(None):
+        if value is None:
+            return None
+        raise ConfigError(f"{key}: expected null, got {value!r}")
+    if origin in (list, List):
+        if not isinstance(value, (list, tuple)):
+            raise ConfigError(f"{key}: expected a list, got {value!r}")
+        (item,) = typing.get_args(annotation)
+        return [_check_type(f"{key}[{i}]", v, item) for i, v in enumerate(value)]
+    if annotation is float:
+        if isinstance(value, str) and _FLOAT.fullmatch(value.strip()):
+            return float(value)  # PyYAML (YAML 1.1) reads 1e-4 as a string: accept it as the number it is
+        if isinstance(value, bool) or not isinstance(value, (int, float)):
+            raise ConfigError(f"{key}: expected a number, got {value!r}")
+        return float(value)
+    if annotation is int:
+        if isinstance(value, bool) or not isinstance(value, int):
+            raise ConfigError(f"{key}: expected int, got {value!r}")
+        return value
+    if annotation is bool:
+        if not isinstance(value, bool):
+            raise ConfigError(f"{key}: expected true or false, got {value!r}")
+        return value
+    if annotation is str:
+        if not isinstance(value, str):
+            raise ConfigError(f"{key}: expected a string, got {value!r}")
+        return value
+    raise ConfigError(f"{key}: unsupported type {annotation!r}")
+
+
+def _type_name(a: Any) -> str:
+    if a is type(None):
+        return "null"
+    if typing.get_origin(a) in (list, List):
+        return "a list"
+    return getattr(a, "__name__", str(a))
+
+
+def _build(cls: Any, data: Dict[str, Any], prefix: str) -> Any:
+    if not isinstance(data, dict):
+        raise ConfigError(f"{prefix or 'config'}: expected a mapping, got {data!r}")
+    hints = typing.get_type_hints(cls)
+    names = {f.name for f in dataclasses.fields(cls)}
+    unknown = sorted(set(data) - names)
+    if unknown:
+        raise ConfigError(f"{prefix + '.' if prefix else ''}{unknown[0]}: unknown key "
+                          f"(known: {', '.join(sorted(names))})")
+    kwargs = {}
+    for name, value in data.items():
+        key = f"{prefix}.{name}" if prefix else name
+        if dataclasses.is_dataclass(hints[name]):
+            kwargs[name] = _build(hints[name], value or {}, key)
+        else:
+            kwargs[name] = _check_type(key, value, hints[name])
+    return cls(**kwargs)
+
+
+def apply_overrides(data: Dict[str, Any], overrides: Sequence[str]) -> Dict[str, Any]:
+    """Apply ``key.sub=value`` strings (values parsed as YAML scalars) to a nested dict."""
+    for item in overrides:
+        if "=" not in item:
+            raise ConfigError(f"override {item!r}: expected key=value, e.g. train.steps=500")
+        key, text = item.split("=", 1)
+        parts = key.strip().split(".")
+        if len(parts) != 2 or not all(parts):
+            raise ConfigError(f"override {item!r}: expected section.key=value, e.g. train.steps=500")
+        try:
+            value = yaml.safe_load(text)
+        except yaml.YAMLError as e:
+            raise ConfigError(f"{key}: could not parse {text!r}: {e}") from None
+        data.setdefault(parts[0], {})
+        if not isinstance(data[parts[0]], dict):
+            raise ConfigError(f"{parts[0]}: expected a mapping")
+        data[parts[0]][parts[1]] = value
+    return data
+
+
+def load_config(path: Optional[Union[str, Path]] = None, overrides: Sequence[str] = ()) -> Config:
+    """Load a YAML config (or the defaults when ``path`` is None), apply overrides, validate."""
+    data: Dict[str, Any] = {}
+    if path is not None:
+        path = Path(path)
+        if not path.is_file():
+            raise ConfigError(f"config file {str(path)!r} does not exist")
+        try:
+            data = yaml.safe_load(path.read_text()) or {}
+        except yaml.YAMLError as e:
+            raise ConfigError(f"{path}: not valid YAML: {e}") from None
+    data = apply_overrides(data, overrides)
+    return _build(Config, data, "").validate()

@@ -1,0 +1,117 @@
+"""Export: volumes to files (.npz, Mitsuba .vol), turntable GIFs, and meshes (PLY with vertex colours).
+
+Mesh extraction: marching cubes on the density channel at iso-level ``level`` (scikit-image),
+in voxel-index space ``(d, h, w)``, mapped to the world by the volume convention
+x = −1 + (w + ½)Δ, y = 1 − (h + ½)Δ, z = 1 − (d + ½)Δ; the flips reverse the triangle winding,
+so faces are re-ordered to keep normals pointing out. Vertex colours are the RGB channels
+sampled trilinearly at the vertices, sRGB-encoded to 8 bits (PLY viewers display sRGB).
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import List, Optional, Sequence, Union
+
+import numpy as np
+import torch
+import torch.nn.functional as F
+
+from .images import composite, linear_to_srgb, to_hwc
+from .render import render
+from .views import turntable
+from .volume import voxel_size, world_to_grid
+
+__all__ = ["save_volume", "turntable_frames", "save_gif", "extract_mesh", "save_ply", "Mesh"]
+
+PathLike = Union[str, Path]
+
+
+def save_volume(volume: torch.Tensor, stem: PathLike) -> List[Path]:
+    """Write a ``(C, N, N, N)`` volume as ``stem.npz`` (array ``volume``) and ``stem.vol`` (Mitsuba)."""
+    from .render.mitsuba_renderer import to_mitsuba_grid
+    from .render.variant import ensure_variant
+
+    stem = Path(stem)
+    stem.parent.mkdir(parents=True, exist_ok=True)
+    v = volume.detach().float().cpu()
+    npz = stem.with_suffix(".npz")
+    np.savez_compressed(npz, volume=v.numpy())
+    mi = ensure_variant()
+    vol = stem.with_suffix(".vol")
+    mi.VolumeGrid(to_mitsuba_grid(v).contiguous().numpy()).write(str(vol))
+    return [npz, vol]
+
+
+def turntable_frames(volume: torch.Tensor, model: str, frames: int = 36, elevation: float = 20.0,
+                     background: float = 1.0) -> List[np.ndarray]:
+    """Closed-form renders of ``(C, N, N, N)`` around +y → sRGB ``(H, W, 3)`` frames over ``background``."""
+    views = turntable(frames, elevation=elevation)
+    with torch.no_grad():
+        images = render(volume.detach().float().cpu()[None].expand(frames, -1, -1, -1, -1).contiguous(),
+                        views, model, "closed_form")
+    return [linear_to_srgb(composite(to_hwc(i), background=background)) for i in images]
+
+
+def save_gif(frames: Sequence[np.ndarray], path: PathLike, scale: int = 4, duration_ms: int = 60) -> Path:
+    """Frames (float sRGB in [0, 1]) → an endlessly looping GIF, upscaled ``scale``× (nearest)."""
+    from PIL import Image
+
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    pil = [Image.fromarray((np.clip(f, 0, 1) * 255 + 0.5).astype(np.uint8)) for f in frames]
+    pil = [p.resize((p.width * scale, p.height * scale), Image.NEAREST) for p in pil]
+    pil[0].save(path, save_all=True, append_images=pil[1:], duration=duration_ms, loop=0)
+    return path
+
+
+class Mesh:
+    """vertices ``(V, 3)`` world coordinates, faces ``(F, 3)`` indices, colours ``(V, 3)`` uint8."""
+
+    def __init__(self, vertices: np.ndarray, faces: np.ndarray, colours: np.ndarray):
+        self.vertices, self.faces, self.colours = vertices, faces, colours
+
+
+def extract_mesh(volume: torch.Tensor, level: float = 0.5) -> Mesh:
+    """Marching cubes on the density (last channel) of ``(C, N, N, N)`` at ``level``."""
+    from skimage.measure import marching_cubes
+
+    v = volume.detach().float().cpu()
+    density = v[-1].numpy()
+    if not density.min() < level < density.max():
+        raise ValueError(f"the density never crosses the iso-level {level} (range "
+                         f"[{density.min():.3g}, {density.max():.3g}]): no surface to extract")
+    n = density.shape[-1]
+    Δ = voxel_size(n)
+    # pad with empty space so surfaces touching the border close
+    verts_idx, faces, _, _ = marching_cubes(np.pad(density, 1), level=level)
+    verts_idx -= 1.0
+    d, h, w = verts_idx[:, 0], verts_idx[:, 1], verts_idx[:, 2]
+    world = np.stack([-1.0 + (w + 0.5) * Δ, 1.0 - (h + 0.5) * Δ, 1.0 - (d + 0.5) * Δ], axis=1)
+    faces = faces[:, ::-1].copy()                      # two axis flips → one reflection: fix winding
+    if v.shape[0] == 4:
+        grid = world_to_grid(torch.from_numpy(world).float())[None, :, None, None, :]
+        rgb = F.grid_sample(v[None, :3], grid, mode="bilinear", padding_mode="border",
+                            align_corners=False)[0, :, :, 0, 0].T.numpy()
+        colours = (linear_to_srgb(rgb) * 255 + 0.5).astype(np.uint8)
+    else:
+        colours = np.full((len(world), 3), 200, np.uint8)
+    return Mesh(world.astype(np.float32), faces.astype(np.int32), colours)
+
+
+def save_ply(mesh: Mesh, path: PathLike) -> Path:
+    """Binary little-endian PLY with float x, y, z, uchar red, green, blue and triangle faces."""
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    header = ("ply\nformat binary_little_endian 1.0\ncomment mitsuba-platonic marching cubes\n"
+              f"element vertex {len(mesh.vertices)}\nproperty float x\nproperty float y\nproperty float z\n"
+              "property uchar red\nproperty uchar green\nproperty uchar blue\n"
+              f"element face {len(mesh.faces)}\nproperty list uchar int vertex_indices\nend_header\n")
+    vertex = np.empty(len(mesh.vertices), dtype=[("p", "<f4", 3), ("c", "u1", 3)])
+    vertex["p"], vertex["c"] = mesh.vertices, mesh.colours
+    face = np.empty(len(mesh.faces), dtype=[("n", "u1"), ("i", "<i4", 3)])
+    face["n"], face["i"] = 3, mesh.faces
+    with open(path, "wb") as f:
+        f.write(header.encode("ascii"))
+        f.write(vertex.tobytes())
+        f.write(face.tobytes())
+    return path

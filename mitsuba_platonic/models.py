@@ -1,0 +1,175 @@
+"""Networks of PlatonicGAN: encoder E (image → z), generator G (z → volume), discriminators.
+
+Shapes follow the authors' code (DESIGN §4), parameterised so that a CPU run can use 16³ or 32³
+and narrow widths while a GPU run uses the paper's 64³:
+
+- G (3D-GAN style): z → ConvTranspose3d(k4, s1) to 4³ → (k4, s2, p1) stages doubling the
+  resolution and halving the width, the last one to C channels at R³ → sigmoid.
+  At R = 64 and width 64: 512 → 256 → 128 → 64 → C, as in the paper.
+- D (2D): Conv2d(k4, s2, p1) stages from R² down to 4², doubling the width (64 → 128 → 256 → 512
+  at R = 64), LeakyReLU 0.2, then Conv2d(k4) to one logit.
+- E: D's trunk, then Linear → z.
+- D3 (3D, for Platonic3D and the 3D-GAN baseline): D's trunk in 3D.
+
+``norm`` = 'batch' (the paper), 'instance' or 'none' (no batch statistics: then data-parallel
+training with half the batch per process makes exactly the single-process update).
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from typing import List
+
+import torch
+from torch import nn
+
+__all__ = ["NetConfig", "Encoder", "Generator", "Discriminator", "VolumeDiscriminator", "build_networks"]
+
+NORMS = ("batch", "instance", "none")
+
+
+@dataclass(frozen=True)
+class NetConfig:
+    """resolution R (16, 32, 64, 128), volume channels (1 or 4), image channels (1 or 4),
+    latent size, base width (channels of the widest-resolution layer), normalisation."""
+
+    resolution: int = 32
+    volume_channels: int = 4
+    image_channels: int = 4
+    latent: int = 64
+    width: int = 32
+    norm: str = "batch"
+
+    def validate(self) -> "NetConfig":
+        if self.resolution not in (16, 32, 64, 128):
+            raise ValueError(f"resolution must be 16, 32, 64 or 128, got {self.resolution!r}")
+        if self.volume_channels not in (1, 4) or self.image_channels not in (1, 4):
+            raise ValueError(f"volume/image channels must be 1 or 4, got "
+                             f"{self.volume_channels!r}/{self.image_channels!r}")
+        if not isinstance(self.latent, int) or self.latent < 1:
+            raise ValueError(f"latent must be a positive int, got {self.latent!r}")
+        if not isinstance(self.width, int) or self.width < 1:
+            raise ValueError(f"width must be a positive int, got {self.width!r}")
+        if self.norm not in NORMS:
+            raise ValueError(f"norm must be one of {NORMS}, got {self.norm!r}")
+        return self
+
+    @property
+    def stages(self) -> int:
+        """Number of ×2 resolution steps between 4 and R."""
+        return int(math.log2(self.resolution)) - 2
+
+
+def _norm(kind: str, channels: int, dims: int) -> nn.Module:
+    if kind == "batch":
+        return (nn.BatchNorm2d if dims == 2 else nn.BatchNorm3d)(channels)
+    if kind == "instance":
+        return (nn.InstanceNorm2d if dims == 2 else nn.InstanceNorm3d)(channels, affine=True)
+    return nn.Identity()
+
+
+def _trunk(cfg: NetConfig, in_channels: int, dims: int) -> nn.Sequential:
+    """Strided k4 s2 p1 convolutions R → 4, widths width·2^i; no norm on the first layer."""
+    conv = nn.Conv2d if dims == 2 else nn.Conv3d
+    layers: List[nn.Module] = []
+    c_in = in_channels
+    for i in range(cfg.stages):
+        c_out = cfg.width * 2 ** i
+        layers += [conv(c_in, c_out, 4, 2, 1, bias=(i == 0 or cfg.norm == "none"))]
+        if i > 0:
+            layers += [_norm(cfg.norm, c_out, dims)]
+        layers += [nn.LeakyReLU(0.2, inplace=True)]
+        c_in = c_out
+    return nn.Sequential(*layers)
+
+
+class Generator(nn.Module):
+    """G: ``(B, latent)`` → ``(B, C, R, R, R)`` volume in (0, 1) (sigmoid)."""
+
+    def __init__(self, cfg: NetConfig):
+        super().__init__()
+        self.cfg = cfg.validate()
+        top = cfg.width * 2 ** (cfg.stages - 1)
+        layers: List[nn.Module] = [nn.ConvTranspose3d(cfg.latent, top, 4, 1, 0, bias=cfg.norm == "none"),
+                                   _norm(cfg.norm, top, 3), nn.ReLU(inplace=True)]
+        c = top
+        for _ in range(cfg.stages - 1):
+            layers += [nn.ConvTranspose3d(c, c // 2, 4, 2, 1, bias=cfg.norm == "none"),
+                       _norm(cfg.norm, c // 2, 3), nn.ReLU(inplace=True)]
+            c //= 2
+        layers += [nn.ConvTranspose3d(c, cfg.volume_channels, 4, 2, 1), nn.Sigmoid()]
+        self.net = nn.Sequential(*layers)
+
+    def forward(self, z: torch.Tensor) -> torch.Tensor:
+        if z.dim() != 2 or z.shape[1] != self.cfg.latent:
+            raise ValueError(f"G expects z of shape (B, {self.cfg.latent}), got {tuple(z.shape)}")
+        return self.net(z[:, :, None, None, None])
+
+
+class Discriminator(nn.Module):
+    """D: ``(B, C, R, R)`` image → ``(B,)`` logit."""
+
+    def __init__(self, cfg: NetConfig):
+        super().__init__()
+        self.cfg = cfg.validate()
+        self.trunk = _trunk(cfg, cfg.image_channels, 2)
+        self.head = nn.Conv2d(cfg.width * 2 ** (cfg.stages - 1), 1, 4)
+
+    def forward(self, x: torch.Tensor) -> torch.Tensor:
+        r, c = self.cfg.resolution, self.cfg.image_channels
+        if x.dim() != 4 or x.shape[1:] != (c, r, r):
+            raise ValueError(f"D expects images (B, {c}, {r}, {r}), got {tuple(x.shape)}")
+        return self.head(self.trunk(x)).flatten()
+
+
+class VolumeDiscriminator(nn.Module):
+    """D3: ``(B, C, R, R, R)`` volume → ``(B,)`` logit (Platonic3D, 3D-GAN baseline)."""
+
+    def __init__(self, cfg: NetConfig):
+        super().__init__()
+        self.cfg = cfg.validate()
+        self.trunk = _trunk(cfg, cfg.volume_channels, 3)
+        self.head = nn.Conv3d(cfg.width * 2 ** (cfg.stages - 1), 1, 4)
+
+    def forward(self, v: torch.Tensor) -> torch.Tensor:
+        r, c = self.cfg.resolution, self.cfg.volume_channels
+        if v.dim() != 5 or v.shape[1:] != (c, r, r, r):
+            raise ValueError(f"D3 expects volumes (B, {c}, {r}, {r}, {r}), got {tuple(v.shape)}")
+        return self.head(self.trunk(v)).flatten()
+
+
+class Encoder(nn.Module):
+    """E: ``(B, C, R, R)`` image → ``(B, latent)`` code."""
+
+    def __init__(self, cfg: NetConfig):
+        super().__init__()
+        self.cfg = cfg.validate()
+        self.trunk = _trunk(cfg, cfg.image_channels, 2)
+        self.head = nn.Linear(cfg.width * 2 ** (cfg.stages - 1) * 16, cfg.latent)
+
+    def forward(self, x: torch.Tensor) -> torch.Tensor:
+        r, c = self.cfg.resolution, self.cfg.image_channels
+        if x.dim() != 4 or x.shape[1:] != (c, r, r):
+            raise ValueError(f"E expects images (B, {c}, {r}, {r}), got {tuple(x.shape)}")
+        return self.head(self.trunk(x).flatten(1))
+
+
+def _init(m: nn.Module) -> None:
+    """DCGAN initialisation: N(0, 0.02) weights, norm scales N(1, 0.02)."""
+    if isinstance(m, (nn.Conv2d, nn.Conv3d, nn.ConvTranspose3d, nn.Linear)):
+        nn.init.normal_(m.weight, 0.0, 0.02)
+        if m.bias is not None:
+            nn.init.zeros_(m.bias)
+    elif isinstance(m, (nn.BatchNorm2d, nn.BatchNorm3d, nn.InstanceNorm2d, nn.InstanceNorm3d)) and m.affine:
+        nn.init.normal_(m.weight, 1.0, 0.02)
+        nn.init.zeros_(m.bias)
+
+
+def build_networks(cfg: NetConfig, volume_discriminator: bool = False) -> nn.ModuleDict:
+    """E, G, D (and D3) for ``cfg``, initialised; a ModuleDict so one state_dict holds all."""
+    nets = nn.ModuleDict({"E": Encoder(cfg), "G": Generator(cfg), "D": Discriminator(cfg)})
+    if volume_discriminator:
+        nets["D3"] = VolumeDiscriminator(cfg)
+    nets.apply(_init)
+    return nets

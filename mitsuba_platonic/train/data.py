@@ -1,0 +1,101 @@
+"""Training data: the images a run learns from, and what evaluation may look at.
+
+- ``procedural``: a built-in shape class rendered by ``make-dataset`` (cached under
+  ``data.cache``, resumable), split *by shape*: the first ``split`` share of shapes trains, the
+  rest is held out. Held-out images keep their evaluation records (view, ground-truth volume);
+  training only ever sees image tensors. Platonic3D / 3D-GAN also get the training shapes'
+  ground-truth volumes (that is their point: 3D data where it exists).
+- ``folder``: an unstructured photo collection (:class:`~mitsuba_platonic.data.photos.PhotoCollection`),
+  de-duplicated, split train / held-out by content hash.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any, Dict, List, Optional
+
+import numpy as np
+import torch
+
+from ..config import Config
+
+__all__ = ["TrainingData", "load_training_data", "collection_folder"]
+
+
+@dataclass
+class TrainingData:
+    """images: ``(N, C, R, R)`` training images (C = 4 premultiplied linear RGBA, or 1 alpha);
+    held_out: ``(M, C, R, R)``; volumes: ``(K, 4, R, R, R)`` training shapes' ground truth or None;
+    held_out_records: evaluation metadata per held-out image (procedural only); source: a label."""
+
+    images: torch.Tensor
+    held_out: torch.Tensor
+    volumes: Optional[torch.Tensor] = None
+    held_out_records: List[Dict[str, Any]] = field(default_factory=list)
+    source: str = ""
+
+
+def collection_folder(cfg: Config) -> Path:
+    """Where a procedural config's collection is cached (one folder per distinct collection)."""
+    d = cfg.data
+    elev = "" if d.elevation is None else "-e" + "_".join(str(x) for x in np.atleast_1d(d.elevation))
+    name = (f"{d.shape_class}-{d.formation}-{cfg.model.resolution}-{d.n_shapes}x{d.views_per_shape}"
+            f"-{d.view_distribution}{elev}-s{d.seed}")
+    return Path(d.cache) / name
+
+
+def _procedural(cfg: Config, progress: bool) -> TrainingData:
+    from ..data.collection import CollectionSpec, make_collection, load_manifest
+    from ..data.photos import decode_image, prepare_image
+
+    d = cfg.data
+    spec = CollectionSpec(shape_class=d.shape_class, n_shapes=d.n_shapes, views_per_shape=d.views_per_shape,
+                          resolution=cfg.model.resolution, formation=d.formation,
+                          renderer="mitsuba" if d.formation == "physical" else "closed_form",
+                          views=d.view_distribution,
+                          elevation=tuple(d.elevation) if isinstance(d.elevation, list) else d.elevation,
+                          lighting=cfg.render.lighting if d.formation == "physical" else "sunsky",
+                          seed=d.seed)
+    folder = collection_folder(cfg)
+    make_collection(folder, spec, progress=progress)
+    records = load_manifest(folder)["images"]
+    n_train = max(1, int(round(d.split * d.n_shapes)))
+    alpha_only = cfg.render.model in ("vh", "ao")
+    train, held, held_records = [], [], []
+    for r in records:
+        img = prepare_image(decode_image(folder / r["image"]), cfg.model.resolution, clean=False, soften=False)
+        img = torch.from_numpy(img[3:] if alpha_only else img)
+        if r["shape"] < n_train:
+            train.append(img)
+        else:
+            held.append(img)
+            held_records.append({**r, "folder": str(folder)})
+    volumes = None
+    if cfg.train.mode != "platonic":
+        volumes = torch.stack([torch.from_numpy(np.load(folder / "volumes" / f"{i:05d}.npz")["volume"])
+                               for i in range(n_train)])
+        if cfg.render.model in ("vh", "ao"):
+            volumes = volumes[:, 3:]
+    empty = torch.zeros(0, *train[0].shape)
+    return TrainingData(torch.stack(train), torch.stack(held) if held else empty, volumes, held_records,
+                        source=str(folder))
+
+
+def _folder(cfg: Config) -> TrainingData:
+    from ..data.photos import PhotoCollection
+
+    d = cfg.data
+    rest = (1.0 - d.split) / 2.0
+    sets = PhotoCollection.load_splits(d.path, resolution=cfg.model.resolution, splits=(d.split, rest, rest),
+                                       seed=d.seed, background=d.background, threshold=d.threshold,
+                                       alpha_only=cfg.render.model in ("vh", "ao"), crop=d.crop)
+    train = torch.stack([sets["train"][i] for i in range(len(sets["train"]))])
+    held = [sets[s][i] for s in ("val", "test") for i in range(len(sets[s]))]
+    return TrainingData(train, torch.stack(held) if held else torch.zeros(0, *train.shape[1:]),
+                        source=str(d.path))
+
+
+def load_training_data(cfg: Config, progress: bool = True) -> TrainingData:
+    """Build (or load from the cache) the data of ``cfg``."""
+    return _procedural(cfg, progress) if cfg.data.source == "procedural" else _folder(cfg)

@@ -1,0 +1,45 @@
+"""GAN losses: non-saturating (the paper) and WGAN-GP, plus the discriminator accuracy gate.
+
+Non-saturating (logits l):  L_D = softplus(−l_real) + softplus(l_fake)   (= −log D(x) − log(1 − D(G)))
+                            L_G = softplus(−l_fake)                      (= −log D(G))
+WGAN-GP:                    L_D = l_fake − l_real + λ (‖∇_x̂ D(x̂)‖ − 1)²,  x̂ = ε x + (1 − ε) G
+                            L_G = −l_fake
+Accuracy of D on a batch: the share of real logits > 0 and fake logits < 0 (the authors update D
+only while it is ≤ 0.6, so D never runs away from G).
+"""
+
+from __future__ import annotations
+
+from typing import Callable, Tuple
+
+import torch
+import torch.nn.functional as F
+
+__all__ = ["d_loss", "g_loss", "gradient_penalty", "accuracy_counts"]
+
+
+def d_loss(kind: str, real: torch.Tensor, fake: torch.Tensor) -> torch.Tensor:
+    if kind == "nonsaturating":
+        return F.softplus(-real).mean() + F.softplus(fake).mean()
+    return fake.mean() - real.mean()
+
+
+def g_loss(kind: str, fake: torch.Tensor) -> torch.Tensor:
+    if kind == "nonsaturating":
+        return F.softplus(-fake).mean()
+    return -fake.mean()
+
+
+def gradient_penalty(D: Callable[[torch.Tensor], torch.Tensor], real: torch.Tensor, fake: torch.Tensor,
+                     eps: torch.Tensor) -> torch.Tensor:
+    """(‖∇ D(x̂)‖₂ − 1)² averaged over the batch, x̂ = ε real + (1 − ε) fake, ε ∈ U[0, 1] per sample."""
+    shape = (-1,) + (1,) * (real.dim() - 1)
+    x = (eps.view(shape) * real + (1.0 - eps.view(shape)) * fake).requires_grad_(True)
+    (grad,) = torch.autograd.grad(D(x).sum(), x, create_graph=True)
+    return ((grad.flatten(1).norm(dim=1) - 1.0) ** 2).mean()
+
+
+def accuracy_counts(real: torch.Tensor, fake: torch.Tensor) -> Tuple[torch.Tensor, torch.Tensor]:
+    """(correct, total) of D's decisions, as float tensors (summable across processes)."""
+    correct = (real > 0).float().sum() + (fake < 0).float().sum()
+    return correct, torch.tensor(float(real.numel() + fake.numel()))

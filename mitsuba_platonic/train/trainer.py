@@ -1,0 +1,231 @@
+"""One PlatonicGAN update (Algorithm 1 of the paper), for every task and mode of the trainer.
+
+Per step, with a generator seeded by (run seed, step) so a resumed run draws exactly what an
+uninterrupted one would:
+
+1. sample a batch of real images x and, per volume, ``random_views`` views ω ~ p_view;
+2. z = E(x) (reconstruction) or z ~ N(0, I) (generation); v = G(z);
+3. I_view = R(ω, v); for reconstruction also I_front = R(ω₀, v) (the input view by convention);
+4. D update on x vs I_view (skipped while D's accuracy on this batch > ``d_gate``);
+5. G (and E) update on  L_G = adv(D(I_view)) + λ_rec ‖x − I_front‖² (+ w₃ adv₃(D3(v))).
+
+Modes: 'platonic' (the above), 'platonic3d' (also a 3D discriminator D3 on ground-truth
+volumes vs v, where 3D data exists), 'gan3d' (the 3D-GAN baseline: WGAN-GP between G(z) and
+ground-truth volumes, no rendering, no 2D discriminator). D is updated before G, and G's
+adversarial term uses the updated D (the usual alternating scheme; the paper's listing computes
+c_Gen before the update, which autograd cannot do once D's weights changed in place).
+
+Data parallel: the batch drawn from the step generator is the *global* batch; process r of W
+takes rows [r·B/W, (r+1)·B/W). Losses are means over a process's rows and DDP averages the
+gradients, so W processes make the single-process update (exactly, for networks without batch
+statistics; with BatchNorm each process normalises its own rows). D's accuracy is summed over
+processes, so the gate decides the same way everywhere.
+"""
+
+from __future__ import annotations
+
+from typing import Dict, Optional
+
+import numpy as np
+import torch
+import torch.distributed as dist
+import torch.nn.functional as F
+from torch import nn
+
+from ..config import Config
+from ..models import NetConfig, build_networks
+from ..views import front_view, sample_views
+from .data import TrainingData
+from .losses import accuracy_counts, d_loss, g_loss, gradient_penalty
+from .renderer import make_renderer
+
+__all__ = ["Trainer", "net_config"]
+
+
+def net_config(cfg: Config) -> NetConfig:
+    channels = 1 if cfg.render.model in ("vh", "ao") else 4
+    return NetConfig(resolution=cfg.model.resolution, volume_channels=channels, image_channels=channels,
+                     latent=cfg.model.latent, width=cfg.model.width, norm=cfg.model.norm).validate()
+
+
+class Trainer:
+    """Networks, optimisers and :meth:`step`; ``rank``/``world`` for data-parallel runs."""
+
+    def __init__(self, cfg: Config, data: TrainingData, device: torch.device, rank: int = 0, world: int = 1):
+        if cfg.train.batch_size % world:
+            raise ValueError(f"train.batch_size ({cfg.train.batch_size}) must be divisible by the "
+                             f"number of processes ({world})")
+        if cfg.train.mode != "platonic" and data.volumes is None:
+            raise ValueError(f"train.mode {cfg.train.mode!r} needs ground-truth volumes")
+        self.cfg, self.data, self.device, self.rank, self.world = cfg, data, device, rank, world
+        torch.manual_seed(cfg.run.seed)                      # network initialisation
+        self.nets = build_networks(net_config(cfg), volume_discriminator=cfg.train.mode != "platonic").to(device)
+        self.modules: Dict[str, nn.Module] = dict(self.nets.items())
+        if world > 1:
+            from torch.nn.parallel import DistributedDataParallel as DDP
+            self.modules = {k: DDP(m, device_ids=[device.index] if device.type == "cuda" else None)
+                            for k, m in self.nets.items()}
+        t = cfg.train
+        betas = tuple(t.betas)
+        groups = [{"params": self.nets["G"].parameters(), "lr": t.lr_g}]
+        if t.task == "reconstruction":
+            groups.append({"params": self.nets["E"].parameters(), "lr": t.lr_e})
+        self.opt_g = torch.optim.Adam(groups, betas=betas)
+        self.opt_d = torch.optim.Adam(self.nets["D"].parameters(), lr=t.lr_d, betas=betas)
+        self.opt_d3 = (torch.optim.Adam(self.nets["D3"].parameters(), lr=t.lr_d, betas=betas)
+                       if "D3" in self.nets else None)
+        self.render = make_renderer(cfg.render)
+        self.images = data.images.to(device)
+        self.volumes = data.volumes.to(device) if data.volumes is not None else None
+
+    # -- state ------------------------------------------------------------------------------
+
+    def state_dict(self) -> Dict[str, object]:
+        state = {"nets": self.nets.state_dict(), "opt_g": self.opt_g.state_dict(), "opt_d": self.opt_d.state_dict()}
+        if self.opt_d3 is not None:
+            state["opt_d3"] = self.opt_d3.state_dict()
+        return state
+
+    def load_state_dict(self, state: Dict[str, object]) -> None:
+        self.nets.load_state_dict(state["nets"])
+        self.opt_g.load_state_dict(state["opt_g"])
+        self.opt_d.load_state_dict(state["opt_d"])
+        if self.opt_d3 is not None:
+            self.opt_d3.load_state_dict(state["opt_d3"])
+
+    # -- one step ---------------------------------------------------------------------------
+
+    def generator(self, step: int, stream: int = 0) -> torch.Generator:
+        g = torch.Generator()
+        g.manual_seed(int(np.random.SeedSequence([self.cfg.run.seed, step, stream]).generate_state(1)[0]))
+        return g
+
+    def _shard(self, x: torch.Tensor) -> torch.Tensor:
+        b = x.shape[0] // self.world
+        return x[self.rank * b:(self.rank + 1) * b]
+
+    def _views(self, n: int, g: torch.Generator) -> torch.Tensor:
+        t = self.cfg.train
+        kwargs = {}
+        if t.view_distribution != "sphere":
+            e = t.elevation if t.elevation is not None else ((0.0, 60.0) if t.view_distribution == "band" else 20.0)
+            kwargs["elevation"] = tuple(e) if isinstance(e, list) else e
+        return sample_views(n, t.view_distribution, seed=g, **kwargs)
+
+    def _all_sum(self, x: torch.Tensor) -> torch.Tensor:
+        if self.world > 1:
+            x = x.to(self.device)
+            dist.all_reduce(x)
+        return x.cpu()
+
+    def step(self, step: int) -> Dict[str, float]:
+        """One update; returns the step's scalars (means over the whole batch)."""
+        if self.cfg.train.mode == "gan3d":
+            return self._step_gan3d(step)
+        cfg, t = self.cfg, self.cfg.train
+        E, G, D = self.modules["E"], self.modules["G"], self.modules["D"]
+        g = self.generator(step)
+        B, K = t.batch_size, t.random_views
+        idx = torch.randint(len(self.images), (B,), generator=g)
+        x = self._shard(self.images[idx.to(self.device)])
+        z_prior = torch.randn(B, cfg.model.latent, generator=g)
+        views = self._shard(self._views(B * K, g).view(B, K, 3)).reshape(-1, 3)
+        eps = self._shard(torch.rand(B * K, generator=g))
+        b = x.shape[0]
+
+        self.nets.train()
+        z = E(x) if t.task == "reconstruction" else self._shard(z_prior).to(self.device)
+        v = G(z)
+        seed = int(np.random.SeedSequence([cfg.run.seed, step, 7, self.rank]).generate_state(1)[0] >> 2)
+        i_view = self.render(v.repeat_interleave(K, 0), views.to(self.device), seed)
+        out: Dict[str, float] = {}
+
+        # -- D: real photos vs rendered views, gated by its accuracy ---------------------------
+        real_d = x.repeat_interleave(K, 0) if K > 1 else x
+        l_real, l_fake = D(real_d), D(i_view.detach())
+        loss_d = d_loss(t.loss, l_real, l_fake)
+        if t.loss == "wgan-gp":
+            loss_d = loss_d + t.gp_weight * gradient_penalty(D, real_d, i_view.detach(), eps.to(self.device))
+        correct, total = accuracy_counts(l_real.detach(), l_fake.detach())
+        acc = float(self._all_sum(correct) / self._all_sum(total))
+        update_d = t.d_gate is None or acc <= t.d_gate
+        if update_d:
+            for _ in range(t.d_steps):
+                self.opt_d.zero_grad(set_to_none=True)
+                loss_d.backward(retain_graph=t.d_steps > 1)
+                self.opt_d.step()
+        out.update(loss_d=float(loss_d.detach()), acc_d=acc, d_updated=float(update_d))
+
+        # -- D3 (Platonic3D): ground-truth volumes vs generated ----------------------------------
+        loss_g3 = torch.zeros((), device=self.device)
+        if t.mode == "platonic3d":
+            loss_g3 = self._update_d3(v, g, eps, out)
+
+        # -- G and E: fool D from random views, reconstruct the input view ---------------------
+        loss_adv = g_loss(t.loss, D(i_view))
+        loss = loss_adv + t.weight_3d * loss_g3
+        if t.task == "reconstruction":
+            i_front = self.render(v, front_view(b).to(self.device), seed + 1)
+            loss_rec = F.mse_loss(i_front, x)
+            loss = loss + t.rec_weight * loss_rec
+            out["loss_rec"] = float(self._all_sum(loss_rec.detach().cpu()) / self.world)
+        self.opt_g.zero_grad(set_to_none=True)
+        loss.backward()
+        self.opt_g.step()
+        out["loss_g"] = float(self._all_sum(loss_adv.detach().cpu()) / self.world)
+        out["loss_d"] = float(self._all_sum(torch.tensor(out["loss_d"])) / self.world)
+        return out
+
+    def _update_d3(self, v: torch.Tensor, g: torch.Generator, eps: torch.Tensor, out: Dict[str, float]) -> torch.Tensor:
+        """One D3 update (ground truth vs v.detach()); returns G's 3D adversarial loss on v."""
+        t, D3 = self.cfg.train, self.modules["D3"]
+        B = t.batch_size
+        real = self._shard(self.volumes[torch.randint(len(self.volumes), (B,), generator=g).to(self.device)])
+        l_real, l_fake = D3(real), D3(v.detach())
+        loss = d_loss(t.loss, l_real, l_fake)
+        if t.loss == "wgan-gp":
+            loss = loss + t.gp_weight * gradient_penalty(D3, real, v.detach(), eps[: len(real)].to(self.device))
+        self.opt_d3.zero_grad(set_to_none=True)
+        loss.backward()
+        self.opt_d3.step()
+        out["loss_d3"] = float(self._all_sum(loss.detach().cpu()) / self.world)
+        return g_loss(t.loss, D3(v))
+
+    def _step_gan3d(self, step: int) -> Dict[str, float]:
+        """The 3D-GAN baseline: WGAN-GP (or the config's loss) between G(z) and ground-truth volumes."""
+        t, G, D3 = self.cfg.train, self.modules["G"], self.modules["D3"]
+        g = self.generator(step)
+        B = t.batch_size
+        real = self._shard(self.volumes[torch.randint(len(self.volumes), (B,), generator=g).to(self.device)])
+        z = self._shard(torch.randn(B, self.cfg.model.latent, generator=g)).to(self.device)
+        eps = self._shard(torch.rand(B, generator=g)).to(self.device)
+        self.nets.train()
+        out: Dict[str, float] = {}
+        for _ in range(t.d_steps):
+            fake = G(z).detach()
+            loss_d = d_loss(t.loss, D3(real), D3(fake))
+            if t.loss == "wgan-gp":
+                loss_d = loss_d + t.gp_weight * gradient_penalty(D3, real, fake, eps)
+            self.opt_d3.zero_grad(set_to_none=True)
+            loss_d.backward()
+            self.opt_d3.step()
+        loss_g = g_loss(t.loss, D3(G(z)))
+        self.opt_g.zero_grad(set_to_none=True)
+        loss_g.backward()
+        self.opt_g.step()
+        out["loss_d3"] = float(self._all_sum(loss_d.detach().cpu()) / self.world)
+        out["loss_g"] = float(self._all_sum(loss_g.detach().cpu()) / self.world)
+        return out
+
+    # -- using the networks -----------------------------------------------------------------
+
+    @torch.no_grad()
+    def reconstruct(self, images: torch.Tensor) -> torch.Tensor:
+        """Volumes for input images (eval mode: BatchNorm uses running statistics)."""
+        self.nets.eval()
+        return self.nets["G"](self.nets["E"](images.to(self.device)))
+
+    @torch.no_grad()
+    def generate(self, z: torch.Tensor) -> torch.Tensor:
+        self.nets.eval()
+        return self.nets["G"](z.to(self.device))

@@ -1,0 +1,237 @@
+"""Training: one step per renderer and mode, who changes what, resume, crash-safe checkpoints,
+Ctrl-C, data parallel, and the command line."""
+
+import os
+import signal
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+import pytest
+import torch
+
+from mitsuba_platonic.config import load_config
+from mitsuba_platonic.data import shapes
+from mitsuba_platonic.train import run as R
+from mitsuba_platonic.train.data import load_training_data
+from mitsuba_platonic.train.trainer import Trainer
+from mitsuba_platonic.volume import voxel_centres
+
+TINY = "tiny_blob"
+
+
+def _blob(rng, n):
+    """A coloured ellipsoid with a random radius and colour: a cheap class for tests."""
+    p = voxel_centres(n)
+    radii = torch.tensor(rng.uniform(0.3, 0.7, size=3))
+    d = ((p / radii) ** 2).sum(-1).sqrt() - 1.0
+    density = torch.sigmoid(-d * n / 2.0)
+    rgb = torch.tensor(rng.uniform(0.2, 0.9, size=3))[:, None, None, None].expand(3, n, n, n)
+    return torch.cat([rgb, density[None]]).float()
+
+
+@pytest.fixture(scope="module", autouse=True)
+def tiny_class():
+    with shapes.registered(TINY, _blob):
+        yield
+
+
+def _cfg(tmp_path, *extra):
+    return load_config(None, [
+        f"run.out_dir={tmp_path}/runs", "run.name=r", "run.steps=4", "run.log_every=1", "run.sample_every=2",
+        "run.checkpoint_every=2", f"data.cache={tmp_path}/data", f"data.shape_class={TINY}", "data.n_shapes=6",
+        "data.views_per_shape=2", "model.resolution=16", "model.width=4", "model.latent=8", "train.batch_size=4",
+        "train.d_gate=null", *extra])
+
+
+def _params(module):
+    """Learnable parameters only (BatchNorm running statistics move on any training-mode forward)."""
+    return {k: v.detach().clone() for k, v in module.named_parameters()}
+
+
+def _changed(before, module):
+    after = _params(module)
+    return any(not torch.equal(before[k], after[k]) for k in before)
+
+
+CASES = [
+    ("closed_form", "ea", "reconstruction", "platonic", "nonsaturating"),
+    ("closed_form", "vh", "reconstruction", "platonic", "nonsaturating"),
+    ("mitsuba", "ao", "reconstruction", "platonic", "nonsaturating"),
+    ("mitsuba", "ea", "generation", "platonic", "wgan-gp"),
+    ("physical", "ea", "reconstruction", "platonic", "nonsaturating"),
+    ("closed_form", "ea", "reconstruction", "platonic3d", "nonsaturating"),
+    ("closed_form", "ea", "generation", "gan3d", "wgan-gp"),
+]
+
+
+@pytest.mark.parametrize("backend,model,task,mode,loss", CASES)
+def test_one_step_changes_what_it_should(tmp_path, backend, model, task, mode, loss):
+    formation = "ea" if backend == "physical" else model
+    cfg = _cfg(tmp_path, f"render.backend={backend}", f"render.model={model}", f"data.formation={formation}",
+               f"train.task={task}", f"train.mode={mode}", f"train.loss={loss}", "render.physical_spp=1",
+               "render.max_depth=2")
+    data = load_training_data(cfg, progress=False)
+    trainer = Trainer(cfg, data, torch.device("cpu"))
+    before = {k: _params(m) for k, m in trainer.nets.items()}
+    out = trainer.step(0)
+    assert all(np.isfinite(v) for v in out.values()), out
+    changed = {k: _changed(before[k], m) for k, m in trainer.nets.items()}
+    assert changed["G"]
+    assert changed["E"] == (task == "reconstruction")
+    assert changed["D"] == (mode != "gan3d")
+    if mode != "platonic":
+        assert changed["D3"]
+
+
+def test_d_step_leaves_g_alone_and_g_step_leaves_d_alone(tmp_path, monkeypatch):
+    cfg = _cfg(tmp_path)
+    trainer = Trainer(cfg, load_training_data(cfg, progress=False), torch.device("cpu"))
+    g0, d0, e0 = _params(trainer.nets["G"]), _params(trainer.nets["D"]), _params(trainer.nets["E"])
+    monkeypatch.setattr(trainer.opt_g, "step", lambda *a, **k: None)         # only D's update happens
+    trainer.step(0)
+    assert _changed(d0, trainer.nets["D"])
+    assert not _changed(g0, trainer.nets["G"]) and not _changed(e0, trainer.nets["E"])
+    monkeypatch.undo()
+    trainer = Trainer(cfg, load_training_data(cfg, progress=False), torch.device("cpu"))
+    d0 = _params(trainer.nets["D"])
+    monkeypatch.setattr(trainer.opt_d, "step", lambda *a, **k: None)         # only G's update happens
+    trainer.step(0)
+    assert not _changed(d0, trainer.nets["D"])
+
+
+def test_discriminator_gate(tmp_path):
+    cfg = _cfg(tmp_path, "train.d_gate=0.01")                # D is never that bad: never updated
+    trainer = Trainer(cfg, load_training_data(cfg, progress=False), torch.device("cpu"))
+    d0 = _params(trainer.nets["D"])
+    out = trainer.step(0)
+    assert out["d_updated"] == 0.0 and not _changed(d0, trainer.nets["D"])
+
+
+def test_resume_matches_an_uninterrupted_run(tmp_path):
+    straight = R.train(_cfg(tmp_path / "a", "run.steps=6"), progress=False)
+    cfg_b = _cfg(tmp_path / "b", "run.steps=6")
+    R.train(cfg_b, progress=False, stop_at=3)
+    assert R.load_checkpoint(Path(cfg_b.run.out_dir) / "r" / "checkpoints" / "last.pt")["step"] == 3
+    resumed = R.train(cfg_b, resume=True, progress=False)
+    a = R.load_checkpoint(straight / "checkpoints" / "last.pt")
+    b = R.load_checkpoint(resumed / "checkpoints" / "last.pt")
+    assert a["step"] == b["step"] == 6
+    for k, v in a["trainer"]["nets"].items():
+        assert torch.equal(v, b["trainer"]["nets"][k]), k
+    rows_a = (straight / "scalars.csv").read_text().splitlines()
+    rows_b = (resumed / "scalars.csv").read_text().splitlines()
+    assert rows_a[0] == rows_b[0] and len(rows_a) == len(rows_b) == 7
+    assert [r.split(",")[:5] for r in rows_a] == [r.split(",")[:5] for r in rows_b]   # same losses
+    assert (resumed / "samples" / "step_0000006.png").exists()
+    assert (resumed / "samples" / "turntable_0000006.gif").exists()
+    assert list((resumed / "tb").iterdir())
+
+
+def test_a_kill_while_writing_a_checkpoint_leaves_the_last_one_loadable(tmp_path, monkeypatch):
+    run_dir = R.train(_cfg(tmp_path, "run.steps=2"), progress=False)
+    last = run_dir / "checkpoints" / "last.pt"
+    good = R.load_checkpoint(last)
+
+    def dying_save(obj, f, *a, **k):
+        f.write(b"PK\x03\x04 half a checkpoint")
+        raise KeyboardInterrupt("killed mid-write")
+
+    monkeypatch.setattr(torch, "save", dying_save)
+    with pytest.raises(KeyboardInterrupt):
+        R.save_checkpoint(last, {"step": 99})
+    monkeypatch.undo()
+    again = R.load_checkpoint(last)
+    assert again["step"] == good["step"] == 2
+    assert not [p for p in last.parent.iterdir() if p.name.startswith(".")]
+
+
+def test_existing_run_needs_resume_and_same_settings(tmp_path):
+    R.train(_cfg(tmp_path, "run.steps=2"), progress=False)
+    with pytest.raises(R.RunError, match="--resume"):
+        R.train(_cfg(tmp_path, "run.steps=2"), progress=False)
+    with pytest.raises(R.RunError, match="train settings differ"):
+        R.train(_cfg(tmp_path, "run.steps=3", "train.rec_weight=1.0"), resume=True, progress=False)
+    with pytest.raises(R.RunError, match="no checkpoint"):
+        R.train(_cfg(tmp_path / "other", "run.steps=2"), resume=True, progress=False)
+
+
+def test_ctrl_c_saves_and_exits_cleanly(tmp_path):
+    cfg_file = tmp_path / "c.yaml"
+    cfg_file.write_text(f"""
+run: {{out_dir: {tmp_path}/runs, name: r, steps: 100000, log_every: 1, sample_every: 100000, checkpoint_every: 100000}}
+data: {{cache: {tmp_path}/data, shape_class: mushroom, n_shapes: 4, views_per_shape: 1}}
+model: {{resolution: 16, width: 4, latent: 8}}
+train: {{batch_size: 2}}
+""")
+    env = dict(os.environ, PYTHONUNBUFFERED="1")
+    p = subprocess.Popen([sys.executable, "-m", "mitsuba_platonic.cli", "train", "--config", str(cfg_file), "--quiet"],
+                         stdout=subprocess.PIPE, stderr=subprocess.STDOUT, env=env, text=True)
+    csv = tmp_path / "runs" / "r" / "tb"
+    deadline = time.time() + 240
+    while not csv.exists() and time.time() < deadline and p.poll() is None:
+        time.sleep(0.5)
+    time.sleep(2.0)                                          # a few steps in
+    p.send_signal(signal.SIGINT)
+    out, _ = p.communicate(timeout=240)
+    assert p.returncode == 0, out
+    assert "interrupted: saving a checkpoint" in out
+    state = R.load_checkpoint(tmp_path / "runs" / "r" / "checkpoints" / "last.pt")
+    assert 0 < state["step"] < 100000
+
+
+def _ddp_worker(rank, world, port, cfg_overrides, tmp, result_file):
+    os.environ.update(MASTER_ADDR="127.0.0.1", MASTER_PORT=str(port), WORLD_SIZE=str(world), RANK=str(rank),
+                      LOCAL_RANK=str(rank))
+    import torch.distributed as dist
+    dist.init_process_group("gloo", rank=rank, world_size=world)
+    torch.set_num_threads(1)
+    cfg = _cfg(Path(tmp), *cfg_overrides)
+    with shapes.registered(TINY, _blob):
+        data = load_training_data(cfg, progress=False)
+        trainer = Trainer(cfg, data, torch.device("cpu"), rank, world)
+        for step in range(2):
+            trainer.step(step)
+    if rank == 0:
+        torch.save(trainer.nets.state_dict(), result_file)
+    dist.destroy_process_group()
+
+
+def test_two_processes_with_half_the_batch_make_the_single_process_update(tmp_path):
+    """gloo, 2 processes, no batch-statistics layers (norm: none): same parameters after 2 steps."""
+    import torch.multiprocessing as mp
+    overrides = ["model.norm=none", "train.batch_size=4", "train.task=reconstruction"]
+    cfg = _cfg(tmp_path, *overrides)
+    load_training_data(cfg, progress=False)                  # render the collection once, up front
+    single = Trainer(cfg, load_training_data(cfg, progress=False), torch.device("cpu"))
+    for step in range(2):
+        single.step(step)
+    import socket
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        port = s.getsockname()[1]
+    result = tmp_path / "ddp.pt"
+    mp.spawn(_ddp_worker, args=(2, port, overrides, str(tmp_path), str(result)), nprocs=2, join=True)
+    ddp = torch.load(result)
+    for k, v in single.nets.state_dict().items():
+        assert torch.allclose(v, ddp[k], atol=1e-5, rtol=1e-4), k
+
+
+def test_cli_train_reconstruct_generate(tmp_path):
+    from mitsuba_platonic.cli import main
+    from PIL import Image
+    args = [f"run.out_dir={tmp_path}/runs", "run.name=c", "run.steps=2", f"data.cache={tmp_path}/data",
+            "data.shape_class=mushroom", "data.n_shapes=4", "data.views_per_shape=1", "model.resolution=16",
+            "model.width=4", "model.latent=8", "train.batch_size=2"]
+    assert main(["train", "--quiet"] + sum((["--set", a] for a in args), [])) == 0
+    run_dir = tmp_path / "runs" / "c"
+    img = next((Path(load_config(None, args).data.cache)).glob("*/images/*.png"))
+    assert main(["reconstruct", "--run", str(run_dir), str(img), "--out", str(tmp_path / "rec"), "--level", "0.3"]) == 0
+    stem = tmp_path / "rec" / img.stem
+    assert stem.with_suffix(".npz").exists() and stem.with_suffix(".vol").exists() and stem.with_suffix(".gif").exists()
+    assert main(["generate", "--run", str(run_dir), "-n", "2", "--out", str(tmp_path / "gen")]) == 0
+    assert (tmp_path / "gen" / "samples.png").exists() and (tmp_path / "gen" / "sample_001.gif").exists()
+    assert main(["train", "--set", "train.batch_size=eight"]) == 2
+    assert main(["reconstruct", "--run", str(tmp_path / "nope"), str(img)]) == 2
