@@ -72,7 +72,8 @@ def _evaluate(trainer, data, model: str, limit: int = 64) -> Dict[str, float]:
         vol = torch.from_numpy(np.load(Path(r["folder"]) / r["volume"])["volume"]).float()
         if model in ("vh", "ao"):
             vol = vol[3:]
-        truths.append(rotate(vol[None], torch.tensor([r["view"]]))[0])   # ground truth in the input frame
+        # the ground truth resampled into the input camera frame (clamped: trilinear round-off exceeds 1)
+        truths.append(rotate(vol[None], torch.tensor([r["view"]]))[0].clamp(0.0, 1.0))
     novel = [novel_view_errors(v, t, model) for v, t in zip(recon, truths)]
     out = {"input_view_mae": float((rendered - images).abs().mean()), "novel_view_mae": float(np.mean(novel))}
     if model == "ea":

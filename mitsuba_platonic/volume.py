@@ -72,7 +72,7 @@ def validate_volume(volume: torch.Tensor, model: str) -> None:
     if math.isnan(lo) or math.isnan(hi):
         raise ValueError("volume contains NaN")
     if lo < 0.0 or hi > 1.0:
-        raise ValueError(f"volume values must lie in [0, 1], got range [{lo:.6g}, {hi:.6g}]")
+        raise ValueError(f"volume values must lie in [0, 1], got range [{lo:.9g}, {hi:.9g}]")
 
 
 def voxel_centres(n: int) -> torch.Tensor:

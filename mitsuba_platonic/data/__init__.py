@@ -1,0 +1,10 @@
+"""Data: procedural shape classes with 3D ground truth (:mod:`.shapes`), rendered collections
+(:mod:`.collection`, ``platonic make-dataset``), contact sheets (:mod:`.preview`) and the
+photo-collection loader (:mod:`.photos`)."""
+
+from . import shapes
+from .photos import (CollectionReport, ImageRejected, PhotoCollection, PhotoCollectionWarning, PhotoEntry,
+                     SkippedFile, decode_image, prepare_image)
+
+__all__ = ["shapes", "PhotoCollection", "CollectionReport", "PhotoEntry", "SkippedFile",
+           "PhotoCollectionWarning", "ImageRejected", "decode_image", "prepare_image"]

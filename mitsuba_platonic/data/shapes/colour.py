@@ -1,0 +1,35 @@
+"""Colour helpers for the shape classes: pick colours in sRGB (perceptual), store linear RGB."""
+
+from __future__ import annotations
+
+import colorsys
+from typing import Sequence, Tuple
+
+import numpy as np
+
+__all__ = ["srgb_to_linear", "hsv", "jitter", "mix"]
+
+RGB = Tuple[float, float, float]
+
+
+def srgb_to_linear(c: Sequence[float]) -> RGB:
+    """sRGB-encoded [0, 1] → linear RGB (the IEC 61966-2-1 curve)."""
+    a = np.clip(np.asarray(c, dtype=np.float64), 0.0, 1.0)
+    lin = np.where(a <= 0.04045, a / 12.92, ((a + 0.055) / 1.055) ** 2.4)
+    return tuple(float(x) for x in lin)
+
+
+def hsv(h: float, s: float, v: float) -> RGB:
+    """Linear RGB of the sRGB colour with hue ``h`` (turns, wraps), saturation ``s`` and value ``v``."""
+    return srgb_to_linear(colorsys.hsv_to_rgb(h % 1.0, float(np.clip(s, 0, 1)), float(np.clip(v, 0, 1))))
+
+
+def jitter(rng: np.random.Generator, h: float, s: float, v: float,
+           dh: float = 0.02, ds: float = 0.08, dv: float = 0.08) -> RGB:
+    """:func:`hsv` of a colour randomly perturbed by up to ``(dh, ds, dv)``."""
+    return hsv(h + rng.uniform(-dh, dh), s + rng.uniform(-ds, ds), v + rng.uniform(-dv, dv))
+
+
+def mix(a: Sequence[float], b: Sequence[float], t: float) -> RGB:
+    """Linear interpolation ``(1 − t) a + t b``."""
+    return tuple(float((1 - t) * x + t * y) for x, y in zip(a, b))
