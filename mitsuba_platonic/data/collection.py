@@ -30,6 +30,7 @@ from __future__ import annotations
 import json
 import os
 import time
+from contextlib import contextmanager
 from dataclasses import asdict, dataclass, field, fields
 from pathlib import Path
 from typing import Any, Callable, Dict, Iterator, List, Optional, Sequence, Tuple, Union
@@ -234,10 +235,37 @@ def make_collection(out: Union[str, Path], spec: CollectionSpec, overwrite: bool
     Raises ``ValueError`` if ``out`` holds a collection made with a different spec (unless
     ``overwrite``, which starts it over).
     """
-    from tqdm.auto import tqdm
-
     spec.validate()
     out = Path(out)
+    manifest_file = out / "manifest.json"
+    if not overwrite and manifest_file.exists():
+        try:
+            m = json.loads(manifest_file.read_text())
+            if m["spec"] == spec.to_dict() and all((out / r["image"]).exists() and (out / r["exr"]).exists()
+                                                   for r in m["images"]):
+                return manifest_file                 # finished: read-only, safe for concurrent readers
+        except (ValueError, KeyError):
+            pass
+    out.mkdir(parents=True, exist_ok=True)
+    with _lock(out / ".lock"):
+        return _make_collection(out, spec, overwrite, progress)
+
+
+@contextmanager
+def _lock(path: Path) -> Iterator[None]:
+    """An exclusive advisory lock: one writer per collection folder (others wait)."""
+    import fcntl
+    with open(path, "w") as f:
+        fcntl.flock(f, fcntl.LOCK_EX)
+        try:
+            yield
+        finally:
+            fcntl.flock(f, fcntl.LOCK_UN)
+
+
+def _make_collection(out: Path, spec: CollectionSpec, overwrite: bool, progress: bool) -> Path:
+    from tqdm.auto import tqdm
+
     spec_file = out / "collection.json"
     if spec_file.exists() and not overwrite:
         old = json.loads(spec_file.read_text())
