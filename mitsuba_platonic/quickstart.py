@@ -18,7 +18,7 @@ from __future__ import annotations
 
 import time
 from pathlib import Path
-from typing import Dict, List, Optional
+from typing import Dict, List, Optional, Tuple
 
 import numpy as np
 import torch
@@ -50,13 +50,24 @@ def billboard(image: torch.Tensor) -> torch.Tensor:
     return torch.cat([colour, a]).clamp(0, 1)[:, None].expand(-1, r, -1, -1).contiguous()
 
 
-def novel_view_errors(recon: torch.Tensor, truth_in_frame: torch.Tensor, model: str) -> float:
-    """Mean absolute error between renders of two ``(C, N, N, N)`` volumes over :data:`NOVEL_VIEWS`."""
+def silhouette_iou(a: torch.Tensor, b: torch.Tensor) -> float:
+    """Mean IoU of the silhouettes (alpha > ½, the last channel) of two image batches ``(B, C, H, W)``.
+
+    An image pair where both silhouettes are empty counts as 1.
+    """
+    sa, sb = a[:, -1] > 0.5, b[:, -1] > 0.5
+    inter = (sa & sb).flatten(1).sum(1).float()
+    union = (sa | sb).flatten(1).sum(1).float()
+    return float(torch.where(union > 0, inter / union.clamp_min(1), torch.ones_like(union)).mean())
+
+
+def novel_view_errors(recon: torch.Tensor, truth_in_frame: torch.Tensor, model: str) -> Tuple[float, float]:
+    """(MAE, silhouette IoU) between renders of two ``(C, N, N, N)`` volumes over :data:`NOVEL_VIEWS`."""
     n = len(NOVEL_VIEWS)
     with torch.no_grad():
         a = render(recon[None].expand(n, -1, -1, -1, -1).contiguous(), NOVEL_VIEWS, model)
         b = render(truth_in_frame[None].expand(n, -1, -1, -1, -1).contiguous(), NOVEL_VIEWS, model)
-    return float((a - b).abs().mean())
+    return float((a - b).abs().mean()), silhouette_iou(a, b)
 
 
 def _evaluate(trainer, data, model: str, limit: int = 64) -> Dict[str, float]:
@@ -74,11 +85,12 @@ def _evaluate(trainer, data, model: str, limit: int = 64) -> Dict[str, float]:
             vol = vol[3:]
         # the ground truth resampled into the input camera frame (clamped: trilinear round-off exceeds 1)
         truths.append(rotate(vol[None], torch.tensor([r["view"]]))[0].clamp(0.0, 1.0))
-    novel = [novel_view_errors(v, t, model) for v, t in zip(recon, truths)]
-    out = {"input_view_mae": float((rendered - images).abs().mean()), "novel_view_mae": float(np.mean(novel))}
+    novel = np.array([novel_view_errors(v, t, model) for v, t in zip(recon, truths)])
+    out = {"input_view_mae": float((rendered - images).abs().mean()), "input_view_iou": silhouette_iou(rendered, images),
+           "novel_view_mae": float(novel[:, 0].mean()), "novel_view_iou": float(novel[:, 1].mean())}
     if model == "ea":
-        out["billboard_novel_view_mae"] = float(np.mean([novel_view_errors(billboard(x), t, model)
-                                                         for x, t in zip(images, truths)]))
+        bb = np.array([novel_view_errors(billboard(x), t, model) for x, t in zip(images, truths)])
+        out["billboard_novel_view_mae"], out["billboard_novel_view_iou"] = float(bb[:, 0].mean()), float(bb[:, 1].mean())
     return out
 
 
@@ -105,8 +117,9 @@ def quickstart(out: Path = Path("quickstart"), steps: Optional[int] = None, prog
 
     recon_dir = out / "reconstructions"
     written: List[str] = []
-    for i in range(min(4, len(data.held_out))):
-        vol = trainer.reconstruct(data.held_out[i:i + 1])[0].cpu()
+    picks = torch.linspace(0, len(data.held_out) - 1, min(4, len(data.held_out))).long().tolist()
+    for i, j in enumerate(picks):                       # spread over the held-out set: different shapes
+        vol = trainer.reconstruct(data.held_out[j:j + 1])[0].cpu()
         stem = recon_dir / f"heldout_{i}"
         save_volume(vol, stem)
         save_gif(turntable_frames(vol, cfg.render.model), stem.with_suffix(".gif"))
@@ -117,7 +130,7 @@ def quickstart(out: Path = Path("quickstart"), steps: Optional[int] = None, prog
         except ValueError:
             pass
         from .images import composite, linear_to_srgb, save_png, to_hwc
-        save_png(stem.with_name(stem.name + "_input.png"), linear_to_srgb(composite(to_hwc(data.held_out[i]), 1.0)))
+        save_png(stem.with_name(stem.name + "_input.png"), linear_to_srgb(composite(to_hwc(data.held_out[j]), 1.0)))
 
     import csv
     rows = list(csv.DictReader(open(run_dir / "scalars.csv")))
@@ -133,13 +146,16 @@ def quickstart(out: Path = Path("quickstart"), steps: Optional[int] = None, prog
         f"- losses (step {first['step']} → {last['step']}): reconstruction {float(first['loss_rec']):.4f} → "
         f"{float(last['loss_rec']):.4f}, D {float(first['loss_d']):.3f} → {float(last['loss_d']):.3f}, "
         f"G {float(first['loss_g']):.3f} → {float(last['loss_g']):.3f}", "",
-        "## Held-out reconstruction error (mean absolute error of premultiplied RGBA renders)", "",
-        "| | input view | novel views |", "|---|---|---|",
-        f"| untrained | {untrained['input_view_mae']:.4f} | {untrained['novel_view_mae']:.4f} |",
-        f"| trained | {trained['input_view_mae']:.4f} | {trained['novel_view_mae']:.4f} |",
+        "## Held-out reconstructions against the ground truth", "",
+        "Mean absolute error (MAE) of premultiplied RGBA renders, and intersection-over-union (IoU) of",
+        "their silhouettes (alpha > ½); higher IoU and lower MAE are better.", "",
+        "| | input view MAE | input view IoU | novel views MAE | novel views IoU |", "|---|---|---|---|---|",
+        *[f"| {name} | {m['input_view_mae']:.4f} | {m['input_view_iou']:.3f} | {m['novel_view_mae']:.4f} | "
+          f"{m['novel_view_iou']:.3f} |" for name, m in (("untrained", untrained), ("trained", trained))],
     ]
     if "billboard_novel_view_mae" in trained:
-        lines.append(f"| billboard (input view only) | 0 | {trained['billboard_novel_view_mae']:.4f} |")
+        lines.append(f"| billboard (input view only) | 0 | 1 | {trained['billboard_novel_view_mae']:.4f} | "
+                     f"{trained['billboard_novel_view_iou']:.3f} |")
     lines += ["", "Novel views: a ring at 30° elevation and the back view, in each input's camera frame, "
               "against the ground-truth volume resampled into that frame.", "",
               "## Files", "", f"- run folder: {run_dir} (samples/, scalars.csv, tb/, checkpoints/)",

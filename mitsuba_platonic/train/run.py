@@ -215,7 +215,8 @@ def train(cfg: Config, resume: bool = False, progress: bool = True,
         state = load_checkpoint(last, device)
         trainer.load_state_dict(state["trainer"])
         start = int(state["step"])
-    sample_inputs = (data.held_out if len(data.held_out) else data.images)[:4]
+    pool = data.held_out if len(data.held_out) else data.images
+    sample_inputs = pool[torch.linspace(0, len(pool) - 1, min(4, len(pool))).long()]   # spread: different shapes
 
     def checkpoint(step: int) -> None:
         if rank != 0:
