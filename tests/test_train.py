@@ -235,3 +235,18 @@ def test_cli_train_reconstruct_generate(tmp_path):
     assert (tmp_path / "gen" / "samples.png").exists() and (tmp_path / "gen" / "sample_001.gif").exists()
     assert main(["train", "--set", "train.batch_size=eight"]) == 2
     assert main(["reconstruct", "--run", str(tmp_path / "nope"), str(img)]) == 2
+
+
+TREE = Path(__file__).resolve().parents[2] / "shared" / "data" / "tree"
+
+
+@pytest.mark.skipif(not TREE.is_dir(), reason="../shared/data/tree is absent")
+def test_photo_collection_config_trains(tmp_path):
+    cfg = load_config(Path(__file__).resolve().parents[1] / "configs" / "photos_tree_ea.yaml",
+                      [f"data.path={TREE}", "model.resolution=16", "model.width=4", "model.latent=8"])
+    data = load_training_data(cfg, progress=False)
+    assert data.images.shape == (26, 4, 16, 16) and data.held_out.shape == (6, 4, 16, 16)
+    trainer = Trainer(cfg, data, torch.device("cpu"))
+    before = _params(trainer.nets["G"])
+    trainer.step(0)
+    assert _changed(before, trainer.nets["G"])
