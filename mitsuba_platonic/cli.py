@@ -14,6 +14,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import os
 import sys
 from pathlib import Path
 from typing import Callable, List, Optional, Sequence
@@ -322,7 +323,8 @@ def _cmd_train(args: argparse.Namespace) -> int:
 
     cfg = load_config(args.config, args.set or ())
     run_dir = train(cfg, resume=args.resume, progress=not args.quiet)
-    print(f"run: {run_dir}")
+    if int(os.environ.get("RANK", "0")) == 0:             # one line, not one per torchrun process
+        print(f"run: {run_dir}")
     return 0
 
 

@@ -271,6 +271,9 @@ def train(cfg: Config, resume: bool = False, progress: bool = True,
             log.close()
             if previous is not None:
                 signal.signal(signal.SIGINT, previous)
+        if world > 1:
+            dist.barrier()                                   # rank 0 has written the last checkpoint
+            dist.destroy_process_group()
     return run_dir
 
 
