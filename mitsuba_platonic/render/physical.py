@@ -36,7 +36,7 @@ import torch
 from ..views import camera_frames
 from ..volume import voxel_size
 from .mitsuba_renderer import grid_to_world, to_mitsuba_grid
-from .variant import ensure_variant
+from .variant import ensure_variant, variant_device
 
 __all__ = ["Lighting", "sample_lighting", "render_physical", "V_MAX_PHYSICAL", "luminance",
            "auto_exposure"]
@@ -242,6 +242,7 @@ def render_physical_ad(volume: torch.Tensor, views: torch.Tensor, lighting: str 
     if volume.dim() != 5 or volume.shape[1] != 4:
         raise ValueError(f"physically based rendering needs RGBA volumes (B, 4, N, N, N), got {tuple(volume.shape)}")
     mi = ensure_variant()
+    device = variant_device()                                # where the variant's arrays live
     n = volume.shape[-1]
     scene, params = _ad_scene(n, spp, max_depth, filter)
     density = volume[:, 3:].clamp(0.0, V_MAX_PHYSICAL)
@@ -255,9 +256,9 @@ def render_physical_ad(volume: torch.Tensor, views: torch.Tensor, lighting: str 
         settings = {"sensor.to_world": _sensor_transform(mi, right[b], up[b], w[b]),
                     "emitter.sun_direction": mi.Vector3f(*light.sun_direction),
                     "emitter.turbidity": mi.Float(light.turbidity)}
-        grids = {"volume.interior_medium.sigma_t.data": to_mitsuba_grid(σ[b].float().cpu()),
-                 "volume.interior_medium.albedo.data": to_mitsuba_grid(volume[b, :3].float().cpu())}
+        grids = {"volume.interior_medium.sigma_t.data": to_mitsuba_grid(σ[b].float().to(device)),
+                 "volume.interior_medium.albedo.data": to_mitsuba_grid(volume[b, :3].float().to(device))}
         rgb = differentiable_render(scene, params, grids, settings, spp, seed + 2 * b).permute(2, 0, 1)
-        k = auto_exposure(rgb.detach().permute(1, 2, 0).numpy(), alpha[b, 0].detach().cpu().numpy())
+        k = auto_exposure(rgb.detach().permute(1, 2, 0).cpu().numpy(), alpha[b, 0].detach().cpu().numpy())
         images.append(torch.cat([rgb.to(volume.device) * k, alpha[b]]))
     return torch.stack(images)
