@@ -21,7 +21,7 @@ from mitsuba_platonic.data.photos import (
     srgb_decoding_table,
 )
 
-TREE = Path(__file__).resolve().parents[2] / "shared" / "data" / "tree"
+TREE = (Path(__file__).resolve().parents[2] / "shared" / "data" / "tree").resolve()  # the loader resolves links
 needs_tree = pytest.mark.skipif(not TREE.is_dir(), reason=f"{TREE} is absent")
 
 
