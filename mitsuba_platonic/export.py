@@ -10,7 +10,7 @@ sampled trilinearly at the vertices, sRGB-encoded to 8 bits (PLY viewers display
 from __future__ import annotations
 
 from pathlib import Path
-from typing import List, Optional, Sequence, Union
+from typing import List, Sequence, Union
 
 import numpy as np
 import torch
@@ -21,35 +21,46 @@ from .render import render
 from .views import turntable
 from .volume import voxel_size, world_to_grid
 
-__all__ = ["save_volume", "turntable_frames", "save_gif", "extract_mesh", "save_ply", "Mesh"]
+__all__ = ["save_volume", "write_vol", "display_frames", "turntable_frames", "save_gif", "extract_mesh",
+           "save_ply", "Mesh"]
 
 PathLike = Union[str, Path]
 
 
-def save_volume(volume: torch.Tensor, stem: PathLike) -> List[Path]:
-    """Write a ``(C, N, N, N)`` volume as ``stem.npz`` (array ``volume``) and ``stem.vol`` (Mitsuba)."""
+def write_vol(volume: torch.Tensor, path: PathLike) -> Path:
+    """Write a ``(C, N, N, N)`` volume in Mitsuba's ``.vol`` format (grid layout ``[Z, Y, X, C]``)."""
     from .render.mitsuba_renderer import to_mitsuba_grid
     from .render.variant import ensure_variant
 
+    mi = ensure_variant()
+    grid = to_mitsuba_grid(volume.detach().float().cpu()).contiguous().numpy()
+    mi.VolumeGrid(grid).write(str(path))
+    return Path(path)
+
+
+def save_volume(volume: torch.Tensor, stem: PathLike) -> List[Path]:
+    """Write a ``(C, N, N, N)`` volume as ``stem.npz`` (array ``volume``) and ``stem.vol`` (Mitsuba)."""
     stem = Path(stem)
     stem.parent.mkdir(parents=True, exist_ok=True)
-    v = volume.detach().float().cpu()
     npz = stem.with_suffix(".npz")
-    np.savez_compressed(npz, volume=v.numpy())
-    mi = ensure_variant()
-    vol = stem.with_suffix(".vol")
-    mi.VolumeGrid(to_mitsuba_grid(v).contiguous().numpy()).write(str(vol))
-    return [npz, vol]
+    np.savez_compressed(npz, volume=volume.detach().float().cpu().numpy())
+    return [npz, write_vol(volume, stem.with_suffix(".vol"))]
+
+
+def display_frames(volume: torch.Tensor, model: str, views: torch.Tensor, filter: str = "trilinear",
+                   background: float = 1.0) -> List[np.ndarray]:
+    """Closed-form renders of ``(C, N, N, N)`` from ``views`` → sRGB ``(H, W, 3)`` images over ``background``."""
+    n = len(views)
+    with torch.no_grad():
+        images = render(volume.detach().float().cpu()[None].expand(n, -1, -1, -1, -1).contiguous(),
+                        views, model, "closed_form", filter=filter)
+    return [linear_to_srgb(composite(to_hwc(i), background=background)) for i in images]
 
 
 def turntable_frames(volume: torch.Tensor, model: str, frames: int = 36, elevation: float = 20.0,
                      background: float = 1.0) -> List[np.ndarray]:
-    """Closed-form renders of ``(C, N, N, N)`` around +y → sRGB ``(H, W, 3)`` frames over ``background``."""
-    views = turntable(frames, elevation=elevation)
-    with torch.no_grad():
-        images = render(volume.detach().float().cpu()[None].expand(frames, -1, -1, -1, -1).contiguous(),
-                        views, model, "closed_form")
-    return [linear_to_srgb(composite(to_hwc(i), background=background)) for i in images]
+    """:func:`display_frames` from ``frames`` azimuths around +y at ``elevation`` degrees."""
+    return display_frames(volume, model, turntable(frames, elevation=elevation), background=background)
 
 
 def save_gif(frames: Sequence[np.ndarray], path: PathLike, scale: int = 4, duration_ms: int = 60) -> Path:

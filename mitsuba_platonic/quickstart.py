@@ -16,6 +16,7 @@ the input view" scores.
 
 from __future__ import annotations
 
+import csv
 import time
 from pathlib import Path
 from typing import Dict, List, Optional, Tuple
@@ -25,6 +26,7 @@ import torch
 
 from .config import load_config
 from .export import extract_mesh, save_gif, save_ply, save_volume, turntable_frames
+from .images import composite, linear_to_srgb, save_png, to_hwc
 from .render import render
 from .render.closed_form import rotate
 from .views import from_angles, front_view, turntable
@@ -129,11 +131,10 @@ def quickstart(out: Path = Path("quickstart"), steps: Optional[int] = None, prog
             written.append(str(stem.with_suffix(".ply")))
         except ValueError:
             pass
-        from .images import composite, linear_to_srgb, save_png, to_hwc
         save_png(stem.with_name(stem.name + "_input.png"), linear_to_srgb(composite(to_hwc(data.held_out[j]), 1.0)))
 
-    import csv
-    rows = list(csv.DictReader(open(run_dir / "scalars.csv")))
+    with open(run_dir / "scalars.csv") as f:
+        rows = list(csv.DictReader(f))
     first, last = rows[0], rows[-1]
     total = time.perf_counter() - t0
     lines = [

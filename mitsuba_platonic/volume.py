@@ -13,7 +13,7 @@ Channels: ``[density]`` for VH and AO, ``[r, g, b, density]`` for EA.
 from __future__ import annotations
 
 import math
-from typing import Dict, Optional
+from typing import Dict
 
 import torch
 

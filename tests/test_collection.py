@@ -1,7 +1,5 @@
 """Rendered collections: promised files, a manifest that matches them, resume, bad settings."""
 
-import json
-import os
 
 import numpy as np
 import pytest

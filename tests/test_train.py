@@ -226,7 +226,6 @@ def test_two_processes_with_half_the_batch_make_the_single_process_update(tmp_pa
 
 def test_cli_train_reconstruct_generate(tmp_path):
     from mitsuba_platonic.cli import main
-    from PIL import Image
     args = [f"run.out_dir={tmp_path}/runs", "run.name=c", "run.steps=2", f"data.cache={tmp_path}/data",
             "data.shape_class=mushroom", "data.n_shapes=4", "data.views_per_shape=1", "model.resolution=16",
             "model.width=4", "model.latent=8", "train.batch_size=2"]

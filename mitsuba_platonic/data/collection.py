@@ -188,17 +188,14 @@ def _write_json(path: Path, data: Any) -> None:
 
 
 def _write_volume(folder: Path, i: int, spec: CollectionSpec, vol: torch.Tensor) -> None:
-    from ..render.mitsuba_renderer import to_mitsuba_grid
-    from ..render.variant import ensure_variant
+    from ..export import write_vol
     npz = folder / f"{i:05d}.npz"
     vol_file = folder / f"{i:05d}.vol"
     if not npz.exists():
         _atomic(npz, lambda p: np.savez_compressed(p, volume=vol.numpy(), shape_class=spec.shape_class,
                                                    seed=spec.shape_seed(i)))
     if not vol_file.exists():
-        mi = ensure_variant()
-        grid = to_mitsuba_grid(vol).contiguous().numpy()
-        _atomic(vol_file, lambda p: mi.VolumeGrid(grid).write(str(p)))
+        _atomic(vol_file, lambda p: write_vol(vol, p))
 
 
 def _read_records(path: Path) -> Dict[str, Dict[str, Any]]:

@@ -22,7 +22,6 @@ from dataclasses import dataclass
 from typing import Any, Dict, Optional, Tuple
 
 import torch
-import torch.nn.functional as F
 
 from ..views import camera_frames
 from ..volume import voxel_size

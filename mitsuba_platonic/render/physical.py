@@ -26,7 +26,7 @@ auto-exposure factor that maps the 95th percentile luminance of its covered pixe
 from __future__ import annotations
 
 import math
-from dataclasses import asdict, dataclass, field
+from dataclasses import asdict, dataclass
 from pathlib import Path
 from typing import Any, Dict, List, Optional, Sequence, Tuple
 
@@ -38,8 +38,8 @@ from ..volume import voxel_size
 from .mitsuba_renderer import grid_to_world, to_mitsuba_grid
 from .variant import ensure_variant, variant_device
 
-__all__ = ["Lighting", "sample_lighting", "render_physical", "V_MAX_PHYSICAL", "luminance",
-           "auto_exposure"]
+__all__ = ["Lighting", "sample_lighting", "render_physical", "render_physical_ad", "extinction",
+           "V_MAX_PHYSICAL", "luminance", "auto_exposure"]
 
 #: Density cap of the physically based medium (σ_t Δ ≤ ln 1000).
 V_MAX_PHYSICAL = 1.0 - 1e-3
@@ -122,11 +122,14 @@ def auto_exposure(rgb: np.ndarray, alpha: np.ndarray) -> float:
     return EXPOSURE_TARGET / level if level > 1e-8 else 1.0
 
 
+def extinction(density: torch.Tensor) -> torch.Tensor:
+    """σ_t = −ln(1 − min(v, v_max)) / Δ of a density volume ``(…, N, N, N)`` (differentiable)."""
+    return -torch.log1p(-density.clamp(0.0, V_MAX_PHYSICAL)) / voxel_size(density.shape[-1])
+
+
 def _medium_grids(v: torch.Tensor) -> Tuple[np.ndarray, np.ndarray]:
     """RGBA ``(4, N, N, N)`` → (σ_t grid, albedo grid) in Mitsuba's [Z, Y, X, C] layout."""
-    n = v.shape[-1]
-    density = v[3:4].clamp(0.0, V_MAX_PHYSICAL)
-    σ = -torch.log1p(-density) / voxel_size(n)
+    σ = extinction(v[3:4])
     return (to_mitsuba_grid(σ).contiguous().numpy().astype(np.float32),
             to_mitsuba_grid(v[:3]).contiguous().numpy().astype(np.float32))
 
@@ -245,9 +248,8 @@ def render_physical_ad(volume: torch.Tensor, views: torch.Tensor, lighting: str 
     device = variant_device()                                # where the variant's arrays live
     n = volume.shape[-1]
     scene, params = _ad_scene(n, spp, max_depth, filter)
-    density = volume[:, 3:].clamp(0.0, V_MAX_PHYSICAL)
-    σ = -torch.log1p(-density) / voxel_size(n)
-    alpha = render(density, views, "ao", "mitsuba", filter=filter)
+    σ = extinction(volume[:, 3:])
+    alpha = render(volume[:, 3:].clamp(0.0, V_MAX_PHYSICAL), views, "ao", "mitsuba", filter=filter)
     right, up, w = camera_frames(views)
     rng = np.random.default_rng(seed)
     images = []

@@ -23,7 +23,6 @@ renderer; rank 0 writes checkpoints, logs and samples.
 from __future__ import annotations
 
 import csv
-import math
 import os
 import signal
 import time
@@ -83,41 +82,32 @@ def load_checkpoint(path: Path, device: torch.device = torch.device("cpu")) -> D
 SAMPLE_VIEWS = torch.cat([front_view(1), turntable(3, elevation=25.0, start=60.0)])
 
 
-def _render_display(trainer: Trainer, vol: torch.Tensor, views: torch.Tensor) -> np.ndarray:
-    """Render one volume from views with the closed form → list of sRGB (H, W, 3) over white."""
-    from ..render import render
-    with torch.no_grad():
-        imgs = render(vol.expand(len(views), -1, -1, -1, -1).contiguous().cpu(), views,
-                      trainer.cfg.render.model, "closed_form", filter=trainer.cfg.render.filter)
-    return [linear_to_srgb(composite(to_hwc(i), background=1.0)) for i in imgs]
-
-
 def write_samples(trainer: Trainer, inputs: torch.Tensor, folder: Path, step: int) -> Tuple[Path, Path]:
     """PNG grid (input | reconstruction from the sample views) and a turntable GIF of input 0."""
     from PIL import Image
+    from ..export import display_frames, save_gif, turntable_frames
 
     folder.mkdir(parents=True, exist_ok=True)
-    if trainer.cfg.train.task == "reconstruction":
+    cfg = trainer.cfg
+    if cfg.train.task == "reconstruction":
         vols = trainer.reconstruct(inputs).cpu()
         first = [linear_to_srgb(composite(to_hwc(x), background=1.0)) for x in inputs]
     else:
-        g = torch.Generator().manual_seed(trainer.cfg.run.seed + 12345)
-        vols = trainer.generate(torch.randn(len(inputs), trainer.cfg.model.latent, generator=g)).cpu()
+        g = torch.Generator().manual_seed(cfg.run.seed + 12345)
+        vols = trainer.generate(torch.randn(len(inputs), cfg.model.latent, generator=g)).cpu()
         first = None
     rows = []
     for i, vol in enumerate(vols):
-        tiles = ([first[i]] if first is not None else []) + _render_display(trainer, vol[None], SAMPLE_VIEWS)
+        tiles = ([first[i]] if first is not None else []) + display_frames(vol, cfg.render.model, SAMPLE_VIEWS,
+                                                                           filter=cfg.render.filter)
         rows.append(np.concatenate(tiles, axis=1))
     grid = np.concatenate(rows, axis=0)
-    scale = max(1, 256 // trainer.cfg.model.resolution)
+    scale = max(1, 256 // cfg.model.resolution)
     png = folder / f"step_{step:07d}.png"
     Image.fromarray((grid * 255 + 0.5).astype(np.uint8)).resize(
         (grid.shape[1] * scale, grid.shape[0] * scale), Image.NEAREST).save(png)
-    frames = _render_display(trainer, vols[:1], turntable(24, elevation=20.0))
-    gif = folder / f"turntable_{step:07d}.gif"
-    pil = [Image.fromarray((f * 255 + 0.5).astype(np.uint8)).resize(
-        (f.shape[1] * scale, f.shape[0] * scale), Image.NEAREST) for f in frames]
-    pil[0].save(gif, save_all=True, append_images=pil[1:], duration=80, loop=0)
+    gif = save_gif(turntable_frames(vols[0], cfg.render.model, frames=24), folder / f"turntable_{step:07d}.gif",
+                   scale=scale, duration_ms=80)
     return png, gif
 
 

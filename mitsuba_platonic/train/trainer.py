@@ -24,7 +24,7 @@ processes, so the gate decides the same way everywhere.
 
 from __future__ import annotations
 
-from typing import Dict, Optional
+from typing import Dict
 
 import numpy as np
 import torch
