@@ -24,8 +24,12 @@ Image formation, with T_k = Π_{j<k} τ_j:
     VH, AO:  ρ = 1 − Π_k τ_k                           (one channel, replicated in RGB)
     EA:      C = Σ_k T_k a_k c_k,   α = 1 − Π_k τ_k     (α is the AOV ``alpha``)
 
-Early termination: a ray stops once T ≤ ``termination`` (default 0: only when T is exactly 0,
-which changes nothing).
+Early termination. With ``termination`` ε > 0 a ray stops once T ≤ ε, in the primal and in the
+adjoint: an approximation whose image error is at most ε and whose gradient error the bench
+measures. With ε = 0 (the default) the march is exact in value *and* gradient: the primal may
+stop where T is exactly 0 (nothing behind is visible), but the adjoint always marches the whole
+ray, because the gradient at an opaque sample k (τ_k = 0) still depends on everything behind it:
+∂α/∂τ_k = −T_k U_k with U_k = Π_{j>k} τ_j, and ∂C/∂τ_k = T_k (R_k − c_k).
 
 Adjoint (path replay, no division by τ so it stays exact when τ = 0). The backward pass
 replays the ray front to back, recording T_k, then marches back to front accumulating the
@@ -181,6 +185,7 @@ class RayMarcher(mi.ad.integrators.common.RBIntegrator):
             C = self._emit(C, T, τ, c)
             T *= τ
             k += 1
+            # nothing behind T = 0 is visible, so the image is exact with ε = 0 too
             active &= (k < self.n_steps) & (T > self.termination)
         return T, C
 
@@ -205,7 +210,10 @@ class RayMarcher(mi.ad.integrators.common.RBIntegrator):
         Ts = dr.zeros(mi.Float, n_rays * n_steps)
         dr.make_opaque(Ts)
 
-        # Section 1: replay front to back, recording the transmittance before each segment
+        # Section 1: replay front to back, recording the transmittance before each segment.
+        # Only a positive threshold cuts the ray short: with ε = 0 the gradient at an opaque
+        # sample needs the suffix products U and R of the samples behind it (module docstring).
+        ε = self.termination
         k = mi.UInt32(0)
         T = mi.Float(1.0)
         replay = mi.Bool(active)
@@ -215,7 +223,7 @@ class RayMarcher(mi.ad.integrators.common.RBIntegrator):
             τ, _ = self._lookup(p, s, colour=False)
             T *= τ
             k += 1
-            replay &= (k < n_steps) & (T > self.termination)
+            replay &= (k < n_steps) & ((T > ε) | (ε == 0.0))
 
         # Section 2: back to front, accumulating suffix radiance R and suffix transmittance U
         R = mi.Spectrum(0.0)
