@@ -4,8 +4,14 @@ Non-saturating (logits l):  L_D = softplus(−l_real) + softplus(l_fake)   (= �
                             L_G = softplus(−l_fake)                      (= −log D(G))
 WGAN-GP:                    L_D = l_fake − l_real + λ (‖∇_x̂ D(x̂)‖ − 1)²,  x̂ = ε x + (1 − ε) G
                             L_G = −l_fake
-Accuracy of D on a batch: the share of real logits > 0 and fake logits < 0 (the authors update D
-only while it is ≤ 0.6, so D never runs away from G).
+Soft accuracy of D on a batch (the authors' gate: D is updated only while it is ≤ 0.6, so D
+never runs away from G):
+
+    acc = ½ (mean σ(l_real) + 1 − mean σ(l_fake))
+
+It stays near ½ for an untrained D whose logits barely differ, and moves smoothly as D learns.
+The *hard* share of correct signs, ½(mean[l_real > 0] + mean[l_fake < 0]), jumps to 0.75–1.0
+on logits that differ by 1e-3, so a gate on it would block a D that has learnt nothing.
 """
 
 from __future__ import annotations
@@ -15,7 +21,7 @@ from typing import Callable, Tuple
 import torch
 import torch.nn.functional as F
 
-__all__ = ["d_loss", "g_loss", "gradient_penalty", "accuracy_counts"]
+__all__ = ["d_loss", "g_loss", "gradient_penalty", "soft_accuracy_counts", "hard_accuracy_counts"]
 
 
 def d_loss(kind: str, real: torch.Tensor, fake: torch.Tensor) -> torch.Tensor:
@@ -39,7 +45,17 @@ def gradient_penalty(D: Callable[[torch.Tensor], torch.Tensor], real: torch.Tens
     return ((grad.flatten(1).norm(dim=1) - 1.0) ** 2).mean()
 
 
-def accuracy_counts(real: torch.Tensor, fake: torch.Tensor) -> Tuple[torch.Tensor, torch.Tensor]:
-    """(correct, total) of D's decisions, as float tensors (summable across processes)."""
+def soft_accuracy_counts(real: torch.Tensor, fake: torch.Tensor) -> Tuple[torch.Tensor, torch.Tensor]:
+    """(Σ σ(l_real) + Σ (1 − σ(l_fake)), count) as float tensors, summable across processes.
+
+    Their ratio is the soft accuracy ½(mean σ(l_real) + 1 − mean σ(l_fake)) when both halves have
+    the same size (they do in the trainer); otherwise it weighs each logit equally.
+    """
+    score = torch.sigmoid(real).sum() + (1.0 - torch.sigmoid(fake)).sum()
+    return score.detach().float(), torch.tensor(float(real.numel() + fake.numel()))
+
+
+def hard_accuracy_counts(real: torch.Tensor, fake: torch.Tensor) -> Tuple[torch.Tensor, torch.Tensor]:
+    """(correct signs, count): the share of real logits > 0 and fake logits < 0 (reported, not gated on)."""
     correct = (real > 0).float().sum() + (fake < 0).float().sum()
     return correct, torch.tensor(float(real.numel() + fake.numel()))

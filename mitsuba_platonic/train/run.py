@@ -237,7 +237,8 @@ def train(cfg: Config, resume: bool = False, progress: bool = True,
                 rate = (step - n_last) * images_per_step / max(time.perf_counter() - t_last, 1e-9)
                 t_last, n_last = time.perf_counter(), step
                 log.add(step, {**scalars, "images_per_s": rate})
-                bar.set_postfix({k: f"{v:.3g}" for k, v in scalars.items() if k != "d_updated"}
+                bar.set_postfix({k: f"{v:.3g}" for k, v in scalars.items()
+                                 if not k.endswith(("_updated", "_hard"))}
                                 | {"img/s": f"{rate:.1f}"})
             bar.update(1)
             if rank == 0 and step % cfg.run.sample_every == 0:

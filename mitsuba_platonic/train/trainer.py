@@ -6,7 +6,8 @@ uninterrupted one would:
 1. sample a batch of real images x and, per volume, ``random_views`` views ω ~ p_view;
 2. z = E(x) (reconstruction) or z ~ N(0, I) (generation); v = G(z);
 3. I_view = R(ω, v); for reconstruction also I_front = R(ω₀, v) (the input view by convention);
-4. D update on x vs I_view (skipped while D's accuracy on this batch > ``d_gate``);
+4. ``d_steps`` D updates on x vs I_view (each skipped, and the rest with it, while D's soft
+   accuracy on this batch, ½(mean σ(l_real) + 1 − mean σ(l_fake)), is above ``d_gate``);
 5. G (and E) update on  L_G = adv(D(I_view)) + λ_rec ‖x − I_front‖² (+ w₃ adv₃(D3(v))).
 
 Modes: 'platonic' (the above), 'platonic3d' (also a 3D discriminator D3 on ground-truth
@@ -20,11 +21,15 @@ takes rows [r·B/W, (r+1)·B/W). Losses are means over a process's rows and DDP 
 gradients, so W processes make the single-process update (exactly, for networks without batch
 statistics; with BatchNorm each process normalises its own rows). D's accuracy is summed over
 processes, so the gate decides the same way everywhere.
+
+Every critic (D on images, D3 on volumes, in every mode) is updated by one routine,
+:meth:`Trainer._critic_update`: ``d_steps`` times, a fresh loss on the same real and (detached)
+fake batch, gated by the soft accuracy when a gate is set.
 """
 
 from __future__ import annotations
 
-from typing import Dict
+from typing import Dict, Optional, Tuple
 
 import numpy as np
 import torch
@@ -36,7 +41,7 @@ from ..config import Config
 from ..models import NetConfig, build_networks
 from ..views import front_view, sample_views
 from .data import TrainingData
-from .losses import accuracy_counts, d_loss, g_loss, gradient_penalty
+from .losses import d_loss, g_loss, gradient_penalty, hard_accuracy_counts, soft_accuracy_counts
 from .renderer import make_renderer
 
 __all__ = ["Trainer", "net_config"]
@@ -140,21 +145,9 @@ class Trainer:
         i_view = self.render(v.repeat_interleave(K, 0), views.to(self.device), seed)
         out: Dict[str, float] = {}
 
-        # -- D: real photos vs rendered views, gated by its accuracy ---------------------------
+        # -- D: real photos vs rendered views, gated by its soft accuracy -----------------------
         real_d = x.repeat_interleave(K, 0) if K > 1 else x
-        l_real, l_fake = D(real_d), D(i_view.detach())
-        loss_d = d_loss(t.loss, l_real, l_fake)
-        if t.loss == "wgan-gp":
-            loss_d = loss_d + t.gp_weight * gradient_penalty(D, real_d, i_view.detach(), eps.to(self.device))
-        correct, total = accuracy_counts(l_real.detach(), l_fake.detach())
-        acc = float(self._all_sum(correct) / self._all_sum(total))
-        update_d = t.d_gate is None or acc <= t.d_gate
-        if update_d:
-            for _ in range(t.d_steps):
-                self.opt_d.zero_grad(set_to_none=True)
-                loss_d.backward(retain_graph=t.d_steps > 1)
-                self.opt_d.step()
-        out.update(loss_d=float(loss_d.detach()), acc_d=acc, d_updated=float(update_d))
+        self._critic_update("D", self.opt_d, real_d, i_view.detach(), eps, t.d_gate, out)
 
         # -- D3 (Platonic3D): ground-truth volumes vs generated ----------------------------------
         loss_g3 = torch.zeros((), device=self.device)
@@ -173,23 +166,50 @@ class Trainer:
         loss.backward()
         self.opt_g.step()
         out["loss_g"] = float(self._all_sum(loss_adv.detach().cpu()) / self.world)
-        out["loss_d"] = float(self._all_sum(torch.tensor(out["loss_d"])) / self.world)
         return out
 
+    def _critic_update(self, name: str, opt: torch.optim.Optimizer, real: torch.Tensor, fake: torch.Tensor,
+                       eps: torch.Tensor, gate: Optional[float], out: Dict[str, float]) -> None:
+        """``d_steps`` updates of critic ``name`` ('D' or 'D3') on real vs (detached) fake.
+
+        Each update evaluates a fresh loss with the critic's current weights (WGAN-GP adds its
+        penalty at x̂ = ε real + (1 − ε) fake). With a ``gate``, an update happens only while the
+        critic's soft accuracy on this batch is ≤ gate; the first refusal ends the loop. Logs
+        ``loss_<name>`` and ``acc_<name>`` (soft) / ``acc_<name>_hard`` of the first evaluation,
+        and ``<name>_updated``, the share of the ``d_steps`` updates that happened.
+        """
+        t, critic = self.cfg.train, self.modules[name]
+        key = name.lower()
+        updates = 0
+        for i in range(t.d_steps):
+            l_real, l_fake = critic(real), critic(fake)
+            loss = d_loss(t.loss, l_real, l_fake)
+            if t.loss == "wgan-gp":
+                loss = loss + t.gp_weight * gradient_penalty(critic, real, fake, eps[: len(real)].to(self.device))
+            acc = self._ratio(soft_accuracy_counts(l_real, l_fake))
+            if i == 0:
+                out[f"loss_{key}"] = float(self._all_sum(loss.detach().cpu()) / self.world)
+                out[f"acc_{key}"] = acc
+                out[f"acc_{key}_hard"] = self._ratio(hard_accuracy_counts(l_real.detach(), l_fake.detach()))
+            if gate is not None and acc > gate:
+                break
+            opt.zero_grad(set_to_none=True)
+            loss.backward()
+            opt.step()
+            updates += 1
+        out[f"{key}_updated"] = updates / t.d_steps
+
+    def _ratio(self, counts: Tuple[torch.Tensor, torch.Tensor]) -> float:
+        """Σ numerator / Σ denominator over all processes."""
+        return float(self._all_sum(counts[0].detach().cpu()) / self._all_sum(counts[1]))
+
     def _update_d3(self, v: torch.Tensor, g: torch.Generator, eps: torch.Tensor, out: Dict[str, float]) -> torch.Tensor:
-        """One D3 update (ground truth vs v.detach()); returns G's 3D adversarial loss on v."""
-        t, D3 = self.cfg.train, self.modules["D3"]
+        """D3 updates (ground truth vs v.detach()); returns G's 3D adversarial loss on v."""
+        t = self.cfg.train
         B = t.batch_size
         real = self._shard(self.volumes[torch.randint(len(self.volumes), (B,), generator=g).to(self.device)])
-        l_real, l_fake = D3(real), D3(v.detach())
-        loss = d_loss(t.loss, l_real, l_fake)
-        if t.loss == "wgan-gp":
-            loss = loss + t.gp_weight * gradient_penalty(D3, real, v.detach(), eps[: len(real)].to(self.device))
-        self.opt_d3.zero_grad(set_to_none=True)
-        loss.backward()
-        self.opt_d3.step()
-        out["loss_d3"] = float(self._all_sum(loss.detach().cpu()) / self.world)
-        return g_loss(t.loss, D3(v))
+        self._critic_update("D3", self.opt_d3, real, v.detach(), eps, None, out)
+        return g_loss(t.loss, self.modules["D3"](v))
 
     def _step_gan3d(self, step: int) -> Dict[str, float]:
         """The 3D-GAN baseline: WGAN-GP (or the config's loss) between G(z) and ground-truth volumes."""
@@ -201,19 +221,11 @@ class Trainer:
         eps = self._shard(torch.rand(B, generator=g)).to(self.device)
         self.nets.train()
         out: Dict[str, float] = {}
-        for _ in range(t.d_steps):
-            fake = G(z).detach()
-            loss_d = d_loss(t.loss, D3(real), D3(fake))
-            if t.loss == "wgan-gp":
-                loss_d = loss_d + t.gp_weight * gradient_penalty(D3, real, fake, eps)
-            self.opt_d3.zero_grad(set_to_none=True)
-            loss_d.backward()
-            self.opt_d3.step()
+        self._critic_update("D3", self.opt_d3, real, G(z).detach(), eps, None, out)
         loss_g = g_loss(t.loss, D3(G(z)))
         self.opt_g.zero_grad(set_to_none=True)
         loss_g.backward()
         self.opt_g.step()
-        out["loss_d3"] = float(self._all_sum(loss_d.detach().cpu()) / self.world)
         out["loss_g"] = float(self._all_sum(loss_g.detach().cpu()) / self.world)
         return out
 
