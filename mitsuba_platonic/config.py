@@ -79,12 +79,15 @@ class ModelConfig:
     'instance' | 'none'. The default is 'none': in our CPU runs at 16³ and 32³ (batch 8) the
     reconstruction loss of networks with BatchNorm or InstanceNorm stayed at 0.21 for 400 steps,
     while without normalisation it fell to 0.014 (benchmarks in the README); 'none' also makes
-    data-parallel training identical to single-process training."""
+    data-parallel training identical to single-process training.
+    encoder_hidden: width of the encoder's last layer before its Linear to z (0, the default:
+    none; the authors' encoder: 1024, see docs/paper.md)."""
 
     resolution: int = 32
     latent: int = 64
     width: int = 16
     norm: str = "none"
+    encoder_hidden: int = 0
 
 
 @dataclass
@@ -168,6 +171,7 @@ class Config:
         _positive("model.latent", self.model.latent)
         _positive("model.width", self.model.width)
         _choice("model.norm", self.model.norm, ("batch", "instance", "none"))
+        _non_negative("model.encoder_hidden", self.model.encoder_hidden)
         _choice("render.backend", self.render.backend, ("closed_form", "mitsuba", "physical"))
         _choice("render.model", self.render.model, ("vh", "ao", "ea"))
         _choice("render.filter", self.render.filter, ("trilinear", "nearest"))

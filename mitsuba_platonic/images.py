@@ -1,8 +1,8 @@
 """Image output helpers: 8-bit PNGs, float EXRs and error heat maps.
 
 All helpers take **numpy** arrays laid out ``(H, W, C)`` (row 0 at the top), the layout image
-files use. Renders are torch ``(B, C, H, W)`` tensors (DESIGN §2); convert one image with
-``img[b].permute(1, 2, 0).detach().cpu().numpy()`` (see :func:`to_hwc`).
+files use. Renders are torch ``(B, C, H, W)`` tensors (docs/conventions.md, "Images"); convert
+one image with ``img[b].permute(1, 2, 0).detach().cpu().numpy()`` (see :func:`to_hwc`).
 
 Channel meanings follow the renderers: VH/AO images are one channel of opacity, EA images are
 *premultiplied* ``R, G, B`` plus alpha ``A``. Compositing onto a background is a separate,

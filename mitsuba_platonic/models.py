@@ -1,14 +1,16 @@
 """Networks of PlatonicGAN: encoder E (image → z), generator G (z → volume), discriminators.
 
-Shapes follow the authors' code (DESIGN §4), parameterised so that a CPU run can use 16³ or 32³
-and narrow widths while a GPU run uses the paper's 64³:
+Shapes follow the authors' code (docs/paper.md, "Networks"), parameterised so that a CPU run
+can use 16³ or 32³ and narrow widths while a GPU run uses the paper's 64³ (``configs/paper.yaml``):
 
 - G (3D-GAN style): z → ConvTranspose3d(k4, s1) to 4³ → (k4, s2, p1) stages doubling the
   resolution and halving the width, the last one to C channels at R³ → sigmoid.
   At R = 64 and width 64: 512 → 256 → 128 → 64 → C, as in the paper.
 - D (2D): Conv2d(k4, s2, p1) stages from R² down to 4², doubling the width (64 → 128 → 256 → 512
   at R = 64), LeakyReLU 0.2, then Conv2d(k4) to one logit.
-- E: D's trunk, then Linear → z.
+- E: D's trunk, then Linear → z; or, with ``encoder_hidden`` = H > 0, the authors' head:
+  Conv2d(k4) from 4² to an H-wide 1² layer, norm, LeakyReLU 0.2, then Linear(H → z)
+  (their encoder: H = 1024, Linear(1024 → 200)).
 - D3 (3D, for Platonic3D and the 3D-GAN baseline): D's trunk in 3D.
 
 ``norm`` = 'batch' (the paper), 'instance' or 'none' (no batch statistics: then data-parallel
@@ -32,7 +34,9 @@ NORMS = ("batch", "instance", "none")
 @dataclass(frozen=True)
 class NetConfig:
     """resolution R (16, 32, 64, 128), volume channels (1 or 4), image channels (1 or 4),
-    latent size, base width (channels of the widest-resolution layer), normalisation."""
+    latent size, base width (channels of the widest-resolution layer), normalisation,
+    encoder_hidden: width of E's last layer before the Linear to z (0: none, E's trunk feeds
+    the Linear directly)."""
 
     resolution: int = 32
     volume_channels: int = 4
@@ -40,6 +44,7 @@ class NetConfig:
     latent: int = 64
     width: int = 32
     norm: str = "batch"
+    encoder_hidden: int = 0
 
     def validate(self) -> "NetConfig":
         if self.resolution not in (16, 32, 64, 128):
@@ -53,6 +58,8 @@ class NetConfig:
             raise ValueError(f"width must be a positive int, got {self.width!r}")
         if self.norm not in NORMS:
             raise ValueError(f"norm must be one of {NORMS}, got {self.norm!r}")
+        if not isinstance(self.encoder_hidden, int) or self.encoder_hidden < 0:
+            raise ValueError(f"encoder_hidden must be a non-negative int, got {self.encoder_hidden!r}")
         return self
 
     @property
@@ -140,19 +147,32 @@ class VolumeDiscriminator(nn.Module):
 
 
 class Encoder(nn.Module):
-    """E: ``(B, C, R, R)`` image → ``(B, latent)`` code."""
+    """E: ``(B, C, R, R)`` image → ``(B, latent)`` code.
+
+    With ``encoder_hidden`` = H > 0 a k4 convolution maps the trunk's 4² output to H channels
+    at 1² (norm, LeakyReLU) before the Linear(H → latent). With BatchNorm that layer normalises
+    one value per channel and sample, so a training-mode forward needs at least 2 images.
+    """
 
     def __init__(self, cfg: NetConfig):
         super().__init__()
         self.cfg = cfg.validate()
         self.trunk = _trunk(cfg, cfg.image_channels, 2)
-        self.head = nn.Linear(cfg.width * 2 ** (cfg.stages - 1) * 16, cfg.latent)
+        top = cfg.width * 2 ** (cfg.stages - 1)
+        if cfg.encoder_hidden:
+            h = cfg.encoder_hidden
+            self.hidden = nn.Sequential(nn.Conv2d(top, h, 4, 1, 0, bias=cfg.norm == "none"),
+                                        _norm(cfg.norm, h, 2), nn.LeakyReLU(0.2, inplace=True))
+            self.head = nn.Linear(h, cfg.latent)
+        else:
+            self.hidden = nn.Identity()
+            self.head = nn.Linear(top * 16, cfg.latent)
 
     def forward(self, x: torch.Tensor) -> torch.Tensor:
         r, c = self.cfg.resolution, self.cfg.image_channels
         if x.dim() != 4 or x.shape[1:] != (c, r, r):
             raise ValueError(f"E expects images (B, {c}, {r}, {r}), got {tuple(x.shape)}")
-        return self.head(self.trunk(x).flatten(1))
+        return self.head(self.hidden(self.trunk(x)).flatten(1))
 
 
 def _init(m: nn.Module) -> None:

@@ -1,6 +1,6 @@
 """Volumes: the generator's output and the one scene representation both renderers share.
 
-Convention (DESIGN §2): ``v[b, c, d, h, w]``, float32 in [0, 1], sampling the cube
+Convention (docs/conventions.md, "Volumes"): ``v[b, c, d, h, w]``, float32 in [0, 1], sampling the cube
 [−1, 1]³ at voxel centres with voxel size Δ = 2 / N:
 
     x = −1 + (w + ½) Δ      (w grows with +x)

@@ -1,6 +1,6 @@
 """An independent per-ray implementation of the rendering layers, for tests only.
 
-Written from the conventions (DESIGN §2) without the package's code: camera frames from
+Written from the conventions (docs/conventions.md, docs/rendering.md) without the package's code: camera frames from
 angles, explicit pixel/depth loops in float64, and hand-written trilinear / nearest lookups
 with zero padding.
 """

@@ -2,7 +2,7 @@
 
 PlatonicGAN learns from an *unstructured* collection: one folder of photos of one object
 class, each showing one object cut out from its background. :class:`PhotoCollection` turns
-such a folder into training images in the conventions of DESIGN §2:
+such a folder into training images in the conventions of docs/conventions.md ("Images"):
 
 - ``(4, R, R)`` float32 ``[r, g, b, alpha]`` in [0, 1], **linear** RGB **premultiplied** by
   alpha (the EA renderer's output), or ``(1, R, R)`` alpha only (``alpha_only=True``: the

@@ -28,7 +28,7 @@ def render(volume: torch.Tensor, views: torch.Tensor, model: str = "ea",
 
     Args:
         volume: ``(B, C, N, N, N)`` in [0, 1]; C = 1 ``[density]`` for 'vh'/'ao',
-            C = 4 ``[r, g, b, density]`` for 'ea' (layout: DESIGN §2, :mod:`mitsuba_platonic.volume`).
+            C = 4 ``[r, g, b, density]`` for 'ea' (layout: docs/conventions.md, :mod:`mitsuba_platonic.volume`).
         views: ``(B, 3)`` unit vectors from the object towards the camera.
         model: image formation, 'vh' | 'ao' | 'ea'.
         backend: 'closed_form' (the paper's layers, reference mode) or 'mitsuba' (ray marcher).

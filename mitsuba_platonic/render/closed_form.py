@@ -9,10 +9,11 @@ camera-space samples along depth, front (i = 1) to back (i = N):
     EA:  C = Σ_i T_i a_i c_i,   T_i = Π_{j<i} (1 − a_j),   α = 1 − Π_i (1 − a_i)
 
 with a = density channel, c = RGB channels. EA uses the *exclusive* transmittance T_i; the
-paper's equation writes the inclusive opacity 1 − Π_{j≤i}(1 − a_j), a typo (DESIGN §2). The
-authors' code also renormalises the colour and supersamples depth 1024×; this layer does
-neither: it is exactly the discrete emission–absorption sum at the N resampled planes,
-which is what a ray marcher with step Δ and pixel-centre rays integrates.
+paper's equation writes the inclusive opacity 1 − Π_{j≤i}(1 − a_j), a typo (docs/conventions.md,
+"Emission–absorption: exclusive transmittance"). The authors' code also renormalises the
+colour and supersamples depth 1024× (docs/paper.md); this layer does neither: it is exactly
+the discrete emission–absorption sum at the N resampled planes, which is what a ray marcher
+with step Δ and pixel-centre rays integrates.
 
 Numerical extremes. AO and EA work in the *product domain* with no log and no clamp:
 Π(1 − v) is exact at v = 0 and v = 1, and so is its gradient −Π_{j≠i}(1 − v_j), because

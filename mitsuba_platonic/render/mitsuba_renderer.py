@@ -5,7 +5,7 @@ Per (volume, view) pair the volume's grids are written into a cached Mitsuba sce
 :class:`~mitsuba_platonic.render.raymarch.RayMarcher`. ``drjit.wrap`` turns each render into
 a PyTorch autograd function, so gradients flow back to the torch volume.
 
-Grid layout (DESIGN §2, §3). A torch ``(C, D, H, W)`` volume becomes a Mitsuba ``[Z, Y, X, C]``
+Grid layout (docs/rendering.md, "The Mitsuba side"). A torch ``(C, D, H, W)`` volume becomes a Mitsuba ``[Z, Y, X, C]``
 grid by a permute and two flips (Z = N−1−d, Y = N−1−h, X = w) that maps onto [−1, 1]³
 (``to_world`` = translate(−1)·scale(2)). Outside the cube the closed form sees zeros
 (``grid_sample`` zero padding); the ray marcher reproduces that by weighting each lookup with

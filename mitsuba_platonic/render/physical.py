@@ -3,7 +3,7 @@ natural light (beyond the paper's closed-form layers).
 
 The volume becomes a ``heterogeneous`` medium inside a null-BSDF cube [−1, 1]³:
 
-    σ_t = −ln(1 − min(v, v_max)) / Δ        (the AO/EA extinction of DESIGN §2; v_max = 1 − 1e-3)
+    σ_t = −ln(1 − min(v, v_max)) / Δ        (the AO/EA extinction, docs/conventions.md; v_max = 1 − 1e-3)
     albedo = colour (linear RGB)
 
 so a voxel of density v absorbs exactly as it does in the AO/EA layers, but light now
@@ -193,7 +193,8 @@ def render_physical(volume: torch.Tensor, views: torch.Tensor, lighting: Sequenc
 # -- differentiable path tracing (training through the physically based renderer) ----------
 
 #: Majorant headroom: the σ grid's fixed maximum is this × the largest σ the cap allows, so no
-#: voxel ever equals the majorant (where prbvolpath's σ_t gradients flip sign, DESIGN §3).
+#: voxel ever equals the majorant (where prbvolpath, with no null collisions left, returns σ_t
+#: gradients of the wrong sign).
 MAJORANT_HEADROOM = 1.5
 
 _AD_SCENES: Dict[Tuple, Tuple[Any, Any]] = {}

@@ -5,7 +5,7 @@ grid is the density v (``scale`` = 1/Δ, the visual-hull extinction σ = v/Δ) a
 its ``albedo`` grid is the colour. This integrator marches each camera ray through the
 camera-space cube z_c ∈ [−1, 1] (the same region the closed-form layers resample), looks up
 the *density* v at each sample and converts it per sample, so trilinear lookups interpolate
-the same quantity as the closed form (DESIGN §2).
+the same quantity as the closed form (docs/conventions.md, "Opacity and extinction").
 
 Segments. With voxel size Δ = 2/N and ``step`` = h/Δ voxels, segment k covers camera depth
 [k h, min((k + 1) h, 2)] from the front face; its length in voxels is s_k = min(step, N − k·step)

@@ -50,7 +50,8 @@ __all__ = ["Trainer", "net_config"]
 def net_config(cfg: Config) -> NetConfig:
     channels = 1 if cfg.render.model in ("vh", "ao") else 4
     return NetConfig(resolution=cfg.model.resolution, volume_channels=channels, image_channels=channels,
-                     latent=cfg.model.latent, width=cfg.model.width, norm=cfg.model.norm).validate()
+                     latent=cfg.model.latent, width=cfg.model.width, norm=cfg.model.norm,
+                     encoder_hidden=cfg.model.encoder_hidden).validate()
 
 
 class Trainer:
