@@ -29,7 +29,7 @@ import torch
 
 from .images import composite, heatmap, save_exr, to_hwc
 from .render import MODELS, render
-from .render.mitsuba_renderer import MitsubaOptions
+from .render.marcher import MarchOptions
 from .views import to_angles, validate_views
 from .volume import CHANNELS
 
@@ -183,7 +183,7 @@ def compare(volume: torch.Tensor, views: torch.Tensor, models: Sequence[str] = (
     volume = _check_inputs(volume, views, models, options)
     if not isinstance(repeats, int) or isinstance(repeats, bool) or repeats < 1:
         raise ValueError(f"repeats must be a positive int, got {repeats!r}")
-    MitsubaOptions(filter=filter, **options).validate()     # bad options fail before any rendering
+    MarchOptions(filter=filter, **options).validate()     # bad options fail before any rendering
     views = views.to(torch.float32)
     b, n = views.shape[0], volume.shape[-1]
     out = Path(out_dir) if out_dir is not None else None

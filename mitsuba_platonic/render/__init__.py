@@ -1,7 +1,8 @@
 """Renderers: one entry point, two backends (closed form | Mitsuba) that agree.
 
 ``render(volume, views, model, backend, **options)`` → ``(B, C, H, W)``, differentiable
-w.r.t. ``volume``. See :mod:`.closed_form` and :mod:`.mitsuba_renderer` for the maths.
+w.r.t. ``volume``. See :mod:`.closed_form` and :mod:`.marcher` (the batched Mitsuba/Dr.Jit ray
+marcher: one launch per call) for the maths.
 """
 
 from __future__ import annotations
@@ -59,5 +60,5 @@ def render(volume: torch.Tensor, views: torch.Tensor, model: str = "ea",
         raise ValueError(f"filter must be one of {tuple(FILTERS)}, got {filter!r}")
     if backend == "closed_form":
         return render_closed_form(volume, views.to(volume.device), model, filter)
-    from .mitsuba_renderer import MitsubaOptions, render_mitsuba
-    return render_mitsuba(volume, views, model, MitsubaOptions(**options))
+    from .marcher import MarchOptions, march
+    return march(volume, views, model, MarchOptions(**options))

@@ -1,0 +1,433 @@
+"""The batched Dr.Jit ray marcher: every (volume, view) pair of a call in one kernel launch.
+
+All B·H·W·spp rays of a call march in one wide Dr.Jit launch (Mitsuba's ``llvm_ad_rgb``
+variant on a CPU, ``cuda_ad_rgb`` on a GPU); the backward pass is one more launch. The B
+volumes are one flat array, channels last (``(B, N, N, N, C)``: a voxel's RGBA is one 16-byte
+packet, read by one packet gather and written by one packet scatter), shared with torch without a
+copy; each ray reads its own pair's voxels by index: lane r belongs to pair b = r // (H·W·spp),
+whose voxels start at voxel b·N³. Zero padding is exact, because a lookup outside the cube
+simply reads nothing.
+
+Rays (docs/conventions.md, "Views" and "Images"). Pixel (row i, column j) of pair b, sub-sample
+(o_x, o_y) ∈ [0, 1)², depth z:
+
+    p = x · right_b + y · up_b + z · ω_b,   x = −1 + (j + o_x) Δ,   y = 1 − (i + o_y) Δ
+
+with (right_b, up_b, ω_b) from :func:`mitsuba_platonic.views.camera_frames`. Without jitter the
+sub-samples form a regular √spp × √spp grid, (o_x, o_y) = ((m + ½)/√spp, (n + ½)/√spp); with
+jitter they are uniform. At spp = 1 they are pixel centres, so at the front view p lands on voxel
+centres exactly (N a power of two): the lookups reproduce the closed form's to the last bit.
+
+Segments. With Δ = 2/N and ``step`` h voxels, segment k covers camera depth [k h, min((k + 1) h, N)]
+voxels from the front face z = 1; its length is s_k = min(h, N − k h) voxels and its sample sits at
+fraction u of it (u = ½, or one u ~ U[0, 1) per ray with ``jitter``):
+
+    z_k = 1 − (k h + u s_k) Δ
+
+Lookups. q = (p + 1) N/2 − ½ per axis (w along x, h along −y, d along −z) is the continuous
+voxel index; ``nearest`` reads voxel round(q) and ``trilinear`` blends the 8 voxels around q with
+weights Π_axes (1 − |q − corner|). A voxel outside [0, N)³ contributes 0 — the closed form's
+``grid_sample`` zero padding.
+
+Image formation (per ray), with the density v and colour c at each sample:
+
+    VH:      T = exp(−Σ_k s_k v_k)                          ρ = 1 − T
+    AO:      τ_k = (1 − v_k)^{s_k}, T = Π_k τ_k             ρ = 1 − T
+    EA:      C = Σ_k T_k (1 − τ_k) c_k,  T_k = Π_{j<k} τ_j,  α = 1 − Π_k τ_k
+
+At ``step`` 1, τ_k = 1 − v_k exactly (no log: exact and differentiable at v = 1). At other steps
+τ_k = exp(s_k log(1 − min(v_k, V_MAX))): the density is clamped to 1 − 1e-6 so the log stays
+finite (its gradient is 0 above the clamp). The pixel is the mean of its spp rays.
+
+Early termination. With ``termination`` ε > 0 a ray stops once T ≤ ε, in the forward and the
+backward pass: an approximation (image error ≤ ε, gradient error measured by ``platonic bench``).
+With ε = 0 (the default) the image stops only where T = 0 exactly, which changes nothing, and a
+pass that records for the gradient marches the whole ray, because the gradient at an opaque
+sample depends on what lies behind it.
+
+Adjoint (one launch, no division by τ, exact at τ = 0). The forward pass of a differentiable call
+records T_k for every ray and segment (4 bytes each). The backward pass marches each ray back to
+front, accumulating the suffix radiance R_k = Σ_{m>k} (Π_{k<j<m} τ_j)(1 − τ_m) c_m and the suffix
+transmittance U_k = Π_{j>k} τ_j:
+
+    ∂C/∂τ_k = T_k (R_k − c_k),   ∂C/∂c_k = T_k (1 − τ_k),   ∂α/∂τ_k = ∂ρ/∂τ_k = −T_k U_k
+
+then ∂L/∂v_k = ∂L/∂τ_k · dτ_k/dv_k, with dτ/dv = −1 (step 1, AO/EA), −s (1 − v)^{s − 1} (other
+steps, 0 above the clamp) or −s τ (VH), and scatters ∂L/∂v_k and ∂L/∂c_k into the voxels the
+lookup read, with the lookup's weights (Dr.Jit's ``scatter_reduce``; on the LLVM backend the
+``Expand`` mode gives each thread its own copy of the gradient, so no atomics collide).
+"""
+
+from __future__ import annotations
+
+import ctypes
+import glob
+import math
+import os
+from dataclasses import dataclass
+from typing import Any, Optional, Tuple
+
+import torch
+
+from ..views import camera_frames
+from .variant import ensure_variant, variant_device
+
+mi = ensure_variant()
+import drjit as dr  # noqa: E402  (after the variant is set)
+
+__all__ = ["MarchOptions", "march", "V_MAX", "RECORD_LIMIT"]
+
+#: Density clamp used by AO/EA when step != 1 (log domain).
+V_MAX = 1.0 - 1e-6
+
+#: Most (ray, segment) pairs a differentiable call may record (4 bytes each): 2 GiB.
+RECORD_LIMIT = 2 ** 29
+
+
+@dataclass(frozen=True)
+class MarchOptions:
+    """Speed/accuracy options of the ray marcher (see the module docstring).
+
+    step: segment length in voxels (> 0; 1 reproduces the closed form's planes).
+    spp: rays per pixel (a perfect square unless ``jitter``).
+    jitter: random sub-pixel positions and a random depth within each segment.
+    filter: 'nearest' or 'trilinear' lookups.
+    termination: stop a ray once its transmittance falls to this value (0 = exact).
+    seed: seed of the random numbers (only used with ``jitter``).
+    """
+
+    step: float = 1.0
+    spp: int = 1
+    jitter: bool = False
+    filter: str = "trilinear"
+    termination: float = 0.0
+    seed: int = 0
+
+    def validate(self) -> "MarchOptions":
+        if isinstance(self.step, bool) or not isinstance(self.step, (int, float)) \
+                or not math.isfinite(self.step) or not self.step > 0:
+            raise ValueError(f"step must be a positive, finite number of voxels, got {self.step!r}")
+        if not isinstance(self.spp, int) or isinstance(self.spp, bool) or self.spp < 1:
+            raise ValueError(f"spp must be a positive int, got {self.spp!r}")
+        if not self.jitter and math.isqrt(self.spp) ** 2 != self.spp:
+            raise ValueError(f"without jitter, spp must be a perfect square (a regular sub-pixel grid), "
+                             f"got {self.spp}")
+        if self.filter not in ("nearest", "trilinear"):
+            raise ValueError(f"filter must be 'nearest' or 'trilinear', got {self.filter!r}")
+        if isinstance(self.termination, bool) or not isinstance(self.termination, (int, float)) \
+                or not 0.0 <= self.termination < 1.0:
+            raise ValueError(f"termination must be in [0, 1), got {self.termination!r}")
+        if not isinstance(self.seed, int) or isinstance(self.seed, bool) or self.seed < 0:
+            raise ValueError(f"seed must be a non-negative int, got {self.seed!r}")
+        return self
+
+
+def n_segments(n: int, step: float) -> int:
+    """Segments per ray: ⌈N / step⌉ (the last one may be shorter)."""
+    return max(1, math.ceil(n / step - 1e-9))
+
+
+# -- Threads -------------------------------------------------------------------------------
+
+
+def _llvm_block_setter():
+    """Dr.Jit's ``jit_llvm_set_block_size`` (not exposed in Python), or None where it is absent."""
+    if not mi.variant().startswith("llvm"):
+        return None
+    pattern = os.path.join(os.path.dirname(dr.__file__), "libdrjit-core*.so*")
+    for path in glob.glob(pattern):
+        try:
+            fn = getattr(ctypes.PyDLL(path), "_Z23jit_llvm_set_block_sizej")   # keeps the GIL held
+        except (OSError, AttributeError):
+            continue
+        fn.argtypes, fn.restype = [ctypes.c_uint32], None
+        return fn
+    return None
+
+
+_set_block_size = _llvm_block_setter()
+
+
+def _spread_over_threads(lanes: int, blocks_per_thread: int) -> None:
+    """Split a launch of ``lanes`` rays into about ``blocks_per_thread`` blocks per thread.
+
+    Dr.Jit's default block is 16,384 lanes, so a 32³ batch of 8 (8,192 rays) would run on one
+    thread. The backward pass asks for one block per thread: its ``Expand`` scatters give every
+    block its own copy of the gradient, which is cleared and summed at the end.
+    """
+    if _set_block_size is None:
+        return
+    threads = max(1, dr.thread_count())
+    block = -(-lanes // (blocks_per_thread * threads))
+    _set_block_size(1 << max(6, min(20, (block - 1).bit_length())))   # a power of two ≥ the packet
+
+
+# -- The marcher ---------------------------------------------------------------------------
+
+
+class _Batch:
+    """One call's rays, lookups and marches (built per call; all arrays are Dr.Jit arrays).
+
+    ``data``: the flat volume batch ``(B, C, N, N, N)``; ``frames``: 9 floats per pair
+    (right, up, ω); ``model``: 'vh' | 'ao' | 'ea'.
+    """
+
+    def __init__(self, data: Any, frames: Any, b: int, c: int, n: int, model: str, opt: MarchOptions):
+        self.data, self.frames, self.B, self.C, self.N, self.model, self.opt = data, frames, b, c, n, model, opt
+        self.Δ = 2.0 / n
+        self.n_steps = n_segments(n, opt.step)
+        self.n_rays = b * n * n * opt.spp
+        self.ε = float(opt.termination)
+        self._rays()
+
+    # -- Rays ------------------------------------------------------------------------------
+
+    def _rays(self) -> None:
+        """Per lane: its pair's offset into ``data``, the image-plane point (x, y) and depth fraction u."""
+        N, spp, opt = self.N, self.opt.spp, self.opt
+        r = dr.arange(mi.UInt32, self.n_rays)
+        pixel = r // spp                                          # which pixel of the batch
+        sub = r - pixel * spp                                     # which ray of that pixel
+        b = pixel // (N * N)
+        ij = pixel - b * (N * N)
+        i, j = ij // N, ij % N
+        if opt.jitter:
+            rng = mi.PCG32(size=self.n_rays, initstate=opt.seed, initseq=r)
+            ox, oy, u = rng.next_float32(), rng.next_float32(), rng.next_float32()
+        else:
+            m = math.isqrt(spp)
+            ox = (mi.Float(sub % m) + 0.5) / m
+            oy = (mi.Float(sub // m) + 0.5) / m
+            u = mi.Float(0.5)
+        self.x = -1.0 + (mi.Float(j) + ox) * self.Δ
+        self.y = 1.0 - (mi.Float(i) + oy) * self.Δ
+        self.u = u
+        self.base = b * (N * N * N)                               # first voxel of this lane's volume
+        f = [dr.gather(mi.Float, self.frames, b * 9 + k) for k in range(9)]
+        self.right, self.up, self.ω = mi.Vector3f(*f[0:3]), mi.Vector3f(*f[3:6]), mi.Vector3f(*f[6:9])
+
+    def segment(self, k: Any) -> Tuple[Any, Any]:
+        """Sample point p of segment k and its length s in voxels."""
+        h, N = self.opt.step, self.N
+        kf = mi.Float(k)
+        s = dr.minimum(h, N - kf * h)                             # the last segment may be short
+        z = 1.0 - (kf * h + self.u * s) * self.Δ
+        return self.x * self.right + self.y * self.up + z * self.ω, s
+
+    # -- Lookups ---------------------------------------------------------------------------
+
+    def corners(self, p: Any):
+        """[(voxel index, weight, inside)] of the lookup at p: 1 voxel (nearest) or 8 (trilinear)."""
+        N = self.N
+        half = N / 2.0
+        q = mi.Vector3f((p.x + 1.0) * half - 0.5,                 # w: along +x
+                        (1.0 - p.y) * half - 0.5,                 # h: along −y
+                        (1.0 - p.z) * half - 0.5)                 # d: along −z
+        if self.opt.filter == "nearest":
+            i = mi.Vector3i(dr.floor(q + 0.5))
+            inside = dr.all((i >= 0) & (i < N))
+            return [(self._index(i), mi.Float(1.0), inside)]
+        i0 = mi.Vector3i(dr.floor(q))
+        t = q - mi.Vector3f(i0)
+        out = []
+        for dd in (0, 1):
+            for dh in (0, 1):
+                for dw in (0, 1):
+                    i = i0 + mi.Vector3i(dw, dh, dd)
+                    w = (t.x if dw else 1.0 - t.x) * (t.y if dh else 1.0 - t.y) * (t.z if dd else 1.0 - t.z)
+                    out.append((self._index(i), w, dr.all((i >= 0) & (i < N))))
+        return out
+
+    def _index(self, i: Any) -> Any:
+        """Voxel number of voxel (w, h, d) = i of this lane's volume (its channels follow each other)."""
+        N = self.N
+        return self.base + mi.UInt32((i.z * N + i.y) * N + i.x)
+
+    def lookup(self, corners) -> Tuple[Any, Any]:
+        """Density v (the last channel) and, for EA, the colour c at a lookup (None otherwise)."""
+        if self.C == 1:
+            v = mi.Float(0.0)
+            for idx, w, inside in corners:
+                v += w * dr.gather(mi.Float, self.data, idx, inside)
+            return v, None
+        rgba = mi.Vector4f(0.0)
+        for idx, w, inside in corners:
+            rgba += w * dr.gather(mi.Vector4f, self.data, idx, inside)   # one packet: r, g, b, v
+        return rgba.w, mi.Color3f(rgba.x, rgba.y, rgba.z)
+
+    def transmittance(self, v: Any, s: Any) -> Tuple[Any, Any]:
+        """τ of a segment of s voxels at density v, and dτ/dv."""
+        if self.model == "vh":
+            τ = dr.exp(-s * v)
+            return τ, -s * τ
+        if self.opt.step == 1.0:
+            return 1.0 - v, mi.Float(-1.0)                        # exact product form at step 1
+        clamped = v >= V_MAX
+        log1m = dr.log(1.0 - dr.minimum(v, V_MAX))                # log domain, density clamped
+        τ = dr.exp(s * log1m)
+        dτ = dr.select(clamped, 0.0, -s * dr.exp((s - 1.0) * log1m))
+        return τ, dτ
+
+    # -- Forward ---------------------------------------------------------------------------
+
+    @dr.syntax
+    def forward(self, record: Optional[Any]) -> Tuple[Any, Any, Any]:
+        """Front-to-back march → (final transmittance T, emitted colour C, segments marched); with
+        ``record`` (a Float of n_rays · n_steps) store T_k before each segment for the backward pass."""
+        ea = self.model == "ea"
+        n_steps, ε = self.n_steps, self.ε
+        whole = record is not None and ε == 0.0                   # the gradient needs every segment
+        slot = dr.arange(mi.UInt32, self.n_rays) * n_steps
+        k = mi.UInt32(0)
+        T = mi.Float(1.0)
+        depth = mi.Float(0.0)                                     # VH: optical depth Σ s v
+        C = mi.Color3f(0.0)
+        active = mi.Bool(True)
+        while active:
+            if record is not None:
+                dr.scatter(record, T, slot + k)
+            p, s = self.segment(k)
+            v, c = self.lookup(self.corners(p))
+            if self.model == "vh":
+                depth += s * v
+                T = dr.exp(-depth)                                # exactly the closed form's exp(−Σ v)
+            else:
+                τ, _ = self.transmittance(v, s)
+                if ea:
+                    C += T * (1.0 - τ) * c
+                T *= τ
+            k += 1
+            # with ε = 0 a forward-only pass stops where T = 0: nothing behind is visible
+            active &= (k < n_steps) & (whole | (T > ε))
+        return T, C, k
+
+    # -- Backward --------------------------------------------------------------------------
+
+    @dr.syntax
+    def backward(self, record: Any, marched: Any, grad: Any, δρ: Any, δC: Any) -> None:
+        """Back-to-front march from each ray's last marched segment, scattering ∂L/∂v (and ∂L/∂c)
+        into ``grad`` (same layout as ``data``). δρ: ∂L/∂ρ or ∂L/∂α per ray; δC: ∂L/∂C (EA)."""
+        ea = self.model == "ea"
+        n_steps = self.n_steps
+        slot = dr.arange(mi.UInt32, self.n_rays) * n_steps
+
+        # Back to front from where the forward march stopped (only a positive ε stops it early),
+        # with the suffix radiance R and the suffix transmittance U
+        k = mi.UInt32(marched)
+        R = mi.Color3f(0.0)
+        U = mi.Float(1.0)
+        active = k > 0
+        while active:
+            k -= 1
+            T_k = dr.gather(mi.Float, record, slot + k)
+            p, s = self.segment(k)
+            corners = self.corners(p)
+            v, c = self.lookup(corners)
+            τ, dτ = self.transmittance(v, s)
+            gτ = -δρ * T_k * U                                    # ∂α/∂τ = −T U
+            if ea:
+                gτ += dr.sum(δC * T_k * (R - c))                  # ∂C/∂τ = T (R − c)
+            gv = gτ * dτ
+            gc = δC * T_k * (1.0 - τ) if ea else None             # ∂C/∂c = T (1 − τ)
+            g = mi.Vector4f(gc.x, gc.y, gc.z, gv) if ea else gv   # EA: one packet per voxel
+            for idx, w, inside in corners:
+                dr.scatter_reduce(dr.ReduceOp.Add, grad, w * g, idx, inside, mode=_MODE)
+            if ea:
+                R = (1.0 - τ) * c + τ * R
+            U *= τ
+            active &= k > 0
+
+
+#: Scatter-add mode of the backward pass (``Expand``: per-thread copies on the LLVM backend).
+_MODE = dr.ReduceMode.Expand if mi.variant().startswith("llvm") else dr.ReduceMode.Auto
+
+
+def _shared(t: torch.Tensor, keep: list) -> Any:
+    """A Dr.Jit Float sharing the memory of the contiguous torch tensor ``t`` (no copy).
+
+    ``t`` goes into ``keep``, which the caller holds until Dr.Jit is done with the array: Dr.Jit
+    may release its last reference inside a launch, where the GIL is not held, and freeing torch
+    memory there aborts the interpreter.
+    """
+    t = t.reshape(-1)
+    keep.append(t)
+    return mi.Float(t)
+
+
+def _frames(views: torch.Tensor, keep: list) -> Any:
+    """(B, 3) views → a Float of 9 per pair: right, up, ω (float64 maths, stored as float32)."""
+    right, up, w = camera_frames(views)
+    return _shared(torch.cat([right, up, w], dim=1).to(torch.float32).contiguous(), keep)
+
+
+def _per_ray_to_image(values, b: int, n: int, spp: int) -> torch.Tensor:
+    """Per-ray Dr.Jit Floats (one per channel) → the (B, C, H, W) image, the mean over each pixel's rays."""
+    rays = torch.stack([v.torch().view(b, n, n, spp) for v in values], dim=1)   # (B, C, H, W, spp)
+    return rays[..., 0] if spp == 1 else rays.mean(dim=-1)
+
+
+def _image_to_per_ray(grad: torch.Tensor, spp: int, keep: list) -> Tuple[Any, ...]:
+    """(B, C, H, W) gradient → per-ray Floats: each ray of a pixel gets 1/spp of it."""
+    g = (grad / spp if spp > 1 else grad).transpose(0, 1)                          # (C, B, H, W)
+    return tuple(_shared(g[ch].unsqueeze(-1).expand(-1, -1, -1, spp).contiguous(), keep)
+                 for ch in range(grad.shape[1]))
+
+
+class _March(torch.autograd.Function):
+    """torch ↔ Dr.Jit: the forward launch, and the backward launch with the recorded T_k."""
+
+    @staticmethod
+    def forward(ctx, volume: torch.Tensor, views: torch.Tensor, model: str, opt: MarchOptions) -> torch.Tensor:
+        b, n, c = volume.shape[0], volume.shape[1], volume.shape[-1]
+        keep: list = []                                           # torch memory Dr.Jit reads
+        data = _shared(volume.detach(), keep)                     # the (B, N, N, N, C) batch, no copy
+        batch = _Batch(data, _frames(views, keep), b, c, n, model, opt)
+        _spread_over_threads(batch.n_rays, 4)
+        record = None
+        if ctx.needs_input_grad[0]:
+            size = batch.n_rays * batch.n_steps
+            if size > RECORD_LIMIT:
+                raise ValueError(f"a differentiable render of {batch.n_rays} rays × {batch.n_steps} segments "
+                                 f"records {4 * size / 2**30:.1f} GiB; use fewer pairs, spp or a larger step")
+            record = dr.zeros(mi.Float, size)
+        T, C, marched = batch.forward(record)
+        values = [C.x, C.y, C.z, 1.0 - T] if model == "ea" else [1.0 - T]
+        dr.eval(values, record, marched)                          # the one forward launch
+        image = _per_ray_to_image(values, b, n, opt.spp)
+        ctx.batch, ctx.record, ctx.marched, ctx.keep = batch, record, marched, keep
+        del values, T, C, data
+        return image
+
+    @staticmethod
+    def backward(ctx, grad_image: torch.Tensor):
+        batch, keep = ctx.batch, ctx.keep
+        per_ray = _image_to_per_ray(grad_image.to(torch.float32), batch.opt.spp, keep)
+        if batch.model == "ea":
+            δC, δρ = mi.Color3f(*per_ray[:3]), per_ray[3]
+        else:
+            δC, δρ = mi.Color3f(0.0), per_ray[0]
+        grad = dr.zeros(mi.Float, batch.B * batch.C * batch.N ** 3)
+        _spread_over_threads(batch.n_rays, 1)
+        batch.backward(ctx.record, ctx.marched, grad, δρ, δC)
+        dr.eval(grad)                                             # the one backward launch
+        out = grad.torch().view(batch.B, batch.N, batch.N, batch.N, batch.C)
+        del per_ray, δC, δρ
+        ctx.batch = ctx.record = ctx.marched = None
+        batch.data = batch.frames = None
+        dr.sync_thread()                                          # nothing in flight reads ``keep``
+        ctx.keep = None
+        return out, None, None, None
+
+
+def march(volume: torch.Tensor, views: torch.Tensor, model: str, options: Optional[MarchOptions] = None) -> torch.Tensor:
+    """Render ``(B, C, N, N, N)`` volumes from ``(B, 3)`` views with the batched ray marcher.
+
+    Returns ``(B, 1, N, N)`` (VH, AO) or ``(B, 4, N, N)`` (EA: premultiplied RGB, alpha),
+    differentiable w.r.t. ``volume``. Inputs are assumed valid (see :func:`mitsuba_platonic.render`).
+    """
+    opt = (options or MarchOptions()).validate()
+    device = variant_device()
+    # channels last: free for C = 1 and for a volume already in ``torch.channels_last_3d``
+    src = volume.to(device=device, dtype=torch.float32).permute(0, 2, 3, 4, 1).contiguous()
+    out = _March.apply(src, views.detach().to(torch.float64).cpu(), model, opt)
+    return out.to(volume.device)
