@@ -33,6 +33,48 @@ def test_paper_generator_widths_at_64():
     assert [c.out_channels for c in convs] == [512, 256, 128, 64, 4]
 
 
+RESOLUTIONS = [(16, 4), (32, 1), (64, 4), (128, 1)]     # every supported R; narrow nets keep 128³ quick
+
+
+@pytest.mark.parametrize("resolution,channels", RESOLUTIONS)
+def test_generator_output_shape_range_and_dependence_on_z(resolution, channels):
+    """G: (B, latent) → (B, C, R, R, R) in [0, 1], different for different z; with its last layer
+    scaled up the output saturates at both ends of (0, 1) without leaving it (a sigmoid, not an
+    unbounded or one-sided output)."""
+    g = build_networks(NetConfig(resolution=resolution, volume_channels=channels, image_channels=channels,
+                                 latent=8, width=2))["G"].train()
+    z = torch.randn(4, 8)
+    with torch.no_grad():
+        v = g(z)
+        assert v.shape == (4, channels, resolution, resolution, resolution) and torch.isfinite(v).all()
+        assert v.min() >= 0 and v.max() <= 1
+        for i in range(1, 4):                            # at initialisation per-voxel differences are ≈ 0.01
+            assert (v[0] - v[i]).abs().mean() > 1e-3, f"G(z_0) ≈ G(z_{i}): G ignores z"
+        last = [m for m in g.modules() if isinstance(m, torch.nn.ConvTranspose3d)][-1]
+        last.weight.mul_(50.0)                           # pre-activations ≈ ±15
+        s = g(z)
+    assert s.min() >= 0 and s.max() <= 1
+    assert s.min() < 1e-3 and s.max() > 1 - 1e-3
+
+
+@pytest.mark.parametrize("encoder_hidden", [0, 16])
+@pytest.mark.parametrize("resolution,channels", RESOLUTIONS)
+def test_encoder_maps_images_to_codes(resolution, channels, encoder_hidden):
+    """E (plain Linear head or the authors' hidden layer): (B, C, R, R) → (B, latent); each code
+    depends on its own image only (eval mode) and differs between images."""
+    e = build_networks(NetConfig(resolution=resolution, volume_channels=channels, image_channels=channels,
+                                 latent=8, width=2, encoder_hidden=encoder_hidden))["E"].eval()
+    x = torch.rand(3, channels, resolution, resolution)
+    with torch.no_grad():
+        codes = e(x)
+        assert codes.shape == (3, 8) and torch.isfinite(codes).all()
+        scale = float(codes.abs().max())                              # DCGAN initialisation: codes are small
+        assert scale > 0
+        torch.testing.assert_close(e(x[[0, 2]]), codes[[0, 2]], rtol=1e-4, atol=1e-4 * scale)  # no mixing
+        assert (codes[0] - codes[1]).abs().max() > 0.1 * scale
+        assert (codes[1] - codes[2]).abs().max() > 0.1 * scale
+
+
 def test_bad_inputs():
     nets = build_networks(NetConfig(resolution=16, latent=8, width=4))
     with pytest.raises(ValueError, match="expects images"):
