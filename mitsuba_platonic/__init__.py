@@ -12,7 +12,7 @@ from .backend import BackendError, check_backend
 BACKEND = check_backend()
 
 from . import views, volume  # noqa: E402
-from .render import render  # noqa: E402
+from .render import RenderSettings, render, render_with  # noqa: E402
 
 __version__ = "0.1.0"
-__all__ = ["render", "views", "volume", "BackendError", "BACKEND", "__version__"]
+__all__ = ["render", "render_with", "RenderSettings", "views", "volume", "BackendError", "BACKEND", "__version__"]

@@ -29,7 +29,7 @@ import torch
 
 from .images import composite, heatmap, save_exr, to_hwc
 from .render import MODELS, render
-from .render.marcher import MarchOptions
+from .render.settings import OPTIONS_OF, RenderSettings
 from .views import to_angles, validate_views
 from .volume import CHANNELS
 
@@ -39,7 +39,7 @@ __all__ = ["compare", "format_table", "time_render", "DISPLAY_BACKGROUND", "HEAT
 DISPLAY_BACKGROUND = 0.5
 #: Colour map of the |difference| heat maps.
 HEATMAP_CMAP = "inferno"
-_MITSUBA_ONLY = {"step", "spp", "jitter", "termination", "seed"}
+_MITSUBA_ONLY = (set(OPTIONS_OF["mitsuba"]) - {"filter"}) | {"seed"}   # the marcher's options, and its seed
 
 
 def _sync() -> None:
@@ -183,7 +183,8 @@ def compare(volume: torch.Tensor, views: torch.Tensor, models: Sequence[str] = (
     volume = _check_inputs(volume, views, models, options)
     if not isinstance(repeats, int) or isinstance(repeats, bool) or repeats < 1:
         raise ValueError(f"repeats must be a positive int, got {repeats!r}")
-    MarchOptions(filter=filter, **options).validate()     # bad options fail before any rendering
+    RenderSettings.for_call("mitsuba", "ea", filter=filter,      # bad options fail before any rendering
+                            **{k: v for k, v in options.items() if k != "seed"})
     views = views.to(torch.float32)
     b, n = views.shape[0], volume.shape[-1]
     out = Path(out_dir) if out_dir is not None else None

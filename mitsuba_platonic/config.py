@@ -1,7 +1,8 @@
 """Experiment configuration: every knob in one validated tree, loaded from YAML.
 
 A config has five sections (``run``, ``data``, ``model``, ``render``, ``train``), each a
-dataclass below whose docstring says what its fields mean. Loading checks every key and type:
+dataclass whose docstring says what its fields mean (``render`` is the renderer's own
+:class:`~mitsuba_platonic.render.RenderSettings`; the others are below). Loading checks every key and type:
 an unknown key or a wrong type is an error that names the key (``train.batch_size: expected
 int, got 'eight'``). Command-line overrides use dotted keys, ``--set train.steps=500``; values
 are parsed as YAML scalars (``true``, ``1e-4``, ``[0.5, 0.9]``, ``null``).
@@ -17,6 +18,8 @@ from pathlib import Path
 from typing import Any, Dict, List, Optional, Sequence, Union
 
 import yaml
+
+from .render.settings import RenderSettings as RenderConfig
 
 __all__ = ["Config", "RunConfig", "DataConfig", "ModelConfig", "RenderConfig", "TrainConfig",
            "load_config", "apply_overrides", "ConfigError"]
@@ -91,23 +94,6 @@ class ModelConfig:
 
 
 @dataclass
-class RenderConfig:
-    """backend: 'closed_form' | 'mitsuba' (ray marcher) | 'physical' (path tracer under natural light);
-    model: 'vh' | 'ao' | 'ea' (physical renders RGBA); filter: 'trilinear' | 'nearest';
-    step, spp, jitter: the ray marcher's options; lighting, physical_spp, max_depth: the path tracer's."""
-
-    backend: str = "closed_form"
-    model: str = "ea"
-    filter: str = "trilinear"
-    step: float = 1.0
-    spp: int = 1
-    jitter: bool = False
-    lighting: str = "sunsky"
-    physical_spp: int = 4
-    max_depth: int = 4
-
-
-@dataclass
 class TrainConfig:
     """task: 'reconstruction' (E encodes the input image; L2 at the input view) or 'generation'
     (z ~ N(0, I)); mode: 'platonic' (2D discriminator only), 'platonic3d' (+ a 3D discriminator on
@@ -172,17 +158,10 @@ class Config:
         _positive("model.width", self.model.width)
         _choice("model.norm", self.model.norm, ("batch", "instance", "none"))
         _non_negative("model.encoder_hidden", self.model.encoder_hidden)
-        _choice("render.backend", self.render.backend, ("closed_form", "mitsuba", "physical"))
-        _choice("render.model", self.render.model, ("vh", "ao", "ea"))
-        _choice("render.filter", self.render.filter, ("trilinear", "nearest"))
-        _choice("render.lighting", self.render.lighting, ("sunsky", "envmap", "mixed"))
-        if not self.render.step > 0:
-            raise ConfigError(f"render.step: expected a positive number, got {self.render.step!r}")
-        _positive("render.spp", self.render.spp)
-        _positive("render.physical_spp", self.render.physical_spp)
-        _positive("render.max_depth", self.render.max_depth)
-        if self.render.backend == "physical" and self.render.model != "ea":
-            raise ConfigError("render.model: the physical backend renders colour; use 'ea' images")
+        try:
+            self.render.validate()                           # the renderer's settings check themselves
+        except ValueError as e:
+            raise ConfigError(f"render.{e}") from None
         _choice("train.task", self.train.task, ("reconstruction", "generation"))
         _choice("train.mode", self.train.mode, ("platonic", "platonic3d", "gan3d"))
         _choice("train.view_distribution", self.train.view_distribution, ("sphere", "band", "ring"))

@@ -197,9 +197,9 @@ def test_vh_and_ao_read_one_channel_ea_reads_rgba_packets(monkeypatch):
     seen = []
     original = M._Batch.__init__
 
-    def spy(self, data, frames, b, c, n, model, opt):
-        seen.append((model, c, dr_width(data), b * n ** 3))
-        original(self, data, frames, b, c, n, model, opt)
+    def spy(self, data, frames, b, c, n, settings, seed):
+        seen.append((settings.model, c, dr_width(data), b * n ** 3))
+        original(self, data, frames, b, c, n, settings, seed)
 
     monkeypatch.setattr(M._Batch, "__init__", spy)
     for model in MODELS:
@@ -217,11 +217,11 @@ def dr_width(x):
 def test_batched_marcher_equals_the_per_pair_mitsuba_integrator(model):
     """The Mitsuba-scene path (one ``mi.render`` of the ``platonic_raymarch`` integrator per pair)
     and the batched marcher render, and differentiate, the same images."""
-    from mitsuba_platonic.render.mitsuba_renderer import MitsubaOptions, render_mitsuba
+    from mitsuba_platonic.render.mitsuba_renderer import render_mitsuba
     vol = _pair(model, 16, "cloud", batch=3)
     x, y = vol.clone().requires_grad_(), vol.clone().requires_grad_()
     w = torch.rand(3, 4 if model == "ea" else 1, 16, 16)
-    a = render_mitsuba(x, OBLIQUE, model, MitsubaOptions())
+    a = render_mitsuba(x, OBLIQUE, model)
     b = render(y, OBLIQUE, model, "mitsuba")
     assert (a - b).abs().max() <= 1e-5
     (a * w).sum().backward()

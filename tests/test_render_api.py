@@ -27,7 +27,7 @@ def test_bad_input_messages(backend):
         (good.clone().fill_(float("nan")), views, "ea", "NaN"),
         (good, views * 2, "ea", "unit vectors"),
         (good, views[:1], "ea", "batch"),
-        (good, views, "xray", "model must be"),
+        (good, views, "xray", "model: expected one of"),
         (good[:, :, :, :, :4], views, "ea", "cubic"),
         (good.to(torch.int64), views, "ea", "floating-point"),
     ]

@@ -64,62 +64,24 @@ import ctypes
 import glob
 import math
 import os
-from dataclasses import dataclass
 from typing import Any, Optional, Tuple
 
 import torch
 
 from ..views import camera_frames
+from .settings import RenderSettings
 from .variant import ensure_variant, variant_device
 
 mi = ensure_variant()
 import drjit as dr  # noqa: E402  (after the variant is set)
 
-__all__ = ["MarchOptions", "march", "V_MAX", "RECORD_LIMIT"]
+__all__ = ["march", "n_segments", "V_MAX", "RECORD_LIMIT"]
 
 #: Density clamp used by AO/EA when step != 1 (log domain).
 V_MAX = 1.0 - 1e-6
 
 #: Most (ray, segment) pairs a differentiable call may record (4 bytes each): 2 GiB.
 RECORD_LIMIT = 2 ** 29
-
-
-@dataclass(frozen=True)
-class MarchOptions:
-    """Speed/accuracy options of the ray marcher (see the module docstring).
-
-    step: segment length in voxels (> 0; 1 reproduces the closed form's planes).
-    spp: rays per pixel (a perfect square unless ``jitter``).
-    jitter: random sub-pixel positions and a random depth within each segment.
-    filter: 'nearest' or 'trilinear' lookups.
-    termination: stop a ray once its transmittance falls to this value (0 = exact).
-    seed: seed of the random numbers (only used with ``jitter``).
-    """
-
-    step: float = 1.0
-    spp: int = 1
-    jitter: bool = False
-    filter: str = "trilinear"
-    termination: float = 0.0
-    seed: int = 0
-
-    def validate(self) -> "MarchOptions":
-        if isinstance(self.step, bool) or not isinstance(self.step, (int, float)) \
-                or not math.isfinite(self.step) or not self.step > 0:
-            raise ValueError(f"step must be a positive, finite number of voxels, got {self.step!r}")
-        if not isinstance(self.spp, int) or isinstance(self.spp, bool) or self.spp < 1:
-            raise ValueError(f"spp must be a positive int, got {self.spp!r}")
-        if not self.jitter and math.isqrt(self.spp) ** 2 != self.spp:
-            raise ValueError(f"without jitter, spp must be a perfect square (a regular sub-pixel grid), "
-                             f"got {self.spp}")
-        if self.filter not in ("nearest", "trilinear"):
-            raise ValueError(f"filter must be 'nearest' or 'trilinear', got {self.filter!r}")
-        if isinstance(self.termination, bool) or not isinstance(self.termination, (int, float)) \
-                or not 0.0 <= self.termination < 1.0:
-            raise ValueError(f"termination must be in [0, 1), got {self.termination!r}")
-        if not isinstance(self.seed, int) or isinstance(self.seed, bool) or self.seed < 0:
-            raise ValueError(f"seed must be a non-negative int, got {self.seed!r}")
-        return self
 
 
 def n_segments(n: int, step: float) -> int:
@@ -168,12 +130,14 @@ def _spread_over_threads(lanes: int, blocks_per_thread: int) -> None:
 class _Batch:
     """One call's rays, lookups and marches (built per call; all arrays are Dr.Jit arrays).
 
-    ``data``: the flat volume batch ``(B, C, N, N, N)``; ``frames``: 9 floats per pair
-    (right, up, ω); ``model``: 'vh' | 'ao' | 'ea'.
+    ``data``: the flat volume batch ``(B, N, N, N, C)``; ``frames``: 9 floats per pair
+    (right, up, ω); ``opt``: the settings (model, filter, step, spp, jitter, termination);
+    ``seed``: the jitter's random numbers.
     """
 
-    def __init__(self, data: Any, frames: Any, b: int, c: int, n: int, model: str, opt: MarchOptions):
-        self.data, self.frames, self.B, self.C, self.N, self.model, self.opt = data, frames, b, c, n, model, opt
+    def __init__(self, data: Any, frames: Any, b: int, c: int, n: int, opt: RenderSettings, seed: int):
+        self.data, self.frames, self.B, self.C, self.N, self.opt = data, frames, b, c, n, opt
+        self.model, self.seed = opt.model, seed
         self.Δ = 2.0 / n
         self.n_steps = n_segments(n, opt.step)
         self.n_rays = b * n * n * opt.spp
@@ -192,7 +156,7 @@ class _Batch:
         ij = pixel - b * (N * N)
         i, j = ij // N, ij % N
         if opt.jitter:
-            rng = mi.PCG32(size=self.n_rays, initstate=opt.seed, initseq=r)
+            rng = mi.PCG32(size=self.n_rays, initstate=self.seed, initseq=r)
             ox, oy, u = rng.next_float32(), rng.next_float32(), rng.next_float32()
         else:
             m = math.isqrt(spp)
@@ -377,11 +341,11 @@ class _March(torch.autograd.Function):
     """torch ↔ Dr.Jit: the forward launch, and the backward launch with the recorded T_k."""
 
     @staticmethod
-    def forward(ctx, volume: torch.Tensor, views: torch.Tensor, model: str, opt: MarchOptions) -> torch.Tensor:
+    def forward(ctx, volume: torch.Tensor, views: torch.Tensor, opt: RenderSettings, seed: int) -> torch.Tensor:
         b, n, c = volume.shape[0], volume.shape[1], volume.shape[-1]
         keep: list = []                                           # torch memory Dr.Jit reads
         data = _shared(volume.detach(), keep)                     # the (B, N, N, N, C) batch, no copy
-        batch = _Batch(data, _frames(views, keep), b, c, n, model, opt)
+        batch = _Batch(data, _frames(views, keep), b, c, n, opt, seed)
         _spread_over_threads(batch.n_rays, 4)
         record = None
         if ctx.needs_input_grad[0]:
@@ -391,7 +355,7 @@ class _March(torch.autograd.Function):
                                  f"records {4 * size / 2**30:.1f} GiB; use fewer pairs, spp or a larger step")
             record = dr.zeros(mi.Float, size)
         T, C, marched = batch.forward(record)
-        values = [C.x, C.y, C.z, 1.0 - T] if model == "ea" else [1.0 - T]
+        values = [C.x, C.y, C.z, 1.0 - T] if opt.model == "ea" else [1.0 - T]
         dr.eval(values, record, marched)                          # the one forward launch
         image = _per_ray_to_image(values, b, n, opt.spp)
         ctx.batch, ctx.record, ctx.marched, ctx.keep = batch, record, marched, keep
@@ -412,22 +376,21 @@ class _March(torch.autograd.Function):
         dr.eval(grad)                                             # the one backward launch
         out = grad.torch().view(batch.B, batch.N, batch.N, batch.N, batch.C)
         del per_ray, δC, δρ
-        ctx.batch = ctx.record = ctx.marched = None
-        batch.data = batch.frames = None
         dr.sync_thread()                                          # nothing in flight reads ``keep``
-        ctx.keep = None
         return out, None, None, None
 
 
-def march(volume: torch.Tensor, views: torch.Tensor, model: str, options: Optional[MarchOptions] = None) -> torch.Tensor:
+def march(volume: torch.Tensor, views: torch.Tensor, settings: RenderSettings, seed: int = 0) -> torch.Tensor:
     """Render ``(B, C, N, N, N)`` volumes from ``(B, 3)`` views with the batched ray marcher.
 
-    Returns ``(B, 1, N, N)`` (VH, AO) or ``(B, 4, N, N)`` (EA: premultiplied RGB, alpha),
-    differentiable w.r.t. ``volume``. Inputs are assumed valid (see :func:`mitsuba_platonic.render`).
+    Uses ``settings``' model, filter, step, spp, jitter and termination; ``seed`` drives the
+    jitter. Returns ``(B, 1, N, N)`` (VH, AO) or ``(B, 4, N, N)`` (EA: premultiplied RGB, alpha),
+    differentiable w.r.t. ``volume`` (also twice from one forward, with ``retain_graph``).
+    Inputs are assumed valid (see :func:`mitsuba_platonic.render`).
     """
-    opt = (options or MarchOptions()).validate()
+    opt = settings.validate()
     device = variant_device()
     # channels last: free for C = 1 and for a volume already in ``torch.channels_last_3d``
     src = volume.to(device=device, dtype=torch.float32).permute(0, 2, 3, 4, 1).contiguous()
-    out = _March.apply(src, views.detach().to(torch.float64).cpu(), model, opt)
+    out = _March.apply(src, views.detach().to(torch.float64).cpu(), opt, int(seed))
     return out.to(volume.device)

@@ -17,7 +17,6 @@ voxel centres, so the front view agrees with the closed form to accumulation rou
 
 from __future__ import annotations
 
-import math
 from dataclasses import dataclass
 from typing import Any, Dict, Optional, Tuple
 
@@ -25,44 +24,10 @@ import torch
 
 from ..views import camera_frames
 from ..volume import voxel_size
+from .settings import RenderSettings
 from .variant import ensure_variant, variant_device
 
-__all__ = ["MitsubaOptions", "to_mitsuba_grid", "render_mitsuba", "build_scene"]
-
-
-@dataclass(frozen=True)
-class MitsubaOptions:
-    """Speed/accuracy options of the Mitsuba ray marcher.
-
-    step: segment length in voxels (> 0; 1 reproduces the closed form's planes).
-    spp: samples per pixel (a perfect square unless ``jitter``).
-    jitter: random sub-pixel positions and random sample depth within each segment.
-    filter: 'nearest' or 'trilinear' grid lookups.
-    termination: stop a ray once its transmittance falls to this value (0 = exact).
-    seed: base seed of the sampler (only used with ``jitter``).
-    """
-
-    step: float = 1.0
-    spp: int = 1
-    jitter: bool = False
-    filter: str = "trilinear"
-    termination: float = 0.0
-    seed: int = 0
-
-    def validate(self) -> None:
-        if not (isinstance(self.step, (int, float)) and math.isfinite(self.step) and self.step > 0):
-            raise ValueError(f"step must be a positive number of voxels, got {self.step!r}")
-        if not isinstance(self.spp, int) or isinstance(self.spp, bool) or self.spp < 1:
-            raise ValueError(f"spp must be a positive int, got {self.spp!r}")
-        if not self.jitter and math.isqrt(self.spp) ** 2 != self.spp:
-            raise ValueError(f"without jitter, spp must be a perfect square (a regular sub-pixel grid), "
-                             f"got {self.spp}")
-        if self.filter not in ("nearest", "trilinear"):
-            raise ValueError(f"filter must be 'nearest' or 'trilinear', got {self.filter!r}")
-        if not (isinstance(self.termination, (int, float)) and 0.0 <= self.termination < 1.0):
-            raise ValueError(f"termination must be in [0, 1), got {self.termination!r}")
-        if not isinstance(self.seed, int) or self.seed < 0:
-            raise ValueError(f"seed must be a non-negative int, got {self.seed!r}")
+__all__ = ["to_mitsuba_grid", "render_mitsuba", "build_scene"]
 
 
 def to_mitsuba_grid(v: torch.Tensor) -> torch.Tensor:
@@ -93,7 +58,7 @@ _SCENES: Dict[Tuple, _Bundle] = {}
 NEAR_CLIP = 2.0 ** -7
 
 
-def build_scene(n: int, model: str, options: MitsubaOptions) -> Dict[str, Any]:
+def build_scene(n: int, model: str, options: RenderSettings) -> Dict[str, Any]:
     """The Mitsuba scene dictionary for an N³ volume under ``model`` (grids start empty)."""
     mi = ensure_variant()
     import drjit as dr
@@ -133,7 +98,7 @@ def build_scene(n: int, model: str, options: MitsubaOptions) -> Dict[str, Any]:
     }
 
 
-def _bundle(n: int, model: str, options: MitsubaOptions) -> _Bundle:
+def _bundle(n: int, model: str, options: RenderSettings) -> _Bundle:
     key = (n, model, options.step, options.spp, options.jitter, options.filter, options.termination)
     if key not in _SCENES:
         mi = ensure_variant()
@@ -226,14 +191,13 @@ def _sensor_transform(mi, right, up, w):
 
 
 def render_mitsuba(volume: torch.Tensor, views: torch.Tensor, model: str,
-                   options: Optional[MitsubaOptions] = None) -> torch.Tensor:
+                   options: Optional[RenderSettings] = None, seed: int = 0) -> torch.Tensor:
     """Render ``(B, C, N, N, N)`` volumes from ``(B, 3)`` views with the Mitsuba ray marcher.
 
     Returns ``(B, 1, N, N)`` (VH, AO) or ``(B, 4, N, N)`` (EA), differentiable w.r.t. ``volume``.
     Inputs are assumed valid (see :func:`mitsuba_platonic.render`).
     """
-    options = options or MitsubaOptions()
-    options.validate()
+    options = (options or RenderSettings(backend="mitsuba", model=model)).validate()
     mi = ensure_variant()
     n = volume.shape[-1]
     bundle = _bundle(n, model, options)
@@ -248,6 +212,6 @@ def render_mitsuba(volume: torch.Tensor, views: torch.Tensor, model: str,
         grids = (to_mitsuba_grid(v[-1:]),) if model != "ea" else (to_mitsuba_grid(v[3:4]), to_mitsuba_grid(v[:3]))
         settings = {"sensor.to_world": _sensor_transform(mi, right[b], up[b], w[b])}
         image = differentiable_render(bundle.scene, bundle.params, dict(zip(bundle.keys, grids)), settings,
-                                      options.spp, options.seed + 2 * b)     # (H, W, 3 or 4)
+                                      options.spp, seed + 2 * b)     # (H, W, 3 or 4)
         images.append(image[..., :out_channels].permute(2, 0, 1))
     return torch.stack(images).to(volume.device)

@@ -1,0 +1,117 @@
+"""Renderer settings: one object for every backend, and the one place that dispatches to them.
+
+:class:`RenderSettings` is what ``render()`` builds from its keyword options and what a
+config's ``render:`` section *is* (``mitsuba_platonic.config.RenderConfig``): backend, image
+formation, lookup filter, the ray marcher's speed/accuracy options and the path tracer's.
+:func:`render_with` renders a batch with it. A per-call ``seed`` (jittered sub-samples, random
+skies) is an argument of the call, not a setting: training draws a new one every step.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from typing import Any, Dict
+
+import torch
+
+__all__ = ["RenderSettings", "render_with", "BACKENDS", "MODELS", "FILTERS", "LIGHTINGS", "OPTIONS_OF"]
+
+#: Backends: the paper's closed-form layers (reference), the batched Dr.Jit ray marcher, and
+#: Mitsuba's differentiable volumetric path tracer under natural light.
+BACKENDS = ("closed_form", "mitsuba", "physical")
+MODELS = ("vh", "ao", "ea")
+FILTERS = ("trilinear", "nearest")
+LIGHTINGS = ("sunsky", "envmap", "mixed")
+
+#: Which settings each backend reads (besides backend and model); any other is an error in ``render``.
+OPTIONS_OF: Dict[str, tuple] = {
+    "closed_form": ("filter",),
+    "mitsuba": ("filter", "step", "spp", "jitter", "termination"),
+    "physical": ("filter", "lighting", "physical_spp", "max_depth"),
+}
+
+
+@dataclass(frozen=True)
+class RenderSettings:
+    """How volumes become images.
+
+    backend: 'closed_form' | 'mitsuba' (ray marcher) | 'physical' (path tracer under natural light).
+    model: image formation, 'vh' | 'ao' | 'ea' (the physical backend renders EA-style RGBA).
+    filter: 'trilinear' | 'nearest' grid lookups (every backend).
+    step: the marcher's segment length in voxels (> 0; 1 reproduces the closed form's planes).
+    spp: the marcher's rays per pixel (a perfect square unless ``jitter``).
+    jitter: random sub-pixel positions and depth within each segment (marcher).
+    termination: the marcher stops a ray once its transmittance is ≤ this (0 = exact).
+    lighting: the path tracer's light, 'sunsky' (differentiable) | 'envmap' | 'mixed'.
+    physical_spp, max_depth: the path tracer's samples per pixel and path depth.
+
+    ``docs/speed_accuracy.md`` says what each option costs and buys.
+    """
+
+    backend: str = "closed_form"
+    model: str = "ea"
+    filter: str = "trilinear"
+    step: float = 1.0
+    spp: int = 1
+    jitter: bool = False
+    termination: float = 0.0
+    lighting: str = "sunsky"
+    physical_spp: int = 4
+    max_depth: int = 4
+
+    def validate(self) -> "RenderSettings":
+        """Return self, or raise ``ValueError('<field>: what was expected, got …')``."""
+        _choice("backend", self.backend, BACKENDS)
+        _choice("model", self.model, MODELS)
+        _choice("filter", self.filter, FILTERS)
+        _choice("lighting", self.lighting, LIGHTINGS)
+        if isinstance(self.step, bool) or not isinstance(self.step, (int, float)) \
+                or not math.isfinite(self.step) or not self.step >= 1.0 / 64:
+            raise ValueError(f"step: expected a finite number of voxels ≥ 1/64, got {self.step!r}")
+        for name in ("spp", "physical_spp", "max_depth"):
+            value = getattr(self, name)
+            if isinstance(value, bool) or not isinstance(value, int) or value < 1:
+                raise ValueError(f"{name}: expected a positive int, got {value!r}")
+        if not isinstance(self.jitter, bool):
+            raise ValueError(f"jitter: expected true or false, got {self.jitter!r}")
+        if not self.jitter and math.isqrt(self.spp) ** 2 != self.spp:
+            raise ValueError(f"spp: without jitter, spp must be a perfect square (a regular sub-pixel grid), "
+                             f"got {self.spp}")
+        if isinstance(self.termination, bool) or not isinstance(self.termination, (int, float)) \
+                or not 0.0 <= self.termination < 1.0:
+            raise ValueError(f"termination: expected a number in [0, 1), got {self.termination!r}")
+        if self.backend == "physical" and self.model != "ea":
+            raise ValueError("model: the physical backend renders colour; use 'ea' images")
+        return self
+
+    @classmethod
+    def for_call(cls, backend: str, model: str, **options: Any) -> "RenderSettings":
+        """Settings from ``render()``'s arguments; an option the backend does not read is an error."""
+        _choice("backend", backend, BACKENDS)
+        allowed = OPTIONS_OF[backend]
+        unknown = sorted(set(options) - set(allowed))
+        if unknown:
+            raise ValueError(f"unknown option(s) {unknown} for backend {backend!r}; expected some of {sorted(allowed)}")
+        return cls(backend=backend, model=model, **options).validate()
+
+
+def render_with(volume: torch.Tensor, views: torch.Tensor, settings: RenderSettings, seed: int = 0) -> torch.Tensor:
+    """Render ``(B, C, N, N, N)`` volumes from ``(B, 3)`` views with ``settings`` (inputs assumed valid).
+
+    ``seed`` drives the marcher's jitter and the path tracer's skies and samples.
+    """
+    if settings.backend == "closed_form":
+        from .closed_form import render_closed_form
+        return render_closed_form(volume, views.to(volume.device), settings.model, settings.filter)
+    if settings.backend == "mitsuba":
+        from .marcher import march
+        return march(volume, views, settings, seed)
+    from .physical import render_physical_ad
+    return render_physical_ad(volume, views, lighting=settings.lighting, spp=settings.physical_spp,
+                              max_depth=settings.max_depth, seed=seed, filter=settings.filter)
+
+
+def _choice(name: str, value: Any, choices: tuple) -> None:
+    if value not in choices:
+        raise ValueError(f"{name}: expected one of {list(choices)}, got {value!r}")
