@@ -132,7 +132,7 @@ class _Batch:
 
     ``data``: the flat volume batch ``(B, N, N, N, C)``; ``frames``: 9 floats per pair
     (right, up, ω); ``opt``: the settings (model, filter, step, spp, jitter, termination);
-    ``seed``: the jitter's random numbers.
+    ``seed``: a UInt32 array of width 1 seeding the jitter's random numbers.
     """
 
     def __init__(self, data: Any, frames: Any, b: int, c: int, n: int, opt: RenderSettings, seed: int):
@@ -156,7 +156,7 @@ class _Batch:
         ij = pixel - b * (N * N)
         i, j = ij // N, ij % N
         if opt.jitter:
-            rng = mi.PCG32(size=self.n_rays, initstate=self.seed, initseq=r)
+            rng = mi.PCG32(size=self.n_rays, initstate=mi.UInt64(self.seed), initseq=r)
             ox, oy, u = rng.next_float32(), rng.next_float32(), rng.next_float32()
         else:
             m = math.isqrt(spp)
@@ -337,45 +337,86 @@ def _image_to_per_ray(grad: torch.Tensor, spp: int, keep: list) -> Tuple[Any, ..
                  for ch in range(grad.shape[1]))
 
 
+class _Static:
+    """The Python values a pass depends on, as one hashable non-array argument: ``dr.freeze``
+    re-records when its hash changes (a new batch size, resolution or setting) and replays otherwise."""
+
+    def __init__(self, shape: Tuple[int, int, int], opt: RenderSettings, record: bool):
+        self.shape, self.opt, self.record = shape, opt, record
+        self.key = (shape, opt, record)
+
+    def __hash__(self) -> int:
+        return hash(self.key)
+
+    def __eq__(self, other: object) -> bool:
+        return isinstance(other, _Static) and self.key == other.key
+
+
+def _forward_pass(data: Any, frames: Any, seed: Any, static: _Static) -> Tuple[list, Any, Any]:
+    """The forward launch: per-ray outputs ([r, g, b, α] or [ρ]), the recorded T_k (or None) and
+    the segments each ray marched. Depends only on its Dr.Jit arrays (volume, camera frames, seed)
+    and ``static``, so ``dr.freeze`` can replay its kernel without re-tracing (see :data:`FREEZE`)."""
+    (b, c, n), opt, record = static.shape, static.opt, static.record
+    batch = _Batch(data, frames, b, c, n, opt, seed)
+    Ts = dr.zeros(mi.Float, batch.n_rays * batch.n_steps) if record else None
+    T, C, marched = batch.forward(Ts)
+    values = [C.x, C.y, C.z, 1.0 - T] if opt.model == "ea" else [1.0 - T]
+    dr.eval(values, Ts, marched)                              # the one forward launch
+    return values, Ts, marched
+
+
+def _backward_pass(data: Any, frames: Any, seed: Any, Ts: Any, marched: Any, δ: list, static: _Static) -> Any:
+    """The backward launch: ∂L/∂volume (same layout as ``data``) from the per-ray gradients δ."""
+    (b, c, n), opt = static.shape, static.opt
+    batch = _Batch(data, frames, b, c, n, opt, seed)
+    δC, δρ = (mi.Color3f(*δ[:3]), δ[3]) if opt.model == "ea" else (mi.Color3f(0.0), δ[0])
+    grad = dr.zeros(mi.Float, b * c * n ** 3)
+    batch.backward(Ts, marched, grad, δρ, δC)
+    dr.eval(grad)                                             # the one backward launch
+    return grad
+
+
+#: Replay the recorded kernels of both passes instead of re-tracing them (Dr.Jit's ``dr.freeze``):
+#: a new (batch, resolution, settings) records once, later calls only launch. Set
+#: ``MITSUBA_PLATONIC_FREEZE=0`` to trace every call (the bench measures both).
+FREEZE = os.environ.get("MITSUBA_PLATONIC_FREEZE", "1") != "0"
+_frozen_forward = dr.freeze(_forward_pass, limit=64, warn_after=10_000)
+_frozen_backward = dr.freeze(_backward_pass, limit=64, warn_after=10_000)
+
+
 class _March(torch.autograd.Function):
     """torch ↔ Dr.Jit: the forward launch, and the backward launch with the recorded T_k."""
 
     @staticmethod
     def forward(ctx, volume: torch.Tensor, views: torch.Tensor, opt: RenderSettings, seed: int) -> torch.Tensor:
         b, n, c = volume.shape[0], volume.shape[1], volume.shape[-1]
+        lanes, steps = b * n * n * opt.spp, n_segments(n, opt.step)
+        record = ctx.needs_input_grad[0]
+        if record and lanes * steps > RECORD_LIMIT:
+            raise ValueError(f"a differentiable render of {lanes} rays × {steps} segments records "
+                             f"{4 * lanes * steps / 2**30:.1f} GiB; use fewer pairs, spp or a larger step")
         keep: list = []                                           # torch memory Dr.Jit reads
         data = _shared(volume.detach(), keep)                     # the (B, N, N, N, C) batch, no copy
-        batch = _Batch(data, _frames(views, keep), b, c, n, opt, seed)
-        _spread_over_threads(batch.n_rays, 4)
-        record = None
-        if ctx.needs_input_grad[0]:
-            size = batch.n_rays * batch.n_steps
-            if size > RECORD_LIMIT:
-                raise ValueError(f"a differentiable render of {batch.n_rays} rays × {batch.n_steps} segments "
-                                 f"records {4 * size / 2**30:.1f} GiB; use fewer pairs, spp or a larger step")
-            record = dr.zeros(mi.Float, size)
-        T, C, marched = batch.forward(record)
-        values = [C.x, C.y, C.z, 1.0 - T] if opt.model == "ea" else [1.0 - T]
-        dr.eval(values, record, marched)                          # the one forward launch
+        frames = _frames(views, keep)
+        _spread_over_threads(lanes, 4)
+        run = _frozen_forward if FREEZE else _forward_pass
+        seed_arr = mi.UInt32(seed if opt.jitter else 0)       # an input array: a new seed replays
+        values, Ts, marched = run(data, frames, seed_arr, _Static((b, c, n), opt, record))
         image = _per_ray_to_image(values, b, n, opt.spp)
-        ctx.batch, ctx.record, ctx.marched, ctx.keep = batch, record, marched, keep
-        del values, T, C, data
+        ctx.args = (data, frames, seed_arr, Ts, marched, _Static((b, c, n), opt, False), lanes)
+        ctx.keep = keep
         return image
 
     @staticmethod
     def backward(ctx, grad_image: torch.Tensor):
-        batch, keep = ctx.batch, ctx.keep
-        per_ray = _image_to_per_ray(grad_image.to(torch.float32), batch.opt.spp, keep)
-        if batch.model == "ea":
-            δC, δρ = mi.Color3f(*per_ray[:3]), per_ray[3]
-        else:
-            δC, δρ = mi.Color3f(0.0), per_ray[0]
-        grad = dr.zeros(mi.Float, batch.B * batch.C * batch.N ** 3)
-        _spread_over_threads(batch.n_rays, 1)
-        batch.backward(ctx.record, ctx.marched, grad, δρ, δC)
-        dr.eval(grad)                                             # the one backward launch
-        out = grad.torch().view(batch.B, batch.N, batch.N, batch.N, batch.C)
-        del per_ray, δC, δρ
+        data, frames, seed_arr, Ts, marched, static, lanes = ctx.args
+        δ = list(_image_to_per_ray(grad_image.to(torch.float32), static.opt.spp, ctx.keep))
+        _spread_over_threads(lanes, 1)
+        run = _frozen_backward if FREEZE else _backward_pass
+        grad = run(data, frames, seed_arr, Ts, marched, δ, static)
+        b, c, n = static.shape
+        out = grad.torch().view(b, n, n, n, c)
+        del δ
         dr.sync_thread()                                          # nothing in flight reads ``keep``
         return out, None, None, None
 
