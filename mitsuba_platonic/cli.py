@@ -5,6 +5,8 @@ Subcommands (one ``argparse`` subparser each; add new ones in :func:`build_parse
 
 - ``compare``: render a volume with the closed-form layers and the Mitsuba ray marcher from a
   few views and report how far apart and how fast they are (:mod:`mitsuba_platonic.compare`).
+- ``bench``: the renderers' speed/accuracy trade: times, memory, image and gradient errors,
+  JSON, Markdown and Pareto plots (:mod:`mitsuba_platonic.bench`).
 
 Exit codes: 0 on success, 2 on bad input (usage errors, unreadable or invalid files, invalid
 options); the message goes to stderr without a traceback.
@@ -225,6 +227,72 @@ def _add_compare(sub: "argparse._SubParsersAction") -> None:
     p.set_defaults(handler=_cmd_compare)
 
 
+# --------------------------------------------------------------------------- bench
+
+
+def _cmd_bench(args: argparse.Namespace) -> int:
+    from .bench import BenchSettings, run_bench, write_doc, write_outputs
+
+    out = Path(args.out)
+    if out.exists() and not out.is_dir():
+        raise CLIError(f"--out {str(out)!r} exists and is not a folder")
+    if args.doc is not None and not Path(args.doc).is_file():
+        raise CLIError(f"--doc {args.doc!r} is not a file")
+    settings = BenchSettings(resolutions=tuple(args.resolutions), batch=args.batch, repeats=args.repeats,
+                             threads=args.threads, models=tuple(parse_models(args.models)), volume=args.volume,
+                             seed=args.seed, quick=args.quick, physical_ref_spp=args.physical_ref_spp,
+                             physical=not args.no_physical, train=not args.no_train,
+                             train_steps=args.train_steps)
+    result = run_bench(settings, log=lambda line: print(line, flush=True))
+    written = write_outputs(result, out)
+    print("wrote:")
+    for p in [written["json"], written["markdown"], *written["plots"]]:
+        print(f"  {p}")
+    if args.doc is not None:
+        print(f"  {write_doc(result, Path(args.doc), written['plots'])}")
+    return 0
+
+
+def _add_bench(sub: "argparse._SubParsersAction") -> None:
+    from .bench import RESOLUTIONS
+
+    p = sub.add_parser(
+        "bench", help="measure the renderers' speed/accuracy trade (JSON, Markdown, Pareto plots)",
+        description="Time (forward, forward+backward), memory, image and gradient error against a "
+                    "converged reference, and a memory-traffic bound, for the closed form, the ray "
+                    "marcher's default and one option varied at a time, and for EA the plain layer, the "
+                    "authors' EA layer and the path tracer; plus training images/s per renderer. Writes "
+                    "OUT/bench.json, OUT/bench.md and OUT/pareto_<model>_<N>.png; with --doc, also the "
+                    "generated section of that Markdown file (docs/speed_accuracy.md).")
+    p.add_argument("--resolutions", type=int, nargs="+", default=[32, 64], choices=RESOLUTIONS, metavar="N",
+                   help=f"volume resolutions, among {', '.join(map(str, RESOLUTIONS))} (default: 32 64)")
+    p.add_argument("--batch", type=_positive_int, default=8, help="random views per call (default: %(default)s)")
+    p.add_argument("--repeats", type=_positive_int, default=3,
+                   help="timed calls after one warm-up; the best counts (default: %(default)s)")
+    p.add_argument("--threads", type=_positive_int, default=None,
+                   help="torch and Dr.Jit threads (default: leave them as they are: all cores)")
+    p.add_argument("--models", default="vh,ao,ea", help="comma-separated models (default: %(default)s)")
+    p.add_argument("--volume", choices=("figure", "cloud"), default="figure",
+                   help="built-in test volume (default: %(default)s)")
+    p.add_argument("--seed", type=_non_negative_int, default=0,
+                   help="seed of the views, the loss weights and the path tracer (default: %(default)s)")
+    p.add_argument("--physical-ref-spp", type=_positive_int, default=32,
+                   help="spp of the path tracer's own reference (default: %(default)s)")
+    p.add_argument("--train-steps", type=_positive_int, default=5,
+                   help="timed training steps per renderer, after 2 warm-up steps (default: %(default)s)")
+    p.add_argument("--no-train", action="store_true", help="skip the training-speed measurement")
+    p.add_argument("--no-physical", action="store_true",
+                   help="skip the path-tracer rows (most of a run's time at 64³ and above)")
+    p.add_argument("--quick", action="store_true",
+                   help="a reduced set: the smallest resolution, fewer configurations, one timed call, "
+                        "path tracer at spp 1 only, one training step (seconds at 16³, batch 2)")
+    p.add_argument("--out", default="bench", help="output folder (default: %(default)s/)")
+    p.add_argument("--doc", default=None,
+                   help="also rewrite the generated section of this Markdown file, e.g. docs/speed_accuracy.md, "
+                        "and copy the plots next to it")
+    p.set_defaults(handler=_cmd_bench)
+
+
 # --------------------------------------------------------------------------- make-dataset
 
 
@@ -439,7 +507,7 @@ def _add_quickstart(sub: "argparse._SubParsersAction") -> None:
 
 #: Subcommand registrars, in help order. Add ``_add_<command>`` functions here.
 SUBCOMMANDS: Sequence[Callable[["argparse._SubParsersAction"], None]] = (
-    _add_quickstart, _add_train, _add_reconstruct, _add_generate, _add_make_dataset, _add_compare)
+    _add_quickstart, _add_train, _add_reconstruct, _add_generate, _add_make_dataset, _add_compare, _add_bench)
 
 
 def build_parser() -> argparse.ArgumentParser:

@@ -1,0 +1,225 @@
+"""`platonic bench` (cli.py + bench.py): its outputs exist and its numbers are what they claim.
+
+The quick bench runs once at 16³ with a batch of 2 (seconds); nothing here looks at a time.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import io
+import json
+import math
+import shutil
+from pathlib import Path
+
+import pytest
+import torch
+from PIL import Image
+
+from mitsuba_platonic import render
+from mitsuba_platonic.bench import (DOC_BEGIN, DOC_END, REFERENCE_OPTIONS, authors_ea, loss_weights, plain_ea,
+                                    write_doc)
+from mitsuba_platonic.cli import main
+from mitsuba_platonic.views import front_view, sample_views
+from mitsuba_platonic.volume import test_volume
+
+N, BATCH = 16, 2
+MODELS = ("vh", "ao", "ea")
+DOC = Path(__file__).resolve().parents[1] / "docs" / "speed_accuracy.md"
+MEASURED = ("fwd_ms", "fwd_bwd_ms", "mem_fwd_mb", "mem_fwd_bwd_mb", "rmse", "max_abs", "grad_cosine",
+            "grad_norm_ratio", "grad_rel_err", "bytes_fwd", "bytes_bwd", "bound_fwd_ms", "bound_fwd_bwd_ms",
+            "fwd_over_bound", "fwd_bwd_over_bound")
+LABELS = ("resolution", "batch", "model", "renderer", "config", "options", "default", "formation", "reference",
+          "skipped", "rmse_vs_closed_form", "max_abs_vs_closed_form")
+
+
+@pytest.fixture(scope="module")
+def quick(tmp_path_factory):
+    out = tmp_path_factory.mktemp("bench")
+    stdout, stderr = io.StringIO(), io.StringIO()
+    with contextlib.redirect_stdout(stdout), contextlib.redirect_stderr(stderr):
+        code = main(["bench", "--quick", "--resolutions", str(N), "--batch", str(BATCH), "--threads", "1",
+                     "--out", str(out)])
+    assert code == 0, stderr.getvalue()
+    return out, json.loads((out / "bench.json").read_text()), stdout.getvalue()
+
+
+def rows_of(result, model):
+    return {r["config"]: r for r in result["rows"] if r["model"] == model}
+
+
+def the_volume(model):
+    return test_volume(N, "figure", model).expand(BATCH, -1, -1, -1, -1).contiguous()
+
+
+def rmse_max(a, b):
+    d = (a.double() - b.double())
+    return float(d.pow(2).mean().sqrt()), float(d.abs().max())
+
+
+# --------------------------------------------------------------------------- outputs
+
+
+def test_outputs_exist(quick):
+    out, result, stdout = quick
+    for model in MODELS:
+        png = out / f"pareto_{model}_{N}.png"
+        with Image.open(png) as im:
+            assert im.format == "PNG" and im.size[0] > 300
+        assert str(png) in stdout
+    md = (out / "bench.md").read_text()
+    for model in MODELS:
+        assert f"### {model.upper()} at {N}³" in md
+        assert f"pareto_{model}_{N}.png" in md
+    assert "| **marcher default** |" in md
+    assert "### Training speed" in md
+
+
+def test_rows_have_the_fields(quick):
+    _, result, _ = quick
+    assert result["meta"]["bandwidth_gb_s"] > 0
+    assert result["meta"]["resolutions_used"] == [N]
+    assert len(result["views"][str(N)]) == BATCH
+    for model in MODELS:
+        rows = rows_of(result, model)
+        assert {"closed form", "marcher default"} <= set(rows)
+        assert [c for c, r in rows.items() if r["default"]] == ["marcher default"]
+        if model == "ea":
+            assert {"plain layer (affine_grid)", "authors' EA (1024 samples)", "path tracer spp 1"} <= set(rows)
+            assert rows["authors' EA (1024 samples)"]["formation"] == "authors"
+            assert rows["path tracer spp 1"]["formation"] == "physical"
+        for r in rows.values():
+            assert set(LABELS) <= set(r)
+            assert r["skipped"] is None, r["skipped"]
+            assert r["resolution"] == N and r["batch"] == BATCH
+            for k in MEASURED:
+                assert isinstance(r[k], (int, float)) and math.isfinite(r[k]) and r[k] >= 0, (r["config"], k, r[k])
+            assert r["fwd_ms"] > 0 and r["fwd_bwd_ms"] > 0
+            assert -1.0 <= r["grad_cosine"] <= 1.0 + 1e-9
+    for t in result["train"]:
+        assert t["skipped"] is None, t["skipped"]
+        assert t["images_per_s"] > 0
+    assert [t["renderer"] for t in result["train"]] == ["closed_form", "mitsuba", "physical"]
+
+
+def test_traffic_bound_is_bytes_over_bandwidth(quick):
+    _, result, _ = quick
+    bw = result["meta"]["bandwidth_gb_s"] * 1e9
+    for r in result["rows"]:
+        c, c_img = (4, 4) if r["model"] == "ea" else (1, 1)
+        vol, img = c * N ** 3 * 4, c_img * N * N * 4                   # per image, float32
+        assert r["bytes_fwd"] == vol + img
+        assert r["bytes_bwd"] == 2 * vol + img
+        assert r["bound_fwd_bwd_ms"] == pytest.approx((3 * vol + 2 * img) / bw * 1e3, rel=1e-9)
+        assert r["fwd_bwd_over_bound"] == pytest.approx(r["fwd_bwd_ms"] / r["bound_fwd_bwd_ms"], rel=1e-9)
+
+
+# --------------------------------------------------------------------------- the numbers, recomputed
+
+
+@pytest.mark.parametrize("model", MODELS)
+def test_reported_errors_match_our_own_renders(quick, model):
+    """RMSE / max of the closed form and the marcher's default, recomputed from render() with the
+    views the bench recorded and a reference rendered here in one batched call."""
+    _, result, _ = quick
+    rows = rows_of(result, model)
+    views = torch.tensor(result["views"][str(N)])
+    vol = the_volume(model)
+    with torch.no_grad():
+        ref = render(vol, views, model, "mitsuba", **REFERENCE_OPTIONS)
+        closed = render(vol, views, model, "closed_form")
+        default = render(vol, views, model, "mitsuba")
+    for config, image in (("closed form", closed), ("marcher default", default)):
+        rmse, mx = rmse_max(image, ref)
+        assert rows[config]["rmse"] == pytest.approx(rmse, rel=1e-4, abs=1e-8)
+        assert rows[config]["max_abs"] == pytest.approx(mx, rel=1e-4, abs=1e-7)
+    rmse, mx = rmse_max(default, closed)
+    assert rows["marcher default"]["max_abs_vs_closed_form"] == pytest.approx(mx, rel=1e-3, abs=1e-7)
+    assert rows["marcher default"]["max_abs_vs_closed_form"] <= 1e-4        # README: oblique views agree to 1e-4
+    assert rows["closed form"]["max_abs_vs_closed_form"] == 0.0
+
+
+def test_default_front_view_matches_closed_form():
+    vol = test_volume(N, "figure", "ea")
+    with torch.no_grad():
+        a = render(vol, front_view(1), "ea", "closed_form")
+        b = render(vol, front_view(1), "ea", "mitsuba")
+    assert float((a - b).abs().max()) <= 1e-5
+
+
+def test_reported_gradient_error_matches(quick):
+    _, result, _ = quick
+    row = rows_of(result, "ea")["marcher default"]
+    views = torch.tensor(result["views"][str(N)])
+    w = loss_weights((BATCH, 4, N, N), result["meta"]["settings"]["seed"])
+    grads = []
+    for options in (REFERENCE_OPTIONS, {}):
+        x = the_volume("ea").requires_grad_()
+        (render(x, views, "ea", "mitsuba", **options) * w).sum().backward()
+        grads.append(x.grad.double().flatten())
+    ref, g = grads
+    assert row["grad_cosine"] == pytest.approx(float(g @ ref / (g.norm() * ref.norm())), abs=1e-6)
+    assert row["grad_rel_err"] == pytest.approx(float((g - ref).norm() / ref.norm()), rel=1e-4)
+    assert row["grad_norm_ratio"] == pytest.approx(float(g.norm() / ref.norm()), rel=1e-5)
+
+
+# --------------------------------------------------------------------------- the extra EA layers
+
+
+def test_plain_layer_is_our_image_formation():
+    vol = the_volume("ea")
+    views = sample_views(BATCH, seed=5)
+    with torch.no_grad():
+        assert float((plain_ea(vol, views) - render(vol, views, "ea")).abs().max()) <= 1e-5
+
+
+def test_authors_layer_density_scale_and_orientation():
+    # an optically thin uniform cube: 1,024 samples of the padded cube integrate a piecewise-linear
+    # density profile whose mean over [−1, 1] is v N / (N + 1), times their factor 100
+    v = 1e-3
+    vol = torch.zeros(1, 4, N, N, N)
+    vol[:, :3], vol[:, 3] = 0.5, v
+    with torch.no_grad():
+        img = authors_ea(vol, front_view(1))
+    alpha = img[0, 3]
+    assert float(alpha[N // 2, N // 2]) == pytest.approx(1.0 - math.exp(-100.0 * v * N / (N + 1)), rel=0.01)
+    assert float(alpha[0].max()) == 0.0 and float(alpha[:, 0].max()) == 0.0      # the padding frames it
+    # the same orientation as ours: correlated with our alpha, far less with its mirror images
+    vol = the_volume("ea")
+    views = sample_views(BATCH, seed=3)
+    with torch.no_grad():
+        a, c = authors_ea(vol, views)[:, 3], render(vol, views, "ea")[:, 3]
+
+    def corr(x, y):
+        x, y = x - x.mean(), y - y.mean()
+        return float((x * y).sum() / (x.norm() * y.norm()))
+
+    for b in range(BATCH):
+        same = corr(a[b], c[b])
+        assert same > 0.9
+        assert same > corr(a[b].flip(0), c[b]) + 0.1 and same > corr(a[b].flip(1), c[b]) + 0.1
+
+
+# --------------------------------------------------------------------------- the doc
+
+
+def test_doc_section_is_written(quick, tmp_path):
+    out, result, _ = quick
+    doc = tmp_path / "speed_accuracy.md"
+    shutil.copyfile(DOC, doc)
+    plots = sorted(out.glob("pareto_*.png"))
+    write_doc(result, doc, plots)
+    text = doc.read_text()
+    head, rest = text.split(DOC_BEGIN)
+    body, tail = rest.split(DOC_END)
+    assert head == DOC.read_text().split(DOC_BEGIN)[0]                # the hand-written part is kept
+    assert "| **marcher default** |" in body and "Not measured yet" not in body
+    for p in plots:
+        assert (tmp_path / "speed_accuracy" / p.name).is_file()
+        assert f"speed_accuracy/{p.name}" in body
+    write_doc(result, doc, plots)                                     # idempotent
+    assert doc.read_text() == text
+    bad = tmp_path / "bad.md"
+    bad.write_text("no markers\n")
+    with pytest.raises(ValueError, match="generated section"):
+        write_doc(result, bad, plots)
