@@ -255,3 +255,29 @@ def test_nearest_agrees_except_where_a_sample_sits_on_a_voxel_face():
     err = (a - m).abs().amax(1)
     assert err[~tie].max() <= 1e-5
     assert tie.float().mean() < 0.01, float(tie.float().mean())
+
+
+def test_steady_state_replays_recorded_kernels_without_retracing():
+    """A second call with new volumes, views and jitter seed (same batch, resolution and settings)
+    replays the frozen passes: no new recording, and the same images as a freshly traced call."""
+    import importlib
+    M = importlib.import_module("mitsuba_platonic.render.marcher")
+    if not M.FREEZE:
+        pytest.skip("MITSUBA_PLATONIC_FREEZE=0")
+    opts = dict(jitter=True, spp=2, step=0.75)                 # a configuration no other test uses
+    x = _pair("ea", 16, "cloud", batch=2).requires_grad_()
+    render(x, OBLIQUE[:2], "ea", "mitsuba", seed=1, **opts).sum().backward()
+    fwd, bwd = M._frozen_forward.n_recordings, M._frozen_backward.n_recordings
+    y = _pair("ea", 16, "figure", batch=2).requires_grad_()
+    w = torch.rand(2, 4, 16, 16)
+    replayed = render(y, OBLIQUE[1:], "ea", "mitsuba", seed=7, **opts)
+    (replayed * w).sum().backward()
+    assert (M._frozen_forward.n_recordings, M._frozen_backward.n_recordings) == (fwd, bwd)
+    M.FREEZE = False
+    try:
+        z = y.detach().clone().requires_grad_()
+        traced = render(z, OBLIQUE[1:], "ea", "mitsuba", seed=7, **opts)
+        (traced * w).sum().backward()
+    finally:
+        M.FREEZE = True
+    assert torch.equal(replayed, traced) and torch.equal(y.grad, z.grad)

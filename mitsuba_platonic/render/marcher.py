@@ -400,7 +400,7 @@ class _March(torch.autograd.Function):
         frames = _frames(views, keep)
         _spread_over_threads(lanes, 4)
         run = _frozen_forward if FREEZE else _forward_pass
-        seed_arr = mi.UInt32(seed if opt.jitter else 0)       # an input array: a new seed replays
+        seed_arr = dr.opaque(mi.UInt32, seed if opt.jitter else 0)   # an input array: a new seed replays
         values, Ts, marched = run(data, frames, seed_arr, _Static((b, c, n), opt, record))
         image = _per_ray_to_image(values, b, n, opt.spp)
         ctx.args = (data, frames, seed_arr, Ts, marched, _Static((b, c, n), opt, False), lanes)
