@@ -4,13 +4,16 @@ A config has five sections (``run``, ``data``, ``model``, ``render``, ``train``)
 dataclass whose docstring says what its fields mean (``render`` is the renderer's own
 :class:`~mitsuba_platonic.render.RenderSettings`; the others are below). Loading checks every key and type:
 an unknown key or a wrong type is an error that names the key (``train.batch_size: expected
-int, got 'eight'``). Command-line overrides use dotted keys, ``--set train.steps=500``; values
-are parsed as YAML scalars (``true``, ``1e-4``, ``[0.5, 0.9]``, ``null``).
+int, got 'eight'``); numbers must be finite (no ``.inf``, ``.nan``). Command-line overrides use
+dotted keys, ``--set train.steps=500``; values are parsed as YAML scalars (``true``, ``1e-4``,
+``[0.5, 0.9]``, ``null``).
 """
 
 from __future__ import annotations
 
 import dataclasses
+import math
+import os
 import re
 import typing
 from dataclasses import dataclass, field
@@ -34,8 +37,8 @@ class ConfigError(ValueError):
 
 @dataclass
 class RunConfig:
-    """name: run folder name under ``out_dir``; seed: master seed; device: 'auto' | 'cpu' | 'cuda';
-    steps: training steps; log_every / sample_every / checkpoint_every: in steps;
+    """name: run folder name under ``out_dir`` (one folder name: no '/', no '..'); seed: master seed;
+    device: 'auto' | 'cpu' | 'cuda'; steps: training steps; log_every / sample_every / checkpoint_every: in steps;
     threads: torch and Dr.Jit CPU threads (0 = all cores); keep_checkpoints: how many to keep."""
 
     name: str = "run"
@@ -137,6 +140,9 @@ class Config:
 
     def validate(self) -> "Config":
         """Check value ranges and combinations; raise :class:`ConfigError` naming the key."""
+        for section in ("run", "data", "model", "train"):    # render checks its own numbers
+            _finite_numbers(section, getattr(self, section))
+        _folder_name("run.name", self.run.name)
         _choice("run.device", self.run.device, ("auto", "cpu", "cuda"))
         for key in ("steps", "log_every", "sample_every", "checkpoint_every", "keep_checkpoints"):
             _positive(f"run.{key}", getattr(self.run, key))
@@ -185,6 +191,22 @@ class Config:
             raise ConfigError(f"render.model: {self.render.model!r} differs from data.formation "
                               f"{self.data.formation!r}; the renderer must match how the images were formed")
         return self
+
+
+def _finite_numbers(prefix: str, section: Any) -> None:
+    """Every float of a section (lists included) is finite: no NaN, no ±inf."""
+    for f in dataclasses.fields(section):
+        value = getattr(section, f.name)
+        for item in (value if isinstance(value, (list, tuple)) else [value]):
+            if isinstance(item, float) and not math.isfinite(item):
+                raise ConfigError(f"{prefix}.{f.name}: expected a finite number, got {value!r}")
+
+
+def _folder_name(key: str, value: str) -> None:
+    """One path component: no separator, not '.' or '..', not empty (so the run stays in out_dir)."""
+    seps = {"/", "\\"} | ({os.sep, os.altsep} - {None})
+    if not value or value in (".", "..") or any(sep in value for sep in seps) or "\0" in value:
+        raise ConfigError(f"{key}: expected a single folder name (no '/', '..' or absolute path), got {value!r}")
 
 
 def _choice(key: str, value: Any, choices: Sequence[Any]) -> None:

@@ -18,6 +18,11 @@ Layout of a collection folder::
     manifest.json            every image's file, shape id and view (+ lighting, exposure):
                              metadata for evaluation only, never read by training
 
+``overwrite`` (``--overwrite``) deletes only files the collection's own records name (the plan in
+``collection.json``, ``records.jsonl``, ``manifest.json``) and the temporaries it writes; if the
+folder holds anything else where a collection writes (``images/``, ``exr/``, ``volumes/``, the
+records), or is no collection at all but has files there, it refuses and deletes nothing.
+
 Crash safety and resume: every file is written to a temporary name and renamed into place, and an
 image counts as done only once its PNG, EXR and record line all exist. Re-running the same
 command skips finished images and shapes, so a half-written collection is completed without
@@ -29,6 +34,7 @@ from __future__ import annotations
 
 import json
 import os
+import re
 import time
 from contextlib import contextmanager
 from dataclasses import asdict, dataclass, field, fields
@@ -52,6 +58,9 @@ RENDERERS = ("closed_form", "mitsuba")
 VIEW_DISTRIBUTIONS = ("sphere", "band", "ring")
 LIGHTINGS = ("sunsky", "envmap", "mixed")
 SCENES = Path(__file__).resolve().parents[2] / "scenes"
+SUBFOLDERS = ("images", "exr", "volumes")
+RECORDS = ("collection.json", "records.jsonl", "manifest.json")
+_TEMPORARY = re.compile(r"\.\d{5,}(_\d{2,})?\.tmp\d+\.(png|exr|npz|vol)")   # what _atomic names them
 
 
 def default_envmaps() -> List[str]:
@@ -230,10 +239,13 @@ def make_collection(out: Union[str, Path], spec: CollectionSpec, overwrite: bool
     """Render (or finish rendering) the collection ``spec`` into ``out``; return the manifest path.
 
     Raises ``ValueError`` if ``out`` holds a collection made with a different spec (unless
-    ``overwrite``, which starts it over).
+    ``overwrite``, which starts it over), and with ``overwrite`` if ``out`` holds files that no
+    collection wrote there (nothing is deleted then).
     """
     spec.validate()
     out = Path(out)
+    if overwrite:
+        _overwrite_plan(out)                         # refuse before writing anything (again under the lock)
     manifest_file = out / "manifest.json"
     if not overwrite and manifest_file.exists():
         try:
@@ -246,6 +258,69 @@ def make_collection(out: Union[str, Path], spec: CollectionSpec, overwrite: bool
     out.mkdir(parents=True, exist_ok=True)
     with _lock(out / ".lock"):
         return _make_collection(out, spec, overwrite, progress)
+
+
+def _overwrite_plan(out: Path) -> List[Path]:
+    """The files ``overwrite`` deletes in ``out``: those the collection's records name.
+
+    Raises ``ValueError`` (one line, naming ``out``) if ``out`` holds anything else in the places a
+    collection writes, or is no collection (no readable ``collection.json``) but has files there.
+    """
+    if not out.exists():
+        return []
+    if not out.is_dir():
+        raise ValueError(f"overwrite: {out} is not a folder")
+    spec: Optional[CollectionSpec] = None
+    try:
+        spec = CollectionSpec.from_dict(json.loads((out / "collection.json").read_text()))
+    except (OSError, ValueError, TypeError, AttributeError):
+        pass
+    owned = set()
+    if spec is not None:
+        for i in range(spec.n_shapes):               # the plan: every file this spec writes
+            owned |= {f"volumes/{i:05d}.npz", f"volumes/{i:05d}.vol"}
+            for k in range(spec.views_per_shape):
+                owned |= {f"images/{image_id(i, k)}.png", f"exr/{image_id(i, k)}.exr"}
+        named = list(_read_records(out / "records.jsonl").values())
+        try:
+            named += json.loads((out / "manifest.json").read_text())["images"]
+        except (OSError, ValueError, KeyError, TypeError):
+            pass
+        for r in named:
+            if isinstance(r, dict):
+                owned |= {v for key in ("image", "exr", "volume") if isinstance(v := r.get(key), str)}
+                if isinstance(r.get("volume"), str) and r["volume"].endswith(".npz"):
+                    owned.add(r["volume"][:-4] + ".vol")
+    remove: List[Path] = []
+    foreign: List[str] = []
+    for name in RECORDS:
+        path = out / name
+        if not (path.exists() or path.is_symlink()):
+            continue
+        if spec is None or not path.is_file():
+            foreign.append(name)
+        elif name != "collection.json":              # rewritten, not deleted
+            remove.append(path)
+    for sub in SUBFOLDERS:
+        folder = out / sub
+        if not folder.is_dir():
+            if folder.exists() or folder.is_symlink():
+                foreign.append(sub)
+            continue
+        for path in sorted(folder.iterdir()):
+            rel = f"{sub}/{path.name}"
+            if not path.is_dir() and (rel in owned or (spec is not None and _TEMPORARY.fullmatch(path.name))):
+                remove.append(path)
+            else:
+                foreign.append(rel + ("/" if path.is_dir() else ""))
+    if foreign:
+        shown = ", ".join(foreign[:3]) + (f" and {len(foreign) - 3} more" if len(foreign) > 3 else "")
+        what = (f"holds {len(foreign)} file(s) its collection did not write" if spec is not None else
+                f"is not a collection (no readable collection.json) but holds {len(foreign)} file(s) "
+                f"overwriting would delete")
+        raise ValueError(f"overwrite (--overwrite): {out} {what} ({shown}); nothing was deleted: "
+                         f"move them away or use another folder")
+    return remove
 
 
 @contextmanager
@@ -270,16 +345,15 @@ def _make_collection(out: Path, spec: CollectionSpec, overwrite: bool, progress:
             diff = [f"{k}: {old.get(k)!r} → {v!r}" for k, v in spec.to_dict().items() if old.get(k) != v]
             raise ValueError(f"{out} holds a collection made with other settings ({'; '.join(diff)}); "
                              f"use another folder, or overwrite=True (--overwrite) to start over")
-    if overwrite and out.exists():
-        for sub in ("images", "exr", "volumes"):
-            for f in (out / sub).glob("*"):
-                f.unlink()
-        for name in ("records.jsonl", "manifest.json"):
-            (out / name).unlink(missing_ok=True)
+    if overwrite:
+        for f in _overwrite_plan(out):               # the collection's own files only
+            f.unlink()
     out.mkdir(parents=True, exist_ok=True)
-    for sub in ("images", "exr", "volumes"):         # temporaries a killed run left behind
-        for stray in (out / sub).glob(".*.tmp*"):
-            stray.unlink()
+    for sub in SUBFOLDERS:                           # temporaries a killed run left behind
+        if (out / sub).is_dir():
+            for stray in (out / sub).iterdir():
+                if _TEMPORARY.fullmatch(stray.name) and stray.is_file():
+                    stray.unlink()
     _write_json(spec_file, spec.to_dict())
 
     records_file = out / "records.jsonl"

@@ -8,12 +8,24 @@ A run folder (``run.out_dir/run.name``) holds::
     scalars.csv, tb/         scalar logs (CSV and TensorBoard)
     samples/step_NNNNNNN.png renders of fixed held-out inputs from fixed views
     samples/turntable_NNNNNNN.gif
+    run.lock                 held while a run writes to the folder (the pid of its process)
 
 Checkpoints are written to a temporary file and renamed over the old one, so a kill at any
 moment leaves the previous checkpoint loadable. ``resume=True`` continues from ``last.pt``;
 because every random draw of a step derives from (seed, step), the continued run matches an
 uninterrupted one step for step (on CPU). Ctrl-C (SIGINT) finishes the current step, saves a
 checkpoint and returns cleanly.
+
+What is saved: a checkpoint is written only on a clean stop (a periodic checkpoint, the last
+step, Ctrl-C, ``stop_at``) and only if every tensor of the state is finite. An exception during
+training saves nothing (the good checkpoints stay as they are; its message says which step
+``last.pt`` holds), and a state with NaN or Inf ends the run with :class:`RunError`. If
+``last.pt`` cannot be loaded (truncated, corrupt), ``--resume``, ``reconstruct`` and ``generate``
+use the newest loadable ``step_*.pt`` and warn on stderr.
+
+One run per folder: ``run.lock`` is an exclusive lock (``flock``) that the kernel releases when
+its process ends, so a lock file left by a killed run is simply taken over, while a second
+run in the folder of a live one is refused.
 
 Data parallel: launch with ``torchrun --nproc-per-node N -m mitsuba_platonic.cli train ...``
 (CUDA + NCCL, or CPU + gloo). Each process renders its share of the batch with the configured
@@ -24,10 +36,13 @@ from __future__ import annotations
 
 import csv
 import os
+import re
 import signal
+import sys
 import time
+from contextlib import contextmanager
 from pathlib import Path
-from typing import Any, Dict, List, Optional, Tuple
+from typing import Any, Dict, Iterator, List, Optional, Tuple
 
 import numpy as np
 import torch
@@ -40,7 +55,8 @@ from ..views import front_view, turntable
 from .data import load_training_data
 from .trainer import Trainer
 
-__all__ = ["train", "load_run", "RunError", "save_checkpoint", "load_checkpoint", "SAMPLE_VIEWS"]
+__all__ = ["train", "load_run", "RunError", "save_checkpoint", "load_checkpoint", "load_latest_checkpoint",
+           "run_lock", "SAMPLE_VIEWS"]
 
 CHECKPOINT_VERSION = 1
 
@@ -76,6 +92,119 @@ def load_checkpoint(path: Path, device: torch.device = torch.device("cpu")) -> D
     if not path.is_file():
         raise RunError(f"no checkpoint at {path}")
     return torch.load(path, map_location=device, weights_only=False)
+
+
+_NUMBERED = re.compile(r"step_(\d+)\.pt")
+
+
+def _checkpoint_files(folder: Path) -> List[Path]:
+    """``last.pt`` (if present), then the numbered checkpoints, newest first."""
+    numbered = sorted((p for p in folder.glob("step_*.pt") if _NUMBERED.fullmatch(p.name)),
+                      key=lambda p: int(_NUMBERED.fullmatch(p.name).group(1)), reverse=True)
+    last = folder / "last.pt"
+    return ([last] if last.exists() else []) + numbered
+
+
+def load_latest_checkpoint(folder: Path, device: torch.device = torch.device("cpu"),
+                           warn: bool = True) -> Tuple[Dict[str, Any], Path]:
+    """The newest loadable checkpoint of ``folder`` (``RUN/checkpoints``): ``last.pt``, else the
+    newest ``step_*.pt`` that loads, with a warning on stderr naming the files that did not.
+
+    Raises :class:`RunError` (one line, naming every file tried) if none loads.
+    """
+    failed: List[Tuple[Path, str]] = []
+    for path in _checkpoint_files(folder):
+        try:
+            state = load_checkpoint(path, device)
+            if not isinstance(state, dict) or not {"step", "trainer", "config"} <= set(state):
+                raise ValueError("not a training checkpoint")
+        except Exception as e:  # torch.load raises RuntimeError, EOFError, UnpicklingError, ... for torn files
+            failed.append((path, _one_line(e)))
+            continue
+        if failed and warn:
+            print(f"warning: could not load {_by_reason(failed, str)}; using {path} (step {int(state['step'])})",
+                  file=sys.stderr, flush=True)
+        return state, path
+    if not failed:
+        raise RunError(f"no checkpoint in {folder}")
+    raise RunError(f"no loadable checkpoint in {folder}: {_by_reason(failed, lambda p: p.name)}")
+
+
+def _by_reason(failed: List[Tuple[Path, str]], name) -> str:
+    """``a.pt, b.pt (reason 1); c.pt (reason 2)``: files grouped by why they did not load."""
+    groups: Dict[str, List[str]] = {}
+    for path, why in failed:
+        groups.setdefault(why, []).append(name(path))
+    return "; ".join(f"{', '.join(names)} ({why})" for why, names in groups.items())
+
+
+def _one_line(e: BaseException, limit: int = 100) -> str:
+    """The first sentence of an error, on one line, at most ``limit`` characters."""
+    text = " ".join(str(e).split()).split(". ")[0] or type(e).__name__
+    return text if len(text) <= limit else text[:limit - 1] + "…"
+
+
+def _non_finite(state: Any, name: str = "") -> Optional[str]:
+    """The name of the first floating tensor of ``state`` holding NaN or Inf, else None."""
+    if isinstance(state, torch.Tensor):
+        return name if state.is_floating_point() and not bool(torch.isfinite(state).all()) else None
+    if isinstance(state, dict):
+        items = state.items()
+    elif isinstance(state, (list, tuple)):
+        items = enumerate(state)
+    else:
+        return None
+    for k, v in items:
+        bad = _non_finite(v, f"{name}.{k}" if name else str(k))
+        if bad is not None:
+            return bad
+    return None
+
+
+def _lock_holder(fd: int) -> str:
+    try:
+        text = os.pread(fd, 64, 0).decode(errors="replace").strip()
+    except OSError:
+        return "?"
+    return text if text.isdigit() else "?"
+
+
+@contextmanager
+def run_lock(run_dir: Path) -> Iterator[Path]:
+    """Hold ``run_dir/run.lock`` (an exclusive ``flock`` holding this process's pid) while inside.
+
+    A lock file whose process is gone is free (the kernel dropped its lock) and is taken over; a
+    live holder makes this raise :class:`RunError`. The file is removed on exit.
+    """
+    import fcntl
+
+    run_dir.mkdir(parents=True, exist_ok=True)
+    path = run_dir / "run.lock"
+    while True:
+        fd = os.open(path, os.O_RDWR | os.O_CREAT, 0o644)
+        try:
+            fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
+        except OSError:
+            holder = _lock_holder(fd)
+            os.close(fd)
+            raise RunError(f"{run_dir} is in use by another training run (pid {holder}, lock {path}); "
+                           f"wait for it to end or choose another run.name") from None
+        try:
+            same = os.path.samestat(os.fstat(fd), os.stat(path))
+        except FileNotFoundError:
+            same = False
+        if same:
+            break
+        os.close(fd)                                 # its holder removed it as we opened it: again
+    try:
+        os.ftruncate(fd, 0)
+        os.pwrite(fd, f"{os.getpid()}\n".encode(), 0)
+        yield path
+    finally:
+        try:
+            os.unlink(path)                          # while still holding it: no one can hold a stale copy
+        finally:
+            os.close(fd)
 
 
 #: Fixed views of the periodic samples: the input view and three turntable views.
@@ -168,19 +297,28 @@ def train(cfg: Config, resume: bool = False, progress: bool = True,
     ``stop_at`` ends the loop after that step as if interrupted (a checkpoint is saved): used to
     test exact resume.
     """
+    rank, world, local_rank = _distributed()
+    run_dir = Path(cfg.run.out_dir) / cfg.run.name
+    if rank != 0:
+        return _train(cfg, run_dir, resume, progress, stop_at, rank, world, local_rank)
+    with run_lock(run_dir):                                  # one run at a time in a run folder
+        return _train(cfg, run_dir, resume, progress, stop_at, rank, world, local_rank)
+
+
+def _train(cfg: Config, run_dir: Path, resume: bool, progress: bool, stop_at: Optional[int],
+           rank: int, world: int, local_rank: int) -> Path:
     from tqdm.auto import tqdm
     import drjit as dr  # noqa: F401  (the backend check ran at import)
 
-    rank, world, local_rank = _distributed()
     device = _device(cfg, local_rank)
     if cfg.run.threads:
         torch.set_num_threads(cfg.run.threads)
-    run_dir = Path(cfg.run.out_dir) / cfg.run.name
     last = run_dir / "checkpoints" / "last.pt"
     if rank == 0:
-        if resume and not last.exists():
+        existing = _checkpoint_files(last.parent)
+        if resume and not existing:
             raise RunError(f"--resume: {run_dir} has no checkpoint to continue from")
-        if not resume and last.exists():
+        if not resume and existing:
             raise RunError(f"{run_dir} already holds a run; pass --resume to continue it, or choose "
                            f"another run.name")
         run_dir.mkdir(parents=True, exist_ok=True)
@@ -201,21 +339,35 @@ def train(cfg: Config, resume: bool = False, progress: bool = True,
         data = load_training_data(cfg, progress=False)
     trainer = Trainer(cfg, data, device, rank, world)
     start = 0
+    saved: Dict[str, Any] = {"path": None, "step": None}     # the newest good checkpoint on disk
     if resume:
-        state = load_checkpoint(last, device)
+        try:
+            state, path = load_latest_checkpoint(last.parent, device, warn=rank == 0)
+        except RunError as e:
+            raise RunError(f"--resume: {e}") from None
         trainer.load_state_dict(state["trainer"])
         start = int(state["step"])
+        saved.update(path=path, step=start)
     pool = data.held_out if len(data.held_out) else data.images
     sample_inputs = pool[torch.linspace(0, len(pool) - 1, min(4, len(pool))).long()]   # spread: different shapes
+
+    def kept() -> str:
+        if saved["path"] is None:
+            return "nothing was saved (no checkpoint had been written yet)"
+        return f"nothing was saved: {saved['path']} still holds step {saved['step']}"
 
     def checkpoint(step: int) -> None:
         if rank != 0:
             return
-        payload = {"version": CHECKPOINT_VERSION, "step": step, "config": cfg.to_dict(),
-                   "trainer": trainer.state_dict()}
+        state = trainer.state_dict()
+        bad = _non_finite(state)
+        if bad is not None:                                  # never over (or rotating out) a good one
+            raise RunError(f"step {step}: the training state is not finite (NaN or Inf in {bad}); {kept()}")
+        payload = {"version": CHECKPOINT_VERSION, "step": step, "config": cfg.to_dict(), "trainer": state}
         save_checkpoint(last, payload)
         numbered = run_dir / "checkpoints" / f"step_{step:07d}.pt"
         save_checkpoint(numbered, payload)
+        saved.update(path=last, step=step)
         for old in sorted((run_dir / "checkpoints").glob("step_*.pt"))[:-cfg.run.keep_checkpoints]:
             old.unlink()
 
@@ -229,10 +381,13 @@ def train(cfg: Config, resume: bool = False, progress: bool = True,
                dynamic_ncols=True)
     images_per_step = cfg.train.batch_size * (cfg.train.random_views + (cfg.train.task == "reconstruction"))
     step, t_last, n_last = start, time.perf_counter(), start
+    clean, where = False, f"in step {start + 1}"
     try:
         while step < end:
+            where = f"in step {step + 1}"
             scalars = trainer.step(step)
             step += 1
+            where = f"after step {step}"
             if rank == 0 and (step % cfg.run.log_every == 0 or step == end):
                 rate = (step - n_last) * images_per_step / max(time.perf_counter() - t_last, 1e-9)
                 t_last, n_last = time.perf_counter(), step
@@ -253,17 +408,28 @@ def train(cfg: Config, resume: bool = False, progress: bool = True,
             if flag.item() > 0:
                 print(f"\ninterrupted: saving a checkpoint at step {step} (resume with --resume)")
                 break
+        clean = True
+    except BaseException as e:                               # a failing step: save nothing, say so
+        if rank == 0 and not isinstance(e, RunError):
+            if isinstance(e, ValueError):                    # bad data or values: one line on the command line
+                raise RunError(f"training failed {where}: {e}; {kept()}") from e
+            e.add_note(f"training failed {where}; {kept()}")
+        raise
     finally:
         bar.close()
         if rank == 0:
-            checkpoint(step)
-            if step == cfg.run.steps:
-                write_samples(trainer, sample_inputs, run_dir / "samples", step)
-            log.close()
-            if previous is not None:
-                signal.signal(signal.SIGINT, previous)
+            try:
+                if clean:                                    # finished, stop_at or Ctrl-C between steps
+                    checkpoint(step)
+                    if step == cfg.run.steps:
+                        write_samples(trainer, sample_inputs, run_dir / "samples", step)
+            finally:
+                log.close()
+                if previous is not None:
+                    signal.signal(signal.SIGINT, previous)
         if world > 1:
-            dist.barrier()                                   # rank 0 has written the last checkpoint
+            if clean:
+                dist.barrier()                               # rank 0 has written the last checkpoint
             dist.destroy_process_group()
     return run_dir
 
@@ -274,11 +440,12 @@ def load_run(run_dir: Path, device: str = "cpu") -> Tuple[Config, Trainer, int]:
     from .data import TrainingData
 
     run_dir = Path(run_dir)
-    ckpt = run_dir / "checkpoints" / "last.pt"
-    if not ckpt.exists():
+    if not _checkpoint_files(run_dir / "checkpoints"):
         raise RunError(f"{run_dir} has no checkpoints/last.pt: not a training run, or not started")
-    state = load_checkpoint(ckpt, torch.device(device))
-    cfg = _build(Config, state["config"], "").validate()
+    state, _ = load_latest_checkpoint(run_dir / "checkpoints", torch.device(device))
+    saved = dict(state["config"])                            # the folder is the run, whatever its saved name
+    saved["run"] = {**(saved.get("run") or {}), "name": run_dir.resolve().name}
+    cfg = _build(Config, saved, "").validate()
     c = 1 if cfg.render.model in ("vh", "ao") else 4
     r = cfg.model.resolution
     dummy = TrainingData(torch.zeros(1, c, r, r), torch.zeros(0, c, r, r),
