@@ -202,6 +202,7 @@ def test_vh_and_ao_read_one_channel_ea_reads_rgba_packets(monkeypatch):
         original(self, data, frames, b, c, n, settings, seed)
 
     monkeypatch.setattr(M._Batch, "__init__", spy)
+    monkeypatch.setattr(M, "FREEZE", False)                  # trace, so the spy sees every call
     for model in MODELS:
         render(_pair(model, 8), V.front_view(1), model, "mitsuba")
     assert [(m, c) for m, c, _, _ in seen] == [("vh", 1), ("ao", 1), ("ea", 4)]

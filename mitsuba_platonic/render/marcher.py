@@ -52,10 +52,12 @@ transmittance U_k = Π_{j>k} τ_j:
 
     ∂C/∂τ_k = T_k (R_k − c_k),   ∂C/∂c_k = T_k (1 − τ_k),   ∂α/∂τ_k = ∂ρ/∂τ_k = −T_k U_k
 
-then ∂L/∂v_k = ∂L/∂τ_k · dτ_k/dv_k, with dτ/dv = −1 (step 1, AO/EA), −s (1 − v)^{s − 1} (other
-steps, 0 above the clamp) or −s τ (VH), and scatters ∂L/∂v_k and ∂L/∂c_k into the voxels the
+then ∂L/∂v_k = ∂L/∂τ_k · dτ_k/dv_k, with dτ/dv = −1 (step 1) or −s (1 − v)^{s − 1} (other steps,
+0 above the clamp), and scatters ∂L/∂v_k and ∂L/∂c_k into the voxels the
 lookup read, with the lookup's weights (Dr.Jit's ``scatter_reduce``; on the LLVM backend the
-``Expand`` mode gives each thread its own copy of the gradient, so no atomics collide).
+``Expand`` mode gives each thread its own copy of the gradient, so no atomics collide). VH needs
+no record: ρ = 1 − exp(−Σ s_k v_k) gives ∂ρ/∂v_k = s_k T with the ray's final T, so its backward
+pass is one front-to-back march that scatters s_k T δρ.
 """
 
 from __future__ import annotations
@@ -235,12 +237,13 @@ class _Batch:
     # -- Forward ---------------------------------------------------------------------------
 
     @dr.syntax
-    def forward(self, record: Optional[Any]) -> Tuple[Any, Any, Any]:
+    def forward(self, record: Optional[Any], whole: bool = False) -> Tuple[Any, Any, Any]:
         """Front-to-back march → (final transmittance T, emitted colour C, segments marched); with
-        ``record`` (a Float of n_rays · n_steps) store T_k before each segment for the backward pass."""
+        ``record`` (a Float of n_rays · n_steps) store T_k before each segment for the backward pass;
+        with ``whole`` (a pass for the gradient) never stop at T = 0."""
         ea = self.model == "ea"
         n_steps, ε = self.n_steps, self.ε
-        whole = record is not None and ε == 0.0                   # the gradient needs every segment
+        whole = whole and ε == 0.0                                # the gradient needs every segment
         slot = dr.arange(mi.UInt32, self.n_rays) * n_steps
         k = mi.UInt32(0)
         T = mi.Float(1.0)
@@ -302,6 +305,21 @@ class _Batch:
             active &= k > 0
 
 
+    @dr.syntax
+    def backward_vh(self, T: Any, marched: Any, grad: Any, δρ: Any) -> None:
+        """VH: ρ = 1 − exp(−Σ_k s_k v_k), so ∂ρ/∂v_k = s_k T with T the ray's final transmittance:
+        one front-to-back pass, nothing recorded, no suffix products."""
+        g = δρ * T
+        k = mi.UInt32(0)
+        active = k < marched
+        while active:
+            p, s = self.segment(k)
+            for idx, w, inside in self.corners(p):
+                dr.scatter_reduce(dr.ReduceOp.Add, grad, w * s * g, idx, inside, mode=_MODE)
+            k += 1
+            active &= k < marched
+
+
 #: Scatter-add mode of the backward pass (``Expand``: per-thread copies on the LLVM backend).
 _MODE = dr.ReduceMode.Expand if mi.variant().startswith("llvm") else dr.ReduceMode.Auto
 
@@ -358,9 +376,12 @@ def _forward_pass(data: Any, frames: Any, seed: Any, static: _Static) -> Tuple[l
     and ``static``, so ``dr.freeze`` can replay its kernel without re-tracing (see :data:`FREEZE`)."""
     (b, c, n), opt, record = static.shape, static.opt, static.record
     batch = _Batch(data, frames, b, c, n, opt, seed)
-    Ts = dr.zeros(mi.Float, batch.n_rays * batch.n_steps) if record else None
-    T, C, marched = batch.forward(Ts)
+    vh = opt.model == "vh"
+    Ts = dr.zeros(mi.Float, batch.n_rays * batch.n_steps) if record and not vh else None
+    T, C, marched = batch.forward(Ts, whole=record)
     values = [C.x, C.y, C.z, 1.0 - T] if opt.model == "ea" else [1.0 - T]
+    if record and vh:
+        Ts = T                                                # VH's gradient needs only the final T
     dr.eval(values, Ts, marched)                              # the one forward launch
     return values, Ts, marched
 
@@ -371,7 +392,10 @@ def _backward_pass(data: Any, frames: Any, seed: Any, Ts: Any, marched: Any, δ:
     batch = _Batch(data, frames, b, c, n, opt, seed)
     δC, δρ = (mi.Color3f(*δ[:3]), δ[3]) if opt.model == "ea" else (mi.Color3f(0.0), δ[0])
     grad = dr.zeros(mi.Float, b * c * n ** 3)
-    batch.backward(Ts, marched, grad, δρ, δC)
+    if opt.model == "vh":
+        batch.backward_vh(Ts, marched, grad, δρ)
+    else:
+        batch.backward(Ts, marched, grad, δρ, δC)
     dr.eval(grad)                                             # the one backward launch
     return grad
 
