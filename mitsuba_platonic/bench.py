@@ -69,6 +69,7 @@ from typing import Any, Callable, Dict, List, Optional, Sequence, Tuple
 import torch
 import torch.nn.functional as F
 
+from .compare import _sync, best_of
 from .views import camera_frames, sample_views
 from .volume import CHANNELS, test_volume
 
@@ -252,16 +253,6 @@ def gradient_error(grad: torch.Tensor, reference: torch.Tensor) -> Dict[str, Opt
     return {"grad_cosine": cos, "grad_norm_ratio": ng / nr, "grad_rel_err": float((g - r).norm()) / nr}
 
 
-def _sync() -> None:
-    if torch.cuda.is_available():
-        torch.cuda.synchronize()
-    try:
-        import drjit as dr
-        dr.sync_thread()
-    except Exception:  # noqa: BLE001 (Dr.Jit not loaded yet: nothing to wait for)
-        pass
-
-
 _LIBC: Any = None
 
 
@@ -315,14 +306,6 @@ class PeakRSS:
         self.peak_increase = max(0, self._peak - self.baseline)
 
 
-def _best_time(fn: Callable[[], Any], repeats: int) -> float:
-    best = float("inf")
-    for _ in range(repeats):
-        t0 = time.perf_counter()
-        fn()
-        _sync()
-        best = min(best, time.perf_counter() - t0)
-    return best
 
 
 def measure_bandwidth(megabytes: int = 256, repeats: int = 5) -> float:
@@ -331,7 +314,7 @@ def measure_bandwidth(megabytes: int = 256, repeats: int = 5) -> float:
     src = torch.rand(n)
     dst = torch.empty_like(src)
     dst.copy_(src)                                            # fault the pages in
-    t = _best_time(lambda: dst.copy_(src), repeats)
+    t = best_of(lambda: dst.copy_(src), repeats)
     return 2.0 * n * 4 / t
 
 
@@ -379,12 +362,12 @@ def _measure(fn: RenderFn, volume: torch.Tensor, views: torch.Tensor, weights: t
     _sync()
     with PeakRSS() as mem_f:
         fwd()
-    t_f = _best_time(fwd, repeats)
+    t_f = best_of(fwd, repeats)
     _forward_backward(fn, volume, views, weights)             # warm-up of the backward pass
     _sync()
     with PeakRSS() as mem_fb:
         image, grad = _forward_backward(fn, volume, views, weights)
-    t_fb = _best_time(lambda: _forward_backward(fn, volume, views, weights), repeats)
+    t_fb = best_of(lambda: _forward_backward(fn, volume, views, weights), repeats)
     return {"fwd_ms": t_f / b * 1e3, "fwd_bwd_ms": t_fb / b * 1e3,
             "mem_fwd_mb": mem_f.peak_increase / _MIB, "mem_fwd_bwd_mb": mem_fb.peak_increase / _MIB,
             "image": image, "grad": grad}

@@ -20,6 +20,7 @@ VH/AO, where ``A`` is the opacity).
 
 from __future__ import annotations
 
+import sys
 import time
 from pathlib import Path
 from typing import Any, Callable, Dict, List, Mapping, Optional, Sequence, Union
@@ -33,7 +34,7 @@ from .render.settings import OPTIONS_OF, RenderSettings
 from .views import to_angles, validate_views
 from .volume import CHANNELS
 
-__all__ = ["compare", "format_table", "time_render", "DISPLAY_BACKGROUND", "HEATMAP_CMAP"]
+__all__ = ["compare", "format_table", "time_render", "best_of", "DISPLAY_BACKGROUND", "HEATMAP_CMAP"]
 
 #: Grey level EA renders (premultiplied RGBA) are composited over for display.
 DISPLAY_BACKGROUND = 0.5
@@ -43,8 +44,22 @@ _MITSUBA_ONLY = (set(OPTIONS_OF["mitsuba"]) - {"filter"}) | {"seed"}   # the mar
 
 
 def _sync() -> None:
+    """Wait for queued CUDA work and Dr.Jit launches (if Dr.Jit is loaded), so timings are whole."""
     if torch.cuda.is_available():
         torch.cuda.synchronize()
+    if "drjit" in sys.modules:
+        sys.modules["drjit"].sync_thread()
+
+
+def best_of(fn: Callable[[], Any], repeats: int) -> float:
+    """The shortest wall time of ``repeats`` calls of ``fn`` (seconds; CUDA work synchronised)."""
+    best = float("inf")
+    for _ in range(repeats):
+        t0 = time.perf_counter()
+        fn()
+        _sync()
+        best = min(best, time.perf_counter() - t0)
+    return best
 
 
 def time_render(fn: Callable[[], torch.Tensor], repeats: int = 3) -> tuple[torch.Tensor, float]:
@@ -57,12 +72,7 @@ def time_render(fn: Callable[[], torch.Tensor], repeats: int = 3) -> tuple[torch
     with torch.no_grad():
         out = fn()
         _sync()
-        best = float("inf")
-        for _ in range(repeats):
-            t0 = time.perf_counter()
-            fn()
-            _sync()
-            best = min(best, time.perf_counter() - t0)
+        best = best_of(fn, repeats)
     return out, best
 
 
