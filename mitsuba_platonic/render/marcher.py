@@ -357,11 +357,14 @@ def _image_to_per_ray(grad: torch.Tensor, spp: int, keep: list) -> Tuple[Any, ..
 
 class _Static:
     """The Python values a pass depends on, as one hashable non-array argument: ``dr.freeze``
-    re-records when its hash changes (a new batch size, resolution or setting) and replays otherwise."""
+    re-records when its hash changes (a new batch size, resolution, setting or thread count) and
+    replays otherwise."""
 
     def __init__(self, shape: Tuple[int, int, int], opt: RenderSettings, record: bool):
         self.shape, self.opt, self.record = shape, opt, record
-        self.key = (shape, opt, record)
+        # Dr.Jit's thread count too: the backward's Expand scatters size their per-thread copies of
+        # the gradient when a kernel is recorded, so a replay under more threads would overrun them
+        self.key = (shape, opt, record, dr.thread_count())
 
     def __hash__(self) -> int:
         return hash(self.key)
