@@ -1,7 +1,7 @@
 """``platonic quickstart``: the whole pipeline in minutes on a CPU.
 
-1. render a small procedural collection (``configs/quickstart.yaml``: 32³, closed-form EA);
-2. train single-image reconstruction with the closed-form EA layer;
+1. render a small procedural collection (``configs/quickstart.yaml``: 32³, EA);
+2. train single-image reconstruction through the batched Mitsuba ray marcher (EA);
 3. reconstruct held-out images (shapes the run never saw), write volumes, turntable GIFs and
    meshes, and a report comparing each reconstruction with the ground truth at the input view
    *and at novel views* (where a model that learnt only the input view fails).
@@ -34,6 +34,9 @@ from .views import from_angles, front_view, turntable
 __all__ = ["quickstart", "novel_view_errors", "billboard", "NOVEL_VIEWS"]
 
 CONFIG = Path(__file__).resolve().parents[1] / "configs" / "quickstart.yaml"
+
+_BACKEND_NAMES = {"closed_form": "closed-form layer", "mitsuba": "Mitsuba ray marcher",
+                  "physical": "Mitsuba path tracer"}
 
 #: Novel views in the reconstruction's frame: a ring at 30° elevation (the input view excluded) and the back.
 NOVEL_VIEWS = torch.cat([turntable(6, elevation=30.0, start=60.0), from_angles(180.0, 0.0)[None]])
@@ -147,7 +150,8 @@ def quickstart(out: Path = Path("quickstart"), steps: Optional[int] = None, prog
         f"- data: {cfg.data.n_shapes} procedural '{cfg.data.shape_class}' shapes × {cfg.data.views_per_shape} "
         f"random views at {cfg.model.resolution}³ ({len(data.images)} training images, {len(data.held_out)} "
         f"held-out images of unseen shapes), {t_data:.0f} s",
-        f"- training: {step} steps, batch {cfg.train.batch_size}, closed-form {cfg.render.model.upper()}, "
+        f"- training: {step} steps, batch {cfg.train.batch_size}, {cfg.render.model.upper()} through the "
+        f"{_BACKEND_NAMES[cfg.render.backend]}, "
         f"{t_train:.0f} s; total {total:.0f} s",
         f"- losses (step {first['step']} → {last['step']}): reconstruction {float(first['loss_rec']):.4f} → "
         f"{float(last['loss_rec']):.4f}, D {float(first['loss_d']):.3f} → {float(last['loss_d']):.3f}, "
