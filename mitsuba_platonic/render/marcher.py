@@ -66,7 +66,7 @@ import ctypes
 import glob
 import math
 import os
-from typing import Any, Optional, Tuple
+from typing import Any, Dict, Optional, Tuple
 
 import torch
 
@@ -411,19 +411,52 @@ _frozen_forward = dr.freeze(_forward_pass, limit=64, warn_after=10_000)
 _frozen_backward = dr.freeze(_backward_pass, limit=64, warn_after=10_000)
 
 
+class _Lease:
+    """A channels-last buffer lent to one render; back in :data:`_POOL` when the render is freed.
+
+    Fresh 10–100 MB allocations cost more in page faults than the copy itself (a 64³ RGBA batch of
+    8: about 10 ms to allocate and fill, 2 ms to fill a reused buffer), so renders of one shape
+    reuse their buffers. A lease lives in the autograd context, which dies with the graph: by
+    then no launch reads the buffer.
+    """
+
+    def __init__(self, shape: Tuple[int, ...], device: str):
+        self.key = (shape, device)
+        free = _POOL.get(self.key)
+        self.buffer = free.pop() if free else torch.empty(shape, device=device)
+
+    def __del__(self):
+        free = _POOL.setdefault(self.key, [])
+        if len(free) < 4:
+            free.append(self.buffer)
+
+
+_POOL: Dict[Tuple, list] = {}
+
+
+def _channels_last(volume: torch.Tensor, keep: list) -> torch.Tensor:
+    """``(B, C, N, N, N)`` → its ``(B, N, N, N, C)`` copy (a view where that is already contiguous)."""
+    view = volume.detach().permute(0, 2, 3, 4, 1)
+    if view.is_contiguous():                                  # C = 1, or torch.channels_last_3d
+        return view
+    lease = _Lease(tuple(view.shape), str(volume.device))
+    keep.append(lease)
+    return lease.buffer.copy_(view)
+
+
 class _March(torch.autograd.Function):
     """torch ↔ Dr.Jit: the forward launch, and the backward launch with the recorded T_k."""
 
     @staticmethod
     def forward(ctx, volume: torch.Tensor, views: torch.Tensor, opt: RenderSettings, seed: int) -> torch.Tensor:
-        b, n, c = volume.shape[0], volume.shape[1], volume.shape[-1]
+        b, c, n = volume.shape[0], volume.shape[1], volume.shape[-1]
         lanes, steps = b * n * n * opt.spp, n_segments(n, opt.step)
         record = ctx.needs_input_grad[0]
         if record and lanes * steps > RECORD_LIMIT:
             raise ValueError(f"a differentiable render of {lanes} rays × {steps} segments records "
                              f"{4 * lanes * steps / 2**30:.1f} GiB; use fewer pairs, spp or a larger step")
         keep: list = []                                           # torch memory Dr.Jit reads
-        data = _shared(volume.detach(), keep)                     # the (B, N, N, N, C) batch, no copy
+        data = _shared(_channels_last(volume, keep), keep)        # the (B, N, N, N, C) batch
         frames = _frames(views, keep)
         _spread_over_threads(lanes, 4)
         run = _frozen_forward if FREEZE else _forward_pass
@@ -442,7 +475,7 @@ class _March(torch.autograd.Function):
         run = _frozen_backward if FREEZE else _backward_pass
         grad = run(data, frames, seed_arr, Ts, marched, δ, static)
         b, c, n = static.shape
-        out = grad.torch().view(b, n, n, n, c)
+        out = grad.torch().view(b, n, n, n, c).permute(0, 4, 1, 2, 3)   # (B, C, N, N, N), a view
         del δ
         dr.sync_thread()                                          # nothing in flight reads ``keep``
         return out, None, None, None
@@ -457,8 +490,6 @@ def march(volume: torch.Tensor, views: torch.Tensor, settings: RenderSettings, s
     Inputs are assumed valid (see :func:`mitsuba_platonic.render`).
     """
     opt = settings.validate()
-    device = variant_device()
-    # channels last: free for C = 1 and for a volume already in ``torch.channels_last_3d``
-    src = volume.to(device=device, dtype=torch.float32).permute(0, 2, 3, 4, 1).contiguous()
+    src = volume.to(device=variant_device(), dtype=torch.float32)
     out = _March.apply(src, views.detach().to(torch.float64).cpu(), opt, int(seed))
     return out.to(volume.device)
