@@ -306,3 +306,18 @@ def test_a_new_thread_count_records_anew_and_stays_exact():
             assert rel <= 1e-3, (threads, float(rel))
     finally:
         dr.set_thread_count(before)
+
+
+@pytest.mark.parametrize("model", MODELS)
+def test_two_backward_passes_from_one_forward_are_each_right(model):
+    """retain_graph: a gradient of the colour, then one of the alpha, from the same render."""
+    vol = _pair(model, 16, "cloud", batch=2)
+    grads = {}
+    for backend in ["closed_form", "mitsuba"]:
+        x = vol.clone().requires_grad_()
+        out = render(x, OBLIQUE[:2], model, backend)
+        first = torch.autograd.grad(out[:, 0].sum(), x, retain_graph=True)[0]
+        second = torch.autograd.grad((out[:, -1] * torch.linspace(0, 1, 16)).sum(), x)[0]
+        grads[backend] = (first, second)
+    for want, got in zip(grads["closed_form"], grads["mitsuba"]):
+        assert (want - got).norm() / want.norm() <= 1e-3
