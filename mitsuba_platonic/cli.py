@@ -8,8 +8,11 @@ Subcommands (one ``argparse`` subparser each; add new ones in :func:`build_parse
 - ``bench``: the renderers' speed/accuracy trade: times, memory, image and gradient errors,
   JSON, Markdown and Pareto plots (:mod:`mitsuba_platonic.bench`).
 
-Exit codes: 0 on success, 2 on bad input (usage errors, unreadable or invalid files, invalid
-options); the message goes to stderr without a traceback.
+Exit codes: 0 on success; 2 on a user error (usage errors, unreadable or invalid files, invalid
+options: :class:`~mitsuba_platonic.errors.UserError`, which ``ConfigError``, ``RunError`` and
+``CLIError`` are, ``BackendError``, and ``OSError`` from files and disks), printed as one line on
+stderr without a traceback; 130 on Ctrl-C, one line saying what was saved. Any other exception is
+a bug and keeps its traceback (exit code 1).
 """
 
 from __future__ import annotations
@@ -24,13 +27,16 @@ from typing import Callable, List, Optional, Sequence
 import numpy as np
 import torch
 
+from .backend import BackendError
+from .errors import Interrupted, UserError
+
 __all__ = ["main", "build_parser", "load_volume", "parse_models"]
 
 PROG = "platonic"
 BUILTIN_PREFIX = "builtin:"
 
 
-class CLIError(ValueError):
+class CLIError(UserError):
     """A user error: reported as ``platonic <command>: error: <message>``, exit code 2."""
 
 
@@ -155,11 +161,36 @@ _positive_float = _number_type(float, float.fromhex("0x1p-1074"), "a positive fi
 # --------------------------------------------------------------------------- compare
 
 
+#: compare's flags for the renderer settings they set (their errors name the flag).
+_COMPARE_FLAGS = {"step": "--step", "spp": "--spp", "jitter": "--jitter", "filter": "--filter"}
+
+
+def _check_compare_settings(args: argparse.Namespace) -> None:
+    """The marcher's settings from compare's flags, checked by the renderer before any work."""
+    from .render.settings import RenderSettings
+
+    try:
+        RenderSettings.for_call("mitsuba", "ea", filter=args.filter, step=args.step, spp=args.spp,
+                                jitter=args.jitter)
+    except ValueError as e:
+        key, _, rest = str(e).partition(": ")
+        if key in _COMPARE_FLAGS:
+            raise CLIError(f"{_COMPARE_FLAGS[key]}: {rest}") from None
+        raise CLIError(str(e)) from None
+
+
 def _cmd_compare(args: argparse.Namespace) -> int:
-    from .compare import compare, format_table
+    from .compare import check_memory, compare, format_table
     from .views import front_view, sample_views
 
+    _check_compare_settings(args)
+    if args.volume.startswith(BUILTIN_PREFIX):              # before building it: refuse what cannot fit
+        n = 32 if args.resolution is None else args.resolution
+        check_memory(n, args.views, builtin=True,
+                     what=f"--resolution {n}" if args.resolution is not None else f"--volume {args.volume}")
     volume = load_volume(args.volume, args.resolution)
+    if not args.volume.startswith(BUILTIN_PREFIX):
+        check_memory(volume.shape[-1], args.views, what=f"--volume {args.volume}")
     models = parse_models(args.models)
     if volume.shape[1] == 1 and "ea" in models:
         models.remove("ea")
@@ -231,13 +262,18 @@ def _add_compare(sub: "argparse._SubParsersAction") -> None:
 
 
 def _cmd_bench(args: argparse.Namespace) -> int:
-    from .bench import BenchSettings, run_bench, write_doc, write_outputs
+    from .bench import DOC_BEGIN, DOC_END, BenchSettings, run_bench, write_doc, write_outputs
 
     out = Path(args.out)
     if out.exists() and not out.is_dir():
         raise CLIError(f"--out {str(out)!r} exists and is not a folder")
     if args.doc is not None and not Path(args.doc).is_file():
         raise CLIError(f"--doc {args.doc!r} is not a file")
+    if args.doc is not None:                                 # before the run, not after it
+        text = Path(args.doc).read_text()
+        if DOC_BEGIN not in text or DOC_END not in text:
+            raise CLIError(f"--doc {args.doc!r} has no generated section: it needs the lines "
+                           f"{DOC_BEGIN!r} and {DOC_END!r}")
     settings = BenchSettings(resolutions=tuple(args.resolutions), batch=args.batch, repeats=args.repeats,
                              threads=args.threads, models=tuple(parse_models(args.models)), volume=args.volume,
                              seed=args.seed, quick=args.quick, physical_ref_spp=args.physical_ref_spp,
@@ -311,7 +347,7 @@ def _elevation(text: str):
 
 def _cmd_make_dataset(args: argparse.Namespace) -> int:
     from .data import shapes
-    from .data.collection import CollectionSpec, default_envmaps, make_collection
+    from .data.collection import CollectionSpec, check_envmap, default_envmaps, make_collection
     from .data.preview import contact_sheet
 
     known = shapes.list_classes()
@@ -326,6 +362,8 @@ def _cmd_make_dataset(args: argparse.Namespace) -> int:
                                  resolution=args.resolution, seed=args.seed)
             print(f"wrote {path}")
         return 0
+    for path in args.envmap or ():                          # named on the command line: checked even if unused
+        check_envmap(path, what="--envmap")
     envmaps = tuple(args.envmap) if args.envmap else tuple(default_envmaps())
     for c in classes:
         spec = CollectionSpec(
@@ -523,8 +561,11 @@ def build_parser() -> argparse.ArgumentParser:
 def main(argv: Optional[Sequence[str]] = None) -> int:
     """Run ``platonic`` with ``argv`` (default ``sys.argv[1:]``); return the exit code.
 
-    Usage errors (argparse) and invalid input (``ValueError``, ``FileNotFoundError``, other
-    ``OSError``) print a one-line message on stderr and return 2; ``--help`` returns 0.
+    Usage errors (argparse) and user errors (:class:`~mitsuba_platonic.errors.UserError`,
+    ``BackendError``, and ``OSError``: a missing file, no permission, a full disk) print a
+    one-line message on stderr and return 2; Ctrl-C prints one line (what was saved, for an
+    :class:`~mitsuba_platonic.errors.Interrupted`) and returns 130; ``--help`` returns 0. Any
+    other exception is a bug: it propagates with its traceback.
     """
     parser = build_parser()
     try:
@@ -533,9 +574,13 @@ def main(argv: Optional[Sequence[str]] = None) -> int:
         return int(e.code) if isinstance(e.code, int) else 2
     try:
         return int(args.handler(args))
-    except (ValueError, OSError) as e:
+    except (UserError, BackendError, OSError) as e:
         print(f"{PROG} {args.command}: error: {e}", file=sys.stderr)
         return 2
+    except KeyboardInterrupt as e:
+        detail = f": {e}" if isinstance(e, Interrupted) and str(e) else ""
+        print(f"{PROG} {args.command}: interrupted{detail}", file=sys.stderr)
+        return 130
 
 
 if __name__ == "__main__":

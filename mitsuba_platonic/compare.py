@@ -20,27 +20,86 @@ VH/AO, where ``A`` is the opacity).
 
 from __future__ import annotations
 
+import os
 import sys
 import time
 from pathlib import Path
-from typing import Any, Callable, Dict, List, Mapping, Optional, Sequence, Union
+from typing import Any, Callable, Dict, List, Mapping, Optional, Sequence, Tuple, Union
 
 import numpy as np
 import torch
 
+from .errors import UserError
 from .images import composite, heatmap, save_exr, to_hwc
 from .render import MODELS, render
 from .render.settings import OPTIONS_OF, RenderSettings
 from .views import to_angles, validate_views
 from .volume import CHANNELS
 
-__all__ = ["compare", "format_table", "time_render", "best_of", "DISPLAY_BACKGROUND", "HEATMAP_CMAP"]
+__all__ = ["compare", "format_table", "time_render", "best_of", "DISPLAY_BACKGROUND", "HEATMAP_CMAP",
+           "memory_estimate", "available_memory", "check_memory"]
 
 #: Grey level EA renders (premultiplied RGBA) are composited over for display.
 DISPLAY_BACKGROUND = 0.5
 #: Colour map of the |difference| heat maps.
 HEATMAP_CMAP = "inferno"
 _MITSUBA_ONLY = (set(OPTIONS_OF["mitsuba"]) - {"filter"}) | {"seed"}   # the marcher's options, and its seed
+
+#: Peak memory per voxel of a comparison (bytes, measured with ``platonic compare`` on CPU at 64³–128³
+#: and rounded up): rendering takes about ``RENDER_BYTES + VIEW_BYTES × views`` (the volume, its
+#: expanded copies, the renderers' buffers); building a built-in test volume takes ``BUILTIN_BYTES``
+#: at its peak (float64 coordinates and shape fields), before rendering starts.
+RENDER_BYTES, VIEW_BYTES, BUILTIN_BYTES = 64, 48, 330
+
+
+def memory_estimate(n: int, views: int, builtin: bool = False) -> int:
+    """Estimated peak memory (bytes) of comparing an ``n``³ volume from ``views`` views (``builtin``:
+    including building a built-in test volume): ``n³ × max(BUILTIN_BYTES, RENDER_BYTES + VIEW_BYTES × views)``."""
+    return int(n) ** 3 * max(BUILTIN_BYTES if builtin else 0, RENDER_BYTES + VIEW_BYTES * int(views))
+
+
+def available_memory() -> Tuple[Optional[int], str]:
+    """(bytes this process can still allocate, where the number comes from): ``MemAvailable`` of
+    ``/proc/meminfo`` (else the free pages of ``os.sysconf``), or a cgroup v2 limit if that is
+    smaller; ``(None, 'unknown')`` where neither can be read."""
+    found: List[Tuple[int, str]] = []
+    try:
+        with open("/proc/meminfo") as f:
+            for line in f:
+                if line.startswith("MemAvailable:"):
+                    found.append((int(line.split()[1]) * 1024, "MemAvailable in /proc/meminfo"))
+                    break
+    except (OSError, ValueError, IndexError):
+        pass
+    if not found:
+        try:
+            found.append((os.sysconf("SC_AVPHYS_PAGES") * os.sysconf("SC_PAGE_SIZE"), "free pages, os.sysconf"))
+        except (ValueError, OSError, AttributeError):
+            pass
+    try:
+        limit = Path("/sys/fs/cgroup/memory.max").read_text().strip()
+        if limit != "max":
+            used = int(Path("/sys/fs/cgroup/memory.current").read_text())
+            found.append((int(limit) - used, "the cgroup limit /sys/fs/cgroup/memory.max"))
+    except (OSError, ValueError):
+        pass
+    return min(found) if found else (None, "unknown")
+
+
+def check_memory(n: int, views: int, builtin: bool = False, what: Optional[str] = None) -> None:
+    """Raise :class:`~mitsuba_platonic.errors.UserError` (one line: the estimate, what is available
+    and the largest resolution that fits) if :func:`memory_estimate` exceeds :func:`available_memory`.
+    ``what`` names the input in the message (e.g. ``'--resolution 1000'``)."""
+    need = memory_estimate(n, views, builtin)
+    have, source = available_memory()
+    if have is None or need <= have:
+        return
+    per_voxel = need / int(n) ** 3
+    largest = (max(have, 0) / per_voxel) ** (1.0 / 3.0)
+    raise UserError(f"{what or f'a {n}³ volume'}: comparing {views} view(s) at {n}³ needs about "
+                    f"{need / 1e9:.3g} GB of memory (an estimate: ~{per_voxel:.0f} bytes per voxel), more than "
+                    f"the {max(have, 0) / 1e9:.1f} GB available ({source}); the largest resolution that fits is "
+                    f"about {int(largest)}")
 
 
 def _sync() -> None:
@@ -68,7 +127,7 @@ def time_render(fn: Callable[[], torch.Tensor], repeats: int = 3) -> tuple[torch
     The warm-up output is returned: with fixed options and seeds every run gives the same images.
     """
     if not isinstance(repeats, int) or isinstance(repeats, bool) or repeats < 1:
-        raise ValueError(f"repeats must be a positive int, got {repeats!r}")
+        raise UserError(f"repeats must be a positive int, got {repeats!r}")
     with torch.no_grad():
         out = fn()
         _sync()
@@ -85,33 +144,33 @@ def _model_volume(volume: torch.Tensor, model: str, batch: int) -> torch.Tensor:
 def _check_inputs(volume: torch.Tensor, views: torch.Tensor, models: Sequence[str],
                   options: Mapping[str, Any]) -> torch.Tensor:
     if not isinstance(volume, torch.Tensor):
-        raise ValueError(f"volume must be a torch.Tensor, got {type(volume).__name__}")
+        raise UserError(f"volume must be a torch.Tensor, got {type(volume).__name__}")
     if volume.dim() == 4:
         volume = volume[None]
     if volume.dim() != 5 or volume.shape[0] != 1:
-        raise ValueError(f"volume must have shape (C, N, N, N) or (1, C, N, N, N), got {tuple(volume.shape)}")
+        raise UserError(f"volume must have shape (C, N, N, N) or (1, C, N, N, N), got {tuple(volume.shape)}")
     if volume.shape[1] not in (1, 4):
-        raise ValueError(f"volume must have 1 channel [density] or 4 [r, g, b, density], "
-                         f"got {volume.shape[1]}")
+        raise UserError(f"volume must have 1 channel [density] or 4 [r, g, b, density], "
+                        f"got {volume.shape[1]}")
     validate_views(views)
     if views.shape[0] < 1:
-        raise ValueError("at least one view is needed")
+        raise UserError("at least one view is needed")
     if isinstance(models, str):
-        raise ValueError(f"models must be a sequence of model names, e.g. ('vh', 'ao', 'ea'), got {models!r}")
+        raise UserError(f"models must be a sequence of model names, e.g. ('vh', 'ao', 'ea'), got {models!r}")
     if not models:
-        raise ValueError("at least one model is needed")
+        raise UserError("at least one model is needed")
     for m in models:
         if m not in MODELS:
-            raise ValueError(f"unknown model {m!r}; expected some of {MODELS}")
+            raise UserError(f"unknown model {m!r}; expected some of {MODELS}")
         if CHANNELS[m] > volume.shape[1]:
-            raise ValueError(f"model {m!r} needs {CHANNELS[m]} channels [r, g, b, density], "
-                             f"the volume has {volume.shape[1]} [density]")
+            raise UserError(f"model {m!r} needs {CHANNELS[m]} channels [r, g, b, density], "
+                            f"the volume has {volume.shape[1]} [density]")
     if len(set(models)) != len(models):
-        raise ValueError(f"models repeat: {tuple(models)}")
+        raise UserError(f"models repeat: {tuple(models)}")
     unknown = set(options) - _MITSUBA_ONLY
     if unknown:
-        raise ValueError(f"unknown Mitsuba option(s) {sorted(unknown)}; expected some of "
-                         f"{sorted(_MITSUBA_ONLY)} (pass the filter as filter=...)")
+        raise UserError(f"unknown Mitsuba option(s) {sorted(unknown)}; expected some of "
+                        f"{sorted(_MITSUBA_ONLY)} (pass the filter as filter=...)")
     return volume
 
 
@@ -187,16 +246,21 @@ def compare(volume: torch.Tensor, views: torch.Tensor, models: Sequence[str] = (
         images themselves as ``closed_form`` / ``mitsuba`` (``(V, C, N, N)`` tensors).
 
     Raises:
-        ValueError: on invalid volumes, views, models, options or ``repeats``.
+        ValueError (:class:`~mitsuba_platonic.errors.UserError`): on invalid volumes, views, models,
+            options or ``repeats``, or a comparison whose :func:`memory_estimate` exceeds the memory
+            available.
     """
     options = dict(options or {})
     volume = _check_inputs(volume, views, models, options)
     if not isinstance(repeats, int) or isinstance(repeats, bool) or repeats < 1:
-        raise ValueError(f"repeats must be a positive int, got {repeats!r}")
-    RenderSettings.for_call("mitsuba", "ea", filter=filter,      # bad options fail before any rendering
-                            **{k: v for k, v in options.items() if k != "seed"})
+        raise UserError(f"repeats must be a positive int, got {repeats!r}")
+    try:                                                         # bad options fail before any rendering
+        RenderSettings.for_call("mitsuba", "ea", filter=filter, **{k: v for k, v in options.items() if k != "seed"})
+    except ValueError as e:
+        raise UserError(str(e)) from None
     views = views.to(torch.float32)
     b, n = views.shape[0], volume.shape[-1]
+    check_memory(n, b)                                           # and a size that cannot fit, too
     out = Path(out_dir) if out_dir is not None else None
     if out is not None:
         out.mkdir(parents=True, exist_ok=True)              # fail before rendering, not after

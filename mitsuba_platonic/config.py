@@ -22,6 +22,7 @@ from typing import Any, Dict, List, Optional, Sequence, Union
 
 import yaml
 
+from .errors import UserError
 from .render.settings import RenderSettings as RenderConfig
 
 __all__ = ["Config", "RunConfig", "DataConfig", "ModelConfig", "RenderConfig", "TrainConfig",
@@ -31,7 +32,7 @@ __all__ = ["Config", "RunConfig", "DataConfig", "ModelConfig", "RenderConfig", "
 _FLOAT = re.compile(r"[-+]?(\d+\.?\d*|\.\d+)[eE][-+]?\d+")
 
 
-class ConfigError(ValueError):
+class ConfigError(UserError):
     """A bad configuration; the message names the key."""
 
 

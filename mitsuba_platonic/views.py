@@ -30,6 +30,8 @@ from typing import Optional, Tuple, Union
 
 import torch
 
+from .errors import UserError
+
 __all__ = [
     "front_view",
     "from_angles",
@@ -103,26 +105,26 @@ def sample_views(n: int, distribution: str = "sphere", seed: Seed = 0,
     Returns ``(n, 3)`` float32 unit vectors.
     """
     if not isinstance(n, int) or n < 0:
-        raise ValueError(f"n must be a non-negative int, got {n!r}")
+        raise UserError(f"n must be a non-negative int, got {n!r}")
     g = _generator(seed)
     phi = torch.rand(n, generator=g, dtype=torch.float64) * (2.0 * math.pi)
     if distribution == "sphere":
         lo, hi = -1.0, 1.0
     elif distribution == "band":
         if isinstance(elevation, (int, float)) or len(elevation) != 2:
-            raise ValueError(f"'band' needs elevation=(low, high) in degrees, got {elevation!r}")
+            raise UserError(f"'band' needs elevation=(low, high) in degrees, got {elevation!r}")
         e0, e1 = float(elevation[0]), float(elevation[1])
         if not -90.0 <= e0 <= e1 <= 90.0:
-            raise ValueError(f"'band' needs elevation=(low, high) with -90 <= low <= high <= 90 degrees, got {elevation!r}")
+            raise UserError(f"'band' needs elevation=(low, high) with -90 <= low <= high <= 90 degrees, got {elevation!r}")
         lo, hi = math.sin(math.radians(e0)), math.sin(math.radians(e1))
     elif distribution == "ring":
         if not isinstance(elevation, (int, float)):
-            raise ValueError(f"'ring' needs a single elevation in degrees, got {elevation!r}")
+            raise UserError(f"'ring' needs a single elevation in degrees, got {elevation!r}")
         if not -90.0 <= float(elevation) <= 90.0:
-            raise ValueError(f"'ring' needs an elevation in [-90, 90] degrees, got {elevation!r}")
+            raise UserError(f"'ring' needs an elevation in [-90, 90] degrees, got {elevation!r}")
         lo = hi = math.sin(math.radians(float(elevation)))
     else:
-        raise ValueError(f"distribution must be 'sphere', 'band' or 'ring', got {distribution!r}")
+        raise UserError(f"distribution must be 'sphere', 'band' or 'ring', got {distribution!r}")
     y = lo + (hi - lo) * torch.rand(n, generator=g, dtype=torch.float64)
     r = torch.sqrt((1.0 - y * y).clamp_min(0.0))
     w = torch.stack([r * torch.sin(phi), y, r * torch.cos(phi)], dim=-1)
@@ -132,28 +134,34 @@ def sample_views(n: int, distribution: str = "sphere", seed: Seed = 0,
 def turntable(n: int, elevation: float = 0.0, start: float = 0.0) -> torch.Tensor:
     """``n`` evenly spaced azimuths starting at ``start`` degrees, at a fixed elevation: ``(n, 3)``."""
     if not isinstance(n, int) or n < 1:
-        raise ValueError(f"n must be a positive int, got {n!r}")
+        raise UserError(f"n must be a positive int, got {n!r}")
     phi = start + torch.arange(n, dtype=torch.float64) * (360.0 / n)
     return from_angles(phi, torch.full_like(phi, float(elevation)))
 
 
 def validate_views(views: torch.Tensor, batch: Optional[int] = None) -> None:
-    """Raise ``ValueError`` unless ``views`` is a finite ``(B, 3)`` tensor of unit vectors."""
+    """Raise ``ValueError`` (a :class:`~mitsuba_platonic.errors.UserError`) unless ``views`` is a
+    finite ``(B, 3)`` tensor of unit vectors with B ≥ 1 and values (not on the 'meta' device)."""
     if not isinstance(views, torch.Tensor):
-        raise ValueError(f"views must be a torch.Tensor of shape (B, 3), got {type(views).__name__}")
+        raise UserError(f"views must be a torch.Tensor of shape (B, 3), got {type(views).__name__}")
     if views.dim() != 2 or views.shape[1] != 3:
-        raise ValueError(f"views must have shape (B, 3), got {tuple(views.shape)}")
+        raise UserError(f"views must have shape (B, 3), got {tuple(views.shape)}")
+    if views.shape[0] == 0:
+        raise UserError("views hold no view (shape (0, 3)); pass at least one")
+    if views.is_meta:
+        raise UserError("views are on the 'meta' device (a shape without values); rendering needs "
+                        "values: create them on 'cpu' or 'cuda'")
     if batch is not None and views.shape[0] != batch:
-        raise ValueError(f"views has batch {views.shape[0]} but the volume has batch {batch}: "
-                         "one view per volume is expected")
+        raise UserError(f"views has batch {views.shape[0]} but the volume has batch {batch}: "
+                        "one view per volume is expected")
     if not torch.isfinite(views).all():
-        raise ValueError("views contain NaN or Inf")
+        raise UserError("views contain NaN or Inf")
     norm = views.detach().to(torch.float64).norm(dim=1)
     bad = (norm - 1.0).abs() > UNIT_TOL
     if bad.any():
         i = int(bad.nonzero()[0])
-        raise ValueError(f"views must be unit vectors (|ω| = 1 ± {UNIT_TOL}); view {i} has "
-                         f"|ω| = {float(norm[i]):.6g}")
+        raise UserError(f"views must be unit vectors (|ω| = 1 ± {UNIT_TOL}); view {i} has "
+                        f"|ω| = {float(norm[i]):.6g}")
 
 
 def camera_frames(views: torch.Tensor) -> Tuple[torch.Tensor, torch.Tensor, torch.Tensor]:

@@ -17,6 +17,8 @@ from typing import Dict
 
 import torch
 
+from .errors import UserError
+
 __all__ = [
     "MODELS",
     "CHANNELS",
@@ -48,31 +50,38 @@ def world_to_grid(p: torch.Tensor) -> torch.Tensor:
 
 
 def validate_volume(volume: torch.Tensor, model: str) -> None:
-    """Raise ``ValueError`` unless ``volume`` is a valid ``(B, C, N, N, N)`` volume for ``model``."""
+    """Raise ``ValueError`` (a :class:`~mitsuba_platonic.errors.UserError`) unless ``volume`` is a
+    valid ``(B, C, N, N, N)`` volume for ``model``: B ≥ 1, real values (not the 'meta' device)."""
     if model not in CHANNELS:
-        raise ValueError(f"model must be one of {MODELS}, got {model!r}")
+        raise UserError(f"model must be one of {MODELS}, got {model!r}")
     if not isinstance(volume, torch.Tensor):
-        raise ValueError(f"volume must be a torch.Tensor of shape (B, C, D, H, W), "
-                         f"got {type(volume).__name__}")
+        raise UserError(f"volume must be a torch.Tensor of shape (B, C, D, H, W), "
+                        f"got {type(volume).__name__}")
     if volume.dim() != 5:
-        raise ValueError(f"volume must have rank 5 (B, C, D, H, W), got shape {tuple(volume.shape)}")
+        raise UserError(f"volume must have rank 5 (B, C, D, H, W), got shape {tuple(volume.shape)}")
+    if volume.shape[0] == 0:
+        raise UserError(f"volume has batch size 0 (shape {tuple(volume.shape)}): there is nothing to "
+                        f"render; pass at least one volume")
     c = CHANNELS[model]
     if volume.shape[1] != c:
         layout = "[density]" if c == 1 else "[r, g, b, density]"
-        raise ValueError(f"model {model!r} needs {c} channel(s) {layout}, "
-                         f"got {volume.shape[1]} in shape {tuple(volume.shape)}")
+        raise UserError(f"model {model!r} needs {c} channel(s) {layout}, "
+                        f"got {volume.shape[1]} in shape {tuple(volume.shape)}")
     d, h, w = volume.shape[2:]
     if not d == h == w:
-        raise ValueError(f"volume must be cubic (D = H = W), got {tuple(volume.shape[2:])}")
+        raise UserError(f"volume must be cubic (D = H = W), got {tuple(volume.shape[2:])}")
     if d < 2:
-        raise ValueError(f"volume resolution must be at least 2, got {d}")
+        raise UserError(f"volume resolution must be at least 2, got {d}")
     if not volume.is_floating_point():
-        raise ValueError(f"volume must be a floating-point tensor, got {volume.dtype}")
+        raise UserError(f"volume must be a floating-point tensor, got {volume.dtype}")
+    if volume.is_meta:
+        raise UserError("volume is on the 'meta' device (a shape without values); rendering needs "
+                        "values: create it on 'cpu' or 'cuda'")
     lo, hi = (float(x) for x in torch.aminmax(volume.detach()))  # one pass; NaN and ±Inf propagate
     if math.isnan(lo) or math.isnan(hi):
-        raise ValueError("volume contains NaN")
+        raise UserError("volume contains NaN")
     if lo < 0.0 or hi > 1.0:
-        raise ValueError(f"volume values must lie in [0, 1], got range [{lo:.9g}, {hi:.9g}]")
+        raise UserError(f"volume values must lie in [0, 1], got range [{lo:.9g}, {hi:.9g}]")
 
 
 def voxel_centres(n: int) -> torch.Tensor:

@@ -45,13 +45,14 @@ import numpy as np
 import torch
 
 from .. import views as V
+from ..errors import Interrupted, UserError
 from ..images import save_exr, save_png, to_hwc, to_png_rgba
 from ..render import render
 from ..volume import CHANNELS
 from . import shapes
 
 __all__ = ["CollectionSpec", "make_collection", "load_manifest", "FORMATIONS", "RENDERERS",
-           "default_envmaps"]
+           "default_envmaps", "check_envmap"]
 
 FORMATIONS = ("vh", "ao", "ea", "physical")
 RENDERERS = ("closed_form", "mitsuba")
@@ -66,6 +67,37 @@ _TEMPORARY = re.compile(r"\.\d{5,}(_\d{2,})?\.tmp\d+\.(png|exr|npz|vol)")   # wh
 def default_envmaps() -> List[str]:
     """Environment maps shipped in or dropped into ``scenes/envmaps/`` (``*.exr``)."""
     return sorted(str(p) for p in (SCENES / "envmaps").glob("*.exr"))
+
+
+_EXR_MAGIC = b"\x76\x2f\x31\x01"
+
+
+def check_envmap(path: Union[str, Path], what: str = "environment map") -> None:
+    """Raise :class:`~mitsuba_platonic.errors.UserError` naming ``path`` unless it is an existing,
+    readable OpenEXR file with colour channels (R, G, B or Y): what Mitsuba's ``envmap`` is given."""
+    from ..images import exr_channel_names
+
+    p = Path(path)
+    if not p.is_file():
+        raise UserError(f"{what} {str(path)!r} does not exist" if not p.exists() else
+                        f"{what} {str(path)!r} is not a file")
+    try:
+        with open(p, "rb") as f:
+            magic = f.read(4)
+    except OSError as e:
+        raise UserError(f"{what} {str(path)!r} cannot be read: {e}") from None
+    expected = "expected a lat-long environment map in OpenEXR format (.exr), like scenes/envmaps/*.exr"
+    if magic != _EXR_MAGIC:
+        raise UserError(f"{what} {str(path)!r} is not an OpenEXR file (it does not start with the EXR "
+                        f"magic number); {expected}")
+    try:
+        channels = exr_channel_names(p)
+    except Exception as e:  # OpenEXR raises several types for a damaged header
+        raise UserError(f"{what} {str(path)!r}: its OpenEXR header cannot be read ({type(e).__name__}: "
+                        f"{' '.join(str(e).split())}); {expected}") from None
+    if not ({"R", "G", "B"} <= set(channels) or "Y" in channels):
+        raise UserError(f"{what} {str(path)!r} has no colour channels (R, G, B or Y), only "
+                        f"{', '.join(channels) or 'none'}; {expected}")
 
 
 @dataclass
@@ -103,32 +135,31 @@ class CollectionSpec:
     def validate(self) -> "CollectionSpec":
         """Check every field; raise ``ValueError`` naming the first bad one. Returns self."""
         if self.shape_class not in shapes.list_classes():
-            raise ValueError(f"shape_class must be one of {shapes.list_classes()}, got {self.shape_class!r}")
+            raise UserError(f"shape_class must be one of {shapes.list_classes()}, got {self.shape_class!r}")
         for name in ("n_shapes", "views_per_shape", "spp", "max_depth"):
             value = getattr(self, name)
             if not isinstance(value, int) or isinstance(value, bool) or value < 1:
-                raise ValueError(f"{name} must be a positive int, got {value!r}")
+                raise UserError(f"{name} must be a positive int, got {value!r}")
         if not isinstance(self.seed, int) or self.seed < 0:
-            raise ValueError(f"seed must be a non-negative int, got {self.seed!r}")
+            raise UserError(f"seed must be a non-negative int, got {self.seed!r}")
         if not isinstance(self.resolution, int) or not 16 <= self.resolution <= 128:
-            raise ValueError(f"resolution must be an int in [16, 128], got {self.resolution!r}")
+            raise UserError(f"resolution must be an int in [16, 128], got {self.resolution!r}")
         if self.formation not in FORMATIONS:
-            raise ValueError(f"formation must be one of {FORMATIONS}, got {self.formation!r}")
+            raise UserError(f"formation must be one of {FORMATIONS}, got {self.formation!r}")
         if self.renderer not in RENDERERS:
-            raise ValueError(f"renderer must be one of {RENDERERS}, got {self.renderer!r}")
+            raise UserError(f"renderer must be one of {RENDERERS}, got {self.renderer!r}")
         if self.filter not in ("trilinear", "nearest"):
-            raise ValueError(f"filter must be 'trilinear' or 'nearest', got {self.filter!r}")
+            raise UserError(f"filter must be 'trilinear' or 'nearest', got {self.filter!r}")
         if self.views not in VIEW_DISTRIBUTIONS:
-            raise ValueError(f"views must be one of {VIEW_DISTRIBUTIONS}, got {self.views!r}")
+            raise UserError(f"views must be one of {VIEW_DISTRIBUTIONS}, got {self.views!r}")
         if self.lighting not in LIGHTINGS:
-            raise ValueError(f"lighting must be one of {LIGHTINGS}, got {self.lighting!r}")
+            raise UserError(f"lighting must be one of {LIGHTINGS}, got {self.lighting!r}")
         if self.formation == "physical" and self.lighting in ("envmap", "mixed") and not self.envmaps:
             if self.lighting == "envmap":
-                raise ValueError("lighting 'envmap' needs at least one environment map (.exr): pass "
-                                 "envmaps or drop EXR files into scenes/envmaps/")
+                raise UserError("lighting 'envmap' needs at least one environment map (.exr): pass "
+                                "envmaps or drop EXR files into scenes/envmaps/")
         for path in self.envmaps:
-            if not Path(path).is_file():
-                raise ValueError(f"environment map {path!r} does not exist")
+            check_envmap(path)
         V.sample_views(1, self.views, seed=0, **self._view_kwargs())  # checks the elevation
         return self
 
@@ -151,7 +182,7 @@ class CollectionSpec:
         known = {f.name for f in fields(cls)}
         unknown = set(d) - known
         if unknown:
-            raise ValueError(f"unknown collection setting(s) {sorted(unknown)}")
+            raise UserError(f"unknown collection setting(s) {sorted(unknown)}")
         d = dict(d)
         d["envmaps"] = tuple(d.get("envmaps", ()))
         if isinstance(d.get("elevation"), list):
@@ -234,13 +265,30 @@ def _render_shape(spec: CollectionSpec, vol: torch.Tensor, views: torch.Tensor,
     return images, [1.0] * len(views)
 
 
+def _missing_files(out: Path, spec: CollectionSpec) -> List[str]:
+    """The files of the finished collection ``spec`` that ``out`` lacks (relative paths, in plan order)."""
+    missing = []
+    for i in range(spec.n_shapes):
+        for k in range(spec.views_per_shape):
+            missing += [rel for rel in (f"images/{image_id(i, k)}.png", f"exr/{image_id(i, k)}.exr")
+                        if not (out / rel).is_file()]
+        missing += [rel for rel in (f"volumes/{i:05d}.npz", f"volumes/{i:05d}.vol") if not (out / rel).is_file()]
+    return missing
+
+
 def make_collection(out: Union[str, Path], spec: CollectionSpec, overwrite: bool = False,
                     progress: bool = True) -> Path:
     """Render (or finish rendering) the collection ``spec`` into ``out``; return the manifest path.
 
-    Raises ``ValueError`` if ``out`` holds a collection made with a different spec (unless
-    ``overwrite``, which starts it over), and with ``overwrite`` if ``out`` holds files that no
-    collection wrote there (nothing is deleted then).
+    A collection counts as finished only if its manifest matches ``spec`` and every file it plans
+    (images, EXRs, volumes) is there; a missing file is made again (the same bytes: everything
+    derives from ``spec``), and nothing else is re-rendered.
+
+    Raises ``ValueError`` (:class:`~mitsuba_platonic.errors.UserError`) if ``out`` holds a collection
+    made with a different spec (unless ``overwrite``, which starts it over), and with ``overwrite``
+    if ``out`` holds files that no collection wrote there (nothing is deleted then).
+    :class:`~mitsuba_platonic.errors.Interrupted` (a ``KeyboardInterrupt``) on Ctrl-C while
+    rendering, saying how many images are saved (a re-run resumes).
     """
     spec.validate()
     out = Path(out)
@@ -251,7 +299,7 @@ def make_collection(out: Union[str, Path], spec: CollectionSpec, overwrite: bool
         try:
             m = json.loads(manifest_file.read_text())
             if m["spec"] == spec.to_dict() and all((out / r["image"]).exists() and (out / r["exr"]).exists()
-                                                   for r in m["images"]):
+                                                   for r in m["images"]) and not _missing_files(out, spec):
                 return manifest_file                 # finished: read-only, safe for concurrent readers
         except (ValueError, KeyError):
             pass
@@ -269,7 +317,7 @@ def _overwrite_plan(out: Path) -> List[Path]:
     if not out.exists():
         return []
     if not out.is_dir():
-        raise ValueError(f"overwrite: {out} is not a folder")
+        raise UserError(f"overwrite: {out} is not a folder")
     spec: Optional[CollectionSpec] = None
     try:
         spec = CollectionSpec.from_dict(json.loads((out / "collection.json").read_text()))
@@ -318,8 +366,8 @@ def _overwrite_plan(out: Path) -> List[Path]:
         what = (f"holds {len(foreign)} file(s) its collection did not write" if spec is not None else
                 f"is not a collection (no readable collection.json) but holds {len(foreign)} file(s) "
                 f"overwriting would delete")
-        raise ValueError(f"overwrite (--overwrite): {out} {what} ({shown}); nothing was deleted: "
-                         f"move them away or use another folder")
+        raise UserError(f"overwrite (--overwrite): {out} {what} ({shown}); nothing was deleted: "
+                        f"move them away or use another folder")
     return remove
 
 
@@ -343,8 +391,8 @@ def _make_collection(out: Path, spec: CollectionSpec, overwrite: bool, progress:
         old = json.loads(spec_file.read_text())
         if old != spec.to_dict():
             diff = [f"{k}: {old.get(k)!r} → {v!r}" for k, v in spec.to_dict().items() if old.get(k) != v]
-            raise ValueError(f"{out} holds a collection made with other settings ({'; '.join(diff)}); "
-                             f"use another folder, or overwrite=True (--overwrite) to start over")
+            raise UserError(f"{out} holds a collection made with other settings ({'; '.join(diff)}); "
+                            f"use another folder, or overwrite=True (--overwrite) to start over")
     if overwrite:
         for f in _overwrite_plan(out):               # the collection's own files only
             f.unlink()
@@ -370,6 +418,33 @@ def _make_collection(out: Path, spec: CollectionSpec, overwrite: bool, progress:
     bar = tqdm(total=total, initial=finished, disable=not progress, unit="img",
                desc=f"{spec.shape_class} {spec.formation}", dynamic_ncols=True)
     t0 = time.perf_counter()
+    try:
+        _render_pending(out, spec, records, records_file, done, bar)
+    except KeyboardInterrupt as e:                   # Ctrl-C: what is on disk is whole (atomic writes)
+        bar.close()
+        saved = (f"{sum(done(i, k) for i in range(n) for k in range(K))} of {total} images of the collection "
+                 f"in {out} are saved")
+        raise Interrupted(f"{saved}; run the same command again to render the rest", saved=saved) from e
+    bar.close()
+    missing = _missing_files(out, spec)
+    if missing:                                      # a file went away while we rendered
+        more = f" and {len(missing) - 1} more file(s)" if len(missing) > 1 else ""
+        raise UserError(f"{out / missing[0]}{more} of the collection went missing while it was rendered "
+                        f"(removed by another program?); run the same command again to make them again")
+    manifest = {
+        "spec": spec.to_dict(),
+        "note": "evaluation metadata: training must not read views or shape ids",
+        "seconds": time.perf_counter() - t0,
+        "images": [records[image_id(i, k)] for i in range(n) for k in range(K)],
+    }
+    _write_json(out / "manifest.json", manifest)
+    return out / "manifest.json"
+
+
+def _render_pending(out: Path, spec: CollectionSpec, records: Dict[str, Dict[str, Any]], records_file: Path,
+                    done: Callable[[int, int], bool], bar: Any) -> None:
+    """Render every image (and write every volume) of ``spec`` that is not done yet, shape by shape."""
+    n, K = spec.n_shapes, spec.views_per_shape
     with open(records_file, "a+") as log:
         log.seek(0, os.SEEK_END)
         if log.tell() > 0:                           # end a torn last line before appending
@@ -378,7 +453,7 @@ def _make_collection(out: Path, spec: CollectionSpec, overwrite: bool, progress:
                 log.write("\n")
         for i in range(n):
             pending = [k for k in range(K) if not done(i, k)]
-            if not pending and (out / "volumes" / f"{i:05d}.npz").exists():
+            if not pending and all((out / "volumes" / f"{i:05d}{ext}").exists() for ext in (".npz", ".vol")):
                 continue
             vol = shapes.generate(spec.shape_class, spec.shape_seed(i), spec.resolution)
             _write_volume(out / "volumes", i, spec, vol)
@@ -403,15 +478,6 @@ def _make_collection(out: Path, spec: CollectionSpec, overwrite: bool, progress:
                 os.fsync(log.fileno())
                 records[iid] = record
             bar.update(len(pending))
-    bar.close()
-    manifest = {
-        "spec": spec.to_dict(),
-        "note": "evaluation metadata: training must not read views or shape ids",
-        "seconds": time.perf_counter() - t0,
-        "images": [records[image_id(i, k)] for i in range(n) for k in range(K)],
-    }
-    _write_json(out / "manifest.json", manifest)
-    return out / "manifest.json"
 
 
 def load_manifest(folder: Union[str, Path]) -> Dict[str, Any]:

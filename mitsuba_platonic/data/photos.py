@@ -58,6 +58,10 @@ Pipeline, per file (every step is a documented choice):
      and a fully opaque photo would teach the networks a square silhouette.
    - A mask that is empty (alpha 0 everywhere, nothing but white, or nothing left after
      cleaning) is rejected as ``fully_transparent``.
+   - A photo (with ``crop="bbox"``: its object's bounding box) whose longer side is more than
+     :data:`MAX_ASPECT` (8) times its shorter side is rejected as ``extreme_aspect``: padded to a
+     square it would fill less than 1/8 of the training image (an 8 × 2000 photo becomes a
+     2-pixel strip in a 16² image).
 6. **Framing.** ``crop="image"`` (default) keeps the photo's framing; ``crop="bbox"`` first
    crops to the bounding box of ``α > 0``. The result is padded with transparent pixels to a
    centred square of side ``S = ceil(max(h, w) / (1 − 2·margin))``, so the longer side maps to
@@ -113,6 +117,8 @@ import numpy as np
 import torch
 from torch.utils.data import Dataset
 
+from ..errors import UserError
+
 __all__ = [
     "PhotoCollection",
     "CollectionReport",
@@ -131,6 +137,7 @@ __all__ = [
     "split_counts",
     "SUPPORTED_FORMATS",
     "REASONS",
+    "MAX_ASPECT",
     "SPLITS",
 ]
 
@@ -161,7 +168,15 @@ REASONS: Dict[str, str] = {
     "unreadable": "a file that could not be read (permissions, I/O error)",
     "no_alpha": "an image without transparency, loaded without background='white'",
     "fully_transparent": "an image whose mask is empty (alpha 0 everywhere, or all white)",
+    "extreme_aspect": "an image (with crop='bbox': its object) whose longer side is more than "
+                      "8 times its shorter side (MAX_ASPECT)",
 }
+
+#: The largest aspect ratio (longer side / shorter side) of what is framed: the photo, or with
+#: ``crop="bbox"`` its object's bounding box. Framing pads the shorter side to a square, so the
+#: content covers only 1 / ratio of the training image: beyond 8:1 that is under 12.5 %, a strip
+#: at most R/8 pixels across (2 pixels at R = 16), which would teach the networks a near-empty image.
+MAX_ASPECT = 8.0
 
 #: Split names accepted by :class:`PhotoCollection`.
 SPLITS = ("train", "val", "test", "all")
@@ -176,7 +191,7 @@ class PhotoCollectionWarning(UserWarning):
     """Warning for a file that :class:`PhotoCollection` skipped (the message names the file)."""
 
 
-class ImageRejected(ValueError):
+class ImageRejected(UserError):
     """A file that cannot become a training image; ``reason`` is a key of :data:`REASONS`."""
 
     def __init__(self, reason: str, message: str):
@@ -479,7 +494,7 @@ def clean_mask(support: np.ndarray, *, min_region: float = 5e-4, regions: str = 
     from scipy import ndimage
 
     if regions not in _REGIONS:
-        raise ValueError(f"regions must be one of {_REGIONS}, got {regions!r}")
+        raise UserError(f"regions must be one of {_REGIONS}, got {regions!r}")
     mask = _strip_frame(support) if strip_frame else support.astype(bool, copy=True)
     if not mask.any():
         return mask
@@ -519,7 +534,7 @@ def white_background_alpha(rgb_codes: np.ndarray, max_value: int, threshold: flo
     from scipy import ndimage
 
     if not 0.0 <= threshold < 1.0:
-        raise ValueError(f"threshold must lie in [0, 1), got {threshold!r}")
+        raise UserError(f"threshold must lie in [0, 1), got {threshold!r}")
     limit = (1.0 - threshold) * max_value
     fg = ~np.all(rgb_codes >= limit, axis=2)
     if clean or regions != "all":
@@ -610,14 +625,28 @@ def premultiplied_linear(decoded: DecodedImage, *, background: Optional[str] = N
     return np.concatenate([rgb, alpha[..., None]], axis=2)
 
 
+def _check_aspect(w: int, h: int, name: str, what: str = "the image") -> None:
+    """Raise ``ImageRejected('extreme_aspect')`` if ``max(w, h) / min(w, h)`` exceeds :data:`MAX_ASPECT`."""
+    ratio = max(w, h) / max(1, min(w, h))
+    if ratio > MAX_ASPECT:
+        raise ImageRejected("extreme_aspect",
+                            f"{name}: {what} is {w} × {h} pixels, an aspect ratio of {ratio:.3g}:1; at most "
+                            f"{MAX_ASPECT:g}:1 is accepted, since padded to a square it would fill only "
+                            f"{100.0 / ratio:.2g} % of the training image; crop it to the object first")
+
+
 def frame_and_resample(image: np.ndarray, resolution: int = 64, *, crop: str = "image",
-                       margin: float = 0.0, filter: str = "triangle") -> np.ndarray:
+                       margin: float = 0.0, filter: str = "triangle", name: str = "<image>") -> np.ndarray:
     """``(H, W, 4)`` premultiplied linear RGBA → ``(4, R, R)`` float32 (steps 6–7).
 
     ``crop="bbox"`` crops to the bounding box of ``α > 0`` first; the image is then padded
     with transparent pixels to a centred square of side ``S = ceil(max(h, w) / (1 − 2·margin))``
     and resampled to ``R × R`` with the antialiasing ``filter``. The result is clipped to
     ``0 ≤ alpha ≤ 1``, ``0 ≤ rgb ≤ alpha`` (a no-op for the non-negative filters).
+
+    Raises:
+        ImageRejected: ``extreme_aspect`` if what is framed (the image, or with ``crop="bbox"``
+            the bounding box) is more than :data:`MAX_ASPECT` times longer than wide or wider than long.
     """
     alpha = image[..., 3]
     if crop == "bbox":
@@ -626,6 +655,7 @@ def frame_and_resample(image: np.ndarray, resolution: int = 64, *, crop: str = "
         if rows.size:
             image = image[rows[0]:rows[-1] + 1, cols[0]:cols[-1] + 1]
     h, w = image.shape[:2]
+    _check_aspect(w, h, name, "its object's bounding box" if crop == "bbox" else "the image")
     side = max(h, w, math.ceil(max(h, w) / (1.0 - 2.0 * margin) - 1e-9))
     top, left = (side - h) // 2, (side - w) // 2
     planes = np.zeros((4, side, side), np.float32)
@@ -648,35 +678,38 @@ def prepare_image(decoded: DecodedImage, resolution: int = 64, *,
     ``0 ≤ alpha ≤ 1`` and ``0 ≤ rgb ≤ alpha``.
 
     Raises:
-        ImageRejected: ``no_alpha`` or ``fully_transparent`` (see :func:`premultiplied_linear`).
+        ImageRejected: ``no_alpha`` or ``fully_transparent`` (see :func:`premultiplied_linear`),
+            ``extreme_aspect`` (see :data:`MAX_ASPECT`).
         ValueError: on invalid options.
     """
     _check_options(resolution, background, threshold, crop, margin, filter, regions, erode)
+    if crop == "image":                                   # before masking: the photo's own shape
+        _check_aspect(*decoded.size, name)
     image = premultiplied_linear(decoded, background=background, threshold=threshold,
                                  clean=clean, regions=regions, fill_holes=fill_holes,
                                  erode=erode, soften=soften, name=name)
-    return frame_and_resample(image, resolution, crop=crop, margin=margin, filter=filter)
+    return frame_and_resample(image, resolution, crop=crop, margin=margin, filter=filter, name=name)
 
 
 def _check_options(resolution, background, threshold, crop, margin, filter, regions,
                    erode) -> None:
     if isinstance(resolution, bool) or not isinstance(resolution, (int, np.integer)) \
             or resolution < 1:
-        raise ValueError(f"resolution must be a positive integer, got {resolution!r}")
+        raise UserError(f"resolution must be a positive integer, got {resolution!r}")
     if background not in _BACKGROUNDS:
-        raise ValueError(f"background must be None or 'white', got {background!r}")
+        raise UserError(f"background must be None or 'white', got {background!r}")
     if not (isinstance(threshold, (int, float)) and 0.0 <= threshold < 1.0):
-        raise ValueError(f"threshold must lie in [0, 1), got {threshold!r}")
+        raise UserError(f"threshold must lie in [0, 1), got {threshold!r}")
     if crop not in _CROPS:
-        raise ValueError(f"crop must be one of {_CROPS}, got {crop!r}")
+        raise UserError(f"crop must be one of {_CROPS}, got {crop!r}")
     if not (isinstance(margin, (int, float)) and 0.0 <= margin < 0.5):
-        raise ValueError(f"margin must lie in [0, 0.5), got {margin!r}")
+        raise UserError(f"margin must lie in [0, 0.5), got {margin!r}")
     if filter not in _FILTERS:
-        raise ValueError(f"filter must be one of {_FILTERS}, got {filter!r}")
+        raise UserError(f"filter must be one of {_FILTERS}, got {filter!r}")
     if regions not in _REGIONS:
-        raise ValueError(f"regions must be one of {_REGIONS}, got {regions!r}")
+        raise UserError(f"regions must be one of {_REGIONS}, got {regions!r}")
     if isinstance(erode, bool) or not isinstance(erode, (int, np.integer)) or erode < 0:
-        raise ValueError(f"erode must be a non-negative integer (pixels), got {erode!r}")
+        raise UserError(f"erode must be a non-negative integer (pixels), got {erode!r}")
 
 
 # --------------------------------------------------------------------------------------------
@@ -712,12 +745,12 @@ def _check_splits(splits: Sequence[float]) -> Tuple[float, float, float]:
     try:
         values = tuple(float(f) for f in splits)
     except (TypeError, ValueError):
-        raise ValueError(f"splits must be three fractions (train, val, test), got {splits!r}"
-                         ) from None
+        raise UserError(f"splits must be three fractions (train, val, test), got {splits!r}"
+                        ) from None
     if len(values) != 3 or not all(math.isfinite(f) and f >= 0 for f in values) \
             or abs(sum(values) - 1.0) > 1e-6:
-        raise ValueError(f"splits must be three non-negative fractions (train, val, test) "
-                         f"summing to 1, got {splits!r}")
+        raise UserError(f"splits must be three non-negative fractions (train, val, test) "
+                        f"summing to 1, got {splits!r}")
     return values  # type: ignore[return-value]
 
 
@@ -925,8 +958,8 @@ def _scan(folder: PathLike, options: _Options, splits: Tuple[float, float, float
     if not files and not others:
         hidden = (f"; only {len(report.ignored)} hidden entr(y/ies), which are ignored"
                   if report.ignored else "")
-        raise ValueError(f"no usable images in {str(root)!r}: the folder is empty (no files "
-                         f"in it or its sub-folders{hidden})")
+        raise UserError(f"no usable images in {str(root)!r}: the folder is empty (no files "
+                        f"in it or its sub-folders{hidden})")
 
     groups: Dict[str, List[Path]] = {}
     for p in files:  # sorted by relative path: the first of a group is kept
@@ -970,8 +1003,8 @@ def _scan(folder: PathLike, options: _Options, splits: Tuple[float, float, float
         reasons = "; ".join(f"{count} {reason}" for reason, count in
                             report.skipped_by_reason.items())
         detail = "\n  ".join(s.message for s in report.skipped)
-        raise ValueError(f"no usable images in {str(root)!r}: all {report.unique_files} unique "
-                         f"file(s) were rejected ({reasons}):\n  {detail}")
+        raise UserError(f"no usable images in {str(root)!r}: all {report.unique_files} unique "
+                        f"file(s) were rejected ({reasons}):\n  {detail}")
 
     ranked = sorted(entries, key=lambda k: _rank_key(seed, k))
     n_train, n_val, n_test = split_counts(len(ranked), splits)
@@ -1047,10 +1080,10 @@ class PhotoCollection(Dataset):
                  fill_holes: bool = False, erode: int = 0, soften: bool = True,
                  workers: Optional[int] = None):
         if split not in SPLITS:
-            raise ValueError(f"split must be one of {SPLITS}, got {split!r}")
+            raise UserError(f"split must be one of {SPLITS}, got {split!r}")
         fractions = _check_splits(splits)
         if isinstance(seed, bool) or not isinstance(seed, (int, np.integer)):
-            raise ValueError(f"seed must be an integer, got {seed!r}")
+            raise UserError(f"seed must be an integer, got {seed!r}")
         options = _Options(resolution, background, threshold, crop, margin, filter,
                            bool(clean), regions, bool(fill_holes), erode, bool(soften))
         self._init_from(_scan(folder, options, fractions, int(seed), workers), split,
@@ -1076,7 +1109,7 @@ class PhotoCollection(Dataset):
     def with_split(self, split: str, *, alpha_only: Optional[bool] = None) -> "PhotoCollection":
         """The same collection (same decoded images, report and options) for another split."""
         if split not in SPLITS:
-            raise ValueError(f"split must be one of {SPLITS}, got {split!r}")
+            raise UserError(f"split must be one of {SPLITS}, got {split!r}")
         other = type(self).__new__(type(self))
         other._init_from(self._scan, split,
                          self.alpha_only if alpha_only is None else alpha_only)

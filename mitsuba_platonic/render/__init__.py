@@ -11,6 +11,7 @@ from typing import Any
 
 import torch
 
+from ..errors import UserError
 from ..views import validate_views
 from ..volume import validate_volume
 from .settings import BACKENDS, MODELS, RenderSettings, render_with
@@ -39,14 +40,20 @@ def render(volume: torch.Tensor, views: torch.Tensor, model: str = "ea",
         ``(B, 1, N, N)`` opacity for VH/AO, ``(B, 4, N, N)`` premultiplied RGB + alpha for EA.
 
     Raises:
-        ValueError: on a wrong rank or channel count, values outside [0, 1], NaN, non-unit
-            views, mismatched batch, an unknown model/backend, or an option the backend does
-            not read (``OPTIONS_OF``).
+        ValueError (:class:`~mitsuba_platonic.errors.UserError`): on a wrong rank or channel
+            count, an empty batch, a tensor on the 'meta' device, values outside [0, 1], NaN,
+            non-unit views, mismatched batch, an unknown model/backend, or an option the backend
+            does not read (``OPTIONS_OF``).
     """
-    settings = RenderSettings.for_call(backend, model, **options)
+    try:
+        settings = RenderSettings.for_call(backend, model, **options)
+    except UserError:
+        raise
+    except ValueError as e:                              # the settings' own check: the caller's values
+        raise UserError(str(e)) from None
     validate_volume(volume, model)
     validate_views(views, batch=volume.shape[0])
     if isinstance(seed, bool) or not isinstance(seed, int) or seed < 0:
-        raise ValueError(f"seed: expected a non-negative int, got {seed!r}")
+        raise UserError(f"seed: expected a non-negative int, got {seed!r}")
     return render_with(volume, views, settings, seed)
 

@@ -49,19 +49,20 @@ import torch
 import torch.distributed as dist
 import yaml
 
-from ..config import Config
+from ..config import Config, ConfigError
+from ..errors import Interrupted, UserError
 from ..images import composite, linear_to_srgb, to_hwc
 from ..views import front_view, turntable
 from .data import load_training_data
 from .trainer import Trainer
 
 __all__ = ["train", "load_run", "RunError", "save_checkpoint", "load_checkpoint", "load_latest_checkpoint",
-           "run_lock", "SAMPLE_VIEWS"]
+           "run_lock", "SAMPLE_VIEWS", "read_run_config"]
 
 CHECKPOINT_VERSION = 1
 
 
-class RunError(ValueError):
+class RunError(UserError):
     """A run folder that cannot be used as asked (exists, missing, incompatible)."""
 
 
@@ -323,21 +324,33 @@ def _train(cfg: Config, run_dir: Path, resume: bool, progress: bool, stop_at: Op
                            f"another run.name")
         run_dir.mkdir(parents=True, exist_ok=True)
         if resume:
-            saved = yaml.safe_load((run_dir / "config.yaml").read_text())
+            try:
+                saved = read_run_config(run_dir / "config.yaml").to_dict()
+            except RunError as e:
+                raise RunError(f"--resume: {e}") from None
             for section in ("data", "model", "render", "train"):
-                if saved.get(section) != cfg.to_dict()[section]:
+                if saved[section] != cfg.to_dict()[section]:
                     raise RunError(f"--resume: the {section} settings differ from {run_dir}/config.yaml; "
                                    f"an exact continuation needs the same config (only run.* may change)")
         (run_dir / "config.yaml").write_text(yaml.safe_dump(cfg.to_dict(), sort_keys=False))
     if world > 1:
         dist.barrier()                                       # rank 0 checked the folder first
     if rank == 0:
-        data = load_training_data(cfg, progress=progress)
+        try:
+            data = load_training_data(cfg, progress=progress)
+        except KeyboardInterrupt as e:                       # Ctrl-C before the first step: say what is kept
+            what = getattr(e, "saved", None) or "nothing of it is cached"
+            done = f"{last.parent} is as it was" if resume else "no checkpoint was written"
+            raise Interrupted(f"while preparing the training data: {what}; no training step ran and {done}; "
+                              f"run the same command again to continue") from e
     if world > 1:
         dist.barrier()                                       # the procedural cache is complete
     if rank != 0:
         data = load_training_data(cfg, progress=False)
-    trainer = Trainer(cfg, data, device, rank, world)
+    try:
+        trainer = Trainer(cfg, data, device, rank, world)
+    except ValueError as e:                                  # the networks' checks of the config
+        raise RunError(str(e)) from e
     start = 0
     saved: Dict[str, Any] = {"path": None, "step": None}     # the newest good checkpoint on disk
     if resume:
@@ -434,18 +447,56 @@ def _train(cfg: Config, run_dir: Path, resume: bool, progress: bool, stop_at: Op
     return run_dir
 
 
+def read_run_config(path: Path) -> Config:
+    """The resolved config a run wrote (``RUN/config.yaml``), validated; :class:`RunError` naming
+    ``path`` if it is missing, not valid YAML, not a mapping, or has a bad key or value."""
+    from ..config import _build
+
+    expected = "expected the run's resolved config as `platonic train` wrote it"
+    try:
+        text = path.read_text()
+    except FileNotFoundError:
+        raise RunError(f"{path} is missing; {expected}") from None
+    except OSError as e:
+        raise RunError(f"{path} cannot be read: {e}") from None
+    try:
+        data = yaml.safe_load(text)
+    except yaml.YAMLError as e:
+        mark = getattr(e, "problem_mark", None)
+        where = f" at line {mark.line + 1}, column {mark.column + 1}" if mark is not None else ""
+        problem = getattr(e, "problem", None) or type(e).__name__
+        raise RunError(f"{path} is not valid YAML ({problem}{where}); {expected}") from None
+    if not isinstance(data, dict):
+        got = "an empty file" if data is None else f"a {type(data).__name__}"
+        raise RunError(f"{path}: expected a mapping of sections (run, data, model, render, train), got {got}; "
+                       f"{expected}")
+    try:
+        return _build(Config, data, "").validate()
+    except ConfigError as e:
+        raise RunError(f"{path}: {e}; {expected}") from None
+
+
 def load_run(run_dir: Path, device: str = "cpu") -> Tuple[Config, Trainer, int]:
-    """A trained run's config and networks (no training data is loaded)."""
+    """A trained run's config and networks (no training data is loaded).
+
+    The config is the one saved in the checkpoint (``config.yaml`` is not read); a bad one is a
+    :class:`RunError` naming the checkpoint file.
+    """
     from ..config import _build
     from .data import TrainingData
 
     run_dir = Path(run_dir)
     if not _checkpoint_files(run_dir / "checkpoints"):
         raise RunError(f"{run_dir} has no checkpoints/last.pt: not a training run, or not started")
-    state, _ = load_latest_checkpoint(run_dir / "checkpoints", torch.device(device))
-    saved = dict(state["config"])                            # the folder is the run, whatever its saved name
-    saved["run"] = {**(saved.get("run") or {}), "name": run_dir.resolve().name}
-    cfg = _build(Config, saved, "").validate()
+    state, path = load_latest_checkpoint(run_dir / "checkpoints", torch.device(device))
+    if not isinstance(state["config"], dict) or not isinstance(state["config"].get("run") or {}, dict):
+        raise RunError(f"{path}: the config saved in this checkpoint is not a mapping of sections")
+    saved = dict(state["config"])
+    saved["run"] = {**(saved.get("run") or {}), "name": run_dir.resolve().name}   # the folder is the run
+    try:
+        cfg = _build(Config, saved, "").validate()
+    except ConfigError as e:
+        raise RunError(f"{path}: the config saved in this checkpoint is not valid: {e}") from None
     c = 1 if cfg.render.model in ("vh", "ao") else 4
     r = cfg.model.resolution
     dummy = TrainingData(torch.zeros(1, c, r, r), torch.zeros(0, c, r, r),

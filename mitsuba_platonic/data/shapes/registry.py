@@ -20,6 +20,8 @@ from typing import Any, Callable, Dict, Iterator, List
 import numpy as np
 import torch
 
+from ...errors import UserError
+
 __all__ = ["register", "unregister", "registered", "generate", "list_classes", "get_class",
            "MIN_RESOLUTION", "MAX_RESOLUTION"]
 
@@ -88,7 +90,7 @@ def list_classes() -> List[str]:
 def _lookup(name: Any) -> Callable[[np.random.Generator, int], Any]:
     if not isinstance(name, str) or name not in _REGISTRY:
         known = ", ".join(list_classes()) or "(none)"
-        raise ValueError(f"unknown shape class {name!r}; known classes: {known}")
+        raise UserError(f"unknown shape class {name!r}; known classes: {known}")
     return _REGISTRY[name]
 
 
@@ -114,15 +116,15 @@ def generate(name: str, seed: int, n: int = 64) -> torch.Tensor:
     """
     fn = _lookup(name)
     if isinstance(seed, bool) or not isinstance(seed, (int, np.integer)):
-        raise ValueError(f"seed must be an int, got {type(seed).__name__} {seed!r}")
+        raise UserError(f"seed must be an int, got {type(seed).__name__} {seed!r}")
     if seed < 0:
-        raise ValueError(f"seed must be a non-negative int, got {seed}")
+        raise UserError(f"seed must be a non-negative int, got {seed}")
     if isinstance(n, bool) or not isinstance(n, (int, np.integer)):
-        raise ValueError(f"n must be an int in [{MIN_RESOLUTION}, {MAX_RESOLUTION}], "
-                         f"got {type(n).__name__} {n!r}")
+        raise UserError(f"n must be an int in [{MIN_RESOLUTION}, {MAX_RESOLUTION}], "
+                        f"got {type(n).__name__} {n!r}")
     n = int(n)
     if not MIN_RESOLUTION <= n <= MAX_RESOLUTION:
-        raise ValueError(f"n must be in [{MIN_RESOLUTION}, {MAX_RESOLUTION}], got {n}")
+        raise UserError(f"n must be in [{MIN_RESOLUTION}, {MAX_RESOLUTION}], got {n}")
     out = fn(_rng(name, int(seed)), n)
     if not isinstance(out, torch.Tensor):
         from .sdf import Part, composite

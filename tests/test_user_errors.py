@@ -1,0 +1,315 @@
+"""User errors are one line on the command line (issue 10): a corrupt run config, an envmap that is
+no EXR, a marching step float32 cannot take, a CUDA variant without CUDA, Ctrl-C while data is
+prepared, a comparison that cannot fit in memory, a photo too thin to train on, a collection with a
+missing volume, an empty or meta batch; and a bug is not dressed up as one (it keeps its traceback)."""
+
+import contextlib
+import io
+import os
+import signal
+import subprocess
+import sys
+import time
+
+import numpy as np
+import pytest
+import torch
+from PIL import Image
+
+import mitsuba_platonic
+from mitsuba_platonic.cli import main
+from mitsuba_platonic.data import shapes
+from mitsuba_platonic.views import front_view
+from mitsuba_platonic.volume import test_volume, voxel_centres
+
+CLASS = "mushroom"
+TINY = "tiny_user_error_blob"
+
+
+def _blob(rng, n):
+    """A grey ellipsoid: a cheap shape class for training runs."""
+    p = voxel_centres(n)
+    radii = torch.tensor(rng.uniform(0.3, 0.7, size=3))
+    density = torch.sigmoid(-(((p / radii) ** 2).sum(-1).sqrt() - 1.0) * n / 2.0)
+    return torch.cat([torch.full((3, n, n, n), 0.6), density[None]]).float()
+
+
+@pytest.fixture(scope="module", autouse=True)
+def tiny_class():
+    with shapes.registered(TINY, _blob):
+        yield
+
+
+def run_cli(argv):
+    """``main(argv)`` → (exit code, stdout, stderr)."""
+    out, err = io.StringIO(), io.StringIO()
+    with contextlib.redirect_stdout(out), contextlib.redirect_stderr(err):
+        code = main(argv)
+    return code, out.getvalue(), err.getvalue()
+
+
+def one_line(stderr, command):
+    """The single line a user error prints, checked: one line, no traceback, the usual prefix."""
+    err = stderr.strip()
+    assert "\n" not in err and "Traceback" not in err, err
+    assert err.startswith(f"platonic {command}: "), err
+    return err
+
+
+def _train_args(tmp_path):
+    overrides = [f"run.out_dir={tmp_path}/runs", "run.name=r", "run.steps=2", "run.log_every=1",
+                 "run.sample_every=1000", "run.checkpoint_every=2", f"data.cache={tmp_path}/data",
+                 f"data.shape_class={TINY}", "data.n_shapes=2", "data.views_per_shape=1", "model.resolution=16",
+                 "model.width=4", "model.latent=8", "train.batch_size=2"]
+    return sum((["--set", a] for a in overrides), [])
+
+
+# --------------------------------------------------------------------------- 1. a corrupt run config
+
+
+@pytest.mark.parametrize("text, message", [
+    ("run: [unclosed\n  foo: {", "not valid YAML"),
+    ("- a\n- b\n", "expected a mapping"),
+    ("bogus: 1\n", "bogus: unknown key"),
+    ("train: {batch_size: eight}\n", "train.batch_size"),
+])
+def test_resume_with_a_corrupt_config_yaml_names_the_file(tmp_path, text, message):
+    args = _train_args(tmp_path)
+    assert run_cli(["train", "--quiet", *args])[0] == 0
+    config = tmp_path / "runs" / "r" / "config.yaml"
+    config.write_text(text)
+    code, _, stderr = run_cli(["train", "--resume", "--quiet", *args])
+    assert code == 2
+    err = one_line(stderr, "train")
+    assert str(config) in err and message in err, err
+
+
+def test_a_checkpoint_whose_saved_config_is_bad_names_the_file(tmp_path):
+    """reconstruct and generate read the config saved in the checkpoint (config.yaml is only what
+    --resume compares against): a bad key there is one line naming the checkpoint."""
+    args = _train_args(tmp_path)
+    assert run_cli(["train", "--quiet", *args])[0] == 0
+    run_dir = tmp_path / "runs" / "r"
+    (run_dir / "config.yaml").write_text("run: [unclosed")           # not read by generate
+    assert run_cli(["generate", "--run", str(run_dir), "-n", "1", "--out", str(tmp_path / "g")])[0] == 0
+    for ckpt in (run_dir / "checkpoints").glob("*.pt"):
+        state = torch.load(ckpt, weights_only=False)
+        state["config"]["train"]["bogus"] = 1
+        torch.save(state, ckpt)
+    img = next((tmp_path / "data").glob("*/images/*.png"))
+    for command in (["generate", "--run", str(run_dir), "-n", "1"], ["reconstruct", "--run", str(run_dir), str(img)]):
+        code, _, stderr = run_cli(command)
+        assert code == 2
+        err = one_line(stderr, command[0])
+        assert "last.pt" in err and "train.bogus: unknown key" in err, err
+
+
+# --------------------------------------------------------------------------- 2. --envmap that is no EXR
+
+
+def test_make_dataset_envmap_that_is_not_an_exr(tmp_path):
+    fake = tmp_path / "sky.exr"
+    fake.write_text("not an EXR file")
+    out = tmp_path / "d"
+    code, _, stderr = run_cli(["make-dataset", "--class", CLASS, "--shapes", "1", "--views", "1", "--resolution", "16",
+                               "--formation", "physical", "--lighting", "envmap", "--envmap", str(fake),
+                               "--spp", "1", "--out", str(out), "--quiet"])
+    assert code == 2
+    err = one_line(stderr, "make-dataset")
+    assert str(fake) in err and "OpenEXR" in err, err
+    assert not (out / "images").exists()                             # refused before rendering
+
+
+def test_collection_spec_checks_envmaps_are_exr(tmp_path):
+    from mitsuba_platonic.data.collection import CollectionSpec
+    from mitsuba_platonic.errors import UserError
+    fake = tmp_path / "sky.exr"
+    fake.write_bytes(b"\x89PNG\r\n\x1a\n" + bytes(32))
+    with pytest.raises(UserError, match="sky.exr.*not an OpenEXR file"):
+        CollectionSpec(CLASS, formation="physical", lighting="envmap", envmaps=(str(fake),)).validate()
+
+
+# --------------------------------------------------------------------------- 3. compare --step 1e-12
+
+
+def test_compare_step_float32_cannot_march_names_the_flag(tmp_path):
+    out = tmp_path / "out"
+    code, stdout, stderr = run_cli(["compare", "--step", "1e-12", "--resolution", "8", "--views", "1",
+                                    "--repeats", "1", "--out", str(out)])
+    assert code == 2 and stdout == ""
+    err = one_line(stderr, "compare")
+    assert "--step" in err and "1/64" in err and "1e-12" in err, err
+    assert not out.exists()                                          # refused before rendering
+
+
+# --------------------------------------------------------------------------- 4. a CUDA variant without CUDA
+
+
+@pytest.mark.skipif(bool(mitsuba_platonic.BACKEND.get("cuda")), reason="CUDA works here")
+def test_cuda_variant_without_cuda_says_what_to_do(tmp_path):
+    env = dict(os.environ, MITSUBA_PLATONIC_VARIANT="cuda_ad_rgb")
+    r = subprocess.run([sys.executable, "-m", "mitsuba_platonic.cli", "compare", "--resolution", "8", "--views", "1",
+                        "--repeats", "1", "--models", "vh", "--out", str(tmp_path / "out")],
+                       env=env, capture_output=True, text=True, timeout=300)
+    assert r.returncode == 2, r.stderr
+    err = one_line(r.stderr, "compare")
+    assert "MITSUBA_PLATONIC_VARIANT=cuda_ad_rgb" in err and "llvm_ad_rgb" in err and "unset" in err, err
+
+
+# --------------------------------------------------------------------------- 5. Ctrl-C while data is prepared
+
+
+def _interrupt_when(command, ready, timeout=240):
+    """Start ``python -m mitsuba_platonic.cli COMMAND``, send SIGINT once ``ready()``; → (rc, stdout, stderr)."""
+    env = dict(os.environ, PYTHONUNBUFFERED="1")
+    p = subprocess.Popen([sys.executable, "-m", "mitsuba_platonic.cli", *command], stdout=subprocess.PIPE,
+                         stderr=subprocess.PIPE, env=env, text=True)
+    deadline = time.time() + timeout
+    while not ready() and time.time() < deadline and p.poll() is None:
+        time.sleep(0.1)
+    assert p.poll() is None, p.communicate()
+    time.sleep(0.3)                                                  # a few more images
+    p.send_signal(signal.SIGINT)
+    out, err = p.communicate(timeout=timeout)
+    return p.returncode, out, err
+
+
+def test_ctrl_c_during_make_dataset_is_one_line(tmp_path):
+    out = tmp_path / "d"
+    rc, stdout, stderr = _interrupt_when(
+        ["make-dataset", "--class", CLASS, "--shapes", "5000", "--views", "1", "--resolution", "16",
+         "--out", str(out), "--quiet"],
+        lambda: any((out / "images").glob("*.png")) if (out / "images").is_dir() else False)
+    assert rc == 130, stderr
+    err = one_line(stderr, "make-dataset")
+    assert "interrupted" in err and "of 5000 images" in err and str(out) in err and "same command" in err, err
+    saved = int(err.split(" of 5000 images")[0].rsplit(" ", 1)[1])
+    assert 0 < saved <= len(list((out / "images").glob("*.png")))
+    assert not (out / "manifest.json").exists()
+
+
+def test_ctrl_c_while_train_prepares_its_data_is_one_line(tmp_path):
+    cfg_file = tmp_path / "c.yaml"
+    cfg_file.write_text(f"""
+run: {{out_dir: {tmp_path}/runs, name: r, steps: 10}}
+data: {{cache: {tmp_path}/data, shape_class: {CLASS}, n_shapes: 5000, views_per_shape: 1}}
+model: {{resolution: 16, width: 4, latent: 8}}
+train: {{batch_size: 2}}
+""")
+    data = tmp_path / "data"
+    rc, stdout, stderr = _interrupt_when(["train", "--config", str(cfg_file), "--quiet"],
+                                         lambda: any(data.glob("*/images/*.png")))
+    assert rc == 130, stderr
+    err = one_line(stderr, "train")
+    assert "preparing the training data" in err and "of 5000 images" in err and "no training step" in err, err
+    assert not (tmp_path / "runs" / "r" / "checkpoints").exists()
+    assert not (tmp_path / "runs" / "r" / "run.lock").exists()
+
+
+# --------------------------------------------------------------------------- 6. compare at 1000³
+
+
+def test_compare_refuses_a_resolution_that_cannot_fit_in_memory(monkeypatch, tmp_path):
+    from mitsuba_platonic import compare as C
+    monkeypatch.setattr(C, "available_memory", lambda: (8 << 30, "MemAvailable in /proc/meminfo"))
+    assert C.memory_estimate(1000, 4, builtin=True) > 24e9           # the float64 grid alone is 24 GB
+    out = tmp_path / "out"
+    t0 = time.perf_counter()
+    code, stdout, stderr = run_cli(["compare", "--resolution", "1000", "--out", str(out)])
+    assert time.perf_counter() - t0 < 5.0                            # refused up front, nothing allocated
+    assert code == 2 and stdout == ""
+    err = one_line(stderr, "compare")
+    assert "--resolution 1000" in err and "GB" in err and "8.6 GB" in err and "MemAvailable" in err, err
+    assert not out.exists()
+    C.check_memory(32, 4, builtin=True)                              # the default fits
+
+
+# --------------------------------------------------------------------------- 7. an 8 × 2000 photo
+
+
+def test_an_extremely_thin_photo_is_rejected_and_reported(tmp_path):
+    from mitsuba_platonic.data.photos import ImageRejected, PhotoCollection, PhotoCollectionWarning, decode_image, \
+        prepare_image
+    good = np.zeros((40, 40, 4), np.uint8)
+    good[10:30, 12:28] = [200, 120, 40, 255]
+    Image.fromarray(good, "RGBA").save(tmp_path / "good.png")
+    thin = np.zeros((2000, 8, 4), np.uint8)                          # 8 wide, 2000 tall
+    thin[5:1995, 2:6] = [90, 160, 60, 255]                           # a pole, transparent around it
+    Image.fromarray(thin, "RGBA").save(tmp_path / "thin.png")
+    with pytest.warns(PhotoCollectionWarning, match="thin.png"):
+        photos = PhotoCollection(tmp_path, 16, "all")
+    assert len(photos) == 1
+    (skipped,) = photos.report.skipped
+    assert skipped.path.name == "thin.png" and skipped.reason == "extreme_aspect"
+    assert "thin.png" in skipped.message and "250" in skipped.message and "8" in skipped.message
+    assert "thin.png" in photos.report.summary()
+    with pytest.raises(ImageRejected, match="thin.png"):
+        prepare_image(decode_image(tmp_path / "thin.png"), 16, name=str(tmp_path / "thin.png"))
+
+
+# --------------------------------------------------------------------------- 8. a missing .npz volume
+
+
+@pytest.mark.parametrize("missing", ["volumes/00000.npz", "volumes/00000.vol"])
+def test_a_collection_with_a_missing_volume_is_not_finished(tmp_path, missing):
+    out = tmp_path / "d"
+    command = ["make-dataset", "--class", CLASS, "--shapes", "2", "--views", "2", "--resolution", "16",
+               "--out", str(out), "--quiet"]
+    assert run_cli(command)[0] == 0
+    png = out / "images" / "00000_00.png"
+    stamp = png.stat().st_mtime_ns
+    reference = (out / missing).read_bytes()
+    (out / missing).unlink()
+    code, stdout, stderr = run_cli(command)
+    assert code == 0, stderr
+    assert (out / missing).read_bytes() == reference                 # re-made, the same bytes
+    assert png.stat().st_mtime_ns == stamp                           # the images were not re-rendered
+
+
+# --------------------------------------------------------------------------- 9. B = 0 and meta tensors
+
+
+@pytest.mark.parametrize("backend", ["closed_form", "mitsuba"])
+def test_render_rejects_an_empty_batch_and_meta_tensors(backend):
+    from mitsuba_platonic.views import validate_views
+    from mitsuba_platonic.volume import validate_volume
+    with pytest.raises(ValueError, match="volume has batch size 0"):
+        mitsuba_platonic.render(torch.zeros(0, 4, 8, 8, 8), torch.zeros(0, 3), "ea", backend)
+    with pytest.raises(ValueError, match="volume is on the 'meta' device"):
+        mitsuba_platonic.render(torch.zeros(1, 4, 8, 8, 8, device="meta"), front_view(1), "ea", backend)
+    with pytest.raises(ValueError, match="views are on the 'meta' device"):
+        mitsuba_platonic.render(test_volume(8), front_view(1).to("meta"), "ea", backend)
+    with pytest.raises(ValueError, match="views hold no view"):
+        validate_views(torch.zeros(0, 3))
+    with pytest.raises(ValueError, match="batch size 0"):
+        validate_volume(torch.zeros(0, 1, 8, 8, 8), "vh")
+
+
+# --------------------------------------------------------------------------- user errors vs bugs
+
+
+def test_a_bug_keeps_its_traceback_and_a_user_error_is_one_line(monkeypatch, tmp_path):
+    from mitsuba_platonic import compare as C
+    from mitsuba_platonic.errors import Interrupted, UserError
+    argv = ["compare", "--resolution", "8", "--views", "1", "--repeats", "1", "--out", str(tmp_path / "out")]
+
+    def bug(*args, **kwargs):
+        raise ValueError("operands could not be broadcast together")    # an internal bug, not the user's
+
+    monkeypatch.setattr(C, "compare", bug)
+    with pytest.raises(ValueError, match="broadcast"):
+        run_cli(argv)
+
+    def user(*args, **kwargs):
+        raise UserError("--views 1: something the user can fix")
+
+    monkeypatch.setattr(C, "compare", user)
+    code, _, stderr = run_cli(argv)
+    assert code == 2 and one_line(stderr, "compare") == "platonic compare: error: --views 1: something the user can fix"
+
+    def ctrl_c(*args, **kwargs):
+        raise Interrupted("3 of 9 images are saved")
+
+    monkeypatch.setattr(C, "compare", ctrl_c)
+    code, _, stderr = run_cli(argv)
+    assert code == 130 and one_line(stderr, "compare") == "platonic compare: interrupted: 3 of 9 images are saved"
