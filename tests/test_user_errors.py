@@ -20,23 +20,16 @@ import mitsuba_platonic
 from mitsuba_platonic.cli import main
 from mitsuba_platonic.data import shapes
 from mitsuba_platonic.views import front_view
-from mitsuba_platonic.volume import test_volume, voxel_centres
+from mitsuba_platonic.volume import test_volume
+from tiny_shapes import ellipsoid
 
 CLASS = "mushroom"
 TINY = "tiny_user_error_blob"
 
 
-def _blob(rng, n):
-    """A grey ellipsoid: a cheap shape class for training runs."""
-    p = voxel_centres(n)
-    radii = torch.tensor(rng.uniform(0.3, 0.7, size=3))
-    density = torch.sigmoid(-(((p / radii) ** 2).sum(-1).sqrt() - 1.0) * n / 2.0)
-    return torch.cat([torch.full((3, n, n, n), 0.6), density[None]]).float()
-
-
 @pytest.fixture(scope="module", autouse=True)
 def tiny_class():
-    with shapes.registered(TINY, _blob):
+    with shapes.registered(TINY, ellipsoid):
         yield
 
 

@@ -1,0 +1,15 @@
+"""A cheap procedural shape class for tests that need a collection or a training run."""
+
+from __future__ import annotations
+
+import torch
+
+from mitsuba_platonic.volume import voxel_centres
+
+
+def ellipsoid(rng, n: int) -> torch.Tensor:
+    """A grey ellipsoid with random radii: ``(4, N, N, N)`` RGBA, anti-aliased over about a voxel."""
+    p = voxel_centres(n)
+    radii = torch.tensor(rng.uniform(0.3, 0.7, size=3))
+    density = torch.sigmoid(-(((p / radii) ** 2).sum(-1).sqrt() - 1.0) * n / 2.0)
+    return torch.cat([torch.full((3, n, n, n), 0.6), density[None]]).float()
