@@ -25,6 +25,8 @@ from importlib import metadata
 from pathlib import Path
 from typing import Dict, List, Optional
 
+from .fileio import atomic_write
+
 __all__ = ["BackendError", "check_backend", "find_libllvm", "INSTALL_HINT"]
 
 #: LLVM major versions Dr.Jit 1.5 works with here (14 rejected, 15 aborts).
@@ -143,10 +145,7 @@ def check_backend() -> Dict[str, object]:
         result = _probe(dict(os.environ))
         if result.get("llvm") or result.get("cuda"):
             try:  # cache only good verdicts: a fix (installing LLVM) must be seen at once
-                cache.parent.mkdir(parents=True, exist_ok=True)
-                tmp = cache.with_suffix(f".{os.getpid()}.tmp")
-                tmp.write_text(json.dumps(result))
-                os.replace(tmp, cache)
+                atomic_write(cache, lambda tmp: tmp.write_text(json.dumps(result)))
             except OSError:
                 pass
     result["libllvm"] = libllvm

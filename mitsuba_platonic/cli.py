@@ -379,6 +379,9 @@ def _cmd_make_dataset(args: argparse.Namespace) -> int:
 
 
 def _add_make_dataset(sub: "argparse._SubParsersAction") -> None:
+    from .data.collection import FORMATIONS
+    from .views import DEFAULT_ELEVATION, DISTRIBUTIONS
+
     p = sub.add_parser(
         "make-dataset", help="render a procedural shape class to an image collection",
         description="Render SHAPES shapes × VIEWS random views of a procedural class in one image "
@@ -391,15 +394,16 @@ def _add_make_dataset(sub: "argparse._SubParsersAction") -> None:
     p.add_argument("--shapes", type=_positive_int, default=100, help="shapes per class (default: %(default)s)")
     p.add_argument("--views", type=_positive_int, default=10, help="images per shape (default: %(default)s)")
     p.add_argument("--resolution", type=_positive_int, default=64, help="N, 16 … 128 (default: %(default)s)")
-    p.add_argument("--formation", choices=("vh", "ao", "ea", "physical"), default="ea",
+    p.add_argument("--formation", choices=FORMATIONS, default="ea",
                    help="image formation (default: %(default)s)")
     p.add_argument("--renderer", choices=("closed_form", "mitsuba"), default="closed_form",
                    help="renderer for vh/ao/ea (default: %(default)s)")
     p.add_argument("--filter", choices=("trilinear", "nearest"), default="trilinear")
-    p.add_argument("--view-dist", choices=("sphere", "band", "ring"), default="sphere",
+    p.add_argument("--view-dist", choices=DISTRIBUTIONS, default="sphere",
                    help="view distribution (default: %(default)s)")
     p.add_argument("--elevation", type=_elevation, default=None,
-                   help="'low,high' degrees for band (default 0,60); one number for ring (default 20)")
+                   help="'low,high' degrees for band (default {:g},{:g}); one number for ring (default {:g})"
+                   .format(*DEFAULT_ELEVATION["band"], DEFAULT_ELEVATION["ring"]))
     p.add_argument("--lighting", choices=("sunsky", "envmap", "mixed"), default="sunsky",
                    help="physical formation: random sky, environment map, or either (default: %(default)s)")
     p.add_argument("--envmap", action="append", default=None,
@@ -452,6 +456,7 @@ def _cmd_reconstruct(args: argparse.Namespace) -> int:
     from .data.photos import decode_image, prepare_image
     from .export import extract_mesh, save_gif, save_ply, save_volume, turntable_frames
     from .train import load_run
+    from .volume import CHANNELS
 
     cfg, trainer, step = load_run(Path(args.run))
     if cfg.train.task != "reconstruction":
@@ -463,7 +468,7 @@ def _cmd_reconstruct(args: argparse.Namespace) -> int:
         path = Path(image)
         x = prepare_image(decode_image(path), cfg.model.resolution, background=args.background,
                           crop=args.crop, name=str(path))
-        x = torch.from_numpy(x[3:] if model in ("vh", "ao") else x)[None]
+        x = torch.from_numpy(x[3:] if CHANNELS[model] == 1 else x)[None]
         vol = trainer.reconstruct(x)[0].cpu()
         stem = out / path.stem
         written = save_volume(vol, stem)
@@ -477,6 +482,8 @@ def _cmd_reconstruct(args: argparse.Namespace) -> int:
 
 
 def _add_reconstruct(sub: "argparse._SubParsersAction") -> None:
+    from .data.photos import CROPS
+
     p = sub.add_parser("reconstruct", help="single-image 3D reconstruction with a trained run",
                        description="Encode each image, generate its volume, and write the volume (.npz, "
                                    ".vol), a turntable GIF and a marching-cubes mesh with vertex colours (.ply).")
@@ -484,7 +491,7 @@ def _add_reconstruct(sub: "argparse._SubParsersAction") -> None:
     p.add_argument("images", nargs="+", help="input images (RGBA PNG, or RGB on white with --background white)")
     p.add_argument("--out", default=None, help="output folder (default: RUN/reconstructions)")
     p.add_argument("--background", choices=("white",), default=None, help="mask RGB photos on white")
-    p.add_argument("--crop", choices=("image", "bbox"), default="image")
+    p.add_argument("--crop", choices=CROPS, default="image")
     p.add_argument("--level", type=float, default=0.5, help="iso-level of the mesh (default: %(default)s)")
     p.set_defaults(handler=_cmd_reconstruct)
 

@@ -221,7 +221,7 @@ def _figure(model: str, cf: torch.Tensor, mi: torch.Tensor, views: torch.Tensor,
     fig.savefig(path, dpi=100)
 
 
-def compare(volume: torch.Tensor, views: torch.Tensor, models: Sequence[str] = ("vh", "ao", "ea"),
+def compare(volume: torch.Tensor, views: torch.Tensor, models: Sequence[str] = MODELS,
             filter: str = "trilinear", options: Optional[Mapping[str, Any]] = None,
             out_dir: Union[str, Path, None] = None, repeats: int = 3) -> List[Dict[str, Any]]:
     """Render ``volume`` from ``views`` with both backends for each model and compare them.

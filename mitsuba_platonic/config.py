@@ -22,8 +22,12 @@ from typing import Any, Dict, List, Optional, Sequence, Union
 
 import yaml
 
+from .data.collection import FORMATIONS
+from .data.photos import BACKGROUNDS, CROPS
 from .errors import UserError
+from .models import NORMS, RESOLUTIONS
 from .render.settings import RenderSettings as RenderConfig
+from .views import DISTRIBUTIONS
 
 __all__ = ["Config", "RunConfig", "DataConfig", "ModelConfig", "RenderConfig", "TrainConfig",
            "load_config", "apply_overrides", "ConfigError"]
@@ -142,38 +146,43 @@ class Config:
 
     def validate(self) -> "Config":
         """Check value ranges and combinations; raise :class:`ConfigError` naming the key."""
+        # the train package imports this module: its choice lists are imported here, not at the top
+        from .train.data import SOURCES
+        from .train.losses import LOSSES
+        from .train.run import DEVICES
+        from .train.trainer import MODES, TASKS
         for section in ("run", "data", "model", "train"):    # render checks its own numbers
             _finite_numbers(section, getattr(self, section))
         _folder_name("run.name", self.run.name)
-        _choice("run.device", self.run.device, ("auto", "cpu", "cuda"))
+        _choice("run.device", self.run.device, DEVICES)
         for key in ("steps", "log_every", "sample_every", "checkpoint_every", "keep_checkpoints"):
             _positive(f"run.{key}", getattr(self.run, key))
         _non_negative("run.threads", self.run.threads)
         _non_negative("run.seed", self.run.seed)
-        _choice("data.source", self.data.source, ("procedural", "folder"))
+        _choice("data.source", self.data.source, SOURCES)
         if self.data.source == "folder" and not self.data.path:
             raise ConfigError("data.path: required when data.source is 'folder'")
-        _choice("data.formation", self.data.formation, ("vh", "ao", "ea", "physical"))
-        _choice("data.view_distribution", self.data.view_distribution, ("sphere", "band", "ring"))
-        _choice("data.background", self.data.background, (None, "white"))
-        _choice("data.crop", self.data.crop, ("image", "bbox"))
+        _choice("data.formation", self.data.formation, FORMATIONS)
+        _choice("data.view_distribution", self.data.view_distribution, DISTRIBUTIONS)
+        _choice("data.background", self.data.background, BACKGROUNDS)
+        _choice("data.crop", self.data.crop, CROPS)
         _positive("data.n_shapes", self.data.n_shapes)
         _positive("data.views_per_shape", self.data.views_per_shape)
         if not 0.0 < self.data.split <= 1.0:
             raise ConfigError(f"data.split: expected a share in (0, 1], got {self.data.split!r}")
-        _choice("model.resolution", self.model.resolution, (16, 32, 64, 128))
+        _choice("model.resolution", self.model.resolution, RESOLUTIONS)
         _positive("model.latent", self.model.latent)
         _positive("model.width", self.model.width)
-        _choice("model.norm", self.model.norm, ("batch", "instance", "none"))
+        _choice("model.norm", self.model.norm, NORMS)
         _non_negative("model.encoder_hidden", self.model.encoder_hidden)
         try:
             self.render.validate()                           # the renderer's settings check themselves
         except ValueError as e:
             raise ConfigError(f"render.{e}") from None
-        _choice("train.task", self.train.task, ("reconstruction", "generation"))
-        _choice("train.mode", self.train.mode, ("platonic", "platonic3d", "gan3d"))
-        _choice("train.view_distribution", self.train.view_distribution, ("sphere", "band", "ring"))
-        _choice("train.loss", self.train.loss, ("nonsaturating", "wgan-gp"))
+        _choice("train.task", self.train.task, TASKS)
+        _choice("train.mode", self.train.mode, MODES)
+        _choice("train.view_distribution", self.train.view_distribution, DISTRIBUTIONS)
+        _choice("train.loss", self.train.loss, LOSSES)
         _positive("train.batch_size", self.train.batch_size)
         _positive("train.random_views", self.train.random_views)
         _positive("train.d_steps", self.train.d_steps)

@@ -29,6 +29,7 @@ from torch import nn
 __all__ = ["NetConfig", "Encoder", "Generator", "Discriminator", "VolumeDiscriminator", "build_networks"]
 
 NORMS = ("batch", "instance", "none")
+RESOLUTIONS = (16, 32, 64, 128)
 
 
 @dataclass(frozen=True)
@@ -47,8 +48,8 @@ class NetConfig:
     encoder_hidden: int = 0
 
     def validate(self) -> "NetConfig":
-        if self.resolution not in (16, 32, 64, 128):
-            raise ValueError(f"resolution must be 16, 32, 64 or 128, got {self.resolution!r}")
+        if self.resolution not in RESOLUTIONS:
+            raise ValueError(f"resolution must be one of {RESOLUTIONS}, got {self.resolution!r}")
         if self.volume_channels not in (1, 4) or self.image_channels not in (1, 4):
             raise ValueError(f"volume/image channels must be 1 or 4, got "
                              f"{self.volume_channels!r}/{self.image_channels!r}")

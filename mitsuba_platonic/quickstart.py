@@ -30,6 +30,7 @@ from .images import composite, linear_to_srgb, save_png, to_hwc
 from .render import render
 from .render.closed_form import rotate
 from .views import from_angles, front_view, turntable
+from .volume import CHANNELS
 
 __all__ = ["quickstart", "novel_view_errors", "billboard", "NOVEL_VIEWS"]
 
@@ -86,7 +87,7 @@ def _evaluate(trainer, data, model: str, limit: int = 64) -> Dict[str, float]:
     truths = []
     for r in records:
         vol = torch.from_numpy(np.load(Path(r["folder"]) / r["volume"])["volume"]).float()
-        if model in ("vh", "ao"):
+        if CHANNELS[model] == 1:
             vol = vol[3:]
         # the ground truth resampled into the input camera frame (clamped: trilinear round-off exceeds 1)
         truths.append(rotate(vol[None], torch.tensor([r["view"]]))[0].clamp(0.0, 1.0))

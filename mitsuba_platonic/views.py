@@ -40,9 +40,17 @@ __all__ = [
     "turntable",
     "camera_frames",
     "validate_views",
+    "DISTRIBUTIONS",
+    "DEFAULT_ELEVATION",
 ]
 
 Seed = Union[int, torch.Generator, None]
+
+#: The view distributions p_view of :func:`sample_views`.
+DISTRIBUTIONS = ("sphere", "band", "ring")
+
+#: The elevation (degrees) a 'band' or 'ring' distribution uses when a dataset or run names none.
+DEFAULT_ELEVATION = {"band": (0.0, 60.0), "ring": 20.0}
 
 #: Horizontal norm below which ω counts as a pole (computed in float64).
 POLE_EPS = 1e-12
@@ -124,7 +132,7 @@ def sample_views(n: int, distribution: str = "sphere", seed: Seed = 0,
             raise UserError(f"'ring' needs an elevation in [-90, 90] degrees, got {elevation!r}")
         lo = hi = math.sin(math.radians(float(elevation)))
     else:
-        raise UserError(f"distribution must be 'sphere', 'band' or 'ring', got {distribution!r}")
+        raise UserError(f"distribution must be one of {DISTRIBUTIONS}, got {distribution!r}")
     y = lo + (hi - lo) * torch.rand(n, generator=g, dtype=torch.float64)
     r = torch.sqrt((1.0 - y * y).clamp_min(0.0))
     w = torch.stack([r * torch.sin(phi), y, r * torch.cos(phi)], dim=-1)

@@ -37,31 +37,31 @@ import os
 import re
 import time
 from contextlib import contextmanager
-from dataclasses import asdict, dataclass, field, fields
+from dataclasses import asdict, dataclass, fields
 from pathlib import Path
-from typing import Any, Callable, Dict, Iterator, List, Optional, Sequence, Tuple, Union
+from typing import Any, Callable, Dict, Iterator, List, Optional, Tuple, Union
 
 import numpy as np
 import torch
 
 from .. import views as V
 from ..errors import Interrupted, UserError
+from ..fileio import atomic_write
 from ..images import save_exr, save_png, to_hwc, to_png_rgba
 from ..render import render
-from ..volume import CHANNELS
+from ..volume import CHANNELS, MODELS
 from . import shapes
 
 __all__ = ["CollectionSpec", "make_collection", "load_manifest", "FORMATIONS", "RENDERERS",
            "default_envmaps", "check_envmap"]
 
-FORMATIONS = ("vh", "ao", "ea", "physical")
+FORMATIONS = MODELS + ("physical",)   # the renderer's image formations, or path-traced
 RENDERERS = ("closed_form", "mitsuba")
-VIEW_DISTRIBUTIONS = ("sphere", "band", "ring")
 LIGHTINGS = ("sunsky", "envmap", "mixed")
 SCENES = Path(__file__).resolve().parents[2] / "scenes"
 SUBFOLDERS = ("images", "exr", "volumes")
 RECORDS = ("collection.json", "records.jsonl", "manifest.json")
-_TEMPORARY = re.compile(r"\.\d{5,}(_\d{2,})?\.tmp\d+\.(png|exr|npz|vol)")   # what _atomic names them
+_TEMPORARY = re.compile(r"\.\d{5,}(_\d{2,})?\.tmp\d+\.(png|exr|npz|vol)")   # what atomic_write names them
 
 
 def default_envmaps() -> List[str]:
@@ -150,8 +150,8 @@ class CollectionSpec:
             raise UserError(f"renderer must be one of {RENDERERS}, got {self.renderer!r}")
         if self.filter not in ("trilinear", "nearest"):
             raise UserError(f"filter must be 'trilinear' or 'nearest', got {self.filter!r}")
-        if self.views not in VIEW_DISTRIBUTIONS:
-            raise UserError(f"views must be one of {VIEW_DISTRIBUTIONS}, got {self.views!r}")
+        if self.views not in V.DISTRIBUTIONS:
+            raise UserError(f"views must be one of {V.DISTRIBUTIONS}, got {self.views!r}")
         if self.lighting not in LIGHTINGS:
             raise UserError(f"lighting must be one of {LIGHTINGS}, got {self.lighting!r}")
         if self.formation == "physical" and self.lighting in ("envmap", "mixed") and not self.envmaps:
@@ -165,7 +165,7 @@ class CollectionSpec:
 
     def _view_kwargs(self) -> Dict[str, Any]:
         if self.views == "sphere" or self.elevation is None:
-            default = {"sphere": None, "band": (0.0, 60.0), "ring": 20.0}[self.views]
+            default = V.DEFAULT_ELEVATION.get(self.views)
             return {} if default is None else {"elevation": default}
         e = self.elevation
         return {"elevation": tuple(float(x) for x in e) if isinstance(e, (list, tuple)) else float(e)}
@@ -211,20 +211,8 @@ def image_id(i: int, k: int) -> str:
     return f"{i:05d}_{k:02d}"
 
 
-def _atomic(path: Path, write: Callable[[Path], Any]) -> None:
-    """Write ``path`` through a temporary sibling and rename it into place (no torn files)."""
-    path.parent.mkdir(parents=True, exist_ok=True)
-    tmp = path.with_name(f".{path.stem}.tmp{os.getpid()}{path.suffix}")
-    try:
-        write(tmp)
-        os.replace(tmp, path)
-    finally:
-        if tmp.exists():
-            tmp.unlink()
-
-
 def _write_json(path: Path, data: Any) -> None:
-    _atomic(path, lambda p: p.write_text(json.dumps(data, indent=1)))
+    atomic_write(path, lambda p: p.write_text(json.dumps(data, indent=1)))
 
 
 def _write_volume(folder: Path, i: int, spec: CollectionSpec, vol: torch.Tensor) -> None:
@@ -232,10 +220,10 @@ def _write_volume(folder: Path, i: int, spec: CollectionSpec, vol: torch.Tensor)
     npz = folder / f"{i:05d}.npz"
     vol_file = folder / f"{i:05d}.vol"
     if not npz.exists():
-        _atomic(npz, lambda p: np.savez_compressed(p, volume=vol.numpy(), shape_class=spec.shape_class,
+        atomic_write(npz, lambda p: np.savez_compressed(p, volume=vol.numpy(), shape_class=spec.shape_class,
                                                    seed=spec.shape_seed(i)))
     if not vol_file.exists():
-        _atomic(vol_file, lambda p: write_vol(vol, p))
+        atomic_write(vol_file, lambda p: write_vol(vol, p))
 
 
 def _read_records(path: Path) -> Dict[str, Dict[str, Any]]:
@@ -465,8 +453,8 @@ def _render_pending(out: Path, spec: CollectionSpec, records: Dict[str, Dict[str
             for j, k in enumerate(pending):
                 iid = image_id(i, k)
                 img = to_hwc(images[j])
-                _atomic(out / "exr" / f"{iid}.exr", lambda p: save_exr(p, img))
-                _atomic(out / "images" / f"{iid}.png", lambda p: save_png(p, to_png_rgba(img)))
+                atomic_write(out / "exr" / f"{iid}.exr", lambda p: save_exr(p, img))
+                atomic_write(out / "images" / f"{iid}.png", lambda p: save_png(p, to_png_rgba(img)))
                 record = {"id": iid, "image": f"images/{iid}.png", "exr": f"exr/{iid}.exr",
                           "shape": i, "shape_seed": spec.shape_seed(i), "volume": f"volumes/{i:05d}.npz",
                           "view": [float(x) for x in views[j]]}

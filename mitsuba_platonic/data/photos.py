@@ -139,6 +139,8 @@ __all__ = [
     "REASONS",
     "MAX_ASPECT",
     "SPLITS",
+    "BACKGROUNDS",
+    "CROPS",
 ]
 
 PathLike = Union[str, "os.PathLike[str]"]
@@ -181,8 +183,8 @@ MAX_ASPECT = 8.0
 #: Split names accepted by :class:`PhotoCollection`.
 SPLITS = ("train", "val", "test", "all")
 
-_BACKGROUNDS = (None, "white")
-_CROPS = ("image", "bbox")
+BACKGROUNDS = (None, "white")
+CROPS = ("image", "bbox")
 _FILTERS = ("triangle", "box", "lanczos")
 _REGIONS = ("all", "largest")
 
@@ -696,12 +698,12 @@ def _check_options(resolution, background, threshold, crop, margin, filter, regi
     if isinstance(resolution, bool) or not isinstance(resolution, (int, np.integer)) \
             or resolution < 1:
         raise UserError(f"resolution must be a positive integer, got {resolution!r}")
-    if background not in _BACKGROUNDS:
+    if background not in BACKGROUNDS:
         raise UserError(f"background must be None or 'white', got {background!r}")
     if not (isinstance(threshold, (int, float)) and 0.0 <= threshold < 1.0):
         raise UserError(f"threshold must lie in [0, 1), got {threshold!r}")
-    if crop not in _CROPS:
-        raise UserError(f"crop must be one of {_CROPS}, got {crop!r}")
+    if crop not in CROPS:
+        raise UserError(f"crop must be one of {CROPS}, got {crop!r}")
     if not (isinstance(margin, (int, float)) and 0.0 <= margin < 0.5):
         raise UserError(f"margin must lie in [0, 0.5), got {margin!r}")
     if filter not in _FILTERS:

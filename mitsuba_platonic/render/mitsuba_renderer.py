@@ -23,7 +23,7 @@ from typing import Any, Dict, Optional, Tuple
 import torch
 
 from ..views import camera_frames
-from ..volume import voxel_size
+from ..volume import CHANNELS, voxel_size
 from .settings import RenderSettings
 from .variant import ensure_variant, variant_device
 
@@ -204,7 +204,7 @@ def render_mitsuba(volume: torch.Tensor, views: torch.Tensor, model: str,
     device = variant_device()
     src = volume.to(device=device, dtype=torch.float32)
     right, up, w = camera_frames(views)
-    out_channels = 4 if model == "ea" else 1
+    out_channels = CHANNELS[model]
 
     images = []
     for b in range(volume.shape[0]):

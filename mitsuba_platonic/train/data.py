@@ -19,21 +19,24 @@ import numpy as np
 import torch
 
 from ..config import Config
+from ..volume import CHANNELS
 
-__all__ = ["TrainingData", "load_training_data", "collection_folder"]
+__all__ = ["TrainingData", "load_training_data", "collection_folder", "SOURCES"]
+
+#: data.source: a procedural collection rendered by make-dataset, or a folder of photos.
+SOURCES = ("procedural", "folder")
 
 
 @dataclass
 class TrainingData:
     """images: ``(N, C, R, R)`` training images (C = 4 premultiplied linear RGBA, or 1 alpha);
     held_out: ``(M, C, R, R)``; volumes: ``(K, 4, R, R, R)`` training shapes' ground truth or None;
-    held_out_records: evaluation metadata per held-out image (procedural only); source: a label."""
+    held_out_records: evaluation metadata per held-out image (procedural only)."""
 
     images: torch.Tensor
     held_out: torch.Tensor
     volumes: Optional[torch.Tensor] = None
     held_out_records: List[Dict[str, Any]] = field(default_factory=list)
-    source: str = ""
 
 
 def collection_folder(cfg: Config) -> Path:
@@ -61,7 +64,7 @@ def _procedural(cfg: Config, progress: bool) -> TrainingData:
     make_collection(folder, spec, progress=progress)
     records = load_manifest(folder)["images"]
     n_train = max(1, int(round(d.split * d.n_shapes)))
-    alpha_only = cfg.render.model in ("vh", "ao")
+    alpha_only = CHANNELS[cfg.render.model] == 1
     train, held, held_records = [], [], []
     for r in records:
         img = prepare_image(decode_image(folder / r["image"]), cfg.model.resolution, clean=False, soften=False)
@@ -75,11 +78,10 @@ def _procedural(cfg: Config, progress: bool) -> TrainingData:
     if cfg.train.mode != "platonic":
         volumes = torch.stack([torch.from_numpy(np.load(folder / "volumes" / f"{i:05d}.npz")["volume"])
                                for i in range(n_train)])
-        if cfg.render.model in ("vh", "ao"):
+        if alpha_only:
             volumes = volumes[:, 3:]
     empty = torch.zeros(0, *train[0].shape)
-    return TrainingData(torch.stack(train), torch.stack(held) if held else empty, volumes, held_records,
-                        source=str(folder))
+    return TrainingData(torch.stack(train), torch.stack(held) if held else empty, volumes, held_records)
 
 
 def _folder(cfg: Config) -> TrainingData:
@@ -89,11 +91,10 @@ def _folder(cfg: Config) -> TrainingData:
     rest = (1.0 - d.split) / 2.0
     sets = PhotoCollection.load_splits(d.path, resolution=cfg.model.resolution, splits=(d.split, rest, rest),
                                        seed=d.seed, background=d.background, threshold=d.threshold,
-                                       alpha_only=cfg.render.model in ("vh", "ao"), crop=d.crop)
+                                       alpha_only=CHANNELS[cfg.render.model] == 1, crop=d.crop)
     train = torch.stack([sets["train"][i] for i in range(len(sets["train"]))])
     held = [sets[s][i] for s in ("val", "test") for i in range(len(sets[s]))]
-    return TrainingData(train, torch.stack(held) if held else torch.zeros(0, *train.shape[1:]),
-                        source=str(d.path))
+    return TrainingData(train, torch.stack(held) if held else torch.zeros(0, *train.shape[1:]))
 
 
 def load_training_data(cfg: Config, progress: bool = True) -> TrainingData:

@@ -21,7 +21,10 @@ from typing import Callable, Tuple
 import torch
 import torch.nn.functional as F
 
-__all__ = ["d_loss", "g_loss", "gradient_penalty", "soft_accuracy_counts", "hard_accuracy_counts"]
+__all__ = ["LOSSES", "d_loss", "g_loss", "gradient_penalty", "soft_accuracy_counts", "hard_accuracy_counts"]
+
+#: The GAN losses of :func:`d_loss` / :func:`g_loss` (anything but the first is WGAN-GP).
+LOSSES = ("nonsaturating", "wgan-gp")
 
 
 def d_loss(kind: str, real: torch.Tensor, fake: torch.Tensor) -> torch.Tensor:

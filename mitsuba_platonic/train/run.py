@@ -51,15 +51,20 @@ import yaml
 
 from ..config import Config, ConfigError
 from ..errors import Interrupted, UserError
+from ..fileio import atomic_write
 from ..images import composite, linear_to_srgb, to_hwc
 from ..views import front_view, turntable
+from ..volume import CHANNELS
 from .data import load_training_data
 from .trainer import Trainer
 
 __all__ = ["train", "load_run", "RunError", "save_checkpoint", "load_checkpoint", "load_latest_checkpoint",
-           "run_lock", "SAMPLE_VIEWS", "read_run_config"]
+           "run_lock", "SAMPLE_VIEWS", "read_run_config", "DEVICES"]
 
 CHECKPOINT_VERSION = 1
+
+#: run.device: 'auto' picks CUDA when available.
+DEVICES = ("auto", "cpu", "cuda")
 
 
 class RunError(UserError):
@@ -76,17 +81,11 @@ def _device(cfg: Config, local_rank: int) -> torch.device:
 
 def save_checkpoint(path: Path, payload: Dict[str, Any]) -> None:
     """``torch.save`` to a temporary sibling, fsync, then rename over ``path`` (atomic)."""
-    path.parent.mkdir(parents=True, exist_ok=True)
-    tmp = path.with_name(f".{path.name}.tmp{os.getpid()}")
-    try:
+    def write(tmp: Path) -> None:
         with open(tmp, "wb") as f:
             torch.save(payload, f)
-            f.flush()
-            os.fsync(f.fileno())
-        os.replace(tmp, path)
-    finally:
-        if tmp.exists():
-            tmp.unlink()
+
+    atomic_write(path, write, durable=True)
 
 
 def load_checkpoint(path: Path, device: torch.device = torch.device("cpu")) -> Dict[str, Any]:
@@ -119,6 +118,8 @@ def load_latest_checkpoint(folder: Path, device: torch.device = torch.device("cp
             state = load_checkpoint(path, device)
             if not isinstance(state, dict) or not {"step", "trainer", "config"} <= set(state):
                 raise ValueError("not a training checkpoint")
+            if state.get("version") != CHECKPOINT_VERSION:
+                raise ValueError(f"checkpoint format {state.get('version')!r}, this version reads {CHECKPOINT_VERSION}")
         except Exception as e:  # torch.load raises RuntimeError, EOFError, UnpicklingError, ... for torn files
             failed.append((path, _one_line(e)))
             continue
@@ -266,12 +267,14 @@ class _ScalarLog:
         keys: List[str] = []
         for r in self.rows:
             keys += [k for k in r if k not in keys]
-        tmp = self.path.with_suffix(".tmp")
-        with open(tmp, "w", newline="") as f:
-            w = csv.DictWriter(f, fieldnames=keys)
-            w.writeheader()
-            w.writerows(self.rows)
-        os.replace(tmp, self.path)
+
+        def write(tmp: Path) -> None:
+            with open(tmp, "w", newline="") as f:
+                w = csv.DictWriter(f, fieldnames=keys)
+                w.writeheader()
+                w.writerows(self.rows)
+
+        atomic_write(self.path, write)
         if self.tb is not None:
             self.tb.flush()
 
@@ -309,7 +312,6 @@ def train(cfg: Config, resume: bool = False, progress: bool = True,
 def _train(cfg: Config, run_dir: Path, resume: bool, progress: bool, stop_at: Optional[int],
            rank: int, world: int, local_rank: int) -> Path:
     from tqdm.auto import tqdm
-    import drjit as dr  # noqa: F401  (the backend check ran at import)
 
     device = _device(cfg, local_rank)
     if cfg.run.threads:
@@ -497,7 +499,7 @@ def load_run(run_dir: Path, device: str = "cpu") -> Tuple[Config, Trainer, int]:
         cfg = _build(Config, saved, "").validate()
     except ConfigError as e:
         raise RunError(f"{path}: the config saved in this checkpoint is not valid: {e}") from None
-    c = 1 if cfg.render.model in ("vh", "ao") else 4
+    c = CHANNELS[cfg.render.model]
     r = cfg.model.resolution
     dummy = TrainingData(torch.zeros(1, c, r, r), torch.zeros(0, c, r, r),
                          torch.zeros(1, c, r, r, r) if cfg.train.mode != "platonic" else None)

@@ -39,16 +39,22 @@ from torch import nn
 
 from ..config import Config
 from ..models import NetConfig, build_networks
-from ..views import front_view, sample_views
+from ..views import DEFAULT_ELEVATION, front_view, sample_views
+from ..volume import CHANNELS
 from .data import TrainingData
 from .losses import d_loss, g_loss, gradient_penalty, hard_accuracy_counts, soft_accuracy_counts
 from .renderer import make_renderer
 
-__all__ = ["Trainer", "net_config"]
+__all__ = ["Trainer", "net_config", "TASKS", "MODES"]
+
+#: What E/G learn: reconstruct the input image, or generate from z ~ N(0, I).
+TASKS = ("reconstruction", "generation")
+#: Which critics train G (module docstring).
+MODES = ("platonic", "platonic3d", "gan3d")
 
 
 def net_config(cfg: Config) -> NetConfig:
-    channels = 1 if cfg.render.model in ("vh", "ao") else 4
+    channels = CHANNELS[cfg.render.model]
     return NetConfig(resolution=cfg.model.resolution, volume_channels=channels, image_channels=channels,
                      latent=cfg.model.latent, width=cfg.model.width, norm=cfg.model.norm,
                      encoder_hidden=cfg.model.encoder_hidden).validate()
@@ -101,9 +107,10 @@ class Trainer:
 
     # -- one step ---------------------------------------------------------------------------
 
-    def generator(self, step: int, stream: int = 0) -> torch.Generator:
+    def generator(self, step: int) -> torch.Generator:
+        """The step's generator: seeded by (run seed, step), so a resumed run draws the same batch."""
         g = torch.Generator()
-        g.manual_seed(int(np.random.SeedSequence([self.cfg.run.seed, step, stream]).generate_state(1)[0]))
+        g.manual_seed(int(np.random.SeedSequence([self.cfg.run.seed, step, 0]).generate_state(1)[0]))
         return g
 
     def _shard(self, x: torch.Tensor) -> torch.Tensor:
@@ -114,7 +121,7 @@ class Trainer:
         t = self.cfg.train
         kwargs = {}
         if t.view_distribution != "sphere":
-            e = t.elevation if t.elevation is not None else ((0.0, 60.0) if t.view_distribution == "band" else 20.0)
+            e = t.elevation if t.elevation is not None else DEFAULT_ELEVATION[t.view_distribution]
             kwargs["elevation"] = tuple(e) if isinstance(e, list) else e
         return sample_views(n, t.view_distribution, seed=g, **kwargs)
 
