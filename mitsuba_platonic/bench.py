@@ -70,6 +70,7 @@ import torch
 import torch.nn.functional as F
 
 from .compare import _sync, best_of
+from .models import RESOLUTIONS
 from .views import camera_frames, sample_views
 from .volume import CHANNELS, test_volume
 
@@ -80,7 +81,6 @@ __all__ = ["BenchSettings", "run_bench", "write_outputs", "write_doc", "marcher_
 #: The converged reference every row of our image formation is measured against.
 REFERENCE_OPTIONS: Dict[str, Any] = {"step": 0.25, "spp": 16, "jitter": False, "filter": "trilinear"}
 #: Resolutions the bench accepts (those the training configuration accepts).
-RESOLUTIONS = (16, 32, 64, 128)
 #: The authors' EA layer: depth samples per ray and density factor (see :func:`authors_ea`).
 AUTHORS_DEPTH_SAMPLES = 1024
 AUTHORS_DENSITY_FACTOR = 100.0

@@ -15,13 +15,15 @@ from typing import Any, Dict
 
 import torch
 
+from ..volume import MODELS
+from .closed_form import FILTERS as GRID_SAMPLE_MODES
+
 __all__ = ["RenderSettings", "render_with", "BACKENDS", "MODELS", "FILTERS", "LIGHTINGS", "OPTIONS_OF"]
 
 #: Backends: the paper's closed-form layers (reference), the batched Dr.Jit ray marcher, and
 #: Mitsuba's differentiable volumetric path tracer under natural light.
 BACKENDS = ("closed_form", "mitsuba", "physical")
-MODELS = ("vh", "ao", "ea")
-FILTERS = ("trilinear", "nearest")
+FILTERS = tuple(GRID_SAMPLE_MODES)                          # trilinear, nearest
 LIGHTINGS = ("sunsky", "envmap", "mixed")
 
 #: Which settings each backend reads (besides backend and model); any other is an error in ``render``.

@@ -316,6 +316,11 @@ def _train(cfg: Config, run_dir: Path, resume: bool, progress: bool, stop_at: Op
     device = _device(cfg, local_rank)
     if cfg.run.threads:
         torch.set_num_threads(cfg.run.threads)
+        if cfg.render.backend != "closed_form":              # Dr.Jit renders: its thread pool too
+            from ..render.variant import ensure_variant
+            ensure_variant()
+            import drjit as dr
+            dr.set_thread_count(cfg.run.threads)
     last = run_dir / "checkpoints" / "last.pt"
     if rank == 0:
         existing = _checkpoint_files(last.parent)
