@@ -27,7 +27,7 @@ from ..volume import CHANNELS, voxel_size
 from .settings import RenderSettings
 from .variant import ensure_variant, variant_device
 
-__all__ = ["to_mitsuba_grid", "render_mitsuba", "build_scene"]
+__all__ = ["to_mitsuba_grid", "render_mitsuba", "build_scene", "grid_dict", "sensor_dict"]
 
 
 def to_mitsuba_grid(v: torch.Tensor) -> torch.Tensor:
@@ -58,19 +58,33 @@ _SCENES: Dict[Tuple, _Bundle] = {}
 NEAR_CLIP = 2.0 ** -7
 
 
+def grid_dict(mi: Any, data: Any, filter: str, **extra: Any) -> Dict[str, Any]:
+    """A raw ``gridvolume`` over the cube [−1, 1]³ holding ``data`` (``[Z, Y, X, C]``)."""
+    return {"type": "gridvolume", "grid": mi.VolumeGrid(data), "to_world": grid_to_world(mi),
+            "filter_type": filter, "raw": True, **extra}
+
+
+def sensor_dict(mi: Any, n: int, spp: int, origin: Any, up: Any, film: Optional[Dict[str, Any]] = None,
+                **extra: Any) -> Dict[str, Any]:
+    """An orthographic sensor at ``origin`` looking at the origin with image up ``up``: an N×N RGB
+    film covering [−1, 1]², a box filter, ``spp`` independent samples (``film``/``extra``: more keys)."""
+    return {"type": "orthographic",
+            "to_world": mi.ScalarTransform4f().look_at(origin=[float(x) for x in origin], target=[0.0, 0.0, 0.0],
+                                                       up=[float(x) for x in up]),
+            "film": {"type": "hdrfilm", "width": n, "height": n, "pixel_format": "rgb",
+                     "rfilter": {"type": "box"}, **(film or {})},
+            "sampler": {"type": "independent", "sample_count": int(spp)}, **extra}
+
+
 def build_scene(n: int, model: str, options: RenderSettings) -> Dict[str, Any]:
     """The Mitsuba scene dictionary for an N³ volume under ``model`` (grids start empty)."""
     mi = ensure_variant()
     import drjit as dr
     from . import raymarch  # noqa: F401  (registers the integrator)
     Δ = voxel_size(n)
-    to_world = grid_to_world(mi)
 
     def grid(channels: int):
-        return mi.load_dict({
-            "type": "gridvolume", "filter_type": options.filter, "raw": True, "to_world": to_world,
-            "grid": mi.VolumeGrid(dr.zeros(mi.TensorXf, (n, n, n, channels))),
-        })
+        return mi.load_dict(grid_dict(mi, dr.zeros(mi.TensorXf, (n, n, n, channels)), options.filter))
 
     density = grid(1)
     medium = {"type": "heterogeneous", "sigma_t": density, "scale": 1.0 / Δ}
@@ -85,16 +99,9 @@ def build_scene(n: int, model: str, options: RenderSettings) -> Dict[str, Any]:
         "type": "scene",
         "integrator": integrator,
         "medium": medium,
-        "sensor": {
-            "type": "orthographic",
-            "to_world": mi.ScalarTransform4f().look_at(origin=[0, 0, 2], target=[0, 0, 0], up=[0, 1, 0]),
-            # dyadic clip distances keep ray origins and depths exact in float32 at the front view
-            "near_clip": NEAR_CLIP, "far_clip": 8.0,
-            "medium": {"type": "ref", "id": "medium"},
-            "film": {"type": "hdrfilm", "width": n, "height": n, "pixel_format": "rgb",
-                     "rfilter": {"type": "box"}, "sample_border": False},
-            "sampler": {"type": "independent", "sample_count": options.spp},
-        },
+        # dyadic clip distances keep ray origins and depths exact in float32 at the front view
+        "sensor": sensor_dict(mi, n, options.spp, (0, 0, 2), (0, 1, 0), film={"sample_border": False},
+                              near_clip=NEAR_CLIP, far_clip=8.0, medium={"type": "ref", "id": "medium"}),
     }
 
 

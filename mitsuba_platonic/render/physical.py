@@ -33,9 +33,9 @@ from typing import Any, Dict, List, Optional, Sequence, Tuple
 import numpy as np
 import torch
 
-from ..views import camera_frames
+from ..views import camera_frames, front_view
 from ..volume import voxel_size
-from .mitsuba_renderer import grid_to_world, to_mitsuba_grid
+from .mitsuba_renderer import grid_dict, sensor_dict, to_mitsuba_grid
 from .variant import ensure_variant, variant_device
 
 __all__ = ["Lighting", "sample_lighting", "render_physical", "render_physical_ad", "extinction",
@@ -134,29 +134,31 @@ def _medium_grids(v: torch.Tensor) -> Tuple[np.ndarray, np.ndarray]:
             to_mitsuba_grid(v[:3]).contiguous().numpy().astype(np.float32))
 
 
+def _scene_dict(mi: Any, n: int, integrator: str, σ: Any, albedo: Any, view: torch.Tensor, emitter: Dict[str, Any],
+                spp: int, max_depth: int, filter: str, σ_max: Optional[float] = None) -> Dict[str, Any]:
+    """The path-traced scene: the medium in a null-BSDF cube, an orthographic camera at 3ω, one emitter.
+
+    ``σ``/``albedo``: grid data ``[Z, Y, X, C]``; ``σ_max``: the extinction grid's majorant, above
+    its largest value (``prbvolpath``'s gradients need null collisions everywhere).
+    """
+    right, up, w = camera_frames(view[None])
+    σ_grid = grid_dict(mi, σ, filter, **({"max_value": σ_max} if σ_max is not None else {}))
+    return {
+        "type": "scene",
+        "integrator": {"type": integrator, "max_depth": int(max_depth), "hide_emitters": True},
+        "emitter": emitter,
+        "volume": {"type": "cube", "bsdf": {"type": "null"},
+                   "interior": {"type": "heterogeneous", "sigma_t": σ_grid, "albedo": grid_dict(mi, albedo, filter),
+                                "scale": 1.0, "phase": {"type": "isotropic"}}},
+        "sensor": sensor_dict(mi, n, spp, 3.0 * w[0], up[0]),
+    }
+
+
 def _scene(mi: Any, v: torch.Tensor, view: torch.Tensor, lighting: Lighting, spp: int,
            max_depth: int, filter: str) -> Any:
     σ, albedo = _medium_grids(v)
-    right, up, w = camera_frames(view[None])
-    n = v.shape[-1]
-    to_world = grid_to_world(mi)
-    grid = lambda data, raw: {"type": "gridvolume", "grid": mi.VolumeGrid(data), "to_world": to_world,
-                              "filter_type": filter, "raw": raw}
-    return mi.load_dict({
-        "type": "scene",
-        "integrator": {"type": "volpath", "max_depth": int(max_depth), "hide_emitters": True},
-        "emitter": lighting.emitter(mi),
-        "volume": {"type": "cube", "bsdf": {"type": "null"},
-                   "interior": {"type": "heterogeneous", "sigma_t": grid(σ, True), "albedo": grid(albedo, True),
-                                "scale": 1.0, "phase": {"type": "isotropic"}}},
-        "sensor": {"type": "orthographic",
-                   "to_world": mi.ScalarTransform4f().look_at(origin=[3.0 * float(x) for x in w[0]],
-                                                             target=[0.0, 0.0, 0.0],
-                                                             up=[float(x) for x in up[0]]),
-                   "film": {"type": "hdrfilm", "width": n, "height": n, "pixel_format": "rgb",
-                            "rfilter": {"type": "box"}},
-                   "sampler": {"type": "independent", "sample_count": int(spp)}},
-    })
+    return mi.load_dict(_scene_dict(mi, v.shape[-1], "volpath", σ, albedo, view, lighting.emitter(mi), spp,
+                                    max_depth, filter))
 
 
 def render_physical(volume: torch.Tensor, views: torch.Tensor, lighting: Sequence[Lighting],
@@ -207,23 +209,10 @@ def _ad_scene(n: int, spp: int, max_depth: int, filter: str) -> Tuple[Any, Any]:
         mi = ensure_variant()
         import drjit as dr
         σ_cap = -math.log(1.0 - V_MAX_PHYSICAL) / voxel_size(n)
-        to_world = grid_to_world(mi)
-        grid = lambda c, extra: {"type": "gridvolume", "to_world": to_world, "filter_type": filter, "raw": True,
-                                 "grid": mi.VolumeGrid(dr.zeros(mi.TensorXf, (n, n, n, c))), **extra}
-        scene = mi.load_dict({
-            "type": "scene",
-            "integrator": {"type": "prbvolpath", "max_depth": int(max_depth), "hide_emitters": True},
-            "emitter": Lighting().emitter(mi),
-            "volume": {"type": "cube", "bsdf": {"type": "null"},
-                       "interior": {"type": "heterogeneous", "scale": 1.0, "phase": {"type": "isotropic"},
-                                    "sigma_t": grid(1, {"max_value": MAJORANT_HEADROOM * σ_cap}),
-                                    "albedo": grid(3, {})}},
-            "sensor": {"type": "orthographic",
-                       "to_world": mi.ScalarTransform4f().look_at(origin=[0, 0, 3], target=[0, 0, 0], up=[0, 1, 0]),
-                       "film": {"type": "hdrfilm", "width": n, "height": n, "pixel_format": "rgb",
-                                "rfilter": {"type": "box"}},
-                       "sampler": {"type": "independent", "sample_count": int(spp)}},
-        })
+        scene = mi.load_dict(_scene_dict(mi, n, "prbvolpath", dr.zeros(mi.TensorXf, (n, n, n, 1)),
+                                         dr.zeros(mi.TensorXf, (n, n, n, 3)), front_view(1)[0],
+                                         Lighting().emitter(mi), spp, max_depth, filter,
+                                         σ_max=MAJORANT_HEADROOM * σ_cap))
         _AD_SCENES[key] = (scene, mi.traverse(scene))
     return _AD_SCENES[key]
 
