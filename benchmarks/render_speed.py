@@ -15,7 +15,6 @@ from __future__ import annotations
 
 import argparse
 import platform
-import time
 from typing import Callable, Dict, List
 
 import torch
@@ -23,19 +22,16 @@ import torch
 import mitsuba_platonic as mp
 from mitsuba_platonic import views as V
 from mitsuba_platonic.bench import plain_ea
+from mitsuba_platonic.compare import best_of
 from mitsuba_platonic.render.mitsuba_renderer import render_mitsuba
 from mitsuba_platonic.render.variant import ensure_variant
 from mitsuba_platonic.volume import test_volume
 
 
 def best_time(fn: Callable[[], None], repeats: int) -> float:
-    fn()  # warm-up: kernel compilation and recording, caches
-    times = []
-    for _ in range(repeats):
-        t = time.perf_counter()
-        fn()
-        times.append(time.perf_counter() - t)
-    return min(times)
+    """The best of ``repeats`` timed calls after one warm-up call (kernel compilation and recording)."""
+    fn()
+    return best_of(fn, repeats)
 
 
 def speed(resolutions: List[int], batch: int, repeats: int) -> None:

@@ -40,7 +40,7 @@ warm-up call):
   over the bound, ``fwd_over_bound`` / ``fwd_bwd_over_bound``.
 
 Plus training images/s per renderer (closed form, the marcher, the path tracer at spp 1 depth 2)
-for one small reconstruction configuration (see ``benchmarks/train_speed.py``).
+for one small reconstruction configuration (:func:`_bench_train`).
 
 Outputs (:func:`write_outputs`): ``bench.json`` (every measured row and the run's settings),
 ``bench.md`` (the tables) and ``pareto_<model>_<N>.png`` (image RMSE vs forward+backward ms per

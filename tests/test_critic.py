@@ -11,21 +11,14 @@ from mitsuba_platonic.data import shapes
 from mitsuba_platonic.train.data import load_training_data
 from mitsuba_platonic.train.losses import d_loss, hard_accuracy_counts, soft_accuracy_counts
 from mitsuba_platonic.train.trainer import Trainer
-from mitsuba_platonic.volume import voxel_centres
+from tiny_shapes import ellipsoid
 
 TINY = "tiny_ball"
 
 
-def _ball(rng, n):
-    p = voxel_centres(n)
-    density = torch.sigmoid(-((p.norm(dim=-1) / rng.uniform(0.4, 0.7)) - 1.0) * n / 2.0)
-    rgb = torch.tensor(rng.uniform(0.2, 0.9, size=3))[:, None, None, None].expand(3, n, n, n)
-    return torch.cat([rgb, density[None]]).float()
-
-
 @pytest.fixture(scope="module", autouse=True)
 def tiny_class():
-    with shapes.registered(TINY, _ball):
+    with shapes.registered(TINY, ellipsoid):
         yield
 
 

@@ -77,7 +77,7 @@ from .variant import ensure_variant, variant_device
 mi = ensure_variant()
 import drjit as dr  # noqa: E402  (after the variant is set)
 
-__all__ = ["march", "n_segments", "V_MAX", "RECORD_LIMIT"]
+__all__ = ["march", "n_segments", "segment_transmittance", "V_MAX", "RECORD_LIMIT"]
 
 #: Density clamp used by AO/EA when step != 1 (log domain).
 V_MAX = 1.0 - 1e-6
@@ -89,6 +89,21 @@ RECORD_LIMIT = 2 ** 29
 def n_segments(n: int, step: float) -> int:
     """Segments per ray: ⌈N / step⌉ (the last one may be shorter)."""
     return max(1, math.ceil(n / step - 1e-9))
+
+
+def segment_transmittance(model: str, step: float, v: Any, s: Any) -> Tuple[Any, Any]:
+    """τ of a segment of s voxels at density v, and dτ/dv (module docstring, "Image formation").
+
+    VH: τ = exp(−s v). AO/EA at step 1: τ = 1 − v, exact at v = 1. Other steps: the log domain
+    with v clamped to :data:`V_MAX` (dτ/dv = 0 above the clamp).
+    """
+    if model == "vh":
+        τ = dr.exp(-s * v)
+        return τ, -s * τ
+    if step == 1.0:
+        return 1.0 - v, mi.Float(-1.0)
+    log1m = dr.log(1.0 - dr.minimum(v, V_MAX))
+    return dr.exp(s * log1m), dr.select(v >= V_MAX, 0.0, -s * dr.exp((s - 1.0) * log1m))
 
 
 # -- Threads -------------------------------------------------------------------------------
@@ -223,16 +238,7 @@ class _Batch:
 
     def transmittance(self, v: Any, s: Any) -> Tuple[Any, Any]:
         """τ of a segment of s voxels at density v, and dτ/dv."""
-        if self.model == "vh":
-            τ = dr.exp(-s * v)
-            return τ, -s * τ
-        if self.opt.step == 1.0:
-            return 1.0 - v, mi.Float(-1.0)                        # exact product form at step 1
-        clamped = v >= V_MAX
-        log1m = dr.log(1.0 - dr.minimum(v, V_MAX))                # log domain, density clamped
-        τ = dr.exp(s * log1m)
-        dτ = dr.select(clamped, 0.0, -s * dr.exp((s - 1.0) * log1m))
-        return τ, dτ
+        return segment_transmittance(self.model, self.opt.step, v, s)
 
     # -- Forward ---------------------------------------------------------------------------
 
@@ -404,8 +410,8 @@ def _backward_pass(data: Any, frames: Any, seed: Any, Ts: Any, marched: Any, δ:
 
 
 #: Replay the recorded kernels of both passes instead of re-tracing them (Dr.Jit's ``dr.freeze``):
-#: a new (batch, resolution, settings) records once, later calls only launch. Set
-#: ``MITSUBA_PLATONIC_FREEZE=0`` to trace every call (the bench measures both).
+#: a new (batch, resolution, settings, thread count) records once, later calls only launch. Set
+#: ``MITSUBA_PLATONIC_FREEZE=0`` to trace every call.
 FREEZE = os.environ.get("MITSUBA_PLATONIC_FREEZE", "1") != "0"
 _frozen_forward = dr.freeze(_forward_pass, limit=64, warn_after=10_000)
 _frozen_backward = dr.freeze(_backward_pass, limit=64, warn_after=10_000)

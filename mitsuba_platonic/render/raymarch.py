@@ -50,12 +50,12 @@ from .variant import ensure_variant
 mi = ensure_variant()
 import drjit as dr  # noqa: E402  (after the variant is set)
 
+from .marcher import V_MAX, n_segments, segment_transmittance  # noqa: E402  (one owner of the formulas)
+
 __all__ = ["RayMarcher", "INTEGRATOR_NAME", "V_MAX"]
 
 INTEGRATOR_NAME = "platonic_raymarch"
 
-#: Density clamp used by AO/EA when step != 1 (log domain).
-V_MAX = 1.0 - 1e-6
 
 
 class RayMarcher(mi.ad.integrators.common.RBIntegrator):
@@ -77,7 +77,7 @@ class RayMarcher(mi.ad.integrators.common.RBIntegrator):
         self.density = props.get("density")
         self.albedo = props.get("albedo") if self.model == "ea" else None
         self.Δ = 2.0 / self.resolution
-        self.n_steps = max(1, math.ceil(self.resolution / self.step - 1e-9))
+        self.n_steps = n_segments(self.resolution, self.step)
 
     def aov_names(self):
         return ["alpha"] if self.model == "ea" else []
@@ -139,12 +139,7 @@ class RayMarcher(mi.ad.integrators.common.RBIntegrator):
         it.p = p
         pad = self._padding_weight(p)
         v = self.density.eval_1(it) * pad
-        if self.model == "vh":
-            τ = dr.exp(-s * v)
-        elif self.step == 1.0:
-            τ = 1.0 - v                                       # exact product form at step 1
-        else:
-            τ = dr.exp(s * dr.log(1.0 - dr.minimum(v, V_MAX)))  # log domain, density clamped
+        τ, _ = segment_transmittance(self.model, self.step, v, s)   # the batched marcher's formula
         c = self.albedo.eval(it) * pad if (colour and self.albedo is not None) else None
         return τ, c
 
