@@ -453,31 +453,16 @@ def _add_train(sub: "argparse._SubParsersAction") -> None:
 
 
 def _cmd_reconstruct(args: argparse.Namespace) -> int:
-    from .data.photos import decode_image, prepare_image
-    from .export import extract_mesh, save_gif, save_ply, save_volume, turntable_frames
-    from .train import load_run
-    from .volume import CHANNELS
+    from .export import export_reconstructions
+    from .model import Model
 
-    cfg, trainer, step = load_run(Path(args.run))
-    if cfg.train.task != "reconstruction":
-        raise CLIError(f"{args.run} was trained for {cfg.train.task!r}; reconstruction needs an encoder "
-                       f"(train.task: reconstruction)")
+    model = Model.from_checkpoint(args.run)
     out = Path(args.out) if args.out else Path(args.run) / "reconstructions"
-    model = cfg.render.model
-    for image in args.images:
-        path = Path(image)
-        x = prepare_image(decode_image(path), cfg.model.resolution, background=args.background,
-                          crop=args.crop, name=str(path))
-        x = torch.from_numpy(x[3:] if CHANNELS[model] == 1 else x)[None]
-        vol = trainer.reconstruct(x)[0].cpu()
-        stem = out / path.stem
-        written = save_volume(vol, stem)
-        written.append(save_gif(turntable_frames(vol, model), stem.with_suffix(".gif")))
-        try:
-            written.append(save_ply(extract_mesh(vol, level=args.level), stem.with_suffix(".ply")))
-        except ValueError as e:
-            print(f"{path}: no mesh: {e}", file=sys.stderr)
-        print(f"{path} → " + ", ".join(str(w) for w in written))
+    for path, done in export_reconstructions(model, args.images, out, background=args.background, crop=args.crop,
+                                             level=args.level):
+        if done.no_mesh:
+            print(f"{path}: no mesh: {done.no_mesh}", file=sys.stderr)
+        print(f"{path} → " + ", ".join(str(p) for p in done.paths))
     return 0
 
 
@@ -497,23 +482,13 @@ def _add_reconstruct(sub: "argparse._SubParsersAction") -> None:
 
 
 def _cmd_generate(args: argparse.Namespace) -> int:
-    from .export import save_gif, save_volume, turntable_frames
-    from .train import load_run
-    from PIL import Image
+    from .export import export_samples
+    from .model import Model
 
-    cfg, trainer, step = load_run(Path(args.run))
+    model = Model.from_checkpoint(args.run)
     out = Path(args.out) if args.out else Path(args.run) / "generated"
-    g = torch.Generator().manual_seed(args.seed)
-    vols = trainer.generate(torch.randn(args.n, cfg.model.latent, generator=g)).cpu()
-    tiles = []
-    for i, vol in enumerate(vols):
-        save_volume(vol, out / f"sample_{i:03d}")
-        frames = turntable_frames(vol, cfg.render.model, frames=24)
-        save_gif(frames, out / f"sample_{i:03d}.gif")
-        tiles.append(np.concatenate(frames[::6], axis=1))
-    grid = np.concatenate(tiles, axis=0)
-    Image.fromarray((grid * 255 + 0.5).astype(np.uint8)).save(out / "samples.png")
-    print(f"{args.n} volumes (step {step}) → {out} (samples.png: one row per sample, 4 views)")
+    export_samples(model, args.n, out, seed=args.seed)
+    print(f"{args.n} volumes (step {model.step}) → {out} (samples.png: one row per sample, 4 views)")
     return 0
 
 

@@ -30,7 +30,7 @@ from .render.settings import RenderSettings as RenderConfig
 from .views import DISTRIBUTIONS
 
 __all__ = ["Config", "RunConfig", "DataConfig", "ModelConfig", "RenderConfig", "TrainConfig",
-           "load_config", "apply_overrides", "ConfigError"]
+           "load_config", "config_from_dict", "apply_overrides", "ConfigError"]
 
 
 _FLOAT = re.compile(r"[-+]?(\d+\.?\d*|\.\d+)[eE][-+]?\d+")
@@ -64,7 +64,13 @@ class DataConfig:
     or 'folder' (an unstructured photo collection at ``path``).
     Procedural: shape_class, n_shapes, views_per_shape, formation ('vh'|'ao'|'ea'|'physical'),
     view_distribution ('sphere'|'band'|'ring'), elevation, seed.
-    Folder: background (null | 'white') and threshold for RGB photos on white, crop ('image'|'bbox').
+    Folder: background (null | 'white') and threshold for RGB photos on white, crop ('image'|'bbox');
+    margin: a transparent border, a share of R per side in [0, 0.5) (with crop 'bbox' the object
+    otherwise touches the image edge, where rendered views seldom put it);
+    clean: remove frame lines and specks from masks (false for exact masks, e.g. rendered cut-outs,
+    whose thin parts are real); fill_holes: keep white areas enclosed by an object on white opaque
+    (a white label on a mug); erode: shrink masks by this many source pixels (cut-outs that carry
+    a light fringe of their old background). See mitsuba_platonic.data.photos.
     split: the train split's share; the rest is held out (val/test) for evaluation."""
 
     source: str = "procedural"
@@ -79,8 +85,23 @@ class DataConfig:
     background: Optional[str] = None
     threshold: float = 0.05
     crop: str = "image"
+    margin: float = 0.0
+    clean: bool = True
+    fill_holes: bool = False
+    erode: int = 0
     split: float = 0.9
     seed: int = 0
+
+    def photo_options(self) -> Dict[str, Any]:
+        """Keyword arguments of ``PhotoCollection`` / ``PhotoCollection.load_splits`` for a
+        folder source: the split shares (the held-out rest halved into val and test), the seed
+        and the image options above (``resolution`` and ``alpha_only`` come from the model and
+        renderer)."""
+        rest = (1.0 - self.split) / 2.0
+        return {"splits": (self.split, rest, rest), "seed": self.seed,
+                "background": self.background, "threshold": self.threshold, "crop": self.crop,
+                "margin": self.margin, "clean": self.clean, "fill_holes": self.fill_holes,
+                "erode": self.erode}
 
 
 @dataclass
@@ -166,6 +187,11 @@ class Config:
         _choice("data.view_distribution", self.data.view_distribution, DISTRIBUTIONS)
         _choice("data.background", self.data.background, BACKGROUNDS)
         _choice("data.crop", self.data.crop, CROPS)
+        if not 0.0 <= self.data.margin < 0.5:
+            raise ConfigError(f"data.margin: expected a share in [0, 0.5), got {self.data.margin!r}")
+        if not 0.0 <= self.data.threshold < 1.0:
+            raise ConfigError(f"data.threshold: expected a number in [0, 1), got {self.data.threshold!r}")
+        _non_negative("data.erode", self.data.erode)
         _positive("data.n_shapes", self.data.n_shapes)
         _positive("data.views_per_shape", self.data.views_per_shape)
         if not 0.0 < self.data.split <= 1.0:
@@ -335,5 +361,10 @@ def load_config(path: Optional[Union[str, Path]] = None, overrides: Sequence[str
             data = yaml.safe_load(path.read_text()) or {}
         except yaml.YAMLError as e:
             raise ConfigError(f"{path}: not valid YAML: {e}") from None
-    data = apply_overrides(data, overrides)
+    return config_from_dict(apply_overrides(data, overrides))
+
+
+def config_from_dict(data: Dict[str, Any]) -> Config:
+    """A nested mapping (a YAML file's, a saved ``Config.to_dict()``) → a validated :class:`Config`;
+    :class:`ConfigError` naming the first bad key."""
     return _build(Config, data, "").validate()

@@ -1,5 +1,9 @@
 """Export: volumes to files (.npz, Mitsuba .vol), turntable GIFs, and meshes (PLY with vertex colours).
 
+:func:`export_volume` writes all of them for one volume; :func:`export_reconstructions` and
+:func:`export_samples` are the ``reconstruct`` and ``generate`` pipelines (a model's volumes,
+then :func:`export_volume`), which the command line and the quickstart call.
+
 Mesh extraction: marching cubes on the density channel at iso-level ``level`` (scikit-image),
 in voxel-index space ``(d, h, w)``, mapped to the world by the volume convention
 x = −1 + (w + ½)Δ, y = 1 − (h + ½)Δ, z = 1 − (d + ½)Δ; the flips reverse the triangle winding,
@@ -9,20 +13,24 @@ sampled trilinearly at the vertices, sRGB-encoded to 8 bits (PLY viewers display
 
 from __future__ import annotations
 
+from dataclasses import dataclass, field
 from pathlib import Path
-from typing import List, Sequence, Union
+from typing import TYPE_CHECKING, Iterator, List, Optional, Sequence, Tuple, Union
 
 import numpy as np
 import torch
 import torch.nn.functional as F
 
-from .images import composite, linear_to_srgb, to_hwc
+from .images import composite, linear_to_srgb, save_grid, to_hwc
 from .render import render
 from .views import turntable
 from .volume import voxel_size, world_to_grid
 
+if TYPE_CHECKING:
+    from .model import Model
+
 __all__ = ["save_volume", "write_vol", "display_frames", "turntable_frames", "save_gif", "extract_mesh",
-           "save_ply", "Mesh"]
+           "save_ply", "Mesh", "Exported", "export_volume", "export_reconstructions", "export_samples"]
 
 PathLike = Union[str, Path]
 
@@ -126,3 +134,57 @@ def save_ply(mesh: Mesh, path: PathLike) -> Path:
         f.write(vertex.tobytes())
         f.write(face.tobytes())
     return path
+
+
+# --------------------------------------------------------------------------- whole volumes
+
+
+@dataclass
+class Exported:
+    """What :func:`export_volume` wrote (``paths``), and why it wrote no mesh (``no_mesh``) if it did not."""
+
+    paths: List[Path] = field(default_factory=list)
+    no_mesh: Optional[str] = None
+
+
+def export_volume(volume: torch.Tensor, stem: PathLike, model: str, level: Optional[float] = 0.5,
+                  frames: int = 36) -> Exported:
+    """One ``(C, N, N, N)`` volume → ``stem.npz``, ``stem.vol``, a turntable ``stem.gif`` of
+    ``frames`` closed-form ``model`` renders and, unless ``level`` is None, a marching-cubes
+    mesh ``stem.ply`` at that iso-level (none where the density never crosses it: ``no_mesh`` says so)."""
+    stem = Path(stem)
+    volume = volume.detach().float().cpu()
+    done = Exported(save_volume(volume, stem))
+    done.paths.append(save_gif(turntable_frames(volume, model, frames=frames), stem.with_suffix(".gif")))
+    if level is not None:
+        try:
+            mesh = extract_mesh(volume, level=level)
+        except ValueError as e:                          # the density never crosses the level: no surface
+            done.no_mesh = str(e)
+        else:
+            done.paths.append(save_ply(mesh, stem.with_suffix(".ply")))
+    return done
+
+
+def export_reconstructions(model: "Model", images: Sequence[PathLike], out: PathLike, background: Optional[str] = None,
+                           crop: str = "image", level: float = 0.5) -> Iterator[Tuple[Path, Exported]]:
+    """``platonic reconstruct``: each image file → its volume → :func:`export_volume` as
+    ``out/<image stem>.*``; yields (image path, what was written) as each one is done."""
+    for image in images:
+        path = Path(image)
+        vol = model.reconstruct(model.load_image(path, background=background, crop=crop))[0]
+        yield path, export_volume(vol, Path(out) / path.stem, model.formation, level=level)
+
+
+def export_samples(model: "Model", n: int, out: PathLike, seed: int = 0) -> List[Path]:
+    """``platonic generate``: ``n`` volumes of ``model.generate(n, seed)`` → ``out/sample_NNN``
+    .npz/.vol/.gif (24-frame turntables) and ``out/samples.png`` (one row per sample, 4 views
+    90° apart); returns every path written, the overview last."""
+    out = Path(out)
+    written: List[Path] = []
+    rows = []
+    for i, vol in enumerate(model.generate(n, seed).cpu()):
+        written += export_volume(vol, out / f"sample_{i:03d}", model.formation, level=None, frames=24).paths
+        rows.append(display_frames(vol, model.formation, turntable(4, elevation=20.0)))
+    written.append(save_grid(out / "samples.png", rows))
+    return written

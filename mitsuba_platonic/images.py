@@ -28,6 +28,7 @@ __all__ = [
     "to_hwc",
     "to_uint8",
     "save_png",
+    "save_grid",
     "save_exr",
     "load_exr",
     "exr_channel_names",
@@ -104,6 +105,16 @@ def save_png(path: PathLike, img: np.ndarray) -> Path:
     mode = {1: "L", 3: "RGB", 4: "RGBA"}[arr.shape[2]]
     Image.fromarray(arr[..., 0] if mode == "L" else arr, mode=mode).save(path, format="PNG")
     return path
+
+
+def save_grid(path: PathLike, rows: Sequence[Sequence[np.ndarray]], scale: int = 1) -> Path:
+    """Write tiles as one PNG grid: ``rows[i][j]`` is the float ``(H, W, C)`` tile in row i,
+    column j (every tile the same shape, rows the same length), upscaled ``scale``× (nearest)."""
+    if not rows or not all(len(r) == len(rows[0]) for r in rows) or not len(rows[0]):
+        raise ValueError(f"rows must be a non-empty list of equally long, non-empty rows, got lengths "
+                         f"{[len(r) for r in rows]}")
+    grid = np.concatenate([np.concatenate([_as_image(t, "tile") for t in r], axis=1) for r in rows], axis=0)
+    return save_png(path, grid.repeat(scale, axis=0).repeat(scale, axis=1))
 
 
 def save_exr(path: PathLike, img: np.ndarray, channels: Optional[Sequence[str]] = None) -> Path:

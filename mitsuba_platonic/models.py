@@ -26,7 +26,8 @@ from typing import List
 import torch
 from torch import nn
 
-__all__ = ["NetConfig", "Encoder", "Generator", "Discriminator", "VolumeDiscriminator", "build_networks"]
+__all__ = ["NetConfig", "Encoder", "Generator", "Discriminator", "VolumeDiscriminator", "build_networks",
+           "init_weights"]
 
 NORMS = ("batch", "instance", "none")
 RESOLUTIONS = (16, 32, 64, 128)
@@ -176,7 +177,7 @@ class Encoder(nn.Module):
         return self.head(self.hidden(self.trunk(x)).flatten(1))
 
 
-def _init(m: nn.Module) -> None:
+def init_weights(m: nn.Module) -> None:
     """DCGAN initialisation: N(0, 0.02) weights, norm scales N(1, 0.02)."""
     if isinstance(m, (nn.Conv2d, nn.Conv3d, nn.ConvTranspose3d, nn.Linear)):
         nn.init.normal_(m.weight, 0.0, 0.02)
@@ -192,5 +193,5 @@ def build_networks(cfg: NetConfig, volume_discriminator: bool = False) -> nn.Mod
     nets = nn.ModuleDict({"E": Encoder(cfg), "G": Generator(cfg), "D": Discriminator(cfg)})
     if volume_discriminator:
         nets["D3"] = VolumeDiscriminator(cfg)
-    nets.apply(_init)
+    nets.apply(init_weights)
     return nets

@@ -25,8 +25,9 @@ import numpy as np
 import torch
 
 from .config import load_config
-from .export import extract_mesh, save_gif, save_ply, save_volume, turntable_frames
+from .export import export_volume
 from .images import composite, linear_to_srgb, save_png, to_hwc
+from .model import Model
 from .render import render
 from .render.closed_form import rotate
 from .views import from_angles, front_view, turntable
@@ -76,11 +77,17 @@ def novel_view_errors(recon: torch.Tensor, truth_in_frame: torch.Tensor, model: 
     return float((a - b).abs().mean()), silhouette_iou(a, b)
 
 
-def _evaluate(trainer, data, model: str, limit: int = 64) -> Dict[str, float]:
-    """Input-view and novel-view errors of a trainer on held-out images (and of the billboard)."""
+def _evaluate(net: Model, data, model: Optional[str] = None, limit: int = 64) -> Dict[str, float]:
+    """Input-view and novel-view errors of a :class:`~mitsuba_platonic.model.Model` on held-out
+    images (and of the billboard), rendered with image formation ``model`` (default: the model's).
+
+    ``net`` may also be a trainer, whose ``model`` is scored (benchmarks/train_defaults.py passes one).
+    """
+    net = getattr(net, "model", net)
+    model = model or net.formation
     records = data.held_out_records[:limit]
     images = data.held_out[:limit]
-    recon = trainer.reconstruct(images).cpu()
+    recon = net.reconstruct(images).cpu()
     front = front_view(len(images))
     with torch.no_grad():
         rendered = render(recon, front, model)
@@ -108,8 +115,7 @@ def _evaluate(trainer, data, model: str, limit: int = 64) -> Dict[str, float]:
 def quickstart(out: Path = Path("quickstart"), steps: Optional[int] = None, progress: bool = True) -> Path:
     """Run the quickstart into ``out``; return the path of its report."""
     from .train.data import load_training_data
-    from .train.run import load_run, train
-    from .train.trainer import Trainer
+    from .train.run import train
 
     t0 = time.perf_counter()
     overrides = [f"run.out_dir={out}", f"data.cache={out / 'data'}"]
@@ -120,26 +126,21 @@ def quickstart(out: Path = Path("quickstart"), steps: Optional[int] = None, prog
     resume = (run_dir / "checkpoints" / "last.pt").exists()
     data = load_training_data(cfg, progress=progress)
     t_data = time.perf_counter() - t0
-    untrained = _evaluate(Trainer(cfg, data, torch.device("cpu")), data, cfg.render.model)
+    torch.manual_seed(cfg.run.seed)
+    untrained = _evaluate(Model.from_config(cfg), data)          # a fresh model, drawn from the run's seed
     train(cfg, resume=resume, progress=progress)
     t_train = time.perf_counter() - t0 - t_data
-    _, trainer, step = load_run(run_dir)
-    trained = _evaluate(trainer, data, cfg.render.model)
+    model = Model.from_checkpoint(run_dir)
+    step = model.step
+    trained = _evaluate(model, data)
 
     recon_dir = out / "reconstructions"
     written: List[str] = []
     picks = torch.linspace(0, len(data.held_out) - 1, min(4, len(data.held_out))).long().tolist()
     for i, j in enumerate(picks):                       # spread over the held-out set: different shapes
-        vol = trainer.reconstruct(data.held_out[j:j + 1])[0].cpu()
         stem = recon_dir / f"heldout_{i}"
-        save_volume(vol, stem)
-        save_gif(turntable_frames(vol, cfg.render.model), stem.with_suffix(".gif"))
-        written.append(str(stem.with_suffix(".gif")))
-        try:
-            save_ply(extract_mesh(vol), stem.with_suffix(".ply"))
-            written.append(str(stem.with_suffix(".ply")))
-        except ValueError:
-            pass
+        done = export_volume(model.reconstruct(data.held_out[j:j + 1])[0], stem, model.formation)
+        written += [str(p) for p in done.paths if p.suffix in (".gif", ".ply")]
         save_png(stem.with_name(stem.name + "_input.png"), linear_to_srgb(composite(to_hwc(data.held_out[j]), 1.0)))
 
     with open(run_dir / "scalars.csv") as f:

@@ -36,39 +36,32 @@ from __future__ import annotations
 
 import csv
 import os
-import re
 import signal
-import sys
 import time
 from contextlib import contextmanager
 from pathlib import Path
 from typing import Any, Dict, Iterator, List, Optional, Tuple
 
-import numpy as np
 import torch
 import torch.distributed as dist
 import yaml
 
-from ..config import Config, ConfigError
+from ..checkpoint import (CHECKPOINT_VERSION, RunError, checkpoint_files, load_checkpoint, load_latest_checkpoint,
+                          read_checkpoint, save_checkpoint)
+from ..config import Config, ConfigError, config_from_dict
 from ..errors import Interrupted, UserError
 from ..fileio import atomic_write
-from ..images import composite, linear_to_srgb, to_hwc
+from ..images import composite, linear_to_srgb, save_grid, to_hwc
+from ..model import Model
 from ..views import front_view, turntable
-from ..volume import CHANNELS
 from .data import load_training_data
 from .trainer import Trainer
 
 __all__ = ["train", "load_run", "RunError", "save_checkpoint", "load_checkpoint", "load_latest_checkpoint",
-           "run_lock", "SAMPLE_VIEWS", "read_run_config", "DEVICES"]
-
-CHECKPOINT_VERSION = 1
+           "run_lock", "SAMPLE_VIEWS", "read_run_config", "DEVICES", "write_samples"]
 
 #: run.device: 'auto' picks CUDA when available.
 DEVICES = ("auto", "cpu", "cuda")
-
-
-class RunError(UserError):
-    """A run folder that cannot be used as asked (exists, missing, incompatible)."""
 
 
 def _device(cfg: Config, local_rank: int) -> torch.device:
@@ -77,73 +70,6 @@ def _device(cfg: Config, local_rank: int) -> torch.device:
             raise RunError("run.device: 'cuda' requested but CUDA is not available")
         return torch.device("cuda", local_rank)
     return torch.device("cpu")
-
-
-def save_checkpoint(path: Path, payload: Dict[str, Any]) -> None:
-    """``torch.save`` to a temporary sibling, fsync, then rename over ``path`` (atomic)."""
-    def write(tmp: Path) -> None:
-        with open(tmp, "wb") as f:
-            torch.save(payload, f)
-
-    atomic_write(path, write, durable=True)
-
-
-def load_checkpoint(path: Path, device: torch.device = torch.device("cpu")) -> Dict[str, Any]:
-    if not path.is_file():
-        raise RunError(f"no checkpoint at {path}")
-    return torch.load(path, map_location=device, weights_only=False)
-
-
-_NUMBERED = re.compile(r"step_(\d+)\.pt")
-
-
-def _checkpoint_files(folder: Path) -> List[Path]:
-    """``last.pt`` (if present), then the numbered checkpoints, newest first."""
-    numbered = sorted((p for p in folder.glob("step_*.pt") if _NUMBERED.fullmatch(p.name)),
-                      key=lambda p: int(_NUMBERED.fullmatch(p.name).group(1)), reverse=True)
-    last = folder / "last.pt"
-    return ([last] if last.exists() else []) + numbered
-
-
-def load_latest_checkpoint(folder: Path, device: torch.device = torch.device("cpu"),
-                           warn: bool = True) -> Tuple[Dict[str, Any], Path]:
-    """The newest loadable checkpoint of ``folder`` (``RUN/checkpoints``): ``last.pt``, else the
-    newest ``step_*.pt`` that loads, with a warning on stderr naming the files that did not.
-
-    Raises :class:`RunError` (one line, naming every file tried) if none loads.
-    """
-    failed: List[Tuple[Path, str]] = []
-    for path in _checkpoint_files(folder):
-        try:
-            state = load_checkpoint(path, device)
-            if not isinstance(state, dict) or not {"step", "trainer", "config"} <= set(state):
-                raise ValueError("not a training checkpoint")
-            if state.get("version") != CHECKPOINT_VERSION:
-                raise ValueError(f"checkpoint format {state.get('version')!r}, this version reads {CHECKPOINT_VERSION}")
-        except Exception as e:  # torch.load raises RuntimeError, EOFError, UnpicklingError, ... for torn files
-            failed.append((path, _one_line(e)))
-            continue
-        if failed and warn:
-            print(f"warning: could not load {_by_reason(failed, str)}; using {path} (step {int(state['step'])})",
-                  file=sys.stderr, flush=True)
-        return state, path
-    if not failed:
-        raise RunError(f"no checkpoint in {folder}")
-    raise RunError(f"no loadable checkpoint in {folder}: {_by_reason(failed, lambda p: p.name)}")
-
-
-def _by_reason(failed: List[Tuple[Path, str]], name) -> str:
-    """``a.pt, b.pt (reason 1); c.pt (reason 2)``: files grouped by why they did not load."""
-    groups: Dict[str, List[str]] = {}
-    for path, why in failed:
-        groups.setdefault(why, []).append(name(path))
-    return "; ".join(f"{', '.join(names)} ({why})" for why, names in groups.items())
-
-
-def _one_line(e: BaseException, limit: int = 100) -> str:
-    """The first sentence of an error, on one line, at most ``limit`` characters."""
-    text = " ".join(str(e).split()).split(". ")[0] or type(e).__name__
-    return text if len(text) <= limit else text[:limit - 1] + "…"
 
 
 def _non_finite(state: Any, name: str = "") -> Optional[str]:
@@ -213,31 +139,22 @@ def run_lock(run_dir: Path) -> Iterator[Path]:
 SAMPLE_VIEWS = torch.cat([front_view(1), turntable(3, elevation=25.0, start=60.0)])
 
 
-def write_samples(trainer: Trainer, inputs: torch.Tensor, folder: Path, step: int) -> Tuple[Path, Path]:
-    """PNG grid (input | reconstruction from the sample views) and a turntable GIF of input 0."""
-    from PIL import Image
+def write_samples(model: Model, inputs: torch.Tensor, folder: Path, step: int, seed: int) -> Tuple[Path, Path]:
+    """PNG grid (input | reconstruction from the sample views; for generation, samples of a
+    generator seeded with ``seed``) and a turntable GIF of the first volume."""
     from ..export import display_frames, save_gif, turntable_frames
 
-    folder.mkdir(parents=True, exist_ok=True)
-    cfg = trainer.cfg
-    if cfg.train.task == "reconstruction":
-        vols = trainer.reconstruct(inputs).cpu()
-        first = [linear_to_srgb(composite(to_hwc(x), background=1.0)) for x in inputs]
+    if model.task == "reconstruction":
+        vols = model.reconstruct(inputs).cpu()
+        first = [[linear_to_srgb(composite(to_hwc(x), background=1.0))] for x in inputs]
     else:
-        g = torch.Generator().manual_seed(cfg.run.seed + 12345)
-        vols = trainer.generate(torch.randn(len(inputs), cfg.model.latent, generator=g)).cpu()
-        first = None
-    rows = []
-    for i, vol in enumerate(vols):
-        tiles = ([first[i]] if first is not None else []) + display_frames(vol, cfg.render.model, SAMPLE_VIEWS,
-                                                                           filter=cfg.render.filter)
-        rows.append(np.concatenate(tiles, axis=1))
-    grid = np.concatenate(rows, axis=0)
-    scale = max(1, 256 // cfg.model.resolution)
-    png = folder / f"step_{step:07d}.png"
-    Image.fromarray((grid * 255 + 0.5).astype(np.uint8)).resize(
-        (grid.shape[1] * scale, grid.shape[0] * scale), Image.NEAREST).save(png)
-    gif = save_gif(turntable_frames(vols[0], cfg.render.model, frames=24), folder / f"turntable_{step:07d}.gif",
+        vols = model.generate(len(inputs), seed).cpu()
+        first = [[] for _ in vols]
+    rows = [first[i] + display_frames(vol, model.formation, SAMPLE_VIEWS, filter=model.render.filter)
+            for i, vol in enumerate(vols)]
+    scale = max(1, 256 // model.resolution)
+    png = save_grid(folder / f"step_{step:07d}.png", rows, scale=scale)
+    gif = save_gif(turntable_frames(vols[0], model.formation, frames=24), folder / f"turntable_{step:07d}.gif",
                    scale=scale, duration_ms=80)
     return png, gif
 
@@ -323,7 +240,7 @@ def _train(cfg: Config, run_dir: Path, resume: bool, progress: bool, stop_at: Op
             dr.set_thread_count(cfg.run.threads)
     last = run_dir / "checkpoints" / "last.pt"
     if rank == 0:
-        existing = _checkpoint_files(last.parent)
+        existing = checkpoint_files(last.parent)
         if resume and not existing:
             raise RunError(f"--resume: {run_dir} has no checkpoint to continue from")
         if not resume and existing:
@@ -354,10 +271,7 @@ def _train(cfg: Config, run_dir: Path, resume: bool, progress: bool, stop_at: Op
         dist.barrier()                                       # the procedural cache is complete
     if rank != 0:
         data = load_training_data(cfg, progress=False)
-    try:
-        trainer = Trainer(cfg, data, device, rank, world)
-    except ValueError as e:                                  # the networks' checks of the config
-        raise RunError(str(e)) from e
+    trainer = Trainer(cfg, data, device, rank, world)
     start = 0
     saved: Dict[str, Any] = {"path": None, "step": None}     # the newest good checkpoint on disk
     if resume:
@@ -370,6 +284,7 @@ def _train(cfg: Config, run_dir: Path, resume: bool, progress: bool, stop_at: Op
         saved.update(path=path, step=start)
     pool = data.held_out if len(data.held_out) else data.images
     sample_inputs = pool[torch.linspace(0, len(pool) - 1, min(4, len(pool))).long()]   # spread: different shapes
+    samples_seed = cfg.run.seed + 12345                      # generation runs: the same z at every sample
 
     def kept() -> str:
         if saved["path"] is None:
@@ -417,7 +332,7 @@ def _train(cfg: Config, run_dir: Path, resume: bool, progress: bool, stop_at: Op
                                 | {"img/s": f"{rate:.1f}"})
             bar.update(1)
             if rank == 0 and step % cfg.run.sample_every == 0:
-                write_samples(trainer, sample_inputs, run_dir / "samples", step)
+                write_samples(trainer.model, sample_inputs, run_dir / "samples", step, samples_seed)
             if step % cfg.run.checkpoint_every == 0:
                 checkpoint(step)
                 if log:
@@ -431,9 +346,13 @@ def _train(cfg: Config, run_dir: Path, resume: bool, progress: bool, stop_at: Op
         clean = True
     except BaseException as e:                               # a failing step: save nothing, say so
         if rank == 0 and not isinstance(e, RunError):
-            if isinstance(e, ValueError):                    # bad data or values: one line on the command line
+            if isinstance(e, UserError):                     # the user's input: one line on the command line
                 raise RunError(f"training failed {where}: {e}; {kept()}") from e
-            e.add_note(f"training failed {where}; {kept()}")
+            bad = _non_finite(trainer.state_dict()) if isinstance(e, ValueError) else None
+            if bad is not None:                              # a diverged run (NaN or Inf in the weights), not a bug
+                raise RunError(f"training failed {where}: {e} (the training state is not finite: NaN or Inf in "
+                               f"{bad}; lower the learning rates); {kept()}") from e
+            e.add_note(f"training failed {where}; {kept()}")   # a bug: it keeps its traceback
         raise
     finally:
         bar.close()
@@ -442,7 +361,7 @@ def _train(cfg: Config, run_dir: Path, resume: bool, progress: bool, stop_at: Op
                 if clean:                                    # finished, stop_at or Ctrl-C between steps
                     checkpoint(step)
                     if step == cfg.run.steps:
-                        write_samples(trainer, sample_inputs, run_dir / "samples", step)
+                        write_samples(trainer.model, sample_inputs, run_dir / "samples", step, samples_seed)
             finally:
                 log.close()
                 if previous is not None:
@@ -457,8 +376,6 @@ def _train(cfg: Config, run_dir: Path, resume: bool, progress: bool, stop_at: Op
 def read_run_config(path: Path) -> Config:
     """The resolved config a run wrote (``RUN/config.yaml``), validated; :class:`RunError` naming
     ``path`` if it is missing, not valid YAML, not a mapping, or has a bad key or value."""
-    from ..config import _build
-
     expected = "expected the run's resolved config as `platonic train` wrote it"
     try:
         text = path.read_text()
@@ -478,36 +395,13 @@ def read_run_config(path: Path) -> Config:
         raise RunError(f"{path}: expected a mapping of sections (run, data, model, render, train), got {got}; "
                        f"{expected}")
     try:
-        return _build(Config, data, "").validate()
+        return config_from_dict(data)
     except ConfigError as e:
         raise RunError(f"{path}: {e}; {expected}") from None
 
 
-def load_run(run_dir: Path, device: str = "cpu") -> Tuple[Config, Trainer, int]:
-    """A trained run's config and networks (no training data is loaded).
-
-    The config is the one saved in the checkpoint (``config.yaml`` is not read); a bad one is a
-    :class:`RunError` naming the checkpoint file.
-    """
-    from ..config import _build
-    from .data import TrainingData
-
-    run_dir = Path(run_dir)
-    if not _checkpoint_files(run_dir / "checkpoints"):
-        raise RunError(f"{run_dir} has no checkpoints/last.pt: not a training run, or not started")
-    state, path = load_latest_checkpoint(run_dir / "checkpoints", torch.device(device))
-    if not isinstance(state["config"], dict) or not isinstance(state["config"].get("run") or {}, dict):
-        raise RunError(f"{path}: the config saved in this checkpoint is not a mapping of sections")
-    saved = dict(state["config"])
-    saved["run"] = {**(saved.get("run") or {}), "name": run_dir.resolve().name}   # the folder is the run
-    try:
-        cfg = _build(Config, saved, "").validate()
-    except ConfigError as e:
-        raise RunError(f"{path}: the config saved in this checkpoint is not valid: {e}") from None
-    c = CHANNELS[cfg.render.model]
-    r = cfg.model.resolution
-    dummy = TrainingData(torch.zeros(1, c, r, r), torch.zeros(0, c, r, r),
-                         torch.zeros(1, c, r, r, r) if cfg.train.mode != "platonic" else None)
-    trainer = Trainer(cfg, dummy, torch.device(device))
-    trainer.load_state_dict(state["trainer"])
-    return cfg, trainer, int(state["step"])
+def load_run(run_dir: Path, device: str = "cpu") -> Tuple[Config, Model, int]:
+    """A trained run's config, :class:`~mitsuba_platonic.model.Model` and step (no training data
+    is loaded): :func:`~mitsuba_platonic.checkpoint.read_checkpoint` of the run folder."""
+    ckpt = read_checkpoint(Path(run_dir), device)
+    return ckpt.config, Model.from_read(ckpt), ckpt.step

@@ -37,15 +37,15 @@ import torch.distributed as dist
 import torch.nn.functional as F
 from torch import nn
 
-from ..config import Config
-from ..models import NetConfig, build_networks
+from ..config import Config, ConfigError
+from ..model import Model
+from ..models import Discriminator, VolumeDiscriminator, init_weights
 from ..views import DEFAULT_ELEVATION, front_view, sample_views
-from ..volume import CHANNELS
 from .data import TrainingData
 from .losses import d_loss, g_loss, gradient_penalty, hard_accuracy_counts, soft_accuracy_counts
 from .renderer import make_renderer
 
-__all__ = ["Trainer", "net_config", "TASKS", "MODES"]
+__all__ = ["Trainer", "TASKS", "MODES"]
 
 #: What E/G learn: reconstruct the input image, or generate from z ~ N(0, I).
 TASKS = ("reconstruction", "generation")
@@ -53,25 +53,26 @@ TASKS = ("reconstruction", "generation")
 MODES = ("platonic", "platonic3d", "gan3d")
 
 
-def net_config(cfg: Config) -> NetConfig:
-    channels = CHANNELS[cfg.render.model]
-    return NetConfig(resolution=cfg.model.resolution, volume_channels=channels, image_channels=channels,
-                     latent=cfg.model.latent, width=cfg.model.width, norm=cfg.model.norm,
-                     encoder_hidden=cfg.model.encoder_hidden).validate()
-
-
 class Trainer:
-    """Networks, optimisers and :meth:`step`; ``rank``/``world`` for data-parallel runs."""
+    """The :class:`~mitsuba_platonic.model.Model` being trained (``model``: E and G), the critics,
+    optimisers and :meth:`step`; ``nets`` holds E, G, D (and D3) under one state dict;
+    ``rank``/``world`` for data-parallel runs."""
 
     def __init__(self, cfg: Config, data: TrainingData, device: torch.device, rank: int = 0, world: int = 1):
         if cfg.train.batch_size % world:
-            raise ValueError(f"train.batch_size ({cfg.train.batch_size}) must be divisible by the "
-                             f"number of processes ({world})")
+            raise ConfigError(f"train.batch_size: {cfg.train.batch_size} must be divisible by the "
+                              f"number of processes ({world})")
         if cfg.train.mode != "platonic" and data.volumes is None:
             raise ValueError(f"train.mode {cfg.train.mode!r} needs ground-truth volumes")
         self.cfg, self.data, self.device, self.rank, self.world = cfg, data, device, rank, world
-        torch.manual_seed(cfg.run.seed)                      # network initialisation
-        self.nets = build_networks(net_config(cfg), volume_discriminator=cfg.train.mode != "platonic").to(device)
+        torch.manual_seed(cfg.run.seed)                      # network initialisation: one draw for all
+        self.model = Model.from_config(cfg, init=False)
+        nets = {"E": self.model.E, "G": self.model.G, "D": Discriminator(self.model.net)}
+        if cfg.train.mode != "platonic":
+            nets["D3"] = VolumeDiscriminator(self.model.net)
+        self.nets = nn.ModuleDict(nets)
+        self.nets.apply(init_weights)
+        self.nets.to(device)
         self.modules: Dict[str, nn.Module] = dict(self.nets.items())
         if world > 1:
             from torch.nn.parallel import DistributedDataParallel as DDP
@@ -236,16 +237,3 @@ class Trainer:
         self.opt_g.step()
         out["loss_g"] = float(self._all_sum(loss_g.detach().cpu()) / self.world)
         return out
-
-    # -- using the networks -----------------------------------------------------------------
-
-    @torch.no_grad()
-    def reconstruct(self, images: torch.Tensor) -> torch.Tensor:
-        """Volumes for input images (eval mode: BatchNorm uses running statistics)."""
-        self.nets.eval()
-        return self.nets["G"](self.nets["E"](images.to(self.device)))
-
-    @torch.no_grad()
-    def generate(self, z: torch.Tensor) -> torch.Tensor:
-        self.nets.eval()
-        return self.nets["G"](z.to(self.device))

@@ -1,0 +1,144 @@
+"""The model: encoder E and generator G with what using them needs, for inference and training.
+
+:class:`Model` holds E (image → z) and G (z → volume) of :mod:`mitsuba_platonic.models` and
+the settings inference needs: the network shapes (resolution, channels, latent size), the
+render settings a run trained through (image formation, backend, filter) and the task E/G
+learnt. It is built from a config (a fresh model, which the trainer trains) or read from a
+checkpoint (:meth:`Model.from_checkpoint`, no training code involved), and it turns images into
+volumes (:meth:`Model.reconstruct`) or draws volumes from the prior (:meth:`Model.generate`).
+
+Its state dict keys are the checkpoint's (``E.*``, ``G.*``): a checkpoint's ``nets`` holds E
+and G under the same names, next to the critics D and D3 that only training needs.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Optional, Union
+
+import torch
+from torch import nn
+
+from .config import Config
+from .errors import UserError
+from .models import Encoder, Generator, NetConfig, init_weights
+from .render.settings import RenderSettings
+from .volume import CHANNELS
+
+__all__ = ["Model", "net_config"]
+
+
+def net_config(cfg: Config) -> NetConfig:
+    """The networks' shapes for a config: its model section, channels from its image formation."""
+    channels = CHANNELS[cfg.render.model]
+    return NetConfig(resolution=cfg.model.resolution, volume_channels=channels, image_channels=channels,
+                     latent=cfg.model.latent, width=cfg.model.width, norm=cfg.model.norm,
+                     encoder_hidden=cfg.model.encoder_hidden).validate()
+
+
+class Model(nn.Module):
+    """E and G, with ``net`` (their :class:`~mitsuba_platonic.models.NetConfig`), ``render`` (the
+    run's :class:`~mitsuba_platonic.render.RenderSettings`), ``task`` ('reconstruction' or
+    'generation': only a reconstruction model's E was trained), ``step`` (training steps behind
+    the weights; None for a fresh model) and ``origin`` (the checkpoint file it came from).
+
+    ``init=False`` leaves PyTorch's default initialisation for a caller that initialises E and G
+    together with other networks (the trainer: one seeded draw for all of them).
+    """
+
+    def __init__(self, net: NetConfig, render: RenderSettings, task: str = "reconstruction", init: bool = True):
+        super().__init__()
+        self.net, self.render, self.task = net.validate(), render.validate(), task
+        self.step: Optional[int] = None
+        self.origin: Optional[Path] = None
+        self.E = Encoder(net)
+        self.G = Generator(net)
+        if init:
+            self.apply(init_weights)
+
+    # -- building ---------------------------------------------------------------------------
+
+    @classmethod
+    def from_config(cls, cfg: Config, init: bool = True) -> "Model":
+        """A fresh model for ``cfg`` (initialised from torch's global generator unless ``init=False``)."""
+        return cls(net_config(cfg), cfg.render, cfg.train.task, init=init)
+
+    @classmethod
+    def from_checkpoint(cls, source: Union[str, Path], device: Union[str, torch.device] = "cpu") -> "Model":
+        """The model of a run folder (its newest loadable checkpoint) or of one checkpoint file.
+
+        Raises :class:`~mitsuba_platonic.checkpoint.RunError` (one line naming the file) if there
+        is no loadable checkpoint or its saved config is not valid.
+        """
+        from .checkpoint import read_checkpoint
+
+        return cls.from_read(read_checkpoint(source, device))
+
+    @classmethod
+    def from_read(cls, ckpt) -> "Model":
+        """The model of a :class:`~mitsuba_platonic.checkpoint.Checkpoint` already read."""
+        nets = ckpt.state["trainer"]["nets"]
+        model = cls.from_config(ckpt.config, init=False)
+        model.load_state_dict({k: v for k, v in nets.items() if k.startswith(("E.", "G."))})
+        model.step, model.origin = ckpt.step, ckpt.path
+        device = next(iter(nets.values())).device if nets else torch.device("cpu")
+        return model.to(device)
+
+    # -- what inference needs ---------------------------------------------------------------
+
+    @property
+    def resolution(self) -> int:
+        return self.net.resolution
+
+    @property
+    def channels(self) -> int:
+        """Image and volume channels: 4 (premultiplied RGBA / RGB + density) or 1 (opacity / density)."""
+        return self.net.image_channels
+
+    @property
+    def formation(self) -> str:
+        """The image formation model ('vh', 'ao', 'ea') the volumes are rendered with."""
+        return self.render.model
+
+    @property
+    def latent(self) -> int:
+        return self.net.latent
+
+    @property
+    def device(self) -> torch.device:
+        return next(self.parameters()).device
+
+    def load_image(self, path: Union[str, Path], background: Optional[str] = None, crop: str = "image") -> torch.Tensor:
+        """An image file → ``(1, C, R, R)`` input for :meth:`reconstruct` (the photo loader's
+        preparation at this model's resolution; alpha only for a one-channel model)."""
+        from .data.photos import decode_image, prepare_image
+
+        path = Path(path)
+        x = prepare_image(decode_image(path), self.resolution, background=background, crop=crop, name=str(path))
+        return torch.from_numpy(x[3:] if self.channels == 1 else x)[None]
+
+    # -- using the networks -----------------------------------------------------------------
+
+    @torch.no_grad()
+    def reconstruct(self, images: torch.Tensor) -> torch.Tensor:
+        """G(E(x)): ``(B, C, R, R)`` images → ``(B, C, R, R, R)`` volumes on the model's device
+        (eval mode: BatchNorm uses running statistics; the previous mode is restored)."""
+        if self.task != "reconstruction":
+            where = self.origin.parent.parent if self.origin is not None else "this model"
+            raise UserError(f"{where} was trained for {self.task!r}; reconstruction needs an encoder "
+                            f"(train.task: reconstruction)")
+        return self._eval(lambda: self.G(self.E(images.to(self.device))))
+
+    @torch.no_grad()
+    def generate(self, n: int, seed: int = 0) -> torch.Tensor:
+        """G(z), z ~ N(0, I) drawn by a generator seeded with ``seed`` → ``(n, C, R, R, R)``."""
+        z = torch.randn(n, self.latent, generator=torch.Generator().manual_seed(seed))
+        return self._eval(lambda: self.G(z.to(self.device)))
+
+    def _eval(self, fn):
+        was = self.training
+        self.eval()
+        try:
+            return fn()
+        finally:
+            self.train(was)
