@@ -7,21 +7,17 @@ from typing import Sequence, Tuple
 
 import numpy as np
 
-__all__ = ["srgb_to_linear", "hsv", "jitter", "mix"]
+from ...images import srgb_to_linear
+
+__all__ = ["hsv", "jitter", "mix"]
 
 RGB = Tuple[float, float, float]
 
 
-def srgb_to_linear(c: Sequence[float]) -> RGB:
-    """sRGB-encoded [0, 1] → linear RGB (the IEC 61966-2-1 curve)."""
-    a = np.clip(np.asarray(c, dtype=np.float64), 0.0, 1.0)
-    lin = np.where(a <= 0.04045, a / 12.92, ((a + 0.055) / 1.055) ** 2.4)
-    return tuple(float(x) for x in lin)
-
-
 def hsv(h: float, s: float, v: float) -> RGB:
     """Linear RGB of the sRGB colour with hue ``h`` (turns, wraps), saturation ``s`` and value ``v``."""
-    return srgb_to_linear(colorsys.hsv_to_rgb(h % 1.0, float(np.clip(s, 0, 1)), float(np.clip(v, 0, 1))))
+    rgb = colorsys.hsv_to_rgb(h % 1.0, float(np.clip(s, 0, 1)), float(np.clip(v, 0, 1)))
+    return tuple(float(x) for x in srgb_to_linear(rgb))
 
 
 def jitter(rng: np.random.Generator, h: float, s: float, v: float,
