@@ -12,6 +12,7 @@ import torch
 from PIL import Image
 
 from mitsuba_platonic.data.photos import (
+    ImageRejected,
     PhotoCollection,
     PhotoCollectionWarning,
     clean_mask,
@@ -77,7 +78,7 @@ def _filtered(rows: np.ndarray, bpp: int) -> bytes:
     return bytes(out)
 
 
-def png16(arr, colour_type: int, *, interlace: bool = False, trns=None) -> bytes:
+def png16(arr, colour_type: int, *, interlace: bool = False, trns=None, exif: bytes = b"") -> bytes:
     """A 16-bit PNG written by hand (Pillow cannot write 16-bit colour PNGs)."""
     arr = np.asarray(arr, np.uint16)
     if arr.ndim == 2:
@@ -99,6 +100,7 @@ def png16(arr, colour_type: int, *, interlace: bool = False, trns=None) -> bytes
         raw = encode(arr)
     ihdr = struct.pack(">IIBBBBB", w, h, 16, colour_type, 0, 0, int(interlace))
     extra = _chunk(b"tRNS", struct.pack(">" + "H" * len(trns), *trns)) if trns else b""
+    extra += _chunk(b"eXIf", exif) if exif else b""
     return (b"\x89PNG\r\n\x1a\n" + _chunk(b"IHDR", ihdr) + extra
             + _chunk(b"IDAT", zlib.compress(raw)) + _chunk(b"IEND", b""))
 
@@ -375,8 +377,9 @@ def test_rgb_png_on_white_mask_softened_cleaned(tmp_path):
     expect = np.clip(np.array([lin(200), lin(100), lin(50)]) - (1 - 6 / 9), 0, 6 / 9)
     assert np.allclose(x[:3, 20, 16], expect, atol=1e-6)
     assert np.allclose(x[:3, 20, 30], [lin(200), lin(100), lin(50)], atol=1e-6)
-    hard = PhotoCollection(tmp_path, 64, "all", background="white", soften=False)[0]
-    assert set(np.unique(hard[3].numpy())) == {0.0, 1.0}
+    hard = premultiplied_linear(decode_image(tmp_path / "white.png"), background="white",
+                                soften=False)
+    assert set(np.unique(hard[..., 3])) == {0.0, 1.0}
     keep = PhotoCollection(tmp_path, 64, "all", background="white", clean=False)[0]
     assert keep[3, top + 44, 60] > 0
 
@@ -409,14 +412,13 @@ def test_premultiplied_resampling_has_no_halo(tmp_path):
         save(rgba(arr), tmp_path / name / "disc.png")
     results = []
     for name in ("black", "white"):
-        for flt in ("triangle", "box", "lanczos"):
-            x = PhotoCollection(tmp_path / name, 16, "all", filter=flt)[0].numpy()
-            assert x.min() >= 0 and x[3].max() <= 1 and (x[:3] <= x[3:] + 1e-6).all()
-            edge = x[3] > 0.05
-            unpremult = x[:3][:, edge] / x[3][edge]
-            assert np.allclose(unpremult, lin(128), atol=1e-3 if flt != "lanczos" else 0.02)
-            results.append(x)
-    assert np.array_equal(results[0], results[3])   # black vs white under alpha 0
+        x = PhotoCollection(tmp_path / name, 16, "all")[0].numpy()
+        assert x.min() >= 0 and x[3].max() <= 1 and (x[:3] <= x[3:] + 1e-6).all()
+        edge = x[3] > 0.05
+        unpremult = x[:3][:, edge] / x[3][edge]
+        assert np.allclose(unpremult, lin(128), atol=1e-3)
+        results.append(x)
+    assert np.array_equal(results[0], results[1])   # black vs white under alpha 0
 
 
 def test_aspect_ratio_crop_and_margin(tmp_path):
@@ -556,8 +558,8 @@ def test_split_counts():
 
 @pytest.mark.parametrize("kwargs", [
     dict(resolution=0), dict(margin=0.5), dict(background="black"), dict(splits=(0.5, 0.2, 0.2)),
-    dict(split="holdout"), dict(crop="centre"), dict(threshold=1.0), dict(filter="nearest"),
-    dict(erode=-1), dict(regions="biggest")])
+    dict(split="holdout"), dict(crop="centre"), dict(threshold=1.0), dict(erode=-1),
+    dict(erode=1.5), dict(margin=-0.1), dict(seed=True)])
 def test_invalid_options(tmp_path, kwargs):
     save(blob(0), tmp_path / "x.png")
     with pytest.raises(ValueError):
@@ -576,3 +578,131 @@ def test_decode_rejections_name_the_file(tmp_path):
     with pytest.raises(ImageRejected, match="GIF") as err:
         decode_image(gif.getvalue(), name="thing.png")    # by content, not by name
     assert err.value.reason == "unsupported_format"
+
+
+# --------------------------------------------------------------------------------------------
+# 16-bit PNGs (pypng), EXIF orientation
+# --------------------------------------------------------------------------------------------
+
+
+def _exif_bytes(orientation: int) -> bytes:
+    """Raw EXIF (TIFF) bytes with an orientation tag, as a PNG eXIf chunk stores them."""
+    exif = Image.Exif()
+    exif[0x0112] = orientation
+    data = exif.tobytes()
+    return data[6:] if data.startswith(b"Exif\0\0") else data
+
+
+@pytest.mark.parametrize("orientation", range(1, 9))
+def test_exif_orientation_8_and_16_bit_match_pillow(tmp_path, orientation):
+    rng = np.random.default_rng(orientation)
+    arr = rng.integers(1, 256, (3, 5, 4)).astype(np.uint8)       # asymmetric: every flip shows
+    exif = Image.Exif()
+    exif[0x0112] = orientation
+    save(rgba(arr), tmp_path / "o8.png", exif=exif)
+    from PIL import ImageOps
+
+    expect = np.asarray(ImageOps.exif_transpose(Image.open(tmp_path / "o8.png")).convert("RGBA"))
+    d8 = decode_image(tmp_path / "o8.png")
+    assert np.array_equal(d8.pixels, expect)
+    (tmp_path / "o16.png").write_bytes(png16(arr.astype(np.uint16) * 257, 6,
+                                             exif=_exif_bytes(orientation)))
+    d16 = decode_image(tmp_path / "o16.png")
+    assert d16.bit_depth == 16 and np.array_equal(d16.pixels, expect.astype(np.uint16) * 257)
+
+
+def test_png16_grey_key_and_corrupt_data(tmp_path):
+    arr = np.array([[1000, 1001], [65535, 1000]], np.uint16)
+    (tmp_path / "g.png").write_bytes(png16(arr, 0, trns=(1000,)))
+    d = decode_image(tmp_path / "g.png")
+    assert d.has_alpha and d.mode == "I;16" and d.bit_depth == 16
+    assert d.pixels[..., 3].tolist() == [[0, 65535], [65535, 0]]
+    assert d.pixels[0, 1, :3].tolist() == [1001] * 3
+    data = bytearray(png16(np.full((8, 8, 3), 40000, np.uint16), 2))
+    idat = data.index(b"IDAT")
+    data[idat + 6] ^= 0xFF                       # a flipped byte in the compressed data
+    with pytest.raises(ImageRejected, match="bad.png") as err:
+        decode_image(bytes(data), name="bad.png")
+    assert err.value.reason == "corrupt"
+    with pytest.raises(ImageRejected) as err:   # truncated inside IDAT
+        decode_image(bytes(data[:idat + 20]), name="short.png")
+    assert err.value.reason == "corrupt"
+
+
+def test_png16_does_not_use_pillow_internals():
+    """16-bit PNGs are read by pypng; no raw-mode re-labelling or header patching is left."""
+    root = Path(__file__).resolve().parents[1] / "mitsuba_platonic" / "data" / "photos"
+    text = "".join(p.read_text() for p in root.glob("*.py"))
+    for hack in ("rawmode", "_patched_ihdr", "crc32", ".tile"):
+        assert hack not in text, hack
+
+
+# --------------------------------------------------------------------------------------------
+# sRGB: one owner (colour-science)
+# --------------------------------------------------------------------------------------------
+
+
+def test_srgb_decoding_has_one_owner(monkeypatch):
+    import colour
+
+    from mitsuba_platonic import images
+    from mitsuba_platonic.data.shapes.colour import hsv
+
+    def fake(x, function="sRGB", **kw):
+        assert function == "sRGB"
+        return np.asarray(x, np.float64) ** 2
+
+    srgb_decoding_table.cache_clear()
+    monkeypatch.setattr(colour, "cctf_decoding", fake)
+    try:
+        assert images.srgb_to_linear(np.array([0.5]))[0] == 0.25
+        assert srgb_decoding_table(8)[51] == pytest.approx(0.04)        # (51 / 255)²
+        assert hsv(0.0, 0.0, 0.5) == (0.25, 0.25, 0.25)                   # grey 0.5
+    finally:
+        monkeypatch.undo()
+        srgb_decoding_table.cache_clear()
+    assert srgb_decoding_table(8)[51] == pytest.approx(lin(51), abs=1e-7)
+
+
+def test_no_hand_written_srgb_curve():
+    root = Path(__file__).resolve().parents[1] / "mitsuba_platonic"
+    for path in root.rglob("*.py"):
+        text = path.read_text()
+        for constant in ("12.92", "0.04045", "0.0031308", "1.055"):
+            assert constant not in text, f"{path}: {constant} (use images.srgb_to_linear)"
+
+
+# --------------------------------------------------------------------------------------------
+# Options: every PhotoCollection option is reachable from the config
+# --------------------------------------------------------------------------------------------
+
+
+def test_every_collection_option_is_in_the_data_config(tmp_path):
+    import inspect
+
+    from mitsuba_platonic.config import ConfigError, load_config
+
+    options = {name for name, p in inspect.signature(PhotoCollection).parameters.items()
+               if p.kind is p.KEYWORD_ONLY}
+    cfg = load_config(None, ["data.source=folder", f"data.path={tmp_path}", "data.margin=0.1",
+                             "data.clean=false", "data.fill_holes=true", "data.erode=2",
+                             "data.split=0.6"])
+    kwargs = cfg.data.photo_options()
+    # alpha_only follows the renderer's image formation (render.model), not a data key
+    assert options == set(kwargs) | {"alpha_only"}
+    assert kwargs["margin"] == 0.1 and kwargs["clean"] is False and kwargs["erode"] == 2
+    assert kwargs["fill_holes"] is True and kwargs["splits"] == pytest.approx((0.6, 0.2, 0.2))
+    for bad in ("data.margin=0.5", "data.erode=-1", "data.threshold=1.0", "data.clean=2"):
+        with pytest.raises(ConfigError, match=bad.split("=")[0]):
+            load_config(None, ["data.source=folder", f"data.path={tmp_path}", bad])
+    save(blob(3), tmp_path / "x.png")
+    c = PhotoCollection(tmp_path, 8, "all", **cfg.data.photo_options())
+    assert c.options.margin == 0.1 and c.options.erode == 2 and not c.options.clean
+
+
+@pytest.mark.parametrize("removed", [dict(filter="lanczos"), dict(regions="largest"),
+                                     dict(soften=False), dict(workers=1)])
+def test_removed_options_are_refused(tmp_path, removed):
+    save(blob(0), tmp_path / "x.png")
+    with pytest.raises(TypeError):
+        PhotoCollection(tmp_path, 8, "all", **removed)
