@@ -1,0 +1,18 @@
+"""Evaluation as in the paper (Sec. 5.3, Table 2): metrics, the re-rendering protocol, the report.
+
+- :mod:`.metrics`: DSSIM, RMSE, silhouette and volume IoU, the density-weighted chamfer
+  distance, VGG feature distance and FID (the last two from a weights file the user gives).
+- :mod:`.protocol`: re-render a reconstruction and its reference from the same 10 random views
+  under the same random skies with IF, VOL, ISO and VOX; the billboard baseline.
+- :mod:`.report`: score trained runs on their held-out shapes, write a Table-2-like Markdown
+  table and figures (``platonic evaluate``).
+
+docs/evaluation.md describes each metric and method.
+"""
+
+from .metrics import (chamfer_distance, dssim, fid, image_rmse, silhouette_iou, vgg_distance, volume_iou,
+                      volume_rmse)
+from .protocol import METHODS, billboard, evaluate_pair, novel_view_errors, rerender
+
+__all__ = ["dssim", "image_rmse", "silhouette_iou", "volume_rmse", "volume_iou", "chamfer_distance",
+           "vgg_distance", "fid", "METHODS", "rerender", "evaluate_pair", "billboard", "novel_view_errors"]
