@@ -1,0 +1,353 @@
+"""Score trained runs as in the paper's Table 2 and write a Markdown report with figures.
+
+``evaluate_runs(run_dirs, out_dir)``: for each run folder (``platonic train``), reconstruct every
+held-out image of its procedural collection (the shapes the run never saw; ``train/data.py``),
+resample the collection's ground-truth volume (``manifest.json`` → ``volumes/SSSSS.npz``) into
+the input camera's frame, and score each (reconstruction, truth) pair with
+:func:`~.protocol.evaluate_pair`. The same is done for two baselines per run: the run's
+networks untrained (initialised with the run's seed) and, for EA, the billboard (the input image
+extruded through the depth of the cube). Written to ``out_dir``:
+
+- ``report.md``: a table laid out like Table 2 — rows: method × image formation (IF); columns:
+  DSSIM of the VOL, ISO, VOX and IF re-renders, then RMSE, IoU and CD of the volumes (VGG per
+  re-render and FID only when a weights file is given);
+- ``figures/<row>.png``: per row, examples of input | reconstruction from 3 novel views |
+  ground truth from the same views;
+- ``results.json``: every pair's metrics and each row's means.
+
+``main_evaluate(argv)`` is the ``platonic evaluate`` command (``add_arguments`` + ``run``).
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import re
+import time
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any, Callable, Dict, List, Optional, Sequence, Tuple, Union
+
+import numpy as np
+import torch
+
+from ..errors import UserError
+from ..render import render
+from ..views import turntable
+from ..volume import CHANNELS
+from . import metrics as M
+from .protocol import METHODS, N_VIEWS, billboard, evaluate_pair, truth_in_input_frame
+
+__all__ = ["Row", "score_pairs", "write_table", "write_figure", "write_report", "evaluate_runs",
+           "add_arguments", "run", "main_evaluate", "FIGURE_VIEWS", "SCALE"]
+
+#: The paper's display scales (Table 2): DSSIM and VGG × 10, RMSE × 10².
+SCALE = {"dssim": 10.0, "vgg": 10.0, "rmse": 100.0, "iou": 1.0, "cd": 1.0, "fid": 1.0}
+#: The novel views of the figures: azimuths 60°, 180°, 300° at 30° elevation, in the input's frame.
+FIGURE_VIEWS = turntable(3, elevation=30.0, start=60.0)
+
+PathLike = Union[str, Path]
+
+
+@dataclass
+class Row:
+    """One table row: ``method`` (e.g. the run's name or a baseline), ``formation`` (VH/AO/EA),
+    per-pair metrics, and up to a few (input image, reconstruction, truth) examples for a figure."""
+
+    method: str
+    formation: str
+    pairs: List[Dict[str, float]] = field(default_factory=list)
+    examples: List[Tuple[torch.Tensor, torch.Tensor, torch.Tensor]] = field(default_factory=list)
+    extra: Dict[str, float] = field(default_factory=dict)        # set-level metrics (FID)
+
+    def mean(self, key: str) -> Optional[float]:
+        vals = [p[key] for p in self.pairs if key in p]
+        return float(np.mean(vals)) if vals else None
+
+    def means(self) -> Dict[str, float]:
+        keys = sorted({k for p in self.pairs for k in p})
+        out = {k: self.mean(k) for k in keys}
+        out.update(self.extra)
+        return out
+
+
+def score_pairs(method: str, model: str, triples: Sequence[Tuple[torch.Tensor, torch.Tensor, torch.Tensor]],
+                n_views: int = N_VIEWS, seed: int = 0, spp: int = 16, max_depth: int = 8,
+                methods: Sequence[str] = METHODS, backend: str = "closed_form",
+                vgg_network: Optional[torch.nn.Module] = None, fid_network: Optional[torch.nn.Module] = None,
+                n_examples: int = 3, progress: bool = False) -> Row:
+    """Score (input image, reconstruction, truth-in-input-frame) triples into one :class:`Row`.
+
+    Pair k uses the views and skies of seed ``seed + k`` (the same for every row, so rows see the
+    same views). FID (with ``fid_network``) compares the IF re-renders of all references with
+    those of all reconstructions.
+    """
+    row = Row(method, model.upper())
+    if_recon, if_ref = [], []
+    for k, (image, recon, truth) in enumerate(triples):
+        res = evaluate_pair(recon, truth, model, n_views=n_views, seed=seed + k, methods=methods, spp=spp,
+                            max_depth=max_depth, backend=backend, vgg_network=vgg_network)
+        row.pairs.append(res.metrics)
+        if "IF" in res.images:
+            if_recon.append(res.images["IF"][0])
+            if_ref.append(res.images["IF"][1])
+        if len(row.examples) < n_examples:
+            row.examples.append((image.detach().cpu(), recon.detach().cpu(), truth.detach().cpu()))
+        if progress:
+            print(f"  {method}: pair {k + 1}/{len(triples)}", flush=True)
+    if fid_network is not None and if_recon:
+        row.extra["fid"] = M.fid(torch.cat(if_ref), torch.cat(if_recon), network=fid_network)
+    return row
+
+
+# -- writing ---------------------------------------------------------------------------------
+
+def _fmt(value: Optional[float], key: str) -> str:
+    if value is None:
+        return "—"                                          # not computed: never a made-up number
+    scale = SCALE[key.split("_")[0]]
+    return f"{value * scale:.3f}" if key.startswith("cd") else f"{value * scale:.2f}"
+
+
+def write_table(rows: Sequence[Row], methods: Sequence[str] = METHODS) -> str:
+    """The Markdown table (Table 2 layout) of ``rows``: DSSIM (and VGG where computed) per re-render
+    method, RMSE, IoU, CD (and FID where computed)."""
+    vgg = any(r.mean(f"vgg_{m}") is not None for r in rows for m in methods)
+    fid = any("fid" in r.extra for r in rows)
+    head = ["Method", "IF"] + [f"DSSIM {m}" for m in methods]
+    if vgg:
+        head += [f"VGG {m}" for m in methods]
+    head += ["RMSE", "IoU", "CD"] + (["FID"] if fid else []) + ["pairs"]
+    lines = ["| " + " | ".join(head) + " |", "|" + "---|" * len(head)]
+    for r in rows:
+        cells = [r.method, r.formation] + [_fmt(r.mean(f"dssim_{m}"), "dssim") for m in methods]
+        if vgg:
+            cells += [_fmt(r.mean(f"vgg_{m}"), "vgg") for m in methods]
+        cells += [_fmt(r.mean("rmse"), "rmse"), _fmt(r.mean("iou"), "iou"), _fmt(r.mean("cd"), "cd")]
+        if fid:
+            cells.append(_fmt(r.extra.get("fid"), "fid"))
+        cells.append(str(len(r.pairs)))
+        lines.append("| " + " | ".join(cells) + " |")
+    return "\n".join(lines)
+
+
+def _slug(text: str) -> str:
+    return re.sub(r"[^A-Za-z0-9_.-]+", "_", text).strip("_") or "row"
+
+
+def write_figure(row: Row, path: PathLike, views: torch.Tensor = FIGURE_VIEWS) -> Path:
+    """A PNG: one line per example of ``row``: input | reconstruction from ``views`` | ground truth
+    from the same views (the training image formation, closed form, over white)."""
+    import matplotlib
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    if not row.examples:
+        raise UserError(f"row {row.method!r} has no examples to draw")
+    model = row.formation.lower()
+    k = len(views)
+    cols = 1 + 2 * k
+    fig, axes = plt.subplots(len(row.examples), cols, figsize=(1.3 * cols, 1.4 * len(row.examples)), squeeze=False)
+    for i, (image, recon, truth) in enumerate(row.examples):
+        with torch.no_grad():
+            a = render(recon[None].expand(k, -1, -1, -1, -1).contiguous(), views, model)
+            b = render(truth[None].expand(k, -1, -1, -1, -1).contiguous(), views, model)
+        panels = [image] + list(a) + list(b)
+        titles = ["input"] + [f"recon {j + 1}" for j in range(k)] + [f"truth {j + 1}" for j in range(k)]
+        for ax, img, title in zip(axes[i], panels, titles):
+            d = M.display_image(img)
+            ax.imshow(d[..., 0] if d.shape[-1] == 1 else d, cmap="gray", vmin=0.0, vmax=1.0,
+                      interpolation="nearest")
+            ax.set_xticks([])
+            ax.set_yticks([])
+            if i == 0:
+                ax.set_title(title, fontsize=7)
+    fig.suptitle(f"{row.method} ({row.formation})", fontsize=8)
+    fig.tight_layout()
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    fig.savefig(path, dpi=100)
+    plt.close(fig)
+    return path
+
+
+def write_report(rows: Sequence[Row], out_dir: PathLike, notes: Sequence[str] = (),
+                 methods: Sequence[str] = METHODS) -> Path:
+    """Write ``report.md``, ``figures/*.png`` and ``results.json`` for ``rows`` into ``out_dir``."""
+    out = Path(out_dir)
+    if out.exists() and not out.is_dir():
+        raise UserError(f"--out {str(out)!r} exists and is not a folder")
+    out.mkdir(parents=True, exist_ok=True)
+    figures = []
+    for r in rows:
+        if r.examples:
+            figures.append((r, write_figure(r, out / "figures" / f"{_slug(r.method)}_{r.formation.lower()}.png")))
+    lines = ["# Evaluation", "",
+             "Held-out reconstructions against the ground truth, laid out like Table 2 of the paper. "
+             "DSSIM = (1 − SSIM)/2 of re-renders from the same random views under the same random skies "
+             "(VOL: volumetric path tracing, ISO: iso-surface at density 0.1, VOX: voxels, IF: the training "
+             "image formation); RMSE, IoU (density ≥ ½) and CD (density-weighted chamfer distance, world "
+             "units²) of the volumes in the input camera's frame. As in the paper, DSSIM and VGG are "
+             "multiplied by 10 and RMSE by 10². Lower is better except IoU. — marks a value that was not "
+             "computed. Definitions: docs/evaluation.md.", "",
+             write_table(rows, methods), ""]
+    lines += [f"- {n}" for n in notes]
+    if figures:
+        lines += ["", "## Figures", "", "Input | reconstruction from 3 novel views | ground truth from the same views.", ""]
+        lines += [f"![{r.method} ({r.formation})](figures/{p.name})" for r, p in figures]
+    report = out / "report.md"
+    report.write_text("\n".join(lines) + "\n")
+    results = [{"method": r.method, "formation": r.formation, "means": r.means(), "pairs": r.pairs} for r in rows]
+    (out / "results.json").write_text(json.dumps(results, indent=1))
+    return report
+
+
+# -- runs ------------------------------------------------------------------------------------
+
+def _load(run_dir: Path) -> Tuple[Any, Callable[[torch.Tensor], torch.Tensor], Callable[[], Callable], int]:
+    """A trained run: (config, reconstruct(images) → volumes, a factory of the untrained
+    reconstruct function, step). Uses :class:`mitsuba_platonic.model.Model` where it exists,
+    else ``train.run.load_run``'s trainer."""
+    try:
+        from ..checkpoint import read_checkpoint
+        from ..model import Model
+    except ImportError:                                    # before the Model class: the trainer does inference
+        from ..train.run import load_run
+        from ..train.trainer import Trainer
+
+        cfg, trainer, step = load_run(run_dir)
+
+        def untrained_trainer():
+            from ..train.data import TrainingData
+            c, r = CHANNELS[cfg.render.model], cfg.model.resolution
+            dummy = TrainingData(torch.zeros(1, c, r, r), torch.zeros(0, c, r, r),
+                                 torch.zeros(1, c, r, r, r) if cfg.train.mode != "platonic" else None)
+            return Trainer(cfg, dummy, torch.device("cpu")).reconstruct
+
+        return cfg, trainer.reconstruct, untrained_trainer, step
+    ckpt = read_checkpoint(run_dir)
+    model = Model.from_read(ckpt)
+
+    def untrained_model():
+        torch.manual_seed(ckpt.config.run.seed)            # the run's seed, fresh initialisation
+        return Model.from_config(ckpt.config).reconstruct
+
+    return ckpt.config, model.reconstruct, untrained_model, ckpt.step
+
+
+def _held_out(cfg, run_dir: Path, data_cache: Optional[PathLike], progress: bool):
+    from ..train.data import collection_folder, load_training_data
+
+    if cfg.data.source != "procedural":
+        raise UserError(f"{run_dir} was trained on data.source {cfg.data.source!r}: evaluation needs the "
+                        f"ground-truth volumes of a procedural collection")
+    if data_cache is not None:
+        cfg.data.cache = str(data_cache)
+    folder = collection_folder(cfg)
+    if not (folder / "manifest.json").is_file():
+        raise UserError(f"{run_dir}: its collection {folder} has no manifest.json (not rendered here, or "
+                        f"unfinished); pass --data-cache DIR where the run's data.cache folder is, or run "
+                        f"make-dataset with the run's settings")
+    data = load_training_data(cfg, progress=progress)
+    if not len(data.held_out):
+        raise UserError(f"{run_dir}: its collection has no held-out shapes (data.split leaves none)")
+    return data
+
+
+def _truths(records: Sequence[Dict[str, Any]], model: str) -> List[torch.Tensor]:
+    out = []
+    for r in records:
+        path = Path(r["folder"]) / r["volume"]
+        try:
+            vol = torch.from_numpy(np.load(path)["volume"]).float()
+        except (OSError, KeyError, ValueError) as e:
+            raise UserError(f"cannot read the ground-truth volume {path}: {e}") from None
+        out.append(truth_in_input_frame(vol, r["view"], model))
+    return out
+
+
+def evaluate_runs(run_dirs: Sequence[PathLike], out_dir: PathLike, n_views: int = N_VIEWS,
+                  limit: Optional[int] = None, spp: int = 16, max_depth: int = 8, seed: int = 0,
+                  baselines: bool = True, vgg_weights: Optional[PathLike] = None,
+                  fid_weights: Optional[PathLike] = None, data_cache: Optional[PathLike] = None,
+                  progress: bool = True) -> Path:
+    """Score each trained run (and its baselines) on its held-out shapes; write the report. Returns
+    the path of ``report.md``. ``limit``: at most this many held-out images per run (all by default)."""
+    if not run_dirs:
+        raise UserError("no run to evaluate: pass at least one --run DIR")
+    if limit is not None and (isinstance(limit, bool) or not isinstance(limit, int) or limit < 1):
+        raise UserError(f"limit must be a positive int, got {limit!r}")
+    vgg = M.load_feature_network(vgg_weights, "VGG16") if vgg_weights is not None else None
+    fidnet = M.load_feature_network(fid_weights, "Inception-v3") if fid_weights is not None else None
+    rows: List[Row] = []
+    notes: List[str] = []
+    t0 = time.perf_counter()
+    kw = dict(n_views=n_views, seed=seed, spp=spp, max_depth=max_depth, vgg_network=vgg, fid_network=fidnet,
+              progress=progress)
+    for run_dir in map(Path, run_dirs):
+        cfg, reconstruct, untrained, step = _load(run_dir)
+        if cfg.train.task != "reconstruction":
+            raise UserError(f"{run_dir} was trained for {cfg.train.task!r}; evaluation reconstructs held-out "
+                            f"images and needs an encoder (train.task: reconstruction)")
+        model = cfg.render.model
+        data = _held_out(cfg, run_dir, data_cache, progress)
+        m = len(data.held_out) if limit is None else min(limit, len(data.held_out))
+        images, records = data.held_out[:m], data.held_out_records[:m]
+        truths = _truths(records, model)
+        name = f"{run_dir.name} ({cfg.train.mode}, step {step})"
+        recon = reconstruct(images).cpu()
+        rows.append(score_pairs(name, model, list(zip(images, recon, truths)), **kw))
+        notes.append(f"{name}: {m} held-out images of '{cfg.data.shape_class}' ({cfg.data.formation} collection, "
+                     f"{cfg.model.resolution}³), {n_views} views per pair, {spp} spp")
+        if baselines:
+            fresh = untrained()(images).cpu()
+            rows.append(score_pairs(f"{run_dir.name}: untrained", model, list(zip(images, fresh, truths)), **kw))
+            if model == "ea":
+                boards = [billboard(x) for x in images]
+                rows.append(score_pairs(f"{run_dir.name}: billboard", model, list(zip(images, boards, truths)), **kw))
+    notes.append(f"evaluated in {time.perf_counter() - t0:.0f} s; held-out pair k of every row is re-rendered "
+                 f"with views and skies of seed {seed} + k")
+    return write_report(rows, out_dir, notes)
+
+
+# -- the command -----------------------------------------------------------------------------
+
+def add_arguments(p: argparse.ArgumentParser) -> argparse.ArgumentParser:
+    """The ``platonic evaluate`` flags."""
+    p.add_argument("--run", action="append", required=True, metavar="DIR",
+                   help="a trained run folder (repeatable: one table row per run, plus its baselines)")
+    p.add_argument("--out", required=True, metavar="DIR", help="folder for report.md, figures/ and results.json")
+    p.add_argument("--views", type=int, default=N_VIEWS, help="random re-render views per pair (default 10)")
+    p.add_argument("--limit", type=int, default=None, help="at most this many held-out images per run (default all)")
+    p.add_argument("--spp", type=int, default=16, help="samples per pixel of the VOL/ISO/VOX path tracing (default 16)")
+    p.add_argument("--seed", type=int, default=0, help="seed of the re-render views and skies (default 0)")
+    p.add_argument("--no-baselines", action="store_true", help="skip the untrained and billboard rows")
+    p.add_argument("--vgg-weights", default=None, metavar="FILE",
+                   help="VGG16 weights (torchvision's vgg16-397923af.pth) for VGG columns; none ships here")
+    p.add_argument("--fid-weights", default=None, metavar="FILE",
+                   help="a TorchScript Inception-v3 feature extractor for an FID column")
+    p.add_argument("--data-cache", default=None, metavar="DIR",
+                   help="where the runs' procedural collections are cached (default: each run's data.cache)")
+    p.add_argument("--quiet", action="store_true", help="no progress lines")
+    return p
+
+
+def run(args: argparse.Namespace) -> int:
+    """Run ``platonic evaluate`` with parsed ``args``; print the report's path."""
+    for flag, value in (("--views", args.views), ("--spp", args.spp)):
+        if value < 1:
+            raise UserError(f"{flag} must be a positive int, got {value}")
+    if args.seed < 0:
+        raise UserError(f"--seed must be a non-negative int, got {args.seed}")
+    report = evaluate_runs(args.run, args.out, n_views=args.views, limit=args.limit, spp=args.spp, seed=args.seed,
+                           baselines=not args.no_baselines, vgg_weights=args.vgg_weights,
+                           fid_weights=args.fid_weights, data_cache=args.data_cache, progress=not args.quiet)
+    print(f"report: {report}")
+    return 0
+
+
+def main_evaluate(argv: Optional[Sequence[str]] = None) -> int:
+    """``platonic evaluate --run DIR [--run DIR ...] --out DIR [...]`` as a function of its arguments."""
+    parser = add_arguments(argparse.ArgumentParser(prog="platonic evaluate",
+                                                   description="Score trained runs as in the paper's Table 2."))
+    return run(parser.parse_args(argv))
