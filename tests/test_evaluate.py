@@ -1,0 +1,283 @@
+"""Evaluation (mitsuba_platonic.evaluate): metrics, the re-rendering protocol, the report.
+
+Tiny sizes only: 16³ volumes, 16² images, 1–4 samples per pixel.
+"""
+
+import json
+
+import numpy as np
+import pytest
+import torch
+import torch.nn.functional as F
+
+from mitsuba_platonic.errors import UserError
+from mitsuba_platonic.evaluate import metrics as M
+from mitsuba_platonic.evaluate import protocol as P
+from mitsuba_platonic.evaluate import report as R
+from mitsuba_platonic.render import render
+from mitsuba_platonic.views import front_view, sample_views
+from mitsuba_platonic.volume import test_volume, voxel_centres, voxel_size
+
+N = 16
+
+
+def _box(n=N, lo=(4, 5, 3), hi=(10, 11, 8)):
+    """A binary box of ones, [lo, hi) in (d, h, w)."""
+    v = torch.zeros(n, n, n)
+    v[lo[0]:hi[0], lo[1]:hi[1], lo[2]:hi[2]] = 1.0
+    return v
+
+
+def _sphere(n=N, centre=(0.25, 0.15, -0.1), radius=0.55):
+    """An off-centre anti-aliased sphere, RGBA, colour varying along x (so flips show)."""
+    p = voxel_centres(n)
+    sdf = (p - p.new_tensor(centre)).norm(dim=-1) - radius
+    density = torch.sigmoid(-sdf / (voxel_size(n) / 4.0))
+    rgb = torch.stack([0.2 + 0.3 * (p[..., 0] + 1.0), torch.full_like(density, 0.5), torch.full_like(density, 0.3)])
+    return torch.cat([rgb, density[None]]).float()
+
+
+# -- metrics ---------------------------------------------------------------------------------
+
+def test_identical_volumes_and_images_score_perfectly():
+    v = test_volume(N, "figure", "ea")[0]
+    binary = v.clone()
+    binary[3] = (v[3] >= 0.5).float()
+    assert M.volume_iou(v, v) == 1.0
+    assert M.volume_rmse(v, v) == 0.0
+    assert M.chamfer_distance(binary, binary) == 0.0          # every output voxel with density lies in O
+    img = render(v[None], front_view(1))[0]
+    assert M.dssim(img, img) == pytest.approx(0.0, abs=1e-12)
+    assert M.image_rmse(img, img) == 0.0
+    other = render(v[None], sample_views(1, seed=3))[0]
+    assert M.dssim(img, other) > 0.01                          # a different view is not "identical"
+    assert M.volume_iou(v, torch.flip(v, dims=[3])) < 0.9      # the figure is asymmetric in x
+
+
+@pytest.mark.parametrize("k", [1, 2, 3])
+def test_chamfer_distance_of_a_shifted_box(k):
+    """Output = target box moved k voxels along +x: the k-voxel slab beyond the box is at distances
+    Δ, 2Δ, …, kΔ from the nearest target voxel (straight across); the overlap is at 0."""
+    target = _box()
+    output = torch.roll(target, shifts=k, dims=2)              # w grows with +x; the box has room
+    delta = 2.0 / N
+    face = (10 - 4) * (11 - 5)                                  # voxels in a (d, h) cross-section
+    expected = sum(face * (s * delta) ** 2 for s in range(1, k + 1)) / N ** 3
+    assert M.chamfer_distance(output, target) == pytest.approx(expected, rel=1e-12)
+    # directional, as in the paper: a target that covers the output costs nothing
+    assert M.chamfer_distance(_box(hi=(10, 11, 6)), target) == 0.0
+    # weighted by the output's density
+    assert M.chamfer_distance(0.5 * output, target) == pytest.approx(0.5 * expected, rel=1e-12)
+    inter = face * (8 - 3 - k)
+    assert M.volume_iou(output, target) == pytest.approx(inter / (2 * face * (8 - 3) - inter))
+
+
+def test_metrics_reject_bad_input_with_what_was_expected():
+    v = torch.rand(4, N, N, N)
+    with pytest.raises(UserError, match="same resolution"):
+        M.volume_iou(v, torch.rand(4, 8, 8, 8))
+    bad = v.clone()
+    bad[0, 0, 0, 0] = float("nan")
+    with pytest.raises(UserError, match="NaN"):
+        M.volume_rmse(bad, v)
+    with pytest.raises(UserError, match=r"\[0, 1\]"):
+        M.chamfer_distance(v * 2.0, v)
+    with pytest.raises(UserError, match="cubic"):
+        M.volume_rmse(torch.rand(4, 8, 8, 9), torch.rand(4, 8, 8, 9))
+    with pytest.raises(UserError, match="no voxel with density"):
+        M.chamfer_distance(v, torch.zeros(N, N, N))
+    with pytest.raises(UserError, match="threshold"):
+        M.volume_iou(v, v, threshold=0.0)
+    with pytest.raises(UserError, match=r"\(C, H, W\)"):
+        M.dssim(torch.rand(3, N, N), torch.rand(3, N, N))
+    with pytest.raises(UserError, match="at least"):
+        M.dssim(torch.rand(4, 8, 8), torch.rand(4, 8, 8))
+    with pytest.raises(UserError, match="same shape"):
+        M.dssim(torch.rand(4, N, N), torch.rand(1, N, N))
+
+
+# -- feature metrics: weights from the user --------------------------------------------------
+
+def _tiny_vgg_state():
+    """A VGG-shaped state dict: conv 0, conv 2, pool, conv 5 (torchvision's indexing)."""
+    g = torch.Generator().manual_seed(0)
+    state = {}
+    for i, (cin, cout) in {0: (3, 4), 2: (4, 4), 5: (4, 6)}.items():
+        state[f"features.{i}.weight"] = torch.randn(cout, cin, 3, 3, generator=g) * 0.3
+        state[f"features.{i}.bias"] = torch.randn(cout, generator=g) * 0.1
+    state["classifier.0.weight"] = torch.zeros(2, 2)          # ignored, as in torchvision's file
+    return state
+
+
+def test_feature_metrics_need_weights_and_say_so(tmp_path):
+    a, b = torch.rand(2, 4, N, N), torch.rand(2, 4, N, N)
+    with pytest.raises(UserError, match="weights"):
+        M.vgg_distance(a, b)
+    with pytest.raises(UserError, match="weights"):
+        M.fid(a, b)
+    with pytest.raises(UserError, match="does not exist"):
+        M.vgg_distance(a, b, weights=tmp_path / "missing.pth")
+    junk = tmp_path / "junk.pth"
+    junk.write_bytes(b"not a torch file")
+    with pytest.raises(UserError, match="neither a TorchScript file nor a torch state dict"):
+        M.fid(a, b, weights=junk)
+    notvgg = tmp_path / "notvgg.pth"
+    torch.save({"w": torch.zeros(1)}, notvgg)
+    with pytest.raises(UserError, match="features.N.weight"):
+        M.vgg_distance(a, b, weights=notvgg)
+
+
+def test_vgg_distance_with_weights_the_test_makes(tmp_path):
+    state = _tiny_vgg_state()
+    path = tmp_path / "tiny_vgg.pth"
+    torch.save(state, path)
+    net = M.load_feature_network(path)
+    x = torch.rand(1, 3, N, N)
+    xn = (x - torch.tensor(M.IMAGENET_MEAN).view(1, 3, 1, 1)) / torch.tensor(M.IMAGENET_STD).view(1, 3, 1, 1)
+    h = F.relu(F.conv2d(F.relu(F.conv2d(xn, state["features.0.weight"], state["features.0.bias"], padding=1)),
+                        state["features.2.weight"], state["features.2.bias"], padding=1))
+    h2 = F.relu(F.conv2d(F.max_pool2d(h, 2), state["features.5.weight"], state["features.5.bias"], padding=1))
+    feats = net(x)
+    assert len(feats) == 2
+    torch.testing.assert_close(feats[0], h)
+    torch.testing.assert_close(feats[1], h2)
+
+    img = render(test_volume(N, "figure", "ea"), front_view(1))
+    other = render(test_volume(N, "figure", "ea"), sample_views(1, seed=5))
+    assert M.vgg_distance(img, img, weights=path) == 0.0
+    d = M.vgg_distance(img, other, weights=path)
+    assert np.isfinite(d) and 0.0 < d <= 4.0
+
+
+def test_fid_with_weights_the_test_makes(tmp_path):
+    torch.manual_seed(1)
+    net = torch.jit.script(torch.nn.Sequential(torch.nn.Conv2d(3, 3, 3, padding=1), torch.nn.Tanh()))
+    path = tmp_path / "tiny_features.pt"
+    torch.jit.save(net, str(path))
+    real = torch.rand(8, 4, N, N)
+    real[:, :3] *= real[:, 3:]                                 # premultiplied
+    assert M.fid(real, real, weights=path) == pytest.approx(0.0, abs=1e-6)
+    fake = real.clone()
+    fake[:, :3] = fake[:, :3] * 0.3                            # darker: a shifted feature distribution
+    # by hand: the same network, spatial means, Fréchet distance of two Gaussians
+    from scipy import linalg
+
+    def feats(x):
+        rgb = torch.from_numpy(np.stack([M.display_image(i) for i in x])).permute(0, 3, 1, 2).float()
+        return net(rgb).mean(dim=(2, 3)).double().detach().numpy()
+
+    fr, ff = feats(real), feats(fake)
+    cr, cf = np.cov(fr, rowvar=False), np.cov(ff, rowvar=False)
+    expected = (np.sum((fr.mean(0) - ff.mean(0)) ** 2) + np.trace(cr + cf)
+                - 2 * np.trace(np.real(linalg.sqrtm(cr @ cf))))
+    value = M.fid(real, fake, weights=path)
+    assert value > 1e-3
+    assert value == pytest.approx(expected, rel=1e-6)
+
+
+# -- the re-rendering protocol ---------------------------------------------------------------
+
+def test_the_four_rerender_methods_agree_in_silhouette_on_a_sphere():
+    """IF, VOL, ISO and VOX of one off-centre sphere (radius 0.55 = 4.4 voxels at 16³) from the
+    same views: silhouettes (alpha > ½) must overlap with IoU ≥ 0.75 for every pair of methods.
+
+    Why 0.75: the methods put the boundary at different places by design — ISO at density 0.1
+    (about ½ voxel outside the ½ level of the anti-aliased sphere), VOX on whole voxels (up to ½
+    voxel either way) — and two discs whose radii differ by ½ voxel at r = 4.4 have IoU
+    (3.9 / 4.4)² ≈ 0.79. An axis flip or a mis-placed camera in any method moves the off-centre
+    sphere by 2 × 0.25 = 0.5 world units (4 pixels) and drops the IoU far below.
+    """
+    vol = _sphere()
+    views, lights = P.rerender_views(4, seed=0), P.rerender_lighting(4, seed=0)
+    images = P.rerender(vol, views, lights, "ea", spp=4, max_depth=4)
+    assert set(images) == set(P.METHODS)
+    for m, img in images.items():
+        assert img.shape == (4, 4, N, N), m
+        assert torch.isfinite(img).all(), m
+        assert float(img[:, 3].sum()) > 0, m
+    for i, a in enumerate(P.METHODS):
+        for b in P.METHODS[i + 1:]:
+            iou = M.silhouette_iou(images[a], images[b])
+            assert iou >= 0.75, (a, b, iou)
+    # the path-traced methods see light: their covered pixels are not black
+    for m in ("VOL", "ISO", "VOX"):
+        assert float(images[m][:, :3].sum()) > 0, m
+
+
+def test_evaluate_pair_identical_and_different():
+    vol = _sphere()
+    same = P.evaluate_pair(vol, vol, "ea", n_views=2, spp=1, max_depth=2)
+    for m in P.METHODS:
+        assert same.metrics[f"dssim_{m}"] == pytest.approx(0.0, abs=1e-12), m
+        assert same.metrics[f"silhouette_iou_{m}"] == 1.0, m
+        x, y = same.images[m]
+        assert x.shape == y.shape
+    assert same.metrics["iou"] == 1.0 and same.metrics["rmse"] == 0.0
+    moved = P.evaluate_pair(_sphere(centre=(-0.2, 0.15, -0.1)), vol, "ea", n_views=2, spp=1, max_depth=2)
+    for m in P.METHODS:
+        assert moved.metrics[f"dssim_{m}"] > 0.02, m
+    assert moved.metrics["iou"] < 0.8 and moved.metrics["cd"] > 0.0
+
+
+def test_voxel_mesh_counts_exposed_faces_only():
+    v = torch.zeros(4, 4, 4, 4)
+    v[:3] = 0.5
+    v[3, 1, 1, 1] = v[3, 1, 1, 2] = 1.0                       # two neighbouring voxels
+    verts, faces, colours = P.voxel_mesh(v)
+    assert len(faces) == 2 * 10                               # 12 faces minus the 2 they share
+    assert len(verts) == 4 * 10 and colours.shape == (40, 3)
+    delta = 0.5
+    # voxel (1, 1, 1..2) spans x ∈ [−0.5, 0.5], y ∈ [0, 0.5], z ∈ [0, 0.5]
+    np.testing.assert_allclose(verts.min(0), [-1 + delta, 1 - 2 * delta, 1 - 2 * delta])
+    np.testing.assert_allclose(verts.max(0), [-1 + 3 * delta, 1 - delta, 1 - delta])
+    assert len(P.voxel_mesh(torch.zeros(1, 4, 4, 4))[1]) == 0
+
+
+def test_billboard_reproduces_the_input_view():
+    img = render(test_volume(N, "figure", "ea"), front_view(1))[0]
+    board = P.billboard(img)
+    assert board.shape == (4, N, N, N)
+    torch.testing.assert_close(render(board[None], front_view(1))[0], img, atol=1e-4, rtol=0)
+    mae, iou = P.novel_view_errors(board, test_volume(N, "figure", "ea")[0], "ea")
+    assert mae > 0.01 and iou < 1.0                            # blind to depth
+
+
+# -- the report ------------------------------------------------------------------------------
+
+def test_report_on_synthetic_pairs(tmp_path):
+    truth = _sphere()
+    image = render(truth[None], front_view(1))[0]
+    triples = [(image, truth, truth), (image, _sphere(centre=(-0.2, 0.1, 0.0)), truth)]
+    row = R.score_pairs("synthetic", "ea", triples, n_views=2, spp=1, max_depth=2)
+    board = R.score_pairs("billboard", "ea", [(image, P.billboard(image), truth)], n_views=2, spp=1, max_depth=2)
+    report = R.write_report([row, board], tmp_path / "eval", notes=["tiny synthetic pairs"])
+    text = report.read_text()
+    assert "| Method | IF | DSSIM VOL | DSSIM ISO | DSSIM VOX | DSSIM IF | RMSE | IoU | CD | pairs |" in text
+    line = next(l for l in text.splitlines() if l.startswith("| synthetic |"))
+    cells = [c.strip() for c in line.strip("|").split("|")]
+    assert cells[1] == "EA" and cells[-1] == "2"
+    assert cells[5] == f"{row.mean('dssim_IF') * 10:.2f}"     # the paper's × 10
+    assert cells[6] == f"{row.mean('rmse') * 100:.2f}"        # and × 10²
+    header = next(l for l in text.splitlines() if l.startswith("| Method"))
+    assert "VGG" not in header and "FID" not in header        # not computed: no column
+    figures = sorted((tmp_path / "eval" / "figures").glob("*.png"))
+    assert [f.name for f in figures] == ["billboard_ea.png", "synthetic_ea.png"]
+    from PIL import Image
+    with Image.open(figures[1]) as im:
+        assert im.width > 200 and im.height > 50
+    results = json.loads((tmp_path / "eval" / "results.json").read_text())
+    assert results[0]["means"]["iou"] == pytest.approx(row.mean("iou"))
+    assert len(results[0]["pairs"]) == 2 and results[0]["pairs"][0]["iou"] == 1.0
+
+
+def test_evaluate_command_arguments_and_errors(tmp_path):
+    import argparse
+    args = R.add_arguments(argparse.ArgumentParser()).parse_args(
+        ["--run", "a", "--run", "b", "--out", "o", "--views", "3", "--limit", "2"])
+    assert args.run == ["a", "b"] and args.views == 3 and args.limit == 2 and args.vgg_weights is None
+    with pytest.raises(SystemExit):
+        R.main_evaluate(["--out", str(tmp_path)])             # --run is required
+    with pytest.raises(UserError):
+        R.main_evaluate(["--run", str(tmp_path / "no_run"), "--out", str(tmp_path / "out")])
+    with pytest.raises(UserError, match="--spp"):
+        R.main_evaluate(["--run", "x", "--out", str(tmp_path / "out"), "--spp", "0"])
