@@ -306,3 +306,22 @@ def test_a_bug_keeps_its_traceback_and_a_user_error_is_one_line(monkeypatch, tmp
     monkeypatch.setattr(C, "compare", ctrl_c)
     code, _, stderr = run_cli(argv)
     assert code == 130 and one_line(stderr, "compare") == "platonic compare: interrupted: 3 of 9 images are saved"
+
+
+def test_a_bug_inside_a_training_step_keeps_its_traceback(monkeypatch, tmp_path):
+    """A ValueError from the code of a step (not the user's input, the weights still finite) is a
+    bug: ``platonic train`` does not turn it into a one-line error with exit code 2, it propagates
+    with a note saying which step failed and what is kept."""
+    from mitsuba_platonic.errors import UserError
+    from mitsuba_platonic.train.trainer import Trainer
+
+    def bug(self, step):
+        raise ValueError("operands could not be broadcast together")     # an internal bug, not the user's
+
+    monkeypatch.setattr(Trainer, "step", bug)
+    with pytest.raises(ValueError, match="broadcast") as info:
+        run_cli(["train", "--quiet", *_train_args(tmp_path)])
+    assert not isinstance(info.value, UserError)
+    assert any("training failed in step 1" in note and "nothing was saved" in note
+               for note in getattr(info.value, "__notes__", [])), getattr(info.value, "__notes__", None)
+    assert not (tmp_path / "runs" / "r" / "checkpoints").exists()
