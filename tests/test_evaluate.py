@@ -222,14 +222,13 @@ def test_evaluate_pair_identical_and_different():
 def test_voxel_mesh_counts_exposed_faces_only():
     v = torch.zeros(4, 4, 4, 4)
     v[:3] = 0.5
-    v[3, 1, 1, 1] = v[3, 1, 1, 2] = 1.0                       # two neighbouring voxels
+    v[3, 1, 1, 2] = v[3, 1, 1, 3] = 1.0                       # two neighbouring voxels along +x
     verts, faces, colours = P.voxel_mesh(v)
     assert len(faces) == 2 * 10                               # 12 faces minus the 2 they share
     assert len(verts) == 4 * 10 and colours.shape == (40, 3)
-    delta = 0.5
-    # voxel (1, 1, 1..2) spans x ∈ [−0.5, 0.5], y ∈ [0, 0.5], z ∈ [0, 0.5]
-    np.testing.assert_allclose(verts.min(0), [-1 + delta, 1 - 2 * delta, 1 - 2 * delta])
-    np.testing.assert_allclose(verts.max(0), [-1 + 3 * delta, 1 - delta, 1 - delta])
+    # voxels (d, h, w) = (1, 1, 2..3) of a 4³ grid (Δ = ½) span x ∈ [0, 1], y ∈ [0, ½], z ∈ [0, ½]
+    np.testing.assert_allclose(verts.min(0), [0.0, 0.0, 0.0])
+    np.testing.assert_allclose(verts.max(0), [1.0, 0.5, 0.5])
     assert len(P.voxel_mesh(torch.zeros(1, 4, 4, 4))[1]) == 0
 
 
