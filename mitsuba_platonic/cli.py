@@ -1,8 +1,14 @@
 """The ``platonic`` command line.
 
 Subcommands (one ``argparse`` subparser each; add new ones in :func:`build_parser` with a
-``handler`` default taking the parsed arguments and returning an exit code):
+``handler`` default taking the parsed arguments and returning an exit code). A handler checks
+its flags, calls the library function that does the work and prints what it wrote:
 
+- ``quickstart``: :func:`mitsuba_platonic.quickstart.quickstart`.
+- ``train``: :func:`mitsuba_platonic.train.train`.
+- ``reconstruct`` / ``generate``: a :class:`~mitsuba_platonic.model.Model` read from a run,
+  :func:`~mitsuba_platonic.export.export_reconstructions` / :func:`~mitsuba_platonic.export.export_samples`.
+- ``make-dataset``: :func:`mitsuba_platonic.data.collection.make_collection` per shape class.
 - ``compare``: render a volume with the closed-form layers and the Mitsuba ray marcher from a
   few views and report how far apart and how fast they are (:mod:`mitsuba_platonic.compare`).
 - ``bench``: the renderers' speed/accuracy trade: times, memory, image and gradient errors,
@@ -18,7 +24,6 @@ a bug and keeps its traceback (exit code 1).
 from __future__ import annotations
 
 import argparse
-import json
 import os
 import sys
 from pathlib import Path
@@ -180,8 +185,7 @@ def _check_compare_settings(args: argparse.Namespace) -> None:
 
 
 def _cmd_compare(args: argparse.Namespace) -> int:
-    from .compare import check_memory, compare, format_table
-    from .views import front_view, sample_views
+    from .compare import check_memory, compare, comparison_views, format_table, write_summary
 
     _check_compare_settings(args)
     if args.volume.startswith(BUILTIN_PREFIX):              # before building it: refuse what cannot fit
@@ -199,7 +203,7 @@ def _cmd_compare(args: argparse.Namespace) -> int:
         if not models:
             raise CLIError("nothing to compare: the volume has no colour, so EA cannot be rendered; "
                            "pass --models vh,ao")
-    views = torch.cat([front_view(1), sample_views(args.views - 1, seed=args.seed)])
+    views = comparison_views(args.views, seed=args.seed)
     options = {"step": args.step, "spp": args.spp, "jitter": args.jitter, "seed": args.seed}
     out = Path(args.out)
     if out.exists() and not out.is_dir():
@@ -212,12 +216,7 @@ def _cmd_compare(args: argparse.Namespace) -> int:
           f"step={args.step:g}, spp={args.spp}, jitter={args.jitter}; "
           f"times: best of {args.repeats} after a warm-up, forward only")
     print(format_table(results))
-    summary = out / "compare.json"
-    keep = ("model", "resolution", "views", "filter", "options", "max_abs_diff", "mean_abs_diff",
-            "closed_form_ms", "mitsuba_ms", "ratio", "png", "exrs")
-    summary.write_text(json.dumps({"volume": args.volume, "repeats": args.repeats,
-                                   "view_vectors": views.tolist(),
-                                   "results": [{k: r[k] for k in keep} for r in results]}, indent=2))
+    summary = write_summary(out / "compare.json", args.volume, views, results, args.repeats)
     print("wrote:")
     for r in results:
         print(f"  {r['png']}")

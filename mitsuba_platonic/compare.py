@@ -37,7 +37,7 @@ from .views import to_angles, validate_views
 from .volume import CHANNELS
 
 __all__ = ["compare", "format_table", "time_render", "best_of", "DISPLAY_BACKGROUND", "HEATMAP_CMAP",
-           "memory_estimate", "available_memory", "check_memory"]
+           "memory_estimate", "available_memory", "check_memory", "comparison_views", "write_summary"]
 
 #: Grey level EA renders (premultiplied RGBA) are composited over for display.
 DISPLAY_BACKGROUND = 0.5
@@ -294,6 +294,29 @@ def compare(volume: torch.Tensor, views: torch.Tensor, models: Sequence[str] = M
                 result["exrs"].append(str(exr))
         results.append(result)
     return results
+
+
+def comparison_views(n: int, seed: int = 0) -> torch.Tensor:
+    """The views ``platonic compare`` renders from: the front view, then ``n − 1`` random views (``seed``)."""
+    from .views import front_view, sample_views
+
+    return torch.cat([front_view(1), sample_views(n - 1, seed=seed)])
+
+
+#: The keys of a result that ``compare.json`` keeps (the images stay out).
+SUMMARY_KEYS = ("model", "resolution", "views", "filter", "options", "max_abs_diff", "mean_abs_diff",
+                "closed_form_ms", "mitsuba_ms", "ratio", "png", "exrs")
+
+
+def write_summary(path: Union[str, Path], volume: str, views: torch.Tensor, results: Sequence[Mapping[str, Any]],
+                  repeats: int) -> Path:
+    """``compare.json``: the volume's name, ``repeats``, the view vectors and each result's :data:`SUMMARY_KEYS`."""
+    import json
+
+    path = Path(path)
+    path.write_text(json.dumps({"volume": volume, "repeats": repeats, "view_vectors": views.tolist(),
+                                "results": [{k: r[k] for k in SUMMARY_KEYS} for r in results]}, indent=2))
+    return path
 
 
 def format_table(results: Sequence[Mapping[str, Any]]) -> str:
