@@ -280,3 +280,41 @@ def test_evaluate_command_arguments_and_errors(tmp_path):
         R.main_evaluate(["--run", str(tmp_path / "no_run"), "--out", str(tmp_path / "out")])
     with pytest.raises(UserError, match="--spp"):
         R.main_evaluate(["--run", "x", "--out", str(tmp_path / "out"), "--spp", "0"])
+
+
+def test_evaluate_runs_on_a_tiny_collection_with_a_stand_in_model(tmp_path, monkeypatch):
+    """The run plumbing: held-out split, manifest volumes, truth in the input frame, baselines,
+    report. The trained networks are replaced by a stand-in that returns the ground truth for the
+    held-out image, so the trained row must score perfectly (IoU 1, RMSE 0, DSSIM 0)."""
+    from mitsuba_platonic.config import load_config
+    from mitsuba_platonic.data.collection import load_manifest
+    from mitsuba_platonic.train.data import collection_folder, load_training_data
+
+    cfg = load_config(None, [f"data.cache={tmp_path / 'data'}", "data.shape_class=mushroom", "data.n_shapes=2",
+                             "data.views_per_shape=1", "data.split=0.5", "model.resolution=16",
+                             "render.model=ea", "render.backend=closed_form"])
+    calls = {}
+
+    def fake_load(run_dir):
+        def reconstruct(images):                                # the truth of the held-out shape, in frame
+            folder = collection_folder(cfg)
+            rec = [r for r in load_manifest(folder)["images"] if r["shape"] == 1][0]
+            vol = torch.from_numpy(np.load(folder / rec["volume"])["volume"]).float()
+            calls["n"] = len(images)
+            assert torch.equal(images, load_training_data(cfg, progress=False).held_out[:1])   # held out, not trained on
+            return P.truth_in_input_frame(vol, rec["view"], "ea")[None].expand(len(images), -1, -1, -1, -1)
+        return cfg, reconstruct, lambda: (lambda images: torch.full((len(images), 4, N, N, N), 0.05)), 123
+
+    monkeypatch.setattr(R, "_load", fake_load)
+    with pytest.raises(UserError, match="manifest.json"):       # the collection is not rendered yet
+        R.evaluate_runs([tmp_path / "run"], tmp_path / "out", n_views=2, spp=1, progress=False)
+    load_training_data(cfg, progress=False)                     # make-dataset at 16³: 2 shapes × 1 view
+    report = R.evaluate_runs([tmp_path / "run"], tmp_path / "out", n_views=2, spp=1, max_depth=2, progress=False)
+    assert calls["n"] == 1                                      # one held-out image (shape 1)
+    results = {r["method"]: r["means"] for r in json.loads((tmp_path / "out" / "results.json").read_text())}
+    trained = results["run (platonic, step 123)"]
+    assert trained["iou"] == 1.0 and trained["rmse"] == 0.0
+    assert all(trained[f"dssim_{m}"] == pytest.approx(0.0, abs=1e-12) for m in P.METHODS)
+    assert results["run: untrained"]["iou"] == 0.0             # nothing at density ≥ ½
+    assert results["run: billboard"]["rmse"] > 0.0
+    assert "| run (platonic, step 123) | EA |" in report.read_text()
