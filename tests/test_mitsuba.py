@@ -44,10 +44,11 @@ def test_oblique_views_agree_with_closed_form(model, filter):
 
 @pytest.mark.parametrize("model", MODELS)
 @pytest.mark.parametrize("filter", FILTERS)
-def test_gradients_agree_with_closed_form(model, filter):
-    vol = _pair(model, 16, "cloud", batch=2)
+@pytest.mark.parametrize("n", [16, 32])                      # 32: the tiled, atomic-free backward
+def test_gradients_agree_with_closed_form(model, filter, n):
+    vol = _pair(model, n, "cloud", batch=2)
     views = torch.cat([V.front_view(1), OBLIQUE[:1]])
-    weights = torch.rand(2, 4 if model == "ea" else 1, 16, 16)
+    weights = torch.rand(2, 4 if model == "ea" else 1, n, n)
     grads = []
     for backend in ["closed_form", "mitsuba"]:
         x = vol.clone().requires_grad_()
@@ -321,3 +322,59 @@ def test_two_backward_passes_from_one_forward_are_each_right(model):
         grads[backend] = (first, second)
     for want, got in zip(grads["closed_form"], grads["mitsuba"]):
         assert (want - got).norm() / want.norm() <= 1e-3
+
+
+def _marcher():
+    import importlib
+    return importlib.import_module("mitsuba_platonic.render.marcher")
+
+
+@pytest.mark.parametrize("n, spp", [(32, 1), (32, 4), (64, 1)])
+def test_tiled_lane_order_puts_a_packets_rays_far_apart(n, spp):
+    """Every ray once; the 16 lanes of an aligned packet belong to one pair and are ≥ N/4 pixels
+    apart along a row or a column (decoded here with numpy, independently of the marcher)."""
+    M = _marcher()
+    b = 2
+    lanes = M.mi.UInt32(np.arange(b * n * n * spp, dtype=np.uint32))
+    ray = np.asarray(M.tiled_ray(lanes, n, spp), dtype=np.int64)
+    assert np.array_equal(np.sort(ray), np.arange(b * n * n * spp))
+    pixel, sub = np.divmod(ray, spp)
+    pair, ij = np.divmod(pixel, n * n)
+    i, j = np.divmod(ij, n)
+    packets = lambda a: a.reshape(-1, 16)                            # noqa: E731
+    assert (packets(pair) == packets(pair)[:, :1]).all()
+    di = np.abs(packets(i)[:, :, None] - packets(i)[:, None, :])
+    dj = np.abs(packets(j)[:, :, None] - packets(j)[:, None, :])
+    apart = np.maximum(di, dj) + np.eye(16, dtype=np.int64)[None] * n   # a lane and itself: excluded
+    assert apart.min() >= n // 4
+
+
+@pytest.mark.parametrize("model", MODELS)
+@pytest.mark.parametrize("filter", FILTERS)
+@pytest.mark.parametrize("options", [{}, {"spp": 4, "jitter": True}, {"termination": 0.05, "step": 0.5}],
+                         ids=["default", "jittered-spp4", "terminated-half-step"])
+def test_tiled_backward_equals_the_expand_backward(model, filter, options):
+    """The atomic-free backward (tiled lanes, NoConflicts scatters) gives the gradient of the
+    Expand scatters up to float summation order: a lost update would show as a large difference."""
+    import drjit as dr
+    M = _marcher()
+    if not M.tiled_backward(32, options.get("spp", 1)):
+        pytest.skip("the tiled backward needs the LLVM backend with packets of ≤ 16 lanes")
+    b = 2                                                       # fewer pairs than blocks: padded launch
+    vol = _pair(model, 32, "cloud", batch=b)
+    views = V.sample_views(b, seed=3)
+    weights = torch.rand(b, 4 if model == "ea" else 1, 32, 32)
+
+    def gradient(tiled):
+        M.TILED = tiled
+        try:
+            x = vol.clone().requires_grad_()
+            (render(x, views, model, "mitsuba", filter=filter, seed=5, **options) * weights).sum().backward()
+        finally:
+            M.TILED = True
+        return x.grad
+
+    expand = gradient(False)
+    assert expand.abs().max() > 0
+    for _ in range(3):                                          # a race between threads is intermittent
+        assert (gradient(True) - expand).abs().max() <= 1e-5 * expand.abs().max()

@@ -20,7 +20,8 @@ centres exactly (N a power of two): the lookups reproduce the closed form's to t
 
 Segments. With Δ = 2/N and ``step`` h voxels, segment k covers camera depth [k h, min((k + 1) h, N)]
 voxels from the front face z = 1; its length is s_k = min(h, N − k h) voxels and its sample sits at
-fraction u of it (u = ½, or one u ~ U[0, 1) per ray with ``jitter``):
+fraction u of it (u = ½, or one u ~ U[0, 1) per ray with ``jitter``; the jitter's numbers are a
+TEA hash of the ray's number, the call's seed and the dimension, so both passes draw the same):
 
     z_k = 1 − (k h + u s_k) Δ
 
@@ -46,18 +47,35 @@ pass that records for the gradient marches the whole ray, because the gradient a
 sample depends on what lies behind it.
 
 Adjoint (one launch, no division by τ, exact at τ = 0). The forward pass of a differentiable call
-records T_k for every ray and segment (4 bytes each). The backward pass marches each ray back to
+records T_k for every ray r and segment k (4 bytes each, at k · rays + r: a packet writes and
+reads neighbouring floats). The backward pass marches each ray back to
 front, accumulating the suffix radiance R_k = Σ_{m>k} (Π_{k<j<m} τ_j)(1 − τ_m) c_m and the suffix
 transmittance U_k = Π_{j>k} τ_j:
 
     ∂C/∂τ_k = T_k (R_k − c_k),   ∂C/∂c_k = T_k (1 − τ_k),   ∂α/∂τ_k = ∂ρ/∂τ_k = −T_k U_k
 
 then ∂L/∂v_k = ∂L/∂τ_k · dτ_k/dv_k, with dτ/dv = −1 (step 1) or −s (1 − v)^{s − 1} (other steps,
-0 above the clamp), and scatters ∂L/∂v_k and ∂L/∂c_k into the voxels the
-lookup read, with the lookup's weights (Dr.Jit's ``scatter_reduce``; on the LLVM backend the
-``Expand`` mode gives each thread its own copy of the gradient, so no atomics collide). VH needs
-no record: ρ = 1 − exp(−Σ s_k v_k) gives ∂ρ/∂v_k = s_k T with the ray's final T, so its backward
-pass is one front-to-back march that scatters s_k T δρ.
+0 above the clamp), and scatters ∂L/∂v_k and ∂L/∂c_k into the voxels the lookup read, with the
+lookup's weights. VH needs no record: ρ = 1 − exp(−Σ s_k v_k) gives ∂ρ/∂v_k = s_k T with the
+ray's final T, so its backward pass is one front-to-back march that scatters s_k T δρ.
+
+Scatter-adds without atomics. On the LLVM backend, Dr.Jit's ``NoConflicts`` scatter-add first
+sums the lanes of a SIMD packet that add into the same voxel and then adds each sum with a plain
+load-add-store: exact, as long as no two *threads* add into the same voxel at once. Where the
+rays of one pair make a power-of-two number of lanes (N²·spp), the backward pass therefore
+
+- cuts its launch into one block of lanes per pair, so that a thread owns the volume it adds
+  into (Dr.Jit keeps a requested block size only for launches of more than 2 blocks per thread:
+  a small batch is padded with idle lanes, :func:`_tiled_pairs`);
+- orders each pair's lanes in tiles (:func:`tiled_ray`): the image is cut into 4 × 4 tiles of N/4
+  pixels and a packet's 16 lanes march the same pixel of the 16 tiles. Exactness does not need
+  this; speed does: rays N/4 pixels apart add into different cache lines, where neighbouring rays
+  would load and store the same lines one after the other (the 64³ EA backward kernel, batch 8,
+  measured about 25 % faster tiled than in row order).
+
+Otherwise (other N or spp, or the CUDA backend) it uses ``Expand`` on the LLVM backend (each
+thread adds into its own copy of the gradient, summed at the end: exact, but the copies cost two
+fills and a reduction of B·N³·C floats per call) and ``Auto`` (atomics) on CUDA.
 """
 
 from __future__ import annotations
@@ -77,7 +95,7 @@ from .variant import ensure_variant, variant_device
 mi = ensure_variant()
 import drjit as dr  # noqa: E402  (after the variant is set)
 
-__all__ = ["march", "n_segments", "segment_transmittance", "V_MAX", "RECORD_LIMIT"]
+__all__ = ["march", "n_segments", "segment_transmittance", "tiled_ray", "tiled_backward", "V_MAX", "RECORD_LIMIT"]
 
 #: Density clamp used by AO/EA when step != 1 (log domain).
 V_MAX = 1.0 - 1e-6
@@ -109,22 +127,26 @@ def segment_transmittance(model: str, step: float, v: Any, s: Any) -> Tuple[Any,
 # -- Threads -------------------------------------------------------------------------------
 
 
-def _llvm_block_setter():
-    """Dr.Jit's ``jit_llvm_set_block_size`` (not exposed in Python), or None where it is absent."""
+def _core_function(symbol: str, restype: Any, argtypes: list):
+    """A function of Dr.Jit's LLVM backend that Python does not expose, or None where it is absent."""
     if not mi.variant().startswith("llvm"):
         return None
     pattern = os.path.join(os.path.dirname(dr.__file__), "libdrjit-core*.so*")
     for path in glob.glob(pattern):
         try:
-            fn = getattr(ctypes.PyDLL(path), "_Z23jit_llvm_set_block_sizej")   # keeps the GIL held
+            fn = getattr(ctypes.PyDLL(path), symbol)                 # PyDLL: keeps the GIL held
         except (OSError, AttributeError):
             continue
-        fn.argtypes, fn.restype = [ctypes.c_uint32], None
+        fn.argtypes, fn.restype = argtypes, restype
         return fn
     return None
 
 
-_set_block_size = _llvm_block_setter()
+#: ``jit_llvm_set_block_size(n)``: lanes per block of work (a power of two); each block runs on one thread.
+_set_block_size = _core_function("_Z23jit_llvm_set_block_sizej", None, [ctypes.c_uint32])
+_vector_width = _core_function("_Z21jit_llvm_vector_widthv", ctypes.c_uint32, [])
+#: Lanes per SIMD packet of the LLVM backend (16 with AVX-512, 8 with AVX2); 0 off the LLVM backend.
+PACKET = int(_vector_width()) if _vector_width is not None else 0
 
 
 def _spread_over_threads(lanes: int, blocks_per_thread: int) -> None:
@@ -149,11 +171,18 @@ class _Batch:
 
     ``data``: the flat volume batch ``(B, N, N, N, C)``; ``frames``: 9 floats per pair
     (right, up, ω); ``opt``: the settings (model, filter, step, spp, jitter, termination);
-    ``seed``: a UInt32 array of width 1 seeding the jitter's random numbers.
+    ``seed``: a UInt32 array of width 1 seeding the jitter's random numbers; ``tiled``: lanes in
+    the tiled order of the atomic-free backward (:func:`tiled_ray`), else lane r is ray r.
     """
 
-    def __init__(self, data: Any, frames: Any, b: int, c: int, n: int, opt: RenderSettings, seed: int):
+    def __init__(self, data: Any, frames: Any, b: int, c: int, n: int, opt: RenderSettings, seed: int,
+                 tiled: bool = False):
         self.data, self.frames, self.B, self.C, self.N, self.opt = data, frames, b, c, n, opt
+        self.tiled = tiled
+        # tiled: whole pairs of idle lanes pad the launch to > 2 blocks per thread (:func:`_tiled_pairs`)
+        self.n_lanes = _tiled_pairs(b) * n * n * opt.spp if tiled else b * n * n * opt.spp
+        # tiled: no two threads add into the same volume (module docstring)
+        self.mode = dr.ReduceMode.NoConflicts if tiled else _MODE
         self.model, self.seed = opt.model, seed
         self.Δ = 2.0 / n
         self.n_steps = n_segments(n, opt.step)
@@ -166,15 +195,18 @@ class _Batch:
     def _rays(self) -> None:
         """Per lane: its pair's offset into ``data``, the image-plane point (x, y) and depth fraction u."""
         N, spp, opt = self.N, self.opt.spp, self.opt
-        r = dr.arange(mi.UInt32, self.n_rays)
+        lane = dr.arange(mi.UInt32, self.n_lanes)
+        r = tiled_ray(lane, N, spp) if self.tiled else lane
+        self.ray = r                                              # which ray this lane marches
+        self.real = r < self.n_rays                               # False: an idle lane of the padding
         pixel = r // spp                                          # which pixel of the batch
         sub = r - pixel * spp                                     # which ray of that pixel
         b = pixel // (N * N)
         ij = pixel - b * (N * N)
         i, j = ij // N, ij % N
         if opt.jitter:
-            rng = mi.PCG32(size=self.n_rays, initstate=mi.UInt64(self.seed), initseq=r)
-            ox, oy, u = rng.next_float32(), rng.next_float32(), rng.next_float32()
+            # a hash of (ray, seed, dimension): the same numbers whichever lane marches the ray
+            ox, oy, u = (mi.sample_tea_float32(r, self.seed * 3 + d, 6) for d in range(3))
         else:
             m = math.isqrt(spp)
             ox = (mi.Float(sub % m) + 0.5) / m
@@ -184,7 +216,7 @@ class _Batch:
         self.y = 1.0 - (mi.Float(i) + oy) * self.Δ
         self.u = u
         self.base = b * (N * N * N)                               # first voxel of this lane's volume
-        f = [dr.gather(mi.Float, self.frames, b * 9 + k) for k in range(9)]
+        f = [dr.gather(mi.Float, self.frames, b * 9 + k, self.real) for k in range(9)]
         self.right, self.up, self.ω = mi.Vector3f(*f[0:3]), mi.Vector3f(*f[3:6]), mi.Vector3f(*f[6:9])
 
     def segment(self, k: Any) -> Tuple[Any, Any]:
@@ -250,7 +282,7 @@ class _Batch:
         ea = self.model == "ea"
         n_steps, ε = self.n_steps, self.ε
         whole = whole and ε == 0.0                                # the gradient needs every segment
-        slot = dr.arange(mi.UInt32, self.n_rays) * n_steps
+        ray = dr.arange(mi.UInt32, self.n_rays)                   # T_k of ray r is record[k · n_rays + r]
         k = mi.UInt32(0)
         T = mi.Float(1.0)
         depth = mi.Float(0.0)                                     # VH: optical depth Σ s v
@@ -258,7 +290,7 @@ class _Batch:
         active = mi.Bool(True)
         while active:
             if record is not None:
-                dr.scatter(record, T, slot + k)
+                dr.scatter(record, T, k * self.n_rays + ray)       # neighbouring lanes, neighbouring floats
             p, s = self.segment(k)
             v, c = self.lookup(self.corners(p))
             if self.model == "vh":
@@ -282,7 +314,7 @@ class _Batch:
         into ``grad`` (same layout as ``data``). δρ: ∂L/∂ρ or ∂L/∂α per ray; δC: ∂L/∂C (EA)."""
         ea = self.model == "ea"
         n_steps = self.n_steps
-        slot = dr.arange(mi.UInt32, self.n_rays) * n_steps
+        ray = self.ray
 
         # Back to front from where the forward march stopped (only a positive ε stops it early),
         # with the suffix radiance R and the suffix transmittance U
@@ -292,7 +324,7 @@ class _Batch:
         active = k > 0
         while active:
             k -= 1
-            T_k = dr.gather(mi.Float, record, slot + k)
+            T_k = dr.gather(mi.Float, record, k * self.n_rays + ray, self.real)
             p, s = self.segment(k)
             corners = self.corners(p)
             v, c = self.lookup(corners)
@@ -304,7 +336,7 @@ class _Batch:
             gc = δC * T_k * (1.0 - τ) if ea else None             # ∂C/∂c = T (1 − τ)
             g = mi.Vector4f(gc.x, gc.y, gc.z, gv) if ea else gv   # EA: one packet per voxel
             for idx, w, inside in corners:
-                dr.scatter_reduce(dr.ReduceOp.Add, grad, w * g, idx, inside, mode=_MODE)
+                dr.scatter_reduce(dr.ReduceOp.Add, grad, w * g, idx, inside, mode=self.mode)
             if ea:
                 R = (1.0 - τ) * c + τ * R
             U *= τ
@@ -321,9 +353,49 @@ class _Batch:
         while active:
             p, s = self.segment(k)
             for idx, w, inside in self.corners(p):
-                dr.scatter_reduce(dr.ReduceOp.Add, grad, w * s * g, idx, inside, mode=_MODE)
+                dr.scatter_reduce(dr.ReduceOp.Add, grad, w * s * g, idx, inside, mode=self.mode)
             k += 1
             active &= k < marched
+
+
+def tiled_ray(lane: Any, n: int, spp: int) -> Any:
+    """The ray that ``lane`` (a UInt32 array) marches in the tiled order: the image is cut into 4 × 4
+    tiles of N/4 pixels (N a multiple of 4), and the 16 lanes of an aligned packet march the same
+    pixel and sub-sample of the 16 tiles of one pair, ≥ N/4 pixels apart (module docstring).
+    Ray r = (pair · N² + row · N + column) · spp + sub-sample, as in the canonical order."""
+    P, t = n * n * spp, n // 4                                    # rays per pair, tile size
+    b = lane // P
+    local = lane - b * P
+    tile, m = local % 16, local // 16                             # slot in the packet, packet number
+    ii, jj, sub = (m // t) % t, m % t, m // (t * t)               # position in the tile, sub-sample
+    i, j = (tile // 4) * t + ii, (tile % 4) * t + jj
+    return b * P + (i * n + j) * spp + sub
+
+
+def _tiled_pairs(b: int) -> int:
+    """Pairs of lanes in a tiled launch: B, padded with idle pairs to more than 2 × (threads + 1).
+
+    Dr.Jit 1.5's LLVM launcher uses the requested block size only for a launch of more than
+    2 × threads blocks; a smaller launch is cut into one block per thread, which could split a
+    pair between two threads. (+ 1: whether the pool counts the calling thread.)
+    """
+    return max(b, 2 * (dr.thread_count() + 1) + 1)
+
+
+def tiled_backward(n: int, spp: int) -> bool:
+    """Whether the backward pass of a call can scatter without atomics or per-thread copies.
+
+    Module docstring, "Scatter-adds without atomics": on the LLVM backend, where a pair's N²·spp
+    rays make a power-of-two block of at least one packet and N is a multiple of 4 (the tiles).
+    """
+    rays = n * n * spp
+    return (TILED and _set_block_size is not None and PACKET > 0 and n % 4 == 0
+            and rays & (rays - 1) == 0 and rays >= PACKET)
+
+
+#: Use the tiled, atomic-free backward where :func:`tiled_backward` allows it
+#: (``MITSUBA_PLATONIC_TILED=0``: always the ``Expand`` scatters).
+TILED = os.environ.get("MITSUBA_PLATONIC_TILED", "1") != "0"
 
 
 #: Scatter-add mode of the backward pass (``Expand``: per-thread copies on the LLVM backend).
@@ -366,11 +438,11 @@ class _Static:
     re-records when its hash changes (a new batch size, resolution, setting or thread count) and
     replays otherwise."""
 
-    def __init__(self, shape: Tuple[int, int, int], opt: RenderSettings, record: bool):
-        self.shape, self.opt, self.record = shape, opt, record
+    def __init__(self, shape: Tuple[int, int, int], opt: RenderSettings, record: bool, tiled: bool = False):
+        self.shape, self.opt, self.record, self.tiled = shape, opt, record, tiled
         # Dr.Jit's thread count too: the backward's Expand scatters size their per-thread copies of
         # the gradient when a kernel is recorded, so a replay under more threads would overrun them
-        self.key = (shape, opt, record, dr.thread_count())
+        self.key = (shape, opt, record, tiled, dr.thread_count())
 
     def __hash__(self) -> int:
         return hash(self.key)
@@ -398,7 +470,12 @@ def _forward_pass(data: Any, frames: Any, seed: Any, static: _Static) -> Tuple[l
 def _backward_pass(data: Any, frames: Any, seed: Any, Ts: Any, marched: Any, δ: list, static: _Static) -> Any:
     """The backward launch: ∂L/∂volume (same layout as ``data``) from the per-ray gradients δ."""
     (b, c, n), opt = static.shape, static.opt
-    batch = _Batch(data, frames, b, c, n, opt, seed)
+    batch = _Batch(data, frames, b, c, n, opt, seed, tiled=static.tiled)
+    if static.tiled:                  # per-ray inputs in the lanes' order; idle lanes march 0 segments
+        δ = [dr.gather(mi.Float, x, batch.ray, batch.real) for x in δ]
+        marched = dr.gather(mi.UInt32, marched, batch.ray, batch.real)
+        if opt.model == "vh":
+            Ts = dr.gather(mi.Float, Ts, batch.ray, batch.real)
     δC, δρ = (mi.Color3f(*δ[:3]), δ[3]) if opt.model == "ea" else (mi.Color3f(0.0), δ[0])
     grad = dr.zeros(mi.Float, b * c * n ** 3)
     if opt.model == "vh":
@@ -477,10 +554,14 @@ class _March(torch.autograd.Function):
     def backward(ctx, grad_image: torch.Tensor):
         data, frames, seed_arr, Ts, marched, static, lanes = ctx.args
         δ = list(_image_to_per_ray(grad_image.to(torch.float32), static.opt.spp, ctx.keep))
-        _spread_over_threads(lanes, 1)
-        run = _frozen_backward if FREEZE else _backward_pass
-        grad = run(data, frames, seed_arr, Ts, marched, δ, static)
         b, c, n = static.shape
+        tiled = tiled_backward(n, static.opt.spp)
+        if tiled:
+            _set_block_size(n * n * static.opt.spp)               # one block per pair: threads own volumes
+        else:
+            _spread_over_threads(lanes, 1)
+        run = _frozen_backward if FREEZE else _backward_pass
+        grad = run(data, frames, seed_arr, Ts, marched, δ, _Static(static.shape, static.opt, False, tiled))
         out = grad.torch().view(b, n, n, n, c).permute(0, 4, 1, 2, 3)   # (B, C, N, N, N), a view
         del δ
         dr.sync_thread()                                          # nothing in flight reads ``keep``
