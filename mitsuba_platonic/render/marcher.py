@@ -242,13 +242,17 @@ class _Batch:
             return [(self._index(i), mi.Float(1.0), inside)]
         i0 = mi.Vector3i(dr.floor(q))
         t = q - mi.Vector3f(i0)
+        # per axis, the two neighbours' offsets, weights and in-range masks; a corner combines one of each
+        x = [(i0.x, 1.0 - t.x, (i0.x >= 0) & (i0.x < N)), (i0.x + 1, t.x, (i0.x >= -1) & (i0.x < N - 1))]
+        y = [(i0.y * N, 1.0 - t.y, (i0.y >= 0) & (i0.y < N)), ((i0.y + 1) * N, t.y, (i0.y >= -1) & (i0.y < N - 1))]
+        z = [(i0.z * (N * N), 1.0 - t.z, (i0.z >= 0) & (i0.z < N)),
+             ((i0.z + 1) * (N * N), t.z, (i0.z >= -1) & (i0.z < N - 1))]
         out = []
-        for dd in (0, 1):
-            for dh in (0, 1):
-                for dw in (0, 1):
-                    i = i0 + mi.Vector3i(dw, dh, dd)
-                    w = (t.x if dw else 1.0 - t.x) * (t.y if dh else 1.0 - t.y) * (t.z if dd else 1.0 - t.z)
-                    out.append((self._index(i), w, dr.all((i >= 0) & (i < N))))
+        for oz, wz, mz in z:
+            for oy, wy, my in y:
+                oyz, wyz, myz = self.base + mi.UInt32(oz + oy), wy * wz, my & mz
+                for ox, wx, mx in x:
+                    out.append((oyz + mi.UInt32(ox), wx * wyz, mx & myz))
         return out
 
     def _index(self, i: Any) -> Any:
