@@ -1,8 +1,9 @@
-"""Views: directions on the unit sphere and the orthographic cameras they define.
+"""Views: directions on the unit sphere and the cameras they define.
 
-A *view* is a unit vector ω ∈ S² pointing from the object's centre to an
-orthographic camera that looks at the origin with upright orientation (up = +y).
-The input view of PlatonicGAN is the front view ω₀ = (0, 0, 1).
+A *view* is a unit vector ω ∈ S² pointing from the object's centre to a camera that looks at
+the origin with upright orientation (up = +y). The input view of PlatonicGAN is the front view
+ω₀ = (0, 0, 1). The camera is orthographic (the paper's, the default) or a pinhole
+(perspective, :func:`lens`); both renderers sample the same points (see "Projection" below).
 
 Angles (used only to build views, never stored):
 
@@ -21,6 +22,22 @@ At the poles the look-at frame is undefined (ω ∥ up); there we use right = +x
 which is the limit of the frame along the meridian φ = 0 (the front meridian),
 so the frame is continuous along that meridian through both poles and defined
 everywhere. (No frame field on S² is continuous everywhere: hairy-ball theorem.)
+
+Projection. Image coordinates x, y ∈ [−1, 1] (x along ``right``, y along ``up``) and the
+camera depth z ∈ [−1, 1] along ω (z = 1 is the front face of the cube) name the world point
+
+    p = S(z) (x · right + y · up) + z · ω
+
+Orthographic: S ≡ 1, every ray is parallel to −ω. Perspective: a pinhole at D ω (distance D
+from the centre, D > 1, outside the planes z ∈ [−1, 1]) with field of view F (the full angle
+across the image) has S(z) = (D − z) tan(F/2): the ray of pixel (x, y) meets depth plane z
+there. By default D = 1 / tan(F/2), so that S(0) = 1 and the plane through the centre fills
+the image exactly as it does orthographically. A ray of the pinhole crosses a slab of depth
+dz along a path ℓ dz longer, with
+
+    ℓ(x, y) = √(1 + tan²(F/2) (x² + y²))      (1 orthographically)
+
+which both renderers use as the segment's length factor (docs/conventions.md, "Cameras").
 """
 
 from __future__ import annotations
@@ -42,6 +59,8 @@ __all__ = [
     "validate_views",
     "DISTRIBUTIONS",
     "DEFAULT_ELEVATION",
+    "CAMERAS",
+    "lens",
 ]
 
 Seed = Union[int, torch.Generator, None]
@@ -51,6 +70,9 @@ DISTRIBUTIONS = ("sphere", "band", "ring")
 
 #: The elevation (degrees) a 'band' or 'ring' distribution uses when a dataset or run names none.
 DEFAULT_ELEVATION = {"band": (0.0, 60.0), "ring": 20.0}
+
+#: Cameras (module docstring, "Projection").
+CAMERAS = ("orthographic", "perspective")
 
 #: Horizontal norm below which ω counts as a pole (computed in float64).
 POLE_EPS = 1e-12
@@ -189,3 +211,27 @@ def camera_frames(views: torch.Tensor) -> Tuple[torch.Tensor, torch.Tensor, torc
     up = torch.linalg.cross(w, right, dim=-1)
     up = up / up.norm(dim=-1, keepdim=True)
     return right, up, w
+
+
+def lens(camera: str = "orthographic", fov: float = 40.0,
+         distance: Optional[float] = None) -> Tuple[float, float]:
+    """``(t, D)`` of a camera: t = tan(F/2) and the pinhole's distance D (module docstring,
+    "Projection"); ``(0, inf)`` for the orthographic camera, whose S(z) ≡ 1 and ℓ ≡ 1.
+
+    ``fov`` F in degrees, 0 < F < 180; ``distance`` D > 1, default 1 / tan(F/2).
+    Raises ``ValueError`` naming the setting otherwise.
+    """
+    if camera not in CAMERAS:
+        raise UserError(f"camera: expected one of {list(CAMERAS)}, got {camera!r}")
+    if camera == "orthographic":
+        return 0.0, math.inf
+    if isinstance(fov, bool) or not isinstance(fov, (int, float)) or not 0.0 < fov < 180.0:
+        raise UserError(f"fov: expected a field of view in degrees in (0, 180), got {fov!r}")
+    t = math.tan(math.radians(fov) / 2.0)
+    if distance is None:
+        distance = 1.0 / t
+    if isinstance(distance, bool) or not isinstance(distance, (int, float)) or not math.isfinite(distance) \
+            or not distance > 1.0:
+        raise UserError(f"distance: expected a finite camera distance > 1 (outside the cube's depth "
+                        f"range), got {distance!r}")
+    return t, float(distance)

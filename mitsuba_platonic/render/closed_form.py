@@ -23,10 +23,16 @@ them. Values stay in [0, 1] and gradients finite for every v in [0, 1].
 Camera-space sample positions (shared with the Mitsuba renderer): for an N³ volume and
 Δ = 2/N, output pixel (row i, column j) and depth plane k sample the world point
 
-    p = x_j · right + y_i · up + z_k · ω,   x_j = −1 + (j + ½)Δ,  y_i = 1 − (i + ½)Δ,  z_k = 1 − (k + ½)Δ
+    p = S(z_k) (x_j · right + y_i · up) + z_k · ω,
+    x_j = −1 + (j + ½)Δ,  y_i = 1 − (i + ½)Δ,  z_k = 1 − (k + ½)Δ
 
-with (right, up, ω) from :func:`mitsuba_platonic.views.camera_frames`. At the front view
-these are the voxel centres themselves, so the rotation is the identity.
+with (right, up, ω) from :func:`mitsuba_platonic.views.camera_frames` and S ≡ 1 for the
+orthographic camera (the paper's). At the front view these are the voxel centres themselves, so
+the rotation is the identity.
+
+Perspective (:func:`mitsuba_platonic.views.lens`): S(z) = (D − z) tan(F/2), and a pixel's ray
+crosses each plane's slab along a path ℓ = √(1 + tan²(F/2)(x² + y²)) times its depth, so the
+per-plane factors become exp(−ℓ v) (VH) and (1 − v)^ℓ (AO, EA: still exact at v = 0 and 1).
 """
 
 from __future__ import annotations
@@ -34,30 +40,52 @@ from __future__ import annotations
 import torch
 import torch.nn.functional as F
 
+import math
+from typing import Optional, Tuple
+
 from ..views import camera_frames
 from ..volume import voxel_size, world_to_grid
 
-__all__ = ["FILTERS", "camera_space_points", "rotate", "reduce_depth", "render_closed_form"]
+__all__ = ["FILTERS", "ORTHOGRAPHIC", "camera_space_points", "path_factor", "rotate", "reduce_depth",
+           "render_closed_form"]
 
 #: Lookup filters both renderers accept, mapped to ``grid_sample`` modes.
 FILTERS = {"nearest": "nearest", "trilinear": "bilinear"}
 
 
-def camera_space_points(views: torch.Tensor, n: int, dtype: torch.dtype = torch.float32) -> torch.Tensor:
+#: The orthographic camera's ``(tan(F/2), D)`` (:func:`mitsuba_platonic.views.lens`).
+ORTHOGRAPHIC = (0.0, math.inf)
+
+
+def camera_space_points(views: torch.Tensor, n: int, dtype: torch.dtype = torch.float32,
+                        lens: Tuple[float, float] = ORTHOGRAPHIC) -> torch.Tensor:
     """World positions of the camera-space samples: ``(B, N, N, N, 3)`` indexed [b, k, i, j].
 
-    ``p = x_j · right + y_i · up + z_k · ω`` (see the module docstring); computed in float64.
+    ``p = S(z_k) (x_j · right + y_i · up) + z_k · ω`` (see the module docstring); float64 maths.
     """
     right, up, w = camera_frames(views)
     c = -1.0 + (torch.arange(n, dtype=torch.float64) + 0.5) * voxel_size(n)
     xs, ys, zs = c, -c, -c
+    t, d = lens
+    scale = torch.ones_like(zs) if t == 0.0 else (d - zs) * t          # S(z_k)
     p = (zs[None, :, None, None, None] * w[:, None, None, None, :]
-         + ys[None, None, :, None, None] * up[:, None, None, None, :]
-         + xs[None, None, None, :, None] * right[:, None, None, None, :])
+         + scale[None, :, None, None, None] * (ys[None, None, :, None, None] * up[:, None, None, None, :]
+                                                + xs[None, None, None, :, None] * right[:, None, None, None, :]))
     return p.to(dtype)
 
 
-def rotate(volume: torch.Tensor, views: torch.Tensor, filter: str = "trilinear") -> torch.Tensor:
+def path_factor(n: int, lens: Tuple[float, float], dtype: torch.dtype = torch.float32) -> Optional[torch.Tensor]:
+    """ℓ(x_j, y_i) = √(1 + tan²(F/2)(x² + y²)) per pixel, ``(N, N)``; None for the orthographic camera."""
+    t = lens[0]
+    if t == 0.0:
+        return None
+    c = -1.0 + (torch.arange(n, dtype=torch.float64) + 0.5) * voxel_size(n)
+    r2 = c[:, None] ** 2 + c[None, :] ** 2
+    return torch.sqrt(1.0 + t * t * r2).to(dtype)
+
+
+def rotate(volume: torch.Tensor, views: torch.Tensor, filter: str = "trilinear",
+           lens: Tuple[float, float] = ORTHOGRAPHIC) -> torch.Tensor:
     """Resample ``volume`` ``(B, C, N, N, N)`` into the camera space of ``views`` ``(B, 3)``.
 
     Output ``(B, C, N, N, N)`` indexed [b, c, k, i, j]: depth plane k (k = 0 nearest the
@@ -67,35 +95,43 @@ def rotate(volume: torch.Tensor, views: torch.Tensor, filter: str = "trilinear")
     if filter not in FILTERS:
         raise ValueError(f"filter must be one of {tuple(FILTERS)}, got {filter!r}")
     n = volume.shape[-1]
-    grid = world_to_grid(camera_space_points(views, n, torch.float64)).to(volume.dtype)
+    grid = world_to_grid(camera_space_points(views, n, torch.float64, lens)).to(volume.dtype)
     return F.grid_sample(volume, grid.to(volume.device), mode=FILTERS[filter],
                          padding_mode="zeros", align_corners=False)
 
 
-def reduce_depth(camera_volume: torch.Tensor, model: str) -> torch.Tensor:
+def reduce_depth(camera_volume: torch.Tensor, model: str, path: Optional[torch.Tensor] = None) -> torch.Tensor:
     """Apply the image formation ρ along depth (dim 2) of a camera-space volume → ``(B, C', H, W)``.
 
-    VH and AO give one channel (opacity); EA gives premultiplied RGB plus alpha.
+    VH and AO give one channel (opacity); EA gives premultiplied RGB plus alpha. ``path``: the
+    perspective camera's per-pixel path factor ℓ ``(H, W)`` (:func:`path_factor`), None for 1.
     """
     if model == "vh":
-        return 1.0 - torch.exp(-camera_volume.sum(dim=2))
+        depth = camera_volume.sum(dim=2)
+        return 1.0 - torch.exp(-(depth if path is None else path * depth))
     if model == "ao":
-        return 1.0 - torch.prod(1.0 - camera_volume, dim=2)
+        tau = 1.0 - camera_volume if path is None else torch.pow((1.0 - camera_volume).clamp_min(0.0), path)
+        return 1.0 - torch.prod(tau, dim=2)
     if model == "ea":
         colour, a = camera_volume[:, :3], camera_volume[:, 3:]
-        tau = 1.0 - a                                                 # per-sample transmittance
+        # per-sample transmittance (the clamp: trilinear round-off may lift a density 1 ulp above 1)
+        tau = 1.0 - a if path is None else torch.pow((1.0 - a).clamp_min(0.0), path)
         ones = torch.ones_like(tau[:, :, :1])
         T = torch.cumprod(torch.cat([ones, tau[:, :, :-1]], dim=2), dim=2)  # exclusive: Π_{j<i}
-        rgb = (T * a * colour).sum(dim=2)
+        rgb = (T * (a if path is None else 1.0 - tau) * colour).sum(dim=2)
         alpha = 1.0 - torch.prod(tau, dim=2)
         return torch.cat([rgb, alpha], dim=1)
     raise ValueError(f"model must be 'vh', 'ao' or 'ea', got {model!r}")
 
 
 def render_closed_form(volume: torch.Tensor, views: torch.Tensor, model: str,
-                       filter: str = "trilinear") -> torch.Tensor:
+                       filter: str = "trilinear", lens: Tuple[float, float] = ORTHOGRAPHIC) -> torch.Tensor:
     """The closed-form layer R(ω, v) = ρ(T(ω) v) for a batch of (volume, view) pairs.
 
+    ``lens``: ``(tan(F/2), D)`` of a perspective camera (:func:`mitsuba_platonic.views.lens`).
     Inputs are assumed valid (see :func:`mitsuba_platonic.render`, which checks them).
     """
-    return reduce_depth(rotate(volume, views, filter), model)
+    n = volume.shape[-1]
+    path = path_factor(n, lens, volume.dtype)
+    return reduce_depth(rotate(volume, views, filter, lens), model,
+                        None if path is None else path.to(volume.device))

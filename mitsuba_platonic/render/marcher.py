@@ -11,12 +11,15 @@ simply reads nothing.
 Rays (docs/conventions.md, "Views" and "Images"). Pixel (row i, column j) of pair b, sub-sample
 (o_x, o_y) ∈ [0, 1)², depth z:
 
-    p = x · right_b + y · up_b + z · ω_b,   x = −1 + (j + o_x) Δ,   y = 1 − (i + o_y) Δ
+    p = S(z) (x · right_b + y · up_b) + z · ω_b,   x = −1 + (j + o_x) Δ,   y = 1 − (i + o_y) Δ
 
-with (right_b, up_b, ω_b) from :func:`mitsuba_platonic.views.camera_frames`. Without jitter the
-sub-samples form a regular √spp × √spp grid, (o_x, o_y) = ((m + ½)/√spp, (n + ½)/√spp); with
-jitter they are uniform. At spp = 1 they are pixel centres, so at the front view p lands on voxel
-centres exactly (N a power of two): the lookups reproduce the closed form's to the last bit.
+with (right_b, up_b, ω_b) from :func:`mitsuba_platonic.views.camera_frames`, and S ≡ 1 for the
+orthographic camera; the perspective camera has S(z) = (D − z) tan(F/2) and lengthens every
+segment's path by ℓ = √(1 + tan²(F/2)(x² + y²)) (:mod:`mitsuba_platonic.views`, "Projection").
+Without jitter the sub-samples form a regular √spp × √spp grid, (o_x, o_y) = ((m + ½)/√spp,
+(n + ½)/√spp); with jitter they are uniform. At spp = 1 they are pixel centres, so at the
+orthographic front view p lands on voxel centres exactly (N a power of two): the lookups
+reproduce the closed form's to the last bit.
 
 Segments. With Δ = 2/N and ``step`` h voxels, segment k covers camera depth [k h, min((k + 1) h, N)]
 voxels from the front face z = 1; its length is s_k = min(h, N − k h) voxels and its sample sits at
@@ -36,9 +39,11 @@ Image formation (per ray), with the density v and colour c at each sample:
     AO:      τ_k = (1 − v_k)^{s_k}, T = Π_k τ_k             ρ = 1 − T
     EA:      C = Σ_k T_k (1 − τ_k) c_k,  T_k = Π_{j<k} τ_j,  α = 1 − Π_k τ_k
 
-At ``step`` 1, τ_k = 1 − v_k exactly (no log: exact and differentiable at v = 1). At other steps
-τ_k = exp(s_k log(1 − min(v_k, V_MAX))): the density is clamped to 1 − 1e-6 so the log stays
-finite (its gradient is 0 above the clamp). The pixel is the mean of its spp rays.
+with s_k the segment's path length in voxels (ℓ times its depth for the perspective camera). At
+``step`` 1 with the orthographic camera, τ_k = 1 − v_k exactly (no log: exact and
+differentiable at v = 1). Otherwise τ_k = exp(s_k log(1 − min(v_k, V_MAX))): the density is
+clamped to 1 − 1e-6 so the log stays finite (its gradient is 0 above the clamp). The pixel is
+the mean of its spp rays.
 
 Early termination. With ``termination`` ε > 0 a ray stops once T ≤ ε, in the forward and the
 backward pass: an approximation (image error ≤ ε, gradient error measured by ``platonic bench``).
@@ -109,16 +114,17 @@ def n_segments(n: int, step: float) -> int:
     return max(1, math.ceil(n / step - 1e-9))
 
 
-def segment_transmittance(model: str, step: float, v: Any, s: Any) -> Tuple[Any, Any]:
+def segment_transmittance(model: str, unit: bool, v: Any, s: Any) -> Tuple[Any, Any]:
     """τ of a segment of s voxels at density v, and dτ/dv (module docstring, "Image formation").
 
-    VH: τ = exp(−s v). AO/EA at step 1: τ = 1 − v, exact at v = 1. Other steps: the log domain
-    with v clamped to :data:`V_MAX` (dτ/dv = 0 above the clamp).
+    VH: τ = exp(−s v). AO/EA with ``unit`` (every segment exactly one voxel long: step 1,
+    orthographic camera): τ = 1 − v, exact at v = 1. Otherwise the log domain with v clamped to
+    :data:`V_MAX` (dτ/dv = 0 above the clamp).
     """
     if model == "vh":
         τ = dr.exp(-s * v)
         return τ, -s * τ
-    if step == 1.0:
+    if unit:
         return 1.0 - v, mi.Float(-1.0)
     log1m = dr.log(1.0 - dr.minimum(v, V_MAX))
     return dr.exp(s * log1m), dr.select(v >= V_MAX, 0.0, -s * dr.exp((s - 1.0) * log1m))
@@ -185,6 +191,8 @@ class _Batch:
         self.mode = dr.ReduceMode.NoConflicts if tiled else _MODE
         self.model, self.seed = opt.model, seed
         self.Δ = 2.0 / n
+        self.t, self.D = opt.lens                                 # the camera: tan(F/2), distance
+        self.unit = opt.step == 1.0 and self.t == 0.0             # every segment one voxel long
         self.n_steps = n_segments(n, opt.step)
         self.n_rays = b * n * n * opt.spp
         self.ε = float(opt.termination)
@@ -215,17 +223,23 @@ class _Batch:
         self.x = -1.0 + (mi.Float(j) + ox) * self.Δ
         self.y = 1.0 - (mi.Float(i) + oy) * self.Δ
         self.u = u
+        # perspective: the path through a slab of unit depth, ℓ = √(1 + t²(x² + y²))
+        self.ℓ = dr.sqrt(1.0 + self.t * self.t * (self.x * self.x + self.y * self.y)) if self.t else None
         self.base = b * (N * N * N)                               # first voxel of this lane's volume
         f = [dr.gather(mi.Float, self.frames, b * 9 + k, self.real) for k in range(9)]
         self.right, self.up, self.ω = mi.Vector3f(*f[0:3]), mi.Vector3f(*f[3:6]), mi.Vector3f(*f[6:9])
 
     def segment(self, k: Any) -> Tuple[Any, Any]:
-        """Sample point p of segment k and its length s in voxels."""
+        """Sample point p of segment k and the length of the ray's path through it, in voxels
+        (its depth s_k, times ℓ for the perspective camera)."""
         h, N = self.opt.step, self.N
         kf = mi.Float(k)
         s = dr.minimum(h, N - kf * h)                             # the last segment may be short
         z = 1.0 - (kf * h + self.u * s) * self.Δ
-        return self.x * self.right + self.y * self.up + z * self.ω, s
+        lateral = self.x * self.right + self.y * self.up
+        if self.ℓ is None:
+            return lateral + z * self.ω, s
+        return (self.D - z) * self.t * lateral + z * self.ω, s * self.ℓ   # S(z) = (D − z) t
 
     # -- Lookups ---------------------------------------------------------------------------
 
@@ -274,7 +288,7 @@ class _Batch:
 
     def transmittance(self, v: Any, s: Any) -> Tuple[Any, Any]:
         """τ of a segment of s voxels at density v, and dτ/dv."""
-        return segment_transmittance(self.model, self.opt.step, v, s)
+        return segment_transmittance(self.model, self.unit, v, s)
 
     # -- Forward ---------------------------------------------------------------------------
 

@@ -139,7 +139,7 @@ class RayMarcher(mi.ad.integrators.common.RBIntegrator):
         it.p = p
         pad = self._padding_weight(p)
         v = self.density.eval_1(it) * pad
-        τ, _ = segment_transmittance(self.model, self.step, v, s)   # the batched marcher's formula
+        τ, _ = segment_transmittance(self.model, self.step == 1.0, v, s)   # the batched marcher's formula
         c = self.albedo.eval(it) * pad if (colour and self.albedo is not None) else None
         return τ, c
 

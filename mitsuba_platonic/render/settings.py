@@ -11,14 +11,15 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
-from typing import Any, Dict
+from typing import Any, Dict, Optional, Tuple
 
 import torch
 
+from ..views import CAMERAS, lens
 from ..volume import MODELS
 from .closed_form import FILTERS as GRID_SAMPLE_MODES
 
-__all__ = ["RenderSettings", "render_with", "BACKENDS", "MODELS", "FILTERS", "LIGHTINGS", "OPTIONS_OF"]
+__all__ = ["RenderSettings", "render_with", "BACKENDS", "MODELS", "FILTERS", "LIGHTINGS", "CAMERAS", "OPTIONS_OF"]
 
 #: Backends: the paper's closed-form layers (reference), the batched Dr.Jit ray marcher, and
 #: Mitsuba's differentiable volumetric path tracer under natural light.
@@ -28,8 +29,8 @@ LIGHTINGS = ("sunsky", "envmap", "mixed")
 
 #: Which settings each backend reads (besides backend and model); any other is an error in ``render``.
 OPTIONS_OF: Dict[str, tuple] = {
-    "closed_form": ("filter",),
-    "mitsuba": ("filter", "step", "spp", "jitter", "termination"),
+    "closed_form": ("filter", "camera", "fov", "distance"),
+    "mitsuba": ("filter", "camera", "fov", "distance", "step", "spp", "jitter", "termination"),
     "physical": ("filter", "lighting", "physical_spp", "max_depth"),
 }
 
@@ -41,6 +42,9 @@ class RenderSettings:
     backend: 'closed_form' | 'mitsuba' (ray marcher) | 'physical' (path tracer under natural light).
     model: image formation, 'vh' | 'ao' | 'ea' (the physical backend renders EA-style RGBA).
     filter: 'trilinear' | 'nearest' grid lookups (every backend).
+    camera: 'orthographic' (the paper's) | 'perspective' (a pinhole; closed form and marcher).
+    fov, distance: the pinhole's full field of view in degrees and its distance from the centre
+        (None: 1 / tan(fov/2), where the centre plane fills the image; :func:`~mitsuba_platonic.views.lens`).
     step: the marcher's segment length in voxels (> 0; 1 reproduces the closed form's planes).
     spp: the marcher's rays per pixel (a perfect square unless ``jitter``).
     jitter: random sub-pixel positions and depth within each segment (marcher).
@@ -54,6 +58,9 @@ class RenderSettings:
     backend: str = "closed_form"
     model: str = "ea"
     filter: str = "trilinear"
+    camera: str = "orthographic"
+    fov: float = 40.0
+    distance: Optional[float] = None
     step: float = 1.0
     spp: int = 1
     jitter: bool = False
@@ -68,6 +75,8 @@ class RenderSettings:
         _choice("model", self.model, MODELS)
         _choice("filter", self.filter, FILTERS)
         _choice("lighting", self.lighting, LIGHTINGS)
+        _choice("camera", self.camera, CAMERAS)
+        lens(self.camera, self.fov, self.distance)          # fov and distance (perspective)
         if isinstance(self.step, bool) or not isinstance(self.step, (int, float)) \
                 or not math.isfinite(self.step) or not self.step >= 1.0 / 64:
             raise ValueError(f"step: expected a finite number of voxels ≥ 1/64, got {self.step!r}")
@@ -85,7 +94,14 @@ class RenderSettings:
             raise ValueError(f"termination: expected a number in [0, 1), got {self.termination!r}")
         if self.backend == "physical" and self.model != "ea":
             raise ValueError("model: the physical backend renders colour; use 'ea' images")
+        if self.backend == "physical" and self.camera != "orthographic":
+            raise ValueError("camera: the physical backend renders with the orthographic camera only")
         return self
+
+    @property
+    def lens(self) -> Tuple[float, float]:
+        """``(tan(fov/2), distance)``; ``(0, inf)`` for the orthographic camera."""
+        return lens(self.camera, self.fov, self.distance)
 
     @classmethod
     def for_call(cls, backend: str, model: str, **options: Any) -> "RenderSettings":
@@ -105,7 +121,7 @@ def render_with(volume: torch.Tensor, views: torch.Tensor, settings: RenderSetti
     """
     if settings.backend == "closed_form":
         from .closed_form import render_closed_form
-        return render_closed_form(volume, views.to(volume.device), settings.model, settings.filter)
+        return render_closed_form(volume, views.to(volume.device), settings.model, settings.filter, settings.lens)
     if settings.backend == "mitsuba":
         from .marcher import march
         return march(volume, views, settings, seed)
