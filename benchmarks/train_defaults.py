@@ -21,7 +21,8 @@ import numpy as np
 import torch
 
 from mitsuba_platonic.config import load_config
-from mitsuba_platonic.quickstart import CONFIG, _evaluate
+from mitsuba_platonic.evaluate import held_out_scores
+from mitsuba_platonic.quickstart import CONFIG
 from mitsuba_platonic.train.data import load_training_data
 from mitsuba_platonic.train.trainer import Trainer
 
@@ -42,7 +43,7 @@ def run(name: str, overrides, steps: int, cache: Path) -> dict:
     t0 = time.perf_counter()
     logs = [trainer.step(s) for s in range(steps)]
     seconds = time.perf_counter() - t0
-    m = _evaluate(trainer, data, cfg.render.model)
+    m = held_out_scores(trainer.model, data, cfg.render.model)
     acc = np.array([o["acc_d"] for o in logs])
     hard = np.array([o["acc_d_hard"] for o in logs])
     return {"name": name, **m, "d_updated": float(np.mean([o["d_updated"] for o in logs])),

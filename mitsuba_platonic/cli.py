@@ -514,7 +514,7 @@ def _cmd_quickstart(args: argparse.Namespace) -> int:
 def _add_quickstart(sub: "argparse._SubParsersAction") -> None:
     p = sub.add_parser("quickstart", help="the whole pipeline on a small procedural collection (CPU, minutes)",
                        description="Generate a small procedural collection, train single-image reconstruction "
-                                   "at 32³ with the closed-form EA renderer, reconstruct held-out images and "
+                                   "at 32³ through the batched Mitsuba ray marcher (EA), reconstruct held-out images and "
                                    "write turntables, meshes and a report.")
     p.add_argument("--out", default="quickstart", help="output folder (default: %(default)s/)")
     p.add_argument("--steps", type=_positive_int, default=None, help="training steps (default: the config's)")
@@ -522,11 +522,27 @@ def _add_quickstart(sub: "argparse._SubParsersAction") -> None:
     p.set_defaults(handler=_cmd_quickstart)
 
 
+def _cmd_evaluate(args: argparse.Namespace) -> int:
+    from .evaluate.report import run
+    return run(args)
+
+
+def _add_evaluate(sub: "argparse._SubParsersAction") -> None:
+    from .evaluate.report import add_arguments
+    p = sub.add_parser("evaluate", help="score trained runs as in the paper's Table 2 (docs/evaluation.md)",
+                       description="Re-render held-out reconstructions and their ground truth (IF, VOL, ISO, "
+                                   "VOX) under random skies, compare in 2D and 3D, and write report.md, "
+                                   "figures and results.json.")
+    add_arguments(p)
+    p.set_defaults(handler=_cmd_evaluate)
+
+
 # --------------------------------------------------------------------------- entry point
 
 #: Subcommand registrars, in help order. Add ``_add_<command>`` functions here.
 SUBCOMMANDS: Sequence[Callable[["argparse._SubParsersAction"], None]] = (
-    _add_quickstart, _add_train, _add_reconstruct, _add_generate, _add_make_dataset, _add_compare, _add_bench)
+    _add_quickstart, _add_train, _add_reconstruct, _add_generate, _add_evaluate, _add_make_dataset, _add_compare,
+    _add_bench)
 
 
 def build_parser() -> argparse.ArgumentParser:

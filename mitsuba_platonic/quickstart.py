@@ -6,7 +6,7 @@
    meshes, and a report comparing each reconstruction with the ground truth at the input view
    *and at novel views* (where a model that learnt only the input view fails).
 
-Novel-view scoring. A reconstruction lives in its input camera's frame (the input view is ω₀).
+Novel-view scoring (:func:`mitsuba_platonic.evaluate.protocol.held_out_scores`). A reconstruction lives in its input camera's frame (the input view is ω₀).
 The ground-truth volume is resampled into that frame (the closed form's rotation T(ω_in)), and
 both are rendered from the same novel views (a ring around the object at 30° elevation, plus the
 back view). A *billboard* baseline — the input image extruded through the depth of the cube,
@@ -19,97 +19,22 @@ from __future__ import annotations
 import csv
 import time
 from pathlib import Path
-from typing import Dict, List, Optional, Tuple
+from typing import List, Optional
 
-import numpy as np
 import torch
 
 from .config import load_config
+from .evaluate.protocol import held_out_scores
 from .export import export_volume
 from .images import composite, linear_to_srgb, save_png, to_hwc
 from .model import Model
-from .render import render
-from .render.closed_form import rotate
-from .views import from_angles, front_view, turntable
-from .volume import CHANNELS
 
-__all__ = ["quickstart", "novel_view_errors", "billboard", "NOVEL_VIEWS"]
+__all__ = ["quickstart"]
 
 CONFIG = Path(__file__).resolve().parents[1] / "configs" / "quickstart.yaml"
 
 _BACKEND_NAMES = {"closed_form": "closed-form layer", "mitsuba": "Mitsuba ray marcher",
                   "physical": "Mitsuba path tracer"}
-
-#: Novel views in the reconstruction's frame: a ring at 30° elevation (the input view excluded) and the back.
-NOVEL_VIEWS = torch.cat([turntable(6, elevation=30.0, start=60.0), from_angles(180.0, 0.0)[None]])
-
-
-def billboard(image: torch.Tensor) -> torch.Tensor:
-    """The input image extruded through the cube: ``(4, R, R)`` → ``(4, R, R, R)`` (EA).
-
-    Each of the R depth samples gets opacity a = 1 − (1 − α)^{1/R} and colour rgb/α, so the
-    front view reproduces the image exactly (Π(1 − a) = 1 − α, Σ T a c = rgb).
-    """
-    r = image.shape[-1]
-    alpha = image[3:].clamp(0.0, 1.0)
-    a = 1.0 - (1.0 - alpha.clamp(max=1.0 - 1e-6)) ** (1.0 / r)
-    colour = torch.where(alpha > 1e-6, image[:3] / alpha.clamp_min(1e-6), torch.zeros_like(image[:3]))
-    return torch.cat([colour, a]).clamp(0, 1)[:, None].expand(-1, r, -1, -1).contiguous()
-
-
-def silhouette_iou(a: torch.Tensor, b: torch.Tensor) -> float:
-    """Mean IoU of the silhouettes (alpha > ½, the last channel) of two image batches ``(B, C, H, W)``.
-
-    An image pair where both silhouettes are empty counts as 1.
-    """
-    sa, sb = a[:, -1] > 0.5, b[:, -1] > 0.5
-    inter = (sa & sb).flatten(1).sum(1).float()
-    union = (sa | sb).flatten(1).sum(1).float()
-    return float(torch.where(union > 0, inter / union.clamp_min(1), torch.ones_like(union)).mean())
-
-
-def novel_view_errors(recon: torch.Tensor, truth_in_frame: torch.Tensor, model: str) -> Tuple[float, float]:
-    """(MAE, silhouette IoU) between renders of two ``(C, N, N, N)`` volumes over :data:`NOVEL_VIEWS`."""
-    n = len(NOVEL_VIEWS)
-    with torch.no_grad():
-        a = render(recon[None].expand(n, -1, -1, -1, -1).contiguous(), NOVEL_VIEWS, model)
-        b = render(truth_in_frame[None].expand(n, -1, -1, -1, -1).contiguous(), NOVEL_VIEWS, model)
-    return float((a - b).abs().mean()), silhouette_iou(a, b)
-
-
-def _evaluate(net: Model, data, model: Optional[str] = None, limit: int = 64) -> Dict[str, float]:
-    """Input-view and novel-view errors of a :class:`~mitsuba_platonic.model.Model` on held-out
-    images (and of the billboard), rendered with image formation ``model`` (default: the model's).
-
-    ``net`` may also be a trainer, whose ``model`` is scored (benchmarks/train_defaults.py passes one).
-    """
-    net = getattr(net, "model", net)
-    model = model or net.formation
-    records = data.held_out_records[:limit]
-    images = data.held_out[:limit]
-    recon = net.reconstruct(images).cpu()
-    front = front_view(len(images))
-    with torch.no_grad():
-        rendered = render(recon, front, model)
-    truths = []
-    for r in records:
-        vol = torch.from_numpy(np.load(Path(r["folder"]) / r["volume"])["volume"]).float()
-        if CHANNELS[model] == 1:
-            vol = vol[3:]
-        # the ground truth resampled into the input camera frame (clamped: trilinear round-off exceeds 1)
-        truths.append(rotate(vol[None], torch.tensor([r["view"]]))[0].clamp(0.0, 1.0))
-    novel = np.array([novel_view_errors(v, t, model) for v, t in zip(recon, truths)])
-    out = {"input_view_mae": float((rendered - images).abs().mean()), "input_view_iou": silhouette_iou(rendered, images),
-           "novel_view_mae": float(novel[:, 0].mean()), "novel_view_iou": float(novel[:, 1].mean())}
-    if model == "ea":
-        boards = torch.stack([billboard(x) for x in images])
-        with torch.no_grad():
-            board_front = render(boards, front, model)
-        out["billboard_input_view_mae"] = float((board_front - images).abs().mean())
-        out["billboard_input_view_iou"] = silhouette_iou(board_front, images)
-        bb = np.array([novel_view_errors(b, t, model) for b, t in zip(boards, truths)])
-        out["billboard_novel_view_mae"], out["billboard_novel_view_iou"] = float(bb[:, 0].mean()), float(bb[:, 1].mean())
-    return out
 
 
 def quickstart(out: Path = Path("quickstart"), steps: Optional[int] = None, progress: bool = True) -> Path:
@@ -127,12 +52,12 @@ def quickstart(out: Path = Path("quickstart"), steps: Optional[int] = None, prog
     data = load_training_data(cfg, progress=progress)
     t_data = time.perf_counter() - t0
     torch.manual_seed(cfg.run.seed)
-    untrained = _evaluate(Model.from_config(cfg), data)          # a fresh model, drawn from the run's seed
+    untrained = held_out_scores(Model.from_config(cfg), data)          # a fresh model, drawn from the run's seed
     train(cfg, resume=resume, progress=progress)
     t_train = time.perf_counter() - t0 - t_data
     model = Model.from_checkpoint(run_dir)
     step = model.step
-    trained = _evaluate(model, data)
+    trained = held_out_scores(model, data)
 
     recon_dir = out / "reconstructions"
     written: List[str] = []

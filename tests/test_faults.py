@@ -5,7 +5,6 @@ folder, run names that leave ``out_dir``, and a truncated ``last.pt``."""
 import subprocess
 import sys
 import threading
-from pathlib import Path
 from types import SimpleNamespace
 
 import pytest

@@ -8,7 +8,7 @@ like it at novel views; one that learnt 3D beats it there, on shapes it never sa
 import torch
 
 from mitsuba_platonic.config import load_config
-from mitsuba_platonic.quickstart import _evaluate
+from mitsuba_platonic.evaluate import held_out_scores
 from mitsuba_platonic.train.data import load_training_data
 from mitsuba_platonic.train.trainer import Trainer
 
@@ -23,10 +23,10 @@ def test_reconstruction_beats_the_billboard_at_novel_views(tmp_path):
         "train.rec_weight=10.0", "run.seed=1"])
     data = load_training_data(cfg, progress=False)
     trainer = Trainer(cfg, data, torch.device("cpu"))
-    before = _evaluate(trainer.model, data)
+    before = held_out_scores(trainer.model, data)
     for step in range(STEPS):
         trainer.step(step)
-    after = _evaluate(trainer.model, data)
+    after = held_out_scores(trainer.model, data)
     print(f"\nheld-out input-view MAE {before['input_view_mae']:.4f} → {after['input_view_mae']:.4f}; "
           f"novel-view MAE {before['novel_view_mae']:.4f} → {after['novel_view_mae']:.4f}, "
           f"silhouette IoU {before['novel_view_iou']:.3f} → {after['novel_view_iou']:.3f} "

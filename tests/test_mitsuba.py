@@ -356,7 +356,6 @@ def test_tiled_lane_order_puts_a_packets_rays_far_apart(n, spp):
 def test_tiled_backward_equals_the_expand_backward(model, filter, options):
     """The atomic-free backward (tiled lanes, NoConflicts scatters) gives the gradient of the
     Expand scatters up to float summation order: a lost update would show as a large difference."""
-    import drjit as dr
     M = _marcher()
     if not M.tiled_backward(32, options.get("spp", 1)):
         pytest.skip("the tiled backward needs the LLVM backend with packets of ≤ 16 lanes")

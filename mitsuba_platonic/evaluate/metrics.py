@@ -28,7 +28,7 @@ from __future__ import annotations
 import math
 import re
 from pathlib import Path
-from typing import List, Optional, Sequence, Tuple, Union
+from typing import List, Optional, Tuple, Union
 
 import numpy as np
 import torch

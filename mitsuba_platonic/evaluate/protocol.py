@@ -44,7 +44,8 @@ from . import metrics as M
 
 __all__ = ["METHODS", "ISO_LEVEL", "GREY", "N_VIEWS", "rerender_views", "rerender_lighting", "as_rgba",
            "iso_mesh", "voxel_mesh", "render_mesh", "rerender", "PairResult", "evaluate_pair",
-           "truth_in_input_frame", "billboard", "novel_view_errors", "NOVEL_VIEWS", "silhouette_iou"]
+           "truth_in_input_frame", "billboard", "novel_view_errors", "NOVEL_VIEWS", "silhouette_iou",
+           "held_out_scores"]
 
 #: The re-render methods, in the order of the paper's table columns.
 METHODS = ("VOL", "ISO", "VOX", "IF")
@@ -332,3 +333,39 @@ def novel_view_errors(recon: torch.Tensor, truth_in_frame: torch.Tensor, model: 
         a = render(recon[None].expand(n, -1, -1, -1, -1).contiguous(), views, model)
         b = render(truth_in_frame[None].expand(n, -1, -1, -1, -1).contiguous(), views, model)
     return float((a - b).abs().mean()), M.silhouette_iou(a, b)
+
+
+def held_out_scores(net, data, model: Optional[str] = None, limit: int = 64) -> Dict[str, float]:
+    """Input-view and novel-view errors of a :class:`~mitsuba_platonic.model.Model` ``net`` on a
+    procedural collection's held-out images (``data``: :class:`~mitsuba_platonic.train.data.TrainingData`
+    with ``held_out_records``), and of the :func:`billboard` of each image (EA): the quickstart's
+    report and the learning test.
+
+    Per image: the reconstruction rendered at the input view against the image (MAE, silhouette
+    IoU), and against the ground truth in the input camera's frame at :data:`NOVEL_VIEWS`
+    (:func:`novel_view_errors`); means over at most ``limit`` images. ``model``: the image
+    formation to render with (default: the model's).
+    """
+    from pathlib import Path
+
+    model = model or net.formation
+    records = data.held_out_records[:limit]
+    images = data.held_out[:limit]
+    recon = net.reconstruct(images).cpu()
+    front = from_angles(0.0, 0.0)[None].expand(len(images), 3).contiguous()
+    with torch.no_grad():
+        rendered = render(recon, front, model)
+    truths = [truth_in_input_frame(torch.from_numpy(np.load(Path(r["folder"]) / r["volume"])["volume"]).float(),
+                                   r["view"], model) for r in records]
+    novel = np.array([novel_view_errors(v, t, model) for v, t in zip(recon, truths)])
+    out = {"input_view_mae": float((rendered - images).abs().mean()), "input_view_iou": silhouette_iou(rendered, images),
+           "novel_view_mae": float(novel[:, 0].mean()), "novel_view_iou": float(novel[:, 1].mean())}
+    if model == "ea":
+        boards = torch.stack([billboard(x) for x in images])
+        with torch.no_grad():
+            board_front = render(boards, front, model)
+        out["billboard_input_view_mae"] = float((board_front - images).abs().mean())
+        out["billboard_input_view_iou"] = silhouette_iou(board_front, images)
+        bb = np.array([novel_view_errors(b, t, model) for b, t in zip(boards, truths)])
+        out["billboard_novel_view_mae"], out["billboard_novel_view_iou"] = float(bb[:, 0].mean()), float(bb[:, 1].mean())
+    return out

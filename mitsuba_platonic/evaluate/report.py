@@ -34,7 +34,6 @@ import torch
 from ..errors import UserError
 from ..render import render
 from ..views import turntable
-from ..volume import CHANNELS
 from . import metrics as M
 from .protocol import METHODS, N_VIEWS, billboard, evaluate_pair, truth_in_input_frame
 
@@ -206,25 +205,10 @@ def write_report(rows: Sequence[Row], out_dir: PathLike, notes: Sequence[str] = 
 
 def _load(run_dir: Path) -> Tuple[Any, Callable[[torch.Tensor], torch.Tensor], Callable[[], Callable], int]:
     """A trained run: (config, reconstruct(images) → volumes, a factory of the untrained
-    reconstruct function, step). Uses :class:`mitsuba_platonic.model.Model` where it exists,
-    else ``train.run.load_run``'s trainer."""
-    try:
-        from ..checkpoint import read_checkpoint
-        from ..model import Model
-    except ImportError:                                    # before the Model class: the trainer does inference
-        from ..train.run import load_run
-        from ..train.trainer import Trainer
+    reconstruct function, step), through :class:`mitsuba_platonic.model.Model`."""
+    from ..checkpoint import read_checkpoint
+    from ..model import Model
 
-        cfg, trainer, step = load_run(run_dir)
-
-        def untrained_trainer():
-            from ..train.data import TrainingData
-            c, r = CHANNELS[cfg.render.model], cfg.model.resolution
-            dummy = TrainingData(torch.zeros(1, c, r, r), torch.zeros(0, c, r, r),
-                                 torch.zeros(1, c, r, r, r) if cfg.train.mode != "platonic" else None)
-            return Trainer(cfg, dummy, torch.device("cpu")).reconstruct
-
-        return cfg, trainer.reconstruct, untrained_trainer, step
     ckpt = read_checkpoint(run_dir)
     model = Model.from_read(ckpt)
 

@@ -331,7 +331,6 @@ class _Batch:
         """Back-to-front march from each ray's last marched segment, scattering ∂L/∂v (and ∂L/∂c)
         into ``grad`` (same layout as ``data``). δρ: ∂L/∂ρ or ∂L/∂α per ray; δC: ∂L/∂C (EA)."""
         ea = self.model == "ea"
-        n_steps = self.n_steps
         ray = self.ray
 
         # Back to front from where the forward march stopped (only a positive ε stops it early),

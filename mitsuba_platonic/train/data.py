@@ -88,10 +88,8 @@ def _folder(cfg: Config) -> TrainingData:
     from ..data.photos import PhotoCollection
 
     d = cfg.data
-    rest = (1.0 - d.split) / 2.0
-    sets = PhotoCollection.load_splits(d.path, resolution=cfg.model.resolution, splits=(d.split, rest, rest),
-                                       seed=d.seed, background=d.background, threshold=d.threshold,
-                                       alpha_only=CHANNELS[cfg.render.model] == 1, crop=d.crop)
+    sets = PhotoCollection.load_splits(d.path, resolution=cfg.model.resolution,
+                                       alpha_only=CHANNELS[cfg.render.model] == 1, **d.photo_options())
     train = torch.stack([sets["train"][i] for i in range(len(sets["train"]))])
     held = [sets[s][i] for s in ("val", "test") for i in range(len(sets[s]))]
     return TrainingData(train, torch.stack(held) if held else torch.zeros(0, *train.shape[1:]))
