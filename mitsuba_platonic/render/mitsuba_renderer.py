@@ -1,7 +1,8 @@
 """The Mitsuba renderer: torch volumes → Mitsuba medium grids → ray-marched images → torch.
 
 Per (volume, view) pair the volume's grids are written into a cached Mitsuba scene
-(a ``heterogeneous`` medium and an ``orthographic`` sensor at the view) and rendered with
+(a ``heterogeneous`` medium and an ``orthographic`` sensor at the view, loaded from the scene
+files ``scenes/raymarch.xml`` / ``scenes/raymarch_ea.xml``) and rendered with
 :class:`~mitsuba_platonic.render.raymarch.RayMarcher`. ``drjit.wrap`` turns each render into
 a PyTorch autograd function, so gradients flow back to the torch volume.
 
@@ -11,7 +12,7 @@ grid by a permute and two flips (Z = N−1−d, Y = N−1−h, X = w) that maps 
 (``grid_sample`` zero padding); the ray marcher reproduces that by weighting each lookup with
 the zero-padding ramp (see :mod:`.raymarch`) instead of padding the data, which keeps the grid
 a power of two wide: for N = 2^k, texture coordinates of dyadic points are exact in float32.
-Together with a dyadic near-clip distance this makes the front view's samples land exactly on
+Together with a dyadic near-clip distance (2⁻⁷, in the scene file) this makes the front view's samples land exactly on
 voxel centres, so the front view agrees with the closed form to accumulation round-off.
 """
 
@@ -27,22 +28,12 @@ from ..volume import CHANNELS, voxel_size
 from .settings import RenderSettings
 from .variant import ensure_variant, variant_device
 
-__all__ = ["to_mitsuba_grid", "render_mitsuba", "build_scene", "grid_dict", "sensor_dict"]
+__all__ = ["to_mitsuba_grid", "render_mitsuba", "build_scene", "sensor_dict"]
 
 
 def to_mitsuba_grid(v: torch.Tensor) -> torch.Tensor:
     """``(C, D, H, W)`` torch volume → ``(N, N, N, C)`` Mitsuba grid ``[Z, Y, X, C]`` (one copy)."""
     return v.permute(1, 2, 3, 0).flip(0, 1)                   # [d, h, w, c] → [Z, Y, X, C]
-
-
-def grid_to_world(mi: Any) -> Any:
-    """Map a grid's local [0, 1]³ to the world cube [−1, 1]³ (x = 2u − 1 per axis).
-
-    Built from the explicit matrix: ``translate(−1) @ scale(2)`` stores its inverse scale as a
-    reciprocal, 0.49999997, which moves every lookup by up to 6e-8 in local coordinates.
-    """
-    return mi.ScalarTransform4f(mi.ScalarMatrix4f([[2.0, 0.0, 0.0, -1.0], [0.0, 2.0, 0.0, -1.0],
-                                                   [0.0, 0.0, 2.0, -1.0], [0.0, 0.0, 0.0, 1.0]]))
 
 
 @dataclass
@@ -54,20 +45,14 @@ class _Bundle:
 
 _SCENES: Dict[Tuple, _Bundle] = {}
 
-#: Near clip distance of the orthographic sensors: 2⁻⁷, exactly representable.
-NEAR_CLIP = 2.0 ** -7
-
-
-def grid_dict(mi: Any, data: Any, filter: str, **extra: Any) -> Dict[str, Any]:
-    """A raw ``gridvolume`` over the cube [−1, 1]³ holding ``data`` (``[Z, Y, X, C]``)."""
-    return {"type": "gridvolume", "grid": mi.VolumeGrid(data), "to_world": grid_to_world(mi),
-            "filter_type": filter, "raw": True, **extra}
-
 
 def sensor_dict(mi: Any, n: int, spp: int, origin: Any, up: Any, film: Optional[Dict[str, Any]] = None,
                 **extra: Any) -> Dict[str, Any]:
     """An orthographic sensor at ``origin`` looking at the origin with image up ``up``: an N×N RGB
-    film covering [−1, 1]², a box filter, ``spp`` independent samples (``film``/``extra``: more keys)."""
+    film covering [−1, 1]², a box filter, ``spp`` independent samples (``film``/``extra``: more keys).
+
+    For scenes built in code around other shapes (the evaluation's meshes); the volume scenes'
+    sensors are described in ``scenes/*.xml``."""
     return {"type": "orthographic",
             "to_world": mi.ScalarTransform4f().look_at(origin=[float(x) for x in origin], target=[0.0, 0.0, 0.0],
                                                        up=[float(x) for x in up]),
@@ -76,42 +61,28 @@ def sensor_dict(mi: Any, n: int, spp: int, origin: Any, up: Any, film: Optional[
             "sampler": {"type": "independent", "sample_count": int(spp)}, **extra}
 
 
-def build_scene(n: int, model: str, options: RenderSettings) -> Dict[str, Any]:
-    """The Mitsuba scene dictionary for an N³ volume under ``model`` (grids start empty)."""
+def build_scene(n: int, model: str, options: RenderSettings) -> Any:
+    """The Mitsuba scene for an N³ volume under ``model``, loaded from ``scenes/raymarch.xml``
+    (VH, AO) or ``scenes/raymarch_ea.xml`` (EA) with empty grids of the right size."""
     mi = ensure_variant()
     import drjit as dr
-    from . import raymarch  # noqa: F401  (registers the integrator)
-    Δ = voxel_size(n)
+    from .scenes import load_scene
 
-    def grid(channels: int):
-        return mi.load_dict(grid_dict(mi, dr.zeros(mi.TensorXf, (n, n, n, channels)), options.filter))
-
-    density = grid(1)
-    medium = {"type": "heterogeneous", "sigma_t": density, "scale": 1.0 / Δ}
-    integrator = {"type": raymarch.INTEGRATOR_NAME, "model": model, "resolution": n,
-                  "step": float(options.step), "jitter": bool(options.jitter),
-                  "termination": float(options.termination), "filter": options.filter, "density": density}
+    grids = {"density": dr.zeros(mi.TensorXf, (n, n, n, 1))}
     if model == "ea":                                         # VH and AO carry no colour grid
-        albedo = grid(3)
-        medium["albedo"] = albedo
-        integrator["albedo"] = albedo
-    return {
-        "type": "scene",
-        "integrator": integrator,
-        "medium": medium,
-        # dyadic clip distances keep ray origins and depths exact in float32 at the front view
-        "sensor": sensor_dict(mi, n, options.spp, (0, 0, 2), (0, 1, 0), film={"sample_border": False},
-                              near_clip=NEAR_CLIP, far_clip=8.0, medium={"type": "ref", "id": "medium"}),
-    }
+        grids["albedo"] = dr.zeros(mi.TensorXf, (n, n, n, 3))
+    params = dict(resolution=n, scale=1.0 / voxel_size(n), spp=options.spp, step=float(options.step),
+                  jitter=bool(options.jitter), termination=float(options.termination), filter=options.filter)
+    if model == "ea":
+        return load_scene("raymarch_ea", grids=grids, **params)
+    return load_scene("raymarch", grids=grids, model=model, **params)
 
 
 def _bundle(n: int, model: str, options: RenderSettings) -> _Bundle:
     key = (n, model, options.step, options.spp, options.jitter, options.filter, options.termination)
     if key not in _SCENES:
         mi = ensure_variant()
-        scene_dict = build_scene(n, model, options)
-        scene_dict["medium"]["id"] = "medium"
-        scene = mi.load_dict(scene_dict)
+        scene = build_scene(n, model, options)
         params = mi.traverse(scene)
         keys = ("medium.sigma_t.data",) + (("medium.albedo.data",) if model == "ea" else ())
         _SCENES[key] = _Bundle(scene, params, keys)

@@ -1,7 +1,8 @@
 """Physically based rendering of a generator volume: Mitsuba's volumetric path tracer under
 natural light (beyond the paper's closed-form layers).
 
-The volume becomes a ``heterogeneous`` medium inside a null-BSDF cube [−1, 1]³:
+The volume becomes a ``heterogeneous`` medium inside a null-BSDF cube [−1, 1]³ (the scene file
+``scenes/physical.xml``, loaded by :func:`.scenes.load_scene` with the grids given in memory):
 
     σ_t = −ln(1 − min(v, v_max)) / Δ        (the AO/EA extinction, docs/conventions.md; v_max = 1 − 1e-3)
     albedo = colour (linear RGB)
@@ -13,7 +14,9 @@ delta tracking takes O(σ_max · length) null collisions per path, so an uncappe
 2× the time for no visible difference.
 
 Lighting (:class:`Lighting`): Mitsuba's ``sunsky`` (Hosek–Wilkie sky and a sun disk) with a sun
-direction and turbidity, or an ``envmap`` (a lat-long EXR, rotated about +y). Emitters are
+direction and turbidity, or an ``envmap`` (a lat-long EXR, rotated about +y): the scene files
+``scenes/emitters/sunsky.xml`` and ``scenes/emitters/envmap.xml`` (:mod:`.sky` bakes lat-long skies
+from ``sunsky``, so ``envmap`` lighting needs no downloaded file). Emitters are
 hidden from the camera, so the radiance image is premultiplied over black, and the alpha is the
 medium's opacity along the camera ray, 1 − exp(−∫σ_t) = the AO image of the same (capped)
 density, computed exactly by the ray marcher.
@@ -33,9 +36,10 @@ from typing import Any, Dict, List, Optional, Sequence, Tuple
 import numpy as np
 import torch
 
-from ..views import camera_frames, front_view
+from ..views import camera_frames
 from ..volume import voxel_size
-from .mitsuba_renderer import grid_dict, sensor_dict, to_mitsuba_grid
+from .mitsuba_renderer import to_mitsuba_grid
+from .scenes import load_scene
 from .variant import ensure_variant, variant_device
 
 __all__ = ["Lighting", "sample_lighting", "render_physical", "render_physical_ad", "extinction",
@@ -67,19 +71,23 @@ class Lighting:
     def to_dict(self) -> Dict[str, Any]:
         return asdict(self)
 
-    def emitter(self, mi: Any) -> Dict[str, Any]:
-        """The Mitsuba emitter dictionary."""
+    def scene_params(self) -> Dict[str, Any]:
+        """This light as parameters of ``scenes/physical.xml`` (``lighting`` picks emitters/<kind>.xml)."""
         if self.kind == "sunsky":
-            # sunsky's own frame is z-up; rotate it so the sky's zenith is the scene's +y
-            return {"type": "sunsky", "sun_direction": list(self.sun_direction),
-                    "turbidity": float(self.turbidity), "albedo": 0.2,
-                    "to_world": mi.ScalarTransform4f().rotate([1, 0, 0], -90.0)}
+            return {"lighting": "sunsky", "sun_direction": tuple(float(x) for x in self.sun_direction),
+                    "turbidity": float(self.turbidity)}
         if self.kind == "envmap":
             if not self.envmap or not Path(self.envmap).is_file():
                 raise ValueError(f"envmap lighting needs an existing EXR file, got {self.envmap!r}")
-            return {"type": "envmap", "filename": str(self.envmap),
-                    "to_world": mi.ScalarTransform4f().rotate([0, 1, 0], float(self.rotation))}
+            return {"lighting": "envmap", "envmap": str(Path(self.envmap).resolve()),
+                    "rotation": float(self.rotation)}
         raise ValueError(f"lighting kind must be 'sunsky' or 'envmap', got {self.kind!r}")
+
+    def emitter(self, mi: Any = None) -> Any:
+        """The Mitsuba emitter, loaded from ``scenes/emitters/<kind>.xml`` (usable as a scene
+        dictionary's ``emitter`` entry). ``mi`` is accepted for older callers and unused."""
+        params = self.scene_params()
+        return load_scene(f"emitters/{params.pop('lighting')}", **params)
 
 
 def sample_lighting(rng: np.random.Generator, kind: str = "sunsky",
@@ -134,31 +142,14 @@ def _medium_grids(v: torch.Tensor) -> Tuple[np.ndarray, np.ndarray]:
             to_mitsuba_grid(v[:3]).contiguous().numpy().astype(np.float32))
 
 
-def _scene_dict(mi: Any, n: int, integrator: str, σ: Any, albedo: Any, view: torch.Tensor, emitter: Dict[str, Any],
-                spp: int, max_depth: int, filter: str, σ_max: Optional[float] = None) -> Dict[str, Any]:
-    """The path-traced scene: the medium in a null-BSDF cube, an orthographic camera at 3ω, one emitter.
-
-    ``σ``/``albedo``: grid data ``[Z, Y, X, C]``; ``σ_max``: the extinction grid's majorant, above
-    its largest value (``prbvolpath``'s gradients need null collisions everywhere).
-    """
-    right, up, w = camera_frames(view[None])
-    σ_grid = grid_dict(mi, σ, filter, **({"max_value": σ_max} if σ_max is not None else {}))
-    return {
-        "type": "scene",
-        "integrator": {"type": integrator, "max_depth": int(max_depth), "hide_emitters": True},
-        "emitter": emitter,
-        "volume": {"type": "cube", "bsdf": {"type": "null"},
-                   "interior": {"type": "heterogeneous", "sigma_t": σ_grid, "albedo": grid_dict(mi, albedo, filter),
-                                "scale": 1.0, "phase": {"type": "isotropic"}}},
-        "sensor": sensor_dict(mi, n, spp, 3.0 * w[0], up[0]),
-    }
-
-
 def _scene(mi: Any, v: torch.Tensor, view: torch.Tensor, lighting: Lighting, spp: int,
            max_depth: int, filter: str) -> Any:
+    """``scenes/physical.xml`` (volpath) holding the RGBA volume ``v``, seen from ``view`` under ``lighting``."""
     σ, albedo = _medium_grids(v)
-    return mi.load_dict(_scene_dict(mi, v.shape[-1], "volpath", σ, albedo, view, lighting.emitter(mi), spp,
-                                    max_depth, filter))
+    _, up, w = camera_frames(view[None])
+    return load_scene("physical", grids={"sigma_t": σ, "albedo": albedo}, integrator="volpath",
+                      max_depth=int(max_depth), resolution=v.shape[-1], spp=int(spp), filter=filter,
+                      origin=3.0 * w[0], up=up[0], **lighting.scene_params())
 
 
 def render_physical(volume: torch.Tensor, views: torch.Tensor, lighting: Sequence[Lighting],
@@ -209,10 +200,13 @@ def _ad_scene(n: int, spp: int, max_depth: int, filter: str) -> Tuple[Any, Any]:
         mi = ensure_variant()
         import drjit as dr
         σ_cap = -math.log(1.0 - V_MAX_PHYSICAL) / voxel_size(n)
-        scene = mi.load_dict(_scene_dict(mi, n, "prbvolpath", dr.zeros(mi.TensorXf, (n, n, n, 1)),
-                                         dr.zeros(mi.TensorXf, (n, n, n, 3)), front_view(1)[0],
-                                         Lighting().emitter(mi), spp, max_depth, filter,
-                                         σ_max=MAJORANT_HEADROOM * σ_cap))
+        # the extinction grid's majorant, above its largest value: prbvolpath's gradients need null
+        # collisions everywhere
+        scene = load_scene("physical", grids={"sigma_t": dr.zeros(mi.TensorXf, (n, n, n, 1)),
+                                              "albedo": dr.zeros(mi.TensorXf, (n, n, n, 3))},
+                           properties={"sigma_t": {"max_value": MAJORANT_HEADROOM * σ_cap}},
+                           integrator="prbvolpath", max_depth=int(max_depth), resolution=n, spp=int(spp),
+                           filter=filter, **Lighting().scene_params())
         _AD_SCENES[key] = (scene, mi.traverse(scene))
     return _AD_SCENES[key]
 
