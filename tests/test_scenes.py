@@ -1,0 +1,297 @@
+"""The Mitsuba scene files in scenes/: each loads and renders with Mitsuba alone, the renderers
+build their scenes from them (same images as the dictionaries they replaced), and the skies
+baked from ``sunsky`` are lat-long EXRs with the sun where it was asked for."""
+
+import math
+from pathlib import Path
+
+import numpy as np
+import pytest
+import torch
+
+from mitsuba_platonic import render
+from mitsuba_platonic import views as V
+from mitsuba_platonic.render import sky
+from mitsuba_platonic.render.physical import Lighting, _medium_grids, _scene, render_physical
+from mitsuba_platonic.render.scenes import SCENES, load_scene, write_scene_grids
+from mitsuba_platonic.render.settings import RenderSettings
+from mitsuba_platonic.render.variant import ensure_variant
+from mitsuba_platonic.volume import test_volume
+
+N = 8
+OBLIQUE = V.from_angles(torch.tensor([37.0, -128.0]), torch.tensor([23.0, -41.0]))
+
+
+def _mi():
+    mi = ensure_variant()
+    import mitsuba_platonic.render.raymarch  # noqa: F401  (the project's integrator, for raymarch*.xml)
+    return mi
+
+
+def _volume():
+    """An 8³ RGBA cloud: density up to ~0.9 and a colour that varies across the cube."""
+    vol = test_volume(N, "cloud", "ea")[0]
+    vol[:3] = torch.linspace(0.2, 0.9, N)[None, :, None, None].expand(3, N, N, N).clone()
+    vol[1] = vol[1].flip(1)
+    return vol
+
+
+@pytest.fixture(scope="module")
+def files(tmp_path_factory):
+    """Grid files of the test volume (as a user writes them) and a tiny baked sky."""
+    folder = tmp_path_factory.mktemp("scene_inputs")
+    grids = write_scene_grids(_volume(), folder)
+    grids["envmap"] = sky.bake_sky(folder / "sky.exr", elevation=40.0, turbidity=3.0, width=32)
+    return {k: str(v) for k, v in grids.items()}
+
+
+def _render_alone(mi, path, params):
+    """What a user does: ``mi.load_file`` with string parameters, then ``mi.render``."""
+    obj = mi.load_file(str(path), **{k: str(v) for k, v in params.items()})
+    if isinstance(obj, mi.Emitter):                 # an emitter file: seen by a tiny camera
+        obj = mi.load_dict({"type": "scene", "emitter": obj, "integrator": {"type": "path"},
+                            "sensor": {"type": "perspective", "fov": 60,
+                                       "film": {"type": "hdrfilm", "width": N, "height": N}}})
+    return np.array(mi.render(obj, seed=0))
+
+
+def _file_params(files):
+    """Each scene file with the parameters of one tiny render (several for physical.xml's skies)."""
+    raymarch = dict(density=files["density"], resolution=N, scale=N / 2, spp=1)
+    physical = dict(sigma_t=files["sigma_t"], albedo=files["albedo"], resolution=N, spp=4, max_depth=3)
+    return {
+        "raymarch.xml": [dict(raymarch, model="ao"), dict(raymarch, model="vh", step=0.5)],
+        "raymarch_ea.xml": [dict(raymarch, albedo=files["albedo"])],
+        "physical.xml": [physical, dict(physical, integrator="prbvolpath", sun_direction="0, 0.5, 0.8"),
+                         dict(physical, lighting="envmap", envmap=files["envmap"], rotation=30)],
+        "emitters/sunsky.xml": [dict(turbidity=5)],
+        "emitters/envmap.xml": [dict(envmap=files["envmap"])],
+    }
+
+
+def test_every_scene_file_loads_and_renders_with_mitsuba_alone(files):
+    mi = _mi()
+    table = _file_params(files)
+    found = sorted(str(p.relative_to(SCENES)) for p in SCENES.rglob("*.xml"))
+    assert found == sorted(table)                    # a new file needs its row here
+    for name, runs in table.items():
+        for params in runs:
+            image = _render_alone(mi, SCENES / name, params)
+            assert image.shape[:2] == (N, N) and np.isfinite(image).all(), (name, params)
+            assert image[..., :3].max() > 0, (name, params)
+
+
+@pytest.mark.parametrize("model", ["ao", "ea"])
+def test_a_users_raymarch_render_is_the_projects(files, model):
+    """``raymarch*.xml`` loaded with Mitsuba alone from the .vol files renders the front view as
+    the renderer does (the batched marcher)."""
+    mi = _mi()
+    vol = _volume() if model == "ea" else _volume()[3:]
+    params = dict(density=files["density"], resolution=N, scale=N / 2, spp=1)
+    if model == "ea":
+        image = _render_alone(mi, SCENES / "raymarch_ea.xml", dict(params, albedo=files["albedo"]))
+    else:
+        image = _render_alone(mi, SCENES / "raymarch.xml", dict(params, model=model))
+    ours = render(vol[None], V.front_view(1), model, "mitsuba")[0].permute(1, 2, 0).numpy()
+    if model == "ea":
+        assert np.abs(image[..., :4] - ours).max() <= 1e-5
+    else:
+        assert np.abs(image[..., :3] - ours).max() <= 1e-5
+
+
+def test_a_users_physical_render_is_the_projects(files):
+    """``physical.xml`` loaded with Mitsuba alone (string parameters, .vol grids) renders the
+    image ``render_physical`` makes of the same volume, view, sky and seed."""
+    mi = _mi()
+    view = OBLIQUE[:1]
+    _, up, w = V.camera_frames(view)
+    light = Lighting(sun_direction=(0.5, 0.6, -0.3), turbidity=4.0)
+    fmt = lambda v: ", ".join(repr(float(x)) for x in v)      # noqa: E731
+    mine = _render_alone(mi, SCENES / "physical.xml", dict(
+        sigma_t=files["sigma_t"], albedo=files["albedo"], resolution=N, spp=4, max_depth=8,
+        origin=fmt(3.0 * w[0]), up=fmt(up[0]), sun_direction=fmt(light.sun_direction), turbidity=4.0))
+    theirs, _ = render_physical(_volume()[None], view, [light], spp=4, seed=0, exposure=False)
+    assert np.abs(mine - theirs[0, :3].permute(1, 2, 0).numpy()).max() <= 1e-6 * np.abs(mine).max()
+
+
+# -- the scenes the code built as dictionaries before scenes/ held them (frozen copies) ---------
+
+def _old_grid(mi, data, filter, **extra):
+    to_world = mi.ScalarTransform4f(mi.ScalarMatrix4f([[2.0, 0.0, 0.0, -1.0], [0.0, 2.0, 0.0, -1.0],
+                                                       [0.0, 0.0, 2.0, -1.0], [0.0, 0.0, 0.0, 1.0]]))
+    return {"type": "gridvolume", "grid": mi.VolumeGrid(data), "to_world": to_world, "filter_type": filter,
+            "raw": True, **extra}
+
+
+def _old_sensor(mi, n, spp, origin, up, film=None, **extra):
+    return {"type": "orthographic",
+            "to_world": mi.ScalarTransform4f().look_at(origin=[float(x) for x in origin], target=[0.0, 0.0, 0.0],
+                                                       up=[float(x) for x in up]),
+            "film": {"type": "hdrfilm", "width": n, "height": n, "pixel_format": "rgb",
+                     "rfilter": {"type": "box"}, **(film or {})},
+            "sampler": {"type": "independent", "sample_count": int(spp)}, **extra}
+
+
+def _old_marcher_scene(mi, n, model, o):
+    import drjit as dr
+
+    from mitsuba_platonic.render import raymarch
+
+    def grid(c):
+        return mi.load_dict(_old_grid(mi, dr.zeros(mi.TensorXf, (n, n, n, c)), o.filter))
+
+    density = grid(1)
+    medium = {"type": "heterogeneous", "sigma_t": density, "scale": n / 2.0, "id": "medium"}
+    integrator = {"type": raymarch.INTEGRATOR_NAME, "model": model, "resolution": n, "step": float(o.step),
+                  "jitter": bool(o.jitter), "termination": float(o.termination), "filter": o.filter,
+                  "density": density}
+    if model == "ea":
+        medium["albedo"] = integrator["albedo"] = grid(3)
+    return mi.load_dict({"type": "scene", "integrator": integrator, "medium": medium,
+                         "sensor": _old_sensor(mi, n, o.spp, (0, 0, 2), (0, 1, 0), film={"sample_border": False},
+                                               near_clip=2.0 ** -7, far_clip=8.0,
+                                               medium={"type": "ref", "id": "medium"})})
+
+
+def _old_physical_scene(mi, v, view, light, integrator, spp, max_depth, filter, σ_max=None):
+    σ, albedo = _medium_grids(v)
+    _, up, w = V.camera_frames(view[None])
+    emitter = {"type": "sunsky", "sun_direction": list(light.sun_direction), "turbidity": float(light.turbidity),
+               "albedo": 0.2, "to_world": mi.ScalarTransform4f().rotate([1, 0, 0], -90.0)}
+    σ_grid = _old_grid(mi, σ, filter, **({"max_value": σ_max} if σ_max is not None else {}))
+    return mi.load_dict({
+        "type": "scene",
+        "integrator": {"type": integrator, "max_depth": int(max_depth), "hide_emitters": True},
+        "emitter": emitter,
+        "volume": {"type": "cube", "bsdf": {"type": "null"},
+                   "interior": {"type": "heterogeneous", "sigma_t": σ_grid, "albedo": _old_grid(mi, albedo, filter),
+                                "scale": 1.0, "phase": {"type": "isotropic"}}},
+        "sensor": _old_sensor(mi, v.shape[-1], spp, 3.0 * w[0], up[0]),
+    })
+
+
+@pytest.mark.parametrize("model, options", [("ao", {}), ("vh", {"step": 0.5, "filter": "nearest"}),
+                                            ("ea", {"spp": 4, "jitter": True})])
+def test_the_marcher_scene_file_renders_as_the_dict_scene_did(model, options):
+    """``build_scene`` (scenes/raymarch*.xml) and the dictionary it replaced, with the same grids and
+    view bound: identical images, bit for bit."""
+    from mitsuba_platonic.render.mitsuba_renderer import _sensor_transform, build_scene, to_mitsuba_grid
+
+    mi = _mi()
+    o = RenderSettings(backend="mitsuba", model=model, **options).validate()
+    vol = _volume() if model == "ea" else _volume()[3:]
+    grids = [to_mitsuba_grid(vol[-1:])] + ([to_mitsuba_grid(vol[:3])] if model == "ea" else [])
+    right, up, w = V.camera_frames(OBLIQUE)
+    images = []
+    for scene in (build_scene(N, model, o), _old_marcher_scene(mi, N, model, o)):
+        params = mi.traverse(scene)
+        for key, g in zip(("medium.sigma_t.data", "medium.albedo.data"), grids):
+            params[key] = mi.TensorXf(g.contiguous().numpy())
+        params["sensor.to_world"] = _sensor_transform(mi, right[1], up[1], w[1])
+        params.update()
+        images.append(np.array(mi.render(scene, seed=5)))
+    assert images[0].shape == (N, N, 4 if model == "ea" else 3)
+    assert np.array_equal(images[0], images[1])
+
+
+@pytest.mark.parametrize("integrator", ["volpath", "prbvolpath"])
+def test_the_physical_scene_file_renders_as_the_dict_scene_did(integrator):
+    """scenes/physical.xml against the dictionary it replaced, same volume, view, sun and seed.
+    Not bit for bit: the file's camera and sky rotation are computed in double precision
+    (the dictionary's in single), which moves pixels by ~1e-6 of the brightest."""
+    import drjit as dr
+
+    mi = _mi()
+    v = _volume()
+    view = OBLIQUE[0]
+    sun = np.array([0.3, 0.7, 0.65]) / np.linalg.norm([0.3, 0.7, 0.65])
+    light = Lighting(sun_direction=tuple(float(x) for x in sun), turbidity=5.0)
+    if integrator == "volpath":
+        new = _scene(mi, v, view, light, spp=4, max_depth=8, filter="trilinear")
+        old = _old_physical_scene(mi, v, view, light, "volpath", 4, 8, "trilinear")
+    else:                       # render_physical_ad's scene: a fixed majorant; grids, sun, view bound
+        from mitsuba_platonic.render.physical import MAJORANT_HEADROOM, V_MAX_PHYSICAL, _ad_scene
+        σ_max = MAJORANT_HEADROOM * -math.log(1.0 - V_MAX_PHYSICAL) / (2.0 / N)
+        new, _ = _ad_scene(N, 4, 4, "trilinear")
+        old = _old_physical_scene(mi, v, view, Lighting(), "prbvolpath", 4, 4, "trilinear", σ_max=σ_max)
+        σ, albedo = _medium_grids(v)
+        _, up, w = V.camera_frames(view[None])
+        for scene in (new, old):                 # as render_physical_ad binds a pair
+            params = mi.traverse(scene)
+            params["volume.interior_medium.sigma_t.data"] = mi.TensorXf(σ)
+            params["volume.interior_medium.albedo.data"] = mi.TensorXf(albedo)
+            params["emitter.sun_direction"] = mi.Vector3f(*light.sun_direction)
+            params["emitter.turbidity"] = mi.Float(light.turbidity)
+            params["sensor.to_world"] = mi.ScalarTransform4f().look_at(
+                origin=[float(x) for x in 3.0 * w[0]], target=[0.0, 0.0, 0.0], up=[float(x) for x in up[0]])
+            params.update()
+        majorant = new.shapes()[0].interior_medium().get_majorant(dr.zeros(mi.MediumInteraction3f))
+        assert np.isclose(float(majorant[0][0]), σ_max, rtol=1e-6)       # fixed, not the grid's maximum
+    a, b = np.array(mi.render(new, seed=3)), np.array(mi.render(old, seed=3))
+    assert a.shape == (N, N, 3) and a.max() > 0.05
+    assert np.abs(a - b).max() <= 1e-5 * a.max()
+
+
+# -- baked skies ----------------------------------------------------------------------------
+
+def _pixel_direction(image, index):
+    j, i = index
+    h, w = image.shape[:2]
+    return sky.latlong_direction(np.array((i + 0.5) / w), np.array((j + 0.5) / h))
+
+
+@pytest.mark.parametrize("elevation, azimuth, turbidity", [(35.0, 0.0, 3.0), (20.0, 120.0, 6.0),
+                                                           (65.0, -75.0, 2.0)])
+def test_a_baked_sky_is_a_latlong_exr_with_the_sun_where_asked(tmp_path, elevation, azimuth, turbidity):
+    from mitsuba_platonic.data.collection import check_envmap
+    from mitsuba_platonic.images import exr_channel_names
+
+    mi = _mi()
+    path = sky.bake_sky(tmp_path / "sky.exr", elevation, turbidity, azimuth=azimuth, width=64)
+    check_envmap(path)                                   # what envmap lighting accepts
+    assert set("RGB") <= set(exr_channel_names(path))
+    bitmap = mi.Bitmap(str(path))
+    assert bitmap.component_format() == mi.Struct.Type.Float32    # the sun is far above half's range
+    image = np.array(bitmap, dtype=np.float64)
+    assert image.shape == (32, 64, 3) and np.isfinite(image).all() and image.min() >= 0
+    sun = np.array(sky.sun_direction(elevation, azimuth))
+    # the brightest pixel holds the sun: within a pixel of it
+    brightest = np.unravel_index(np.argmax(image.sum(-1)), image.shape[:2])
+    assert math.degrees(math.acos(_pixel_direction(image, brightest) @ sun)) <= math.hypot(180 / 32, 360 / 64)
+    # the brightest region sits at the sun: the sunward hemisphere holds most of the light
+    h, w = image.shape[:2]
+    jj, ii = np.meshgrid(np.arange(h), np.arange(w), indexing="ij")
+    d = sky.latlong_direction((ii + 0.5) / w, (jj + 0.5) / h)
+    dω = (2 * np.pi / w) * (np.pi / h) * np.sin(np.pi * (jj + 0.5) / h)
+    power = image.sum(-1) * dω
+    assert power[d @ sun > 0].sum() > 2 * power[d @ sun <= 0].sum()
+    # Mitsuba's envmap, given the file, sends the most light from (within a pixel of) the sun
+    emitter = load_scene("emitters/envmap", envmap=path)
+    radiance = sky._radiance(emitter, d.reshape(-1, 3)).sum(-1)
+    assert math.degrees(math.acos(d.reshape(-1, 3)[np.argmax(radiance)] @ sun)) <= math.hypot(180 / 32, 360 / 64)
+    # the sun's power is the disk's: its radiance times its solid angle (within a few per cent)
+    disk = math.pi * math.radians(sky.SUN_APERTURE / 2) ** 2
+    sun_only = load_scene("emitters/sunsky", sun_direction=tuple(sun), turbidity=turbidity)
+    params = mi.traverse(sun_only)
+    params["sky_scale"] = 0.0
+    params.update()
+    expected = sky._radiance(sun_only, sun[None])[0] * disk
+    sky_only = sky._radiance(load_scene("emitters/sunsky", sun_direction=tuple(sun), turbidity=turbidity),
+                             d.reshape(-1, 3)).reshape(h, w, 3)
+    hot = (image - sky_only).sum(-1) > 1.0                        # where the sun adds to the sky
+    measured = ((image - sky_only) * dω[..., None])[hot].sum(0)
+    assert np.allclose(measured, expected, rtol=0.05)
+
+
+def test_baked_envmaps_bake_once_and_light_a_render(tmp_path):
+    paths = sky.baked_envmaps(tmp_path, skies=((30.0, 3.0),), width=32)
+    assert [Path(p).name for p in paths] == ["sunsky_elev30_turb3.exr"]
+    stamp = Path(paths[0]).stat().st_mtime_ns
+    assert sky.baked_envmaps(tmp_path, skies=((30.0, 3.0),), width=32) == paths
+    assert Path(paths[0]).stat().st_mtime_ns == stamp                    # found, not baked again
+    light = Lighting("envmap", envmap=paths[0], rotation=90.0)
+    images, exposures = render_physical(_volume()[None], V.front_view(1), [light], spp=4, max_depth=3)
+    assert images.shape == (1, 4, N, N) and torch.isfinite(images).all() and images[:, :3].max() > 0
+    # the default sky of scenes/emitters/envmap.xml is one of the baked ones
+    default = (SCENES / "emitters" / "envmap.xml").read_text()
+    assert any(f"envmaps/{sky.sky_name(e, t)}" in default for e, t in sky.SKIES)
