@@ -65,8 +65,12 @@ _TEMPORARY = re.compile(r"\.\d{5,}(_\d{2,})?\.tmp\d+\.(png|exr|npz|vol)")   # wh
 
 
 def default_envmaps() -> List[str]:
-    """Environment maps shipped in or dropped into ``scenes/envmaps/`` (``*.exr``)."""
-    return sorted(str(p) for p in (SCENES / "envmaps").glob("*.exr"))
+    """Environment maps in ``scenes/envmaps/`` (``*.exr``): the skies baked from Mitsuba's
+    ``sunsky`` (:func:`mitsuba_platonic.render.sky.baked_envmaps`, baked on first use: no map
+    ships for want of a licence) and any a user dropped there."""
+    from ..render.sky import baked_envmaps
+
+    return sorted(set(str(p) for p in (SCENES / "envmaps").glob("*.exr")) | set(baked_envmaps()))
 
 
 _EXR_MAGIC = b"\x76\x2f\x31\x01"
