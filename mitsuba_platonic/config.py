@@ -4,7 +4,9 @@ A config has five sections (``run``, ``data``, ``model``, ``render``, ``train``)
 dataclass whose docstring says what its fields mean (``render`` is the renderer's own
 :class:`~mitsuba_platonic.render.RenderSettings`; the others are below). Loading checks every key and type:
 an unknown key or a wrong type is an error that names the key (``train.batch_size: expected
-int, got 'eight'``); numbers must be finite (no ``.inf``, ``.nan``). Command-line overrides use
+int, got 'eight'``); numbers must be finite (no ``.inf``, ``.nan``). pydantic checks keys and types
+(on the plain dataclasses: other modules construct them directly); :meth:`Config.validate` checks
+ranges, choices and combinations. Command-line overrides use
 dotted keys, ``--set train.steps=500``; values are parsed as YAML scalars (``true``, ``1e-4``,
 ``[0.5, 0.9]``, ``null``).
 """
@@ -12,7 +14,6 @@ dotted keys, ``--set train.steps=500``; values are parsed as YAML scalars (``tru
 from __future__ import annotations
 
 import dataclasses
-import math
 import os
 import re
 import typing
@@ -20,7 +21,9 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, Dict, List, Optional, Sequence, Union
 
+import pydantic
 import yaml
+from pydantic_core import SchemaValidator, core_schema
 
 from .data.collection import FORMATIONS
 from .data.photos import BACKGROUNDS, CROPS
@@ -172,8 +175,7 @@ class Config:
         from .train.losses import LOSSES
         from .train.run import DEVICES
         from .train.trainer import MODES, TASKS
-        for section in ("run", "data", "model", "train"):    # render checks its own numbers
-            _finite_numbers(section, getattr(self, section))
+        _typed(self.to_dict())                               # a config built in code: its types, finite numbers
         _folder_name("run.name", self.run.name)
         _choice("run.device", self.run.device, DEVICES)
         for key in ("steps", "log_every", "sample_every", "checkpoint_every", "keep_checkpoints"):
@@ -230,15 +232,6 @@ class Config:
         return self
 
 
-def _finite_numbers(prefix: str, section: Any) -> None:
-    """Every float of a section (lists included) is finite: no NaN, no ±inf."""
-    for f in dataclasses.fields(section):
-        value = getattr(section, f.name)
-        for item in (value if isinstance(value, (list, tuple)) else [value]):
-            if isinstance(item, float) and not math.isfinite(item):
-                raise ConfigError(f"{prefix}.{f.name}: expected a finite number, got {value!r}")
-
-
 def _folder_name(key: str, value: str) -> None:
     """One path component: no separator, not '.' or '..', not empty (so the run stays in out_dir)."""
     seps = {"/", "\\"} | ({os.sep, os.altsep} - {None})
@@ -261,73 +254,79 @@ def _non_negative(key: str, value: Any) -> None:
         raise ConfigError(f"{key}: expected a non-negative value, got {value!r}")
 
 
-def _check_type(key: str, value: Any, annotation: Any) -> Any:
-    """Return ``value`` if it fits ``annotation`` (ints are accepted for floats), else raise."""
-    origin = typing.get_origin(annotation)
-    if origin is Union:
-        errors = []
-        for option in typing.get_args(annotation):
-            try:
-                return _check_type(key, value, option)
-            except ConfigError as e:
-                errors.append(e)
-        names = " or ".join(_type_name(a) for a in typing.get_args(annotation))
-        raise ConfigError(f"{key}: expected {names}, got {value!r}")
-    if annotation is type(None):
-        if value is None:
-            return None
-        raise ConfigError(f"{key}: expected null, got {value!r}")
-    if origin in (list, List):
-        if not isinstance(value, (list, tuple)):
-            raise ConfigError(f"{key}: expected a list, got {value!r}")
-        (item,) = typing.get_args(annotation)
-        return [_check_type(f"{key}[{i}]", v, item) for i, v in enumerate(value)]
-    if annotation is float:
-        if isinstance(value, str) and _FLOAT.fullmatch(value.strip()):
-            return float(value)  # PyYAML (YAML 1.1) reads 1e-4 as a string: accept it as the number it is
-        if isinstance(value, bool) or not isinstance(value, (int, float)):
-            raise ConfigError(f"{key}: expected a number, got {value!r}")
-        return float(value)
-    if annotation is int:
-        if isinstance(value, bool) or not isinstance(value, int):
-            raise ConfigError(f"{key}: expected int, got {value!r}")
-        return value
-    if annotation is bool:
-        if not isinstance(value, bool):
-            raise ConfigError(f"{key}: expected true or false, got {value!r}")
-        return value
-    if annotation is str:
-        if not isinstance(value, str):
-            raise ConfigError(f"{key}: expected a string, got {value!r}")
-        return value
-    raise ConfigError(f"{key}: unsupported type {annotation!r}")
+# The key-and-type check is pydantic's, run on the dataclasses above (a copy of its schema for
+# Config, the sections included, with three changes; the dataclasses themselves stay plain):
+# every leaf is strict (ints are not bools, strings are not numbers; a float accepts an int) and
+# finite (allow_inf_nan), unknown keys are errors; a section accepts a mapping, a list a tuple, a
+# float a string in exponent form, which PyYAML (YAML 1.1) reads from `1e-4`, and Optional[X] is
+# a union of X and None (pydantic's own form for it names no "null" in its errors).
+Config.__pydantic_config__ = pydantic.ConfigDict(strict=True, extra="forbid", allow_inf_nan=False)
 
 
-def _type_name(a: Any) -> str:
-    if a is type(None):
-        return "null"
-    if typing.get_origin(a) in (list, List):
-        return "a list"
-    return getattr(a, "__name__", str(a))
+def _yaml_float(value: Any) -> Any:
+    return float(value) if isinstance(value, str) and _FLOAT.fullmatch(value.strip()) else value
 
 
-def _build(cls: Any, data: Dict[str, Any], prefix: str) -> Any:
-    if not isinstance(data, dict):
-        raise ConfigError(f"{prefix or 'config'}: expected a mapping, got {data!r}")
-    hints = typing.get_type_hints(cls)
-    names = {f.name for f in dataclasses.fields(cls)}
-    unknown = sorted(set(data) - names)
-    if unknown:
-        raise ConfigError(f"{prefix + '.' if prefix else ''}{unknown[0]}: unknown key "
-                          f"(known: {', '.join(sorted(names))})")
-    kwargs = {}
-    for name, value in data.items():
-        key = f"{prefix}.{name}" if prefix else name
-        if dataclasses.is_dataclass(hints[name]):
-            kwargs[name] = _build(hints[name], value or {}, key)
-        else:
-            kwargs[name] = _check_type(key, value, hints[name])
-    return cls(**kwargs)
+def _relaxed(schema: Any) -> Any:
+    if isinstance(schema, list):
+        return [_relaxed(s) for s in schema]
+    if not isinstance(schema, dict):
+        return schema
+    schema = {k: _relaxed(v) for k, v in schema.items()}
+    if schema.get("type") in ("dataclass", "list"):
+        schema["strict"] = False
+    if schema.get("type") == "float":
+        return core_schema.no_info_before_validator_function(_yaml_float, schema)
+    if schema.get("type") == "nullable":                  # a union with None: its message says "or null"
+        return core_schema.union_schema([schema["schema"], core_schema.none_schema()])
+    return schema
+
+
+_VALIDATOR = SchemaValidator(_relaxed(pydantic.TypeAdapter(Config).core_schema))
+
+# how pydantic's error types read in a message ("train.batch_size: expected int, got 'eight'")
+_EXPECTED = {"int_type": "int", "float_type": "a number", "bool_type": "true or false", "string_type": "a string",
+             "list_type": "a list", "dataclass_type": "a mapping", "none_required": "null"}
+
+
+def _typed(data: Any) -> Config:
+    """``data`` as a :class:`Config` of the declared types; else a one-line :class:`ConfigError`."""
+    try:
+        return _VALIDATOR.validate_python(data)
+    except pydantic.ValidationError as e:
+        raise _one_line(e, data) from None
+
+
+def _one_line(e: pydantic.ValidationError, data: Any) -> ConfigError:
+    """The first error as ``key: expected …, got …``. A union (``elevation``: null, a number or a
+    list) fails once per member: the member that got deepest into the value names the key
+    (``data.elevation[1]``), and members failing at the same depth are joined with 'or'."""
+    errors = [(_key(err["loc"], data), err) for err in e.errors()]
+    first = errors[0][0]
+    same = [(k, err) for k, err in errors if k == first or k.startswith(first + "[")]
+    key = max((k for k, _ in same), key=len)
+    errors = [err for k, err in same if k == key]
+    if errors[0]["type"] in ("unexpected_keyword_argument", "extra_forbidden"):
+        cls = Config
+        for part in errors[0]["loc"][:-1]:
+            cls = typing.get_type_hints(cls)[part]
+        known = ", ".join(sorted(f.name for f in dataclasses.fields(cls)))
+        return ConfigError(f"{key}: unknown key (known: {known})")
+    expected = dict.fromkeys(_EXPECTED.get(err["type"], err["msg"].replace("Input should be ", "", 1))
+                             for err in errors)
+    return ConfigError(f"{key or 'config'}: expected {' or '.join(expected)}, got {errors[0]['input']!r}")
+
+
+def _key(loc: Sequence[Any], data: Any) -> str:
+    """pydantic's error location as a key into ``data`` (``train.betas[1]``), leaving out the names
+    of union members that pydantic puts into the location."""
+    key, node = "", data
+    for part in loc:
+        if isinstance(node, dict) and part in node:
+            key, node = f"{key}.{part}" if key else str(part), node[part]
+        elif isinstance(node, (list, tuple)) and isinstance(part, int):
+            key, node = f"{key}[{part}]", node[part]
+    return key
 
 
 def apply_overrides(data: Dict[str, Any], overrides: Sequence[str]) -> Dict[str, Any]:
@@ -367,4 +366,6 @@ def load_config(path: Optional[Union[str, Path]] = None, overrides: Sequence[str
 def config_from_dict(data: Dict[str, Any]) -> Config:
     """A nested mapping (a YAML file's, a saved ``Config.to_dict()``) → a validated :class:`Config`;
     :class:`ConfigError` naming the first bad key."""
-    return _build(Config, data, "").validate()
+    if isinstance(data, dict):                               # an empty section (`train:` alone) is its defaults
+        data = {name: {} if value is None else value for name, value in data.items()}
+    return _typed(data).validate()
