@@ -40,12 +40,39 @@ class RunError(UserError):
 
 
 def save_checkpoint(path: Path, payload: Dict[str, Any]) -> None:
-    """``torch.save`` to a temporary sibling, fsync, then rename over ``path`` (atomic)."""
+    """``torch.save`` to a temporary sibling, fsync, then rename over ``path`` (atomic).
+
+    A failed write (a full disk) is the ``OSError`` the file raised, naming ``path``: ``torch.save``
+    itself reports it as a ``RuntimeError`` about stream positions.
+    """
     def write(tmp: Path) -> None:
         with open(tmp, "wb") as f:
-            torch.save(payload, f)
+            out = _Recorded(f)
+            try:
+                torch.save(payload, out)
+            except RuntimeError:
+                if out.error is not None:
+                    raise out.error from None
+                raise
 
     atomic_write(path, write, durable=True)
+
+
+class _Recorded:
+    """A binary file for ``torch.save`` that remembers the ``OSError`` a write raised."""
+
+    def __init__(self, f):
+        self.f, self.error = f, None
+
+    def write(self, data) -> int:
+        try:
+            return self.f.write(data)
+        except OSError as e:
+            self.error = e
+            raise
+
+    def flush(self) -> None:
+        self.f.flush()
 
 
 def load_checkpoint(path: Path, device: torch.device = torch.device("cpu")) -> Dict[str, Any]:
@@ -70,7 +97,7 @@ def checkpoint_files(folder: Path) -> List[Path]:
     numbered = sorted((p for p in folder.glob("step_*.pt") if _NUMBERED.fullmatch(p.name)),
                       key=lambda p: int(_NUMBERED.fullmatch(p.name).group(1)), reverse=True)
     last = folder / "last.pt"
-    return ([last] if last.exists() else []) + numbered
+    return ([last] if last.exists() or last.is_symlink() else []) + numbered   # a dangling link: named, not skipped
 
 
 def load_latest_checkpoint(folder: Path, device: torch.device = torch.device("cpu"),
