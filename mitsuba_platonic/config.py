@@ -341,7 +341,7 @@ def apply_overrides(data: Dict[str, Any], overrides: Sequence[str]) -> Dict[str,
         try:
             value = yaml.safe_load(text)
         except yaml.YAMLError as e:
-            raise ConfigError(f"{key}: could not parse {text!r}: {e}") from None
+            raise ConfigError(f"{key}: could not parse {text!r}: {yaml_problem(e)}") from None
         data.setdefault(parts[0], {})
         if not isinstance(data[parts[0]], dict):
             raise ConfigError(f"{parts[0]}: expected a mapping")
@@ -358,9 +358,21 @@ def load_config(path: Optional[Union[str, Path]] = None, overrides: Sequence[str
             raise ConfigError(f"config file {str(path)!r} does not exist")
         try:
             data = yaml.safe_load(path.read_text()) or {}
+        except UnicodeDecodeError:
+            raise ConfigError(f"{path}: not a YAML text file (not UTF-8 text)") from None
         except yaml.YAMLError as e:
-            raise ConfigError(f"{path}: not valid YAML: {e}") from None
+            raise ConfigError(f"{path}: not valid YAML ({yaml_problem(e)})") from None
+        if not isinstance(data, dict):
+            raise ConfigError(f"{path}: expected a mapping of sections (run, data, model, render, train), "
+                              f"got a {type(data).__name__}")
     return config_from_dict(apply_overrides(data, overrides))
+
+
+def yaml_problem(e: yaml.YAMLError) -> str:
+    """A YAML error on one line: its problem and where (PyYAML's own message spans lines)."""
+    mark = getattr(e, "problem_mark", None)
+    where = f" at line {mark.line + 1}, column {mark.column + 1}" if mark is not None else ""
+    return f"{getattr(e, 'problem', None) or type(e).__name__}{where}"
 
 
 def config_from_dict(data: Dict[str, Any]) -> Config:
