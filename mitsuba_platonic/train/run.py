@@ -11,7 +11,10 @@ A run folder (``run.out_dir/run.name``) holds::
     run.lock                 held while a run writes to the folder (the pid of its process)
 
 Checkpoints are written to a temporary file and renamed over the old one, so a kill at any
-moment leaves the previous checkpoint loadable. ``resume=True`` continues from ``last.pt``;
+moment leaves the previous checkpoint loadable (the next run in the folder deletes the
+temporaries a killed one left; ``scalars.csv`` is written before each checkpoint, so a resume
+loses no row); a full disk ends the run with one line naming the file, the good checkpoints
+as they were. ``resume=True`` continues from ``last.pt``;
 because every random draw of a step derives from (seed, step), the continued run matches an
 uninterrupted one step for step (on CPU). Ctrl-C (SIGINT) finishes the current step, saves a
 checkpoint and returns cleanly.
@@ -50,7 +53,7 @@ from ..checkpoint import (CHECKPOINT_VERSION, RunError, checkpoint_files, load_c
                           read_checkpoint, save_checkpoint)
 from ..config import Config, ConfigError, config_from_dict
 from ..errors import Interrupted, UserError
-from ..fileio import atomic_write
+from ..fileio import atomic_write, remove_temporaries
 from ..images import composite, linear_to_srgb, save_grid, to_hwc
 from ..model import Model
 from ..views import front_view, turntable
@@ -125,8 +128,11 @@ def run_lock(run_dir: Path) -> Iterator[Path]:
             break
         os.close(fd)                                 # its holder removed it as we opened it: again
     try:
-        os.ftruncate(fd, 0)
-        os.pwrite(fd, f"{os.getpid()}\n".encode(), 0)
+        try:
+            os.ftruncate(fd, 0)
+            os.pwrite(fd, f"{os.getpid()}\n".encode(), 0)
+        except OSError as e:                         # a full disk: say where
+            raise OSError(e.errno, e.strerror, str(path)) from None
         yield path
     finally:
         try:
@@ -247,6 +253,8 @@ def _train(cfg: Config, run_dir: Path, resume: bool, progress: bool, stop_at: Op
             raise RunError(f"{run_dir} already holds a run; pass --resume to continue it, or choose "
                            f"another run.name")
         run_dir.mkdir(parents=True, exist_ok=True)
+        for folder in (run_dir, last.parent):                # what a killed run was writing (we hold the lock)
+            remove_temporaries(folder)
         if resume:
             try:
                 saved = read_run_config(run_dir / "config.yaml").to_dict()
@@ -256,7 +264,8 @@ def _train(cfg: Config, run_dir: Path, resume: bool, progress: bool, stop_at: Op
                 if saved[section] != cfg.to_dict()[section]:
                     raise RunError(f"--resume: the {section} settings differ from {run_dir}/config.yaml; "
                                    f"an exact continuation needs the same config (only run.* may change)")
-        (run_dir / "config.yaml").write_text(yaml.safe_dump(cfg.to_dict(), sort_keys=False))
+        text = yaml.safe_dump(cfg.to_dict(), sort_keys=False)
+        atomic_write(run_dir / "config.yaml", lambda p: p.write_text(text))   # never torn: --resume reads it
     if world > 1:
         dist.barrier()                                       # rank 0 checked the folder first
     if rank == 0:
@@ -299,10 +308,14 @@ def _train(cfg: Config, run_dir: Path, resume: bool, progress: bool, stop_at: Op
         if bad is not None:                                  # never over (or rotating out) a good one
             raise RunError(f"step {step}: the training state is not finite (NaN or Inf in {bad}); {kept()}")
         payload = {"version": CHECKPOINT_VERSION, "step": step, "config": cfg.to_dict(), "trainer": state}
-        save_checkpoint(last, payload)
         numbered = run_dir / "checkpoints" / f"step_{step:07d}.pt"
-        save_checkpoint(numbered, payload)
-        saved.update(path=last, step=step)
+        try:
+            save_checkpoint(last, payload)
+            saved.update(path=last, step=step)
+            save_checkpoint(numbered, payload)
+        except OSError as e:                                 # a full disk: the old files are whole (atomic)
+            held = f"{saved['path']} holds step {step}" if saved["step"] == step else kept()
+            raise RunError(f"step {step}: the checkpoint could not be written ({e}); {held}") from None
         for old in sorted((run_dir / "checkpoints").glob("step_*.pt"))[:-cfg.run.keep_checkpoints]:
             old.unlink()
 
@@ -334,9 +347,9 @@ def _train(cfg: Config, run_dir: Path, resume: bool, progress: bool, stop_at: Op
             if rank == 0 and step % cfg.run.sample_every == 0:
                 write_samples(trainer.model, sample_inputs, run_dir / "samples", step, samples_seed)
             if step % cfg.run.checkpoint_every == 0:
+                if log:                                      # first: the rows after a checkpoint are dropped on
+                    log.flush()                              # resume, rows missing before it would stay lost
                 checkpoint(step)
-                if log:
-                    log.flush()
             flag = torch.tensor(float(stop["now"]))
             if world > 1:
                 dist.all_reduce(flag)                       # stop together
@@ -346,7 +359,7 @@ def _train(cfg: Config, run_dir: Path, resume: bool, progress: bool, stop_at: Op
         clean = True
     except BaseException as e:                               # a failing step: save nothing, say so
         if rank == 0 and not isinstance(e, RunError):
-            if isinstance(e, UserError):                     # the user's input: one line on the command line
+            if isinstance(e, (UserError, OSError)):          # the user's input, a full disk: one line
                 raise RunError(f"training failed {where}: {e}; {kept()}") from e
             bad = _non_finite(trainer.state_dict()) if isinstance(e, ValueError) else None
             if bad is not None:                              # a diverged run (NaN or Inf in the weights), not a bug
@@ -359,11 +372,22 @@ def _train(cfg: Config, run_dir: Path, resume: bool, progress: bool, stop_at: Op
         if rank == 0:
             try:
                 if clean:                                    # finished, stop_at or Ctrl-C between steps
+                    log.flush()
                     checkpoint(step)
                     if step == cfg.run.steps:
                         write_samples(trainer.model, sample_inputs, run_dir / "samples", step, samples_seed)
+            except OSError as e:                             # the final samples on a full disk
+                clean = False
+                raise RunError(f"after step {step}: {e}; {saved['path']} holds step {saved['step']}") from None
+            except BaseException:
+                clean = False
+                raise
             finally:
-                log.close()
+                try:
+                    log.close()
+                except OSError:
+                    if clean:                                # else the error on its way says more
+                        raise
                 if previous is not None:
                     signal.signal(signal.SIGINT, previous)
         if world > 1:
@@ -383,6 +407,8 @@ def read_run_config(path: Path) -> Config:
         raise RunError(f"{path} is missing; {expected}") from None
     except OSError as e:
         raise RunError(f"{path} cannot be read: {e}") from None
+    except UnicodeDecodeError:
+        raise RunError(f"{path} is not a text file (not UTF-8); {expected}") from None
     try:
         data = yaml.safe_load(text)
     except yaml.YAMLError as e:
