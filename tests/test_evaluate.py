@@ -318,3 +318,30 @@ def test_evaluate_runs_on_a_tiny_collection_with_a_stand_in_model(tmp_path, monk
     assert results["run: untrained"]["iou"] == 0.0             # nothing at density ≥ ½
     assert results["run: billboard"]["rmse"] > 0.0
     assert "| run (platonic, step 123) | EA |" in report.read_text()
+
+
+def test_depth_stripes_measures_period_two_layers():
+    from mitsuba_platonic.evaluate.metrics import depth_stripes
+    n = 32
+    c = (np.arange(n) + 0.5) / n * 2 - 1
+    d, h, w = np.meshgrid(c, c, c, indexing="ij")
+    ball = ((d ** 2 + h ** 2 + w ** 2) <= 0.5).astype(np.float32)
+    striped = ball * (np.arange(n)[:, None, None] % 2)          # every other depth layer emptied
+    assert depth_stripes(ball) < 0.05
+    assert depth_stripes(striped) > 0.9
+    ramp = np.broadcast_to(np.linspace(0.1, 0.9, n)[:, None, None], (n, n, n))
+    assert depth_stripes(ramp) == pytest.approx(0.0, abs=1e-9)   # linear in depth: nothing alternates
+    assert depth_stripes(striped.transpose(1, 0, 2)) < 0.05     # the stripes lie along axis 0 only
+
+
+def test_half_opacity_depth_tells_a_front_card_from_a_solid():
+    from mitsuba_platonic.evaluate.metrics import half_opacity_depth
+    n = 32
+    card = np.zeros((n, n, n), np.float32)
+    card[0, 8:24, 8:24] = 0.9                                   # one painted layer at the front
+    solid = np.zeros((n, n, n), np.float32)
+    solid[10:22, 8:24, 8:24] = 0.3                              # starts 10 voxels deep
+    assert half_opacity_depth(card) == 0.0
+    # T after layer k is 0.7^(k − 9) from layer 10 on: below ½ after layer 11 (0.7² = 0.49)
+    assert half_opacity_depth(solid) == 11.0
+    assert np.isnan(half_opacity_depth(np.zeros((n, n, n), np.float32)))
