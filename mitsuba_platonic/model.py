@@ -7,6 +7,11 @@ learnt. It is built from a config (a fresh model, which the trainer trains) or r
 checkpoint (:meth:`Model.from_checkpoint`, no training code involved), and it turns images into
 volumes (:meth:`Model.reconstruct`) or draws volumes from the prior (:meth:`Model.generate`).
 
+A PrGAN-style model (``train.mode: prgan``) takes the view as part of its latent: G's input is
+z followed by a one-hot code of one of :data:`RING_VIEWS` views on a ring (:meth:`Model.code`).
+Its volumes are in the frame of ring view 0, which is the input view ω₀ for reconstruction, so
+:meth:`Model.reconstruct` and :meth:`Model.generate` append the code of view 0.
+
 Its state dict keys are the checkpoint's (``E.*``, ``G.*``): a checkpoint's ``nets`` holds E
 and G under the same names, next to the critics D and D3 that only training needs.
 """
@@ -17,6 +22,7 @@ from pathlib import Path
 from typing import Optional, Union
 
 import torch
+import torch.nn.functional as F
 from torch import nn
 
 from .config import Config
@@ -25,7 +31,15 @@ from .models import Encoder, Generator, NetConfig, init_weights
 from .render.settings import RenderSettings
 from .volume import CHANNELS
 
-__all__ = ["Model", "net_config"]
+__all__ = ["Model", "net_config", "RING_VIEWS", "view_codes"]
+
+#: Views of the PrGAN-style baseline: azimuths k · 360°/8 on one elevation ring (Gadelha et al.).
+RING_VIEWS = 8
+
+
+def view_codes(cfg: Config) -> int:
+    """Length of the view code G gets next to z: :data:`RING_VIEWS` for ``train.mode: prgan``, else 0."""
+    return RING_VIEWS if cfg.train.mode == "prgan" else 0
 
 
 def net_config(cfg: Config) -> NetConfig:
@@ -33,7 +47,7 @@ def net_config(cfg: Config) -> NetConfig:
     channels = CHANNELS[cfg.render.model]
     return NetConfig(resolution=cfg.model.resolution, volume_channels=channels, image_channels=channels,
                      latent=cfg.model.latent, width=cfg.model.width, norm=cfg.model.norm,
-                     encoder_hidden=cfg.model.encoder_hidden).validate()
+                     encoder_hidden=cfg.model.encoder_hidden, view_codes=view_codes(cfg)).validate()
 
 
 class Model(nn.Module):
@@ -105,6 +119,22 @@ class Model(nn.Module):
         return self.net.latent
 
     @property
+    def views(self) -> int:
+        """Length of G's view code (:data:`RING_VIEWS` for a PrGAN-style model, else 0: G sees z only)."""
+        return self.net.view_codes
+
+    def code(self, z: torch.Tensor, view: Union[int, torch.Tensor] = 0) -> torch.Tensor:
+        """G's input for latent codes ``z`` ``(B, latent)`` seen from ring view(s) ``view`` (an index or
+        ``(B,)`` indices): z followed by the one-hot of the view, or z itself for a model without
+        view codes (then ``view`` must be 0)."""
+        if not self.views:
+            if not (isinstance(view, int) and view == 0):
+                raise ValueError("this model's G takes no view code (train.mode is not 'prgan')")
+            return z
+        index = torch.as_tensor(view, device=z.device, dtype=torch.long).expand(z.shape[0])
+        return torch.cat([z, F.one_hot(index, self.views).to(z.dtype)], dim=1)
+
+    @property
     def device(self) -> torch.device:
         return next(self.parameters()).device
 
@@ -122,18 +152,20 @@ class Model(nn.Module):
     @torch.no_grad()
     def reconstruct(self, images: torch.Tensor) -> torch.Tensor:
         """G(E(x)): ``(B, C, R, R)`` images → ``(B, C, R, R, R)`` volumes on the model's device
-        (eval mode: BatchNorm uses running statistics; the previous mode is restored)."""
+        (eval mode: BatchNorm uses running statistics; the previous mode is restored). A
+        PrGAN-style model's G gets the code of ring view 0, the input view."""
         if self.task != "reconstruction":
             where = self.origin.parent.parent if self.origin is not None else "this model"
             raise UserError(f"{where} was trained for {self.task!r}; reconstruction needs an encoder "
                             f"(train.task: reconstruction)")
-        return self._eval(lambda: self.G(self.E(images.to(self.device))))
+        return self._eval(lambda: self.G(self.code(self.E(images.to(self.device)))))
 
     @torch.no_grad()
     def generate(self, n: int, seed: int = 0) -> torch.Tensor:
-        """G(z), z ~ N(0, I) drawn by a generator seeded with ``seed`` → ``(n, C, R, R, R)``."""
+        """G(z), z ~ N(0, I) drawn by a generator seeded with ``seed`` → ``(n, C, R, R, R)`` (a
+        PrGAN-style model's G gets the code of ring view 0)."""
         z = torch.randn(n, self.latent, generator=torch.Generator().manual_seed(seed))
-        return self._eval(lambda: self.G(z.to(self.device)))
+        return self._eval(lambda: self.G(self.code(z.to(self.device))))
 
     def _eval(self, fn):
         was = self.training

@@ -3,7 +3,8 @@
 Shapes follow the authors' code (docs/paper.md, "Networks"), parameterised so that a CPU run
 can use 16³ or 32³ and narrow widths while a GPU run uses the paper's 64³ (``configs/paper.yaml``):
 
-- G (3D-GAN style): z → ConvTranspose3d(k4, s1) to 4³ → (k4, s2, p1) stages doubling the
+- G (3D-GAN style): z (with ``view_codes`` > 0: z and a view code, the PrGAN-style baseline's
+  input) → ConvTranspose3d(k4, s1) to 4³ → (k4, s2, p1) stages doubling the
   resolution and halving the width, the last one to C channels at R³ → sigmoid.
   At R = 64 and width 64: 512 → 256 → 128 → 64 → C, as in the paper.
 - D (2D): Conv2d(k4, s2, p1) stages from R² down to 4², doubling the width (64 → 128 → 256 → 512
@@ -38,7 +39,9 @@ class NetConfig:
     """resolution R (16, 32, 64, 128), volume channels (1 or 4), image channels (1 or 4),
     latent size, base width (channels of the widest-resolution layer), normalisation,
     encoder_hidden: width of E's last layer before the Linear to z (0: none, E's trunk feeds
-    the Linear directly)."""
+    the Linear directly); view_codes: length of a view code appended to z as G's input (the
+    PrGAN-style baseline, ``train.mode: prgan``: a one-hot of one of 8 ring views; 0: none, G
+    sees z only)."""
 
     resolution: int = 32
     volume_channels: int = 4
@@ -47,6 +50,7 @@ class NetConfig:
     width: int = 32
     norm: str = "batch"
     encoder_hidden: int = 0
+    view_codes: int = 0
 
     def validate(self) -> "NetConfig":
         if self.resolution not in RESOLUTIONS:
@@ -62,6 +66,8 @@ class NetConfig:
             raise ValueError(f"norm must be one of {NORMS}, got {self.norm!r}")
         if not isinstance(self.encoder_hidden, int) or self.encoder_hidden < 0:
             raise ValueError(f"encoder_hidden must be a non-negative int, got {self.encoder_hidden!r}")
+        if not isinstance(self.view_codes, int) or self.view_codes < 0:
+            raise ValueError(f"view_codes must be a non-negative int, got {self.view_codes!r}")
         return self
 
     @property
@@ -94,13 +100,13 @@ def _trunk(cfg: NetConfig, in_channels: int, dims: int) -> nn.Sequential:
 
 
 class Generator(nn.Module):
-    """G: ``(B, latent)`` → ``(B, C, R, R, R)`` volume in (0, 1) (sigmoid)."""
+    """G: ``(B, latent + view_codes)`` → ``(B, C, R, R, R)`` volume in (0, 1) (sigmoid)."""
 
     def __init__(self, cfg: NetConfig):
         super().__init__()
         self.cfg = cfg.validate()
         top = cfg.width * 2 ** (cfg.stages - 1)
-        layers: List[nn.Module] = [nn.ConvTranspose3d(cfg.latent, top, 4, 1, 0, bias=cfg.norm == "none"),
+        layers: List[nn.Module] = [nn.ConvTranspose3d(cfg.latent + cfg.view_codes, top, 4, 1, 0, bias=cfg.norm == "none"),
                                    _norm(cfg.norm, top, 3), nn.ReLU(inplace=True)]
         c = top
         for _ in range(cfg.stages - 1):
@@ -111,8 +117,11 @@ class Generator(nn.Module):
         self.net = nn.Sequential(*layers)
 
     def forward(self, z: torch.Tensor) -> torch.Tensor:
-        if z.dim() != 2 or z.shape[1] != self.cfg.latent:
-            raise ValueError(f"G expects z of shape (B, {self.cfg.latent}), got {tuple(z.shape)}")
+        n = self.cfg.latent + self.cfg.view_codes
+        if z.dim() != 2 or z.shape[1] != n:
+            what = f"z and a view code, (B, {self.cfg.latent} + {self.cfg.view_codes})" if self.cfg.view_codes \
+                else f"z of shape (B, {n})"
+            raise ValueError(f"G expects {what}, got {tuple(z.shape)}")
         return self.net(z[:, :, None, None, None])
 
 
