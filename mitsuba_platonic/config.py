@@ -128,7 +128,9 @@ class ModelConfig:
 class TrainConfig:
     """task: 'reconstruction' (E encodes the input image; L2 at the input view) or 'generation'
     (z ~ N(0, I)); mode: 'platonic' (2D discriminator only), 'platonic3d' (+ a 3D discriminator on
-    ground-truth volumes) or 'gan3d' (the 3D-GAN baseline: WGAN-GP on volumes, no rendering).
+    ground-truth volumes; G learns from both), 'gan3d' (the 3D-GAN baseline: WGAN-GP on volumes,
+    no rendering) or 'prgan' (the PrGAN-style baseline: VH only, views from 8 azimuths on the ring
+    at ``elevation`` (0° by default; reconstruction: 0°, the input view's), G(z, one-hot view)).
     batch_size: global batch (split across processes); random_views: random views per volume per step;
     view_distribution / elevation: p_view; loss: 'nonsaturating' | 'wgan-gp'; gp_weight: WGAN-GP λ;
     rec_weight: λ of the reconstruction term; weight_3d: weight of the 3D adversarial term;
@@ -174,7 +176,8 @@ class Config:
         from .train.data import SOURCES
         from .train.losses import LOSSES
         from .train.run import DEVICES
-        from .train.trainer import MODES, TASKS
+        from .train.trainer import MODES, MODES_3D, TASKS
+        from .views import DEFAULT_ELEVATION
         _typed(self.to_dict())                               # a config built in code: its types, finite numbers
         _folder_name("run.name", self.run.name)
         _choice("run.device", self.run.device, DEVICES)
@@ -221,10 +224,36 @@ class Config:
             raise ConfigError(f"train.betas: expected two numbers in [0, 1), got {self.train.betas!r}")
         if self.train.d_gate is not None and not 0.0 < self.train.d_gate <= 1.0:
             raise ConfigError(f"train.d_gate: expected null or a number in (0, 1], got {self.train.d_gate!r}")
-        if self.train.mode != "platonic" and self.data.source != "procedural":
+        if self.train.mode in MODES_3D and self.data.source != "procedural":
             raise ConfigError(f"train.mode: {self.train.mode!r} needs 3D ground truth, i.e. data.source 'procedural'")
         if self.train.mode == "gan3d" and self.train.task != "generation":
             raise ConfigError("train.task: the 3D-GAN baseline ('gan3d') is a generation task")
+        if self.train.mode == "prgan":                       # the PrGAN-style baseline: VH, 8 views on one ring
+            prgan = "the PrGAN-style baseline ('prgan')"
+            if self.render.model != "vh":
+                raise ConfigError(f"render.model: {prgan} trains on visual hulls only; expected 'vh', "
+                                  f"got {self.render.model!r}")
+            if self.data.source == "procedural" and self.data.formation != "vh":
+                raise ConfigError(f"data.formation: {prgan} trains on visual hull images only; expected 'vh', "
+                                  f"got {self.data.formation!r}")
+            if self.train.view_distribution != "ring":
+                raise ConfigError(f"train.view_distribution: {prgan} draws its views from 8 azimuths on one "
+                                  f"ring; expected 'ring', got {self.train.view_distribution!r}")
+            ring = 0.0 if self.train.elevation is None else self.train.elevation
+            if isinstance(ring, list) or not -90.0 <= ring <= 90.0:
+                raise ConfigError(f"train.elevation: {prgan} needs one ring elevation in [-90, 90] degrees "
+                                  f"(null: 0), got {self.train.elevation!r}")
+            if self.train.task == "reconstruction" and ring != 0.0:
+                raise ConfigError(f"train.elevation: {prgan} reconstructs in the input camera's frame, whose "
+                                  f"view (ring view 0) is at elevation 0; expected 0 or null, got {ring!r}")
+            if self.data.source == "procedural":
+                if self.data.view_distribution != "ring":
+                    raise ConfigError(f"data.view_distribution: {prgan} needs a collection on its ring; "
+                                      f"expected 'ring', got {self.data.view_distribution!r}")
+                data_ring = DEFAULT_ELEVATION["ring"] if self.data.elevation is None else self.data.elevation
+                if data_ring != ring:
+                    raise ConfigError(f"data.elevation: {prgan} needs a collection on its ring at {ring:g}°; "
+                                      f"got {data_ring!r}")
         if self.data.source == "procedural" and self.data.formation != "physical" \
                 and self.render.backend != "physical" and self.data.formation != self.render.model:
             raise ConfigError(f"render.model: {self.render.model!r} differs from data.formation "

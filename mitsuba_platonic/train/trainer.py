@@ -10,9 +10,24 @@ uninterrupted one would:
    accuracy on this batch, ½(mean σ(l_real) + 1 − mean σ(l_fake)), is above ``d_gate``);
 5. G (and E) update on  L_G = adv(D(I_view)) + λ_rec ‖x − I_front‖² (+ w₃ adv₃(D3(v))).
 
-Modes: 'platonic' (the above), 'platonic3d' (also a 3D discriminator D3 on ground-truth
-volumes vs v, where 3D data exists), 'gan3d' (the 3D-GAN baseline: WGAN-GP between G(z) and
-ground-truth volumes, no rendering, no 2D discriminator). D is updated before G, and G's
+Modes (which critics train G; ``tests/test_baselines.py`` checks the gradient flow of each):
+
+- 'platonic': the above; G's gradient comes from D (2D adversarial) and, for reconstruction,
+  the input-view term.
+- 'platonic3d': also a 3D discriminator D3 on ground-truth volumes vs v, where 3D data exists.
+  G's objective holds *both* adversarial terms (the authors' public Platonic3D code never lets
+  its generator see the 2D term; here it does, as the paper describes the method). For
+  reconstruction, G's volumes live in the input camera's frame, so D3's real volumes are
+  resampled into the frames of views drawn from the data's view distribution (else D3 could tell
+  fakes from their orientation alone).
+- 'gan3d': the 3D-GAN baseline: WGAN-GP (or the config's loss) between G(z) and ground-truth
+  volumes; no rendering, no 2D discriminator: G's only gradient is D3's.
+- 'prgan': the PrGAN-style baseline (Gadelha et al.): visual hull images only, random views
+  drawn from the :data:`~mitsuba_platonic.model.RING_VIEWS` = 8 azimuths k · 45° on one ring
+  (``train.elevation``, 0° by default: in view space the input view ω₀ is ring view 0), and the
+  view as part of the latent: G(z, onehot(k)) is rendered from ring view k; the reconstruction
+  term renders G(E(x), onehot(0)) from ω₀. Same D, renderer and gate as 'platonic'.
+ D is updated before G, and G's
 adversarial term uses the updated D (the usual alternating scheme; the paper's listing computes
 c_Gen before the update, which autograd cannot do once D's weights changed in place).
 
@@ -38,19 +53,28 @@ import torch.nn.functional as F
 from torch import nn
 
 from ..config import Config, ConfigError
-from ..model import Model
+from ..model import RING_VIEWS, Model
 from ..models import Discriminator, VolumeDiscriminator, init_weights
-from ..views import DEFAULT_ELEVATION, front_view, sample_views
+from ..render.closed_form import rotate
+from ..views import DEFAULT_ELEVATION, from_angles, front_view, sample_views
 from .data import TrainingData
 from .losses import d_loss, g_loss, gradient_penalty, hard_accuracy_counts, soft_accuracy_counts
 from .renderer import make_renderer
 
-__all__ = ["Trainer", "TASKS", "MODES"]
+__all__ = ["Trainer", "TASKS", "MODES", "MODES_3D", "ring_views"]
 
 #: What E/G learn: reconstruct the input image, or generate from z ~ N(0, I).
 TASKS = ("reconstruction", "generation")
 #: Which critics train G (module docstring).
-MODES = ("platonic", "platonic3d", "gan3d")
+MODES = ("platonic", "platonic3d", "gan3d", "prgan")
+#: Modes that learn from ground-truth volumes (a 3D critic D3).
+MODES_3D = ("platonic3d", "gan3d")
+
+
+def ring_views(elevation: float = 0.0) -> torch.Tensor:
+    """The PrGAN-style baseline's views: ``(8, 3)``, azimuths k · 45° (k = 0 … 7) at ``elevation``
+    degrees; at 0° view 0 is the input view ω₀."""
+    return from_angles(torch.arange(RING_VIEWS, dtype=torch.float64) * (360.0 / RING_VIEWS), float(elevation))
 
 
 class Trainer:
@@ -62,13 +86,14 @@ class Trainer:
         if cfg.train.batch_size % world:
             raise ConfigError(f"train.batch_size: {cfg.train.batch_size} must be divisible by the "
                               f"number of processes ({world})")
-        if cfg.train.mode != "platonic" and data.volumes is None:
+        needs_3d = cfg.train.mode in MODES_3D
+        if needs_3d and data.volumes is None:
             raise ValueError(f"train.mode {cfg.train.mode!r} needs ground-truth volumes")
         self.cfg, self.data, self.device, self.rank, self.world = cfg, data, device, rank, world
         torch.manual_seed(cfg.run.seed)                      # network initialisation: one draw for all
         self.model = Model.from_config(cfg, init=False)
         nets = {"E": self.model.E, "G": self.model.G, "D": Discriminator(self.model.net)}
-        if cfg.train.mode != "platonic":
+        if needs_3d:
             nets["D3"] = VolumeDiscriminator(self.model.net)
         self.nets = nn.ModuleDict(nets)
         self.nets.apply(init_weights)
@@ -89,7 +114,10 @@ class Trainer:
                        if "D3" in self.nets else None)
         self.render = make_renderer(cfg.render)
         self.images = data.images.to(device)
-        self.volumes = data.volumes.to(device) if data.volumes is not None else None
+        self.volumes = data.volumes.to(device) if needs_3d else None
+        #: 'prgan': the 8 ring views (train.elevation, default 0°)
+        self.ring = ring_views(cfg.train.elevation if cfg.train.elevation is not None else 0.0) \
+            if cfg.train.mode == "prgan" else None
 
     # -- state ------------------------------------------------------------------------------
 
@@ -118,8 +146,9 @@ class Trainer:
         b = x.shape[0] // self.world
         return x[self.rank * b:(self.rank + 1) * b]
 
-    def _views(self, n: int, g: torch.Generator) -> torch.Tensor:
-        t = self.cfg.train
+    def _views(self, n: int, g: torch.Generator, section=None) -> torch.Tensor:
+        """``n`` views from the p_view of ``section`` (the train section, or the data's)."""
+        t = self.cfg.train if section is None else section
         kwargs = {}
         if t.view_distribution != "sphere":
             e = t.elevation if t.elevation is not None else DEFAULT_ELEVATION[t.view_distribution]
@@ -143,15 +172,31 @@ class Trainer:
         idx = torch.randint(len(self.images), (B,), generator=g)
         x = self._shard(self.images[idx.to(self.device)])
         z_prior = torch.randn(B, cfg.model.latent, generator=g)
-        views = self._shard(self._views(B * K, g).view(B, K, 3)).reshape(-1, 3)
+        ring_k = None
+        if t.mode == "prgan":                                # one of the 8 ring views per random view
+            ring_k = self._shard(torch.randint(RING_VIEWS, (B, K), generator=g)).reshape(-1)
+            views = self.ring[ring_k]
+        else:
+            views = self._shard(self._views(B * K, g).view(B, K, 3)).reshape(-1, 3)
         eps = self._shard(torch.rand(B * K, generator=g))
         b = x.shape[0]
+        rec = t.task == "reconstruction"
 
         self.nets.train()
-        z = E(x) if t.task == "reconstruction" else self._shard(z_prior).to(self.device)
-        v = G(z)
+        z = E(x) if rec else self._shard(z_prior).to(self.device)
+        if ring_k is None:
+            v = G(z)
+            v_view, v_input = v.repeat_interleave(K, 0), v
+        else:
+            # the view is part of G's input: one volume per (z, ring view k), rendered from view k;
+            # the input view is ring view 0 (one forward pass, so DDP sees each weight used once)
+            codes = self.model.code(z.repeat_interleave(K, 0), ring_k.to(self.device))
+            if rec:
+                codes = torch.cat([codes, self.model.code(z, 0)])
+            v = G(codes)
+            v_view, v_input = v[:b * K], v[b * K:]
         seed = int(np.random.SeedSequence([cfg.run.seed, step, 7, self.rank]).generate_state(1)[0] >> 2)
-        i_view = self.render(v.repeat_interleave(K, 0), views.to(self.device), seed)
+        i_view = self.render(v_view, views.to(self.device), seed)
         out: Dict[str, float] = {}
 
         # -- D: real photos vs rendered views, gated by its soft accuracy -----------------------
@@ -163,19 +208,28 @@ class Trainer:
         if t.mode == "platonic3d":
             loss_g3 = self._update_d3(v, g, eps, out)
 
-        # -- G and E: fool D from random views, reconstruct the input view ---------------------
+        # -- G and E: fool D from random views (and D3), reconstruct the input view --------------
         loss_adv = g_loss(t.loss, D(i_view))
-        loss = loss_adv + t.weight_3d * loss_g3
-        if t.task == "reconstruction":
-            i_front = self.render(v, front_view(b).to(self.device), seed + 1)
+        terms = {"adv2d": loss_adv}
+        if t.mode == "platonic3d":
+            terms["adv3d"] = t.weight_3d * loss_g3
+        if rec:
+            i_front = self.render(v_input, front_view(b).to(self.device), seed + 1)
             loss_rec = F.mse_loss(i_front, x)
-            loss = loss + t.rec_weight * loss_rec
+            terms["rec"] = t.rec_weight * loss_rec
             out["loss_rec"] = float(self._all_sum(loss_rec.detach().cpu()) / self.world)
+        loss = self._g_objective(terms)
         self.opt_g.zero_grad(set_to_none=True)
         loss.backward()
         self.opt_g.step()
         out["loss_g"] = float(self._all_sum(loss_adv.detach().cpu()) / self.world)
         return out
+
+    def _g_objective(self, terms: Dict[str, torch.Tensor]) -> torch.Tensor:
+        """G's (and E's) loss: the sum of its weighted terms, named 'adv2d' (D on rendered views),
+        'adv3d' (D3 on volumes) and 'rec' (the input view). One place that sees every term, so
+        the tests can check which of them reach G."""
+        return sum(terms.values())
 
     def _critic_update(self, name: str, opt: torch.optim.Optimizer, real: torch.Tensor, fake: torch.Tensor,
                        eps: torch.Tensor, gate: Optional[float], out: Dict[str, float]) -> None:
@@ -217,6 +271,11 @@ class Trainer:
         t = self.cfg.train
         B = t.batch_size
         real = self._shard(self.volumes[torch.randint(len(self.volumes), (B,), generator=g).to(self.device)])
+        if t.task == "reconstruction":
+            # v is in the input camera's frame: show D3 ground truth in the frames of cameras drawn
+            # from the data's views (evaluate.truth_in_input_frame's resampling), not in object space
+            frames = self._shard(self._views(B, g, self.cfg.data)).to(self.device)
+            real = rotate(real, frames).clamp(0.0, 1.0)
         self._critic_update("D3", self.opt_d3, real, v.detach(), eps, None, out)
         return g_loss(t.loss, self.modules["D3"](v))
 
@@ -231,7 +290,7 @@ class Trainer:
         self.nets.train()
         out: Dict[str, float] = {}
         self._critic_update("D3", self.opt_d3, real, G(z).detach(), eps, None, out)
-        loss_g = g_loss(t.loss, D3(G(z)))
+        loss_g = self._g_objective({"adv3d": g_loss(t.loss, D3(G(z)))})
         self.opt_g.zero_grad(set_to_none=True)
         loss_g.backward()
         self.opt_g.step()
