@@ -50,6 +50,7 @@ def collection_folder(cfg: Config) -> Path:
 
 def _procedural(cfg: Config, progress: bool) -> TrainingData:
     from ..data.collection import CollectionSpec, make_collection, load_manifest
+    from .trainer import MODES_3D
     from ..data.photos import decode_image, prepare_image
 
     d = cfg.data
@@ -75,7 +76,7 @@ def _procedural(cfg: Config, progress: bool) -> TrainingData:
             held.append(img)
             held_records.append({**r, "folder": str(folder)})
     volumes = None
-    if cfg.train.mode != "platonic":
+    if cfg.train.mode in MODES_3D:                                # the modes trained with 3D ground truth
         volumes = torch.stack([torch.from_numpy(np.load(folder / "volumes" / f"{i:05d}.npz")["volume"])
                                for i in range(n_train)])
         if alpha_only:
