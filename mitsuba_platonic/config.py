@@ -26,7 +26,7 @@ import yaml
 from pydantic_core import SchemaValidator, core_schema
 
 from .data.collection import FORMATIONS
-from .data.photos import BACKGROUNDS, CROPS
+from .data.photos import BACKGROUNDS, CROPS, PhotoOptions
 from .errors import UserError
 from .models import NORMS, RESOLUTIONS
 from .render.settings import RenderSettings as RenderConfig
@@ -62,18 +62,13 @@ class RunConfig:
 
 
 @dataclass
-class DataConfig:
+class DataConfig(PhotoOptions):
     """source: 'procedural' (render a built-in class with make-dataset, cached under ``cache``)
     or 'folder' (an unstructured photo collection at ``path``).
     Procedural: shape_class, n_shapes, views_per_shape, formation ('vh'|'ao'|'ea'|'physical'),
     view_distribution ('sphere'|'band'|'ring'), elevation, seed.
-    Folder: background (null | 'white') and threshold for RGB photos on white, crop ('image'|'bbox');
-    margin: a transparent border, a share of R per side in [0, 0.5) (with crop 'bbox' the object
-    otherwise touches the image edge, where rendered views seldom put it);
-    clean: remove frame lines and specks from masks (false for exact masks, e.g. rendered cut-outs,
-    whose thin parts are real); fill_holes: keep white areas enclosed by an object on white opaque
-    (a white label on a mug); erode: shrink masks by this many source pixels (cut-outs that carry
-    a light fringe of their old background). See mitsuba_platonic.data.photos.
+    Folder: the photo options background, threshold, crop, margin, clean, fill_holes and erode,
+    inherited from (and explained by) :class:`mitsuba_platonic.data.photos.PhotoOptions`.
     split: the train split's share; the rest is held out (val/test) for evaluation."""
 
     source: str = "procedural"
@@ -85,13 +80,6 @@ class DataConfig:
     formation: str = "ea"
     view_distribution: str = "sphere"
     elevation: Optional[Union[float, List[float]]] = None
-    background: Optional[str] = None
-    threshold: float = 0.05
-    crop: str = "image"
-    margin: float = 0.0
-    clean: bool = True
-    fill_holes: bool = False
-    erode: int = 0
     split: float = 0.9
     seed: int = 0
 
@@ -101,10 +89,7 @@ class DataConfig:
         and the image options above (``resolution`` and ``alpha_only`` come from the model and
         renderer)."""
         rest = (1.0 - self.split) / 2.0
-        return {"splits": (self.split, rest, rest), "seed": self.seed,
-                "background": self.background, "threshold": self.threshold, "crop": self.crop,
-                "margin": self.margin, "clean": self.clean, "fill_holes": self.fill_holes,
-                "erode": self.erode}
+        return {"splits": (self.split, rest, rest), "seed": self.seed, **self.image_kwargs()}
 
 
 @dataclass

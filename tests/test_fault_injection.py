@@ -19,7 +19,6 @@ import builtins
 import contextlib
 import errno
 import io
-import json
 import os
 import random
 import shutil
@@ -34,9 +33,8 @@ import pytest
 import torch
 from PIL import Image
 
-from mitsuba_platonic.checkpoint import (CHECKPOINT_VERSION, RunError, checkpoint_files, read_checkpoint,
+from mitsuba_platonic.checkpoint import (CHECKPOINT_VERSION, checkpoint_files, read_checkpoint,
                                          save_checkpoint)
-from mitsuba_platonic.cli import main
 from mitsuba_platonic.config import load_config
 from mitsuba_platonic.data import shapes
 from mitsuba_platonic.data.collection import load_manifest
@@ -44,6 +42,7 @@ from mitsuba_platonic.fileio import atomic_write
 from mitsuba_platonic.images import load_exr
 from mitsuba_platonic.train import run as R
 from mitsuba_platonic.train.data import load_training_data
+from cli_runner import one_line, run_cli
 from tiny_shapes import ellipsoid
 
 SEED = 10                                   # issue 10
@@ -56,21 +55,6 @@ N = 16
 def tiny_class():
     with shapes.registered(TINY, ellipsoid):
         yield
-
-
-def run_cli(argv):
-    """``main(argv)`` in this process → (exit code, stdout, stderr)."""
-    out, err = io.StringIO(), io.StringIO()
-    with contextlib.redirect_stdout(out), contextlib.redirect_stderr(err):
-        code = main(argv)
-    return code, out.getvalue(), err.getvalue()
-
-
-def one_line(stderr, command):
-    err = stderr.strip()
-    assert "\n" not in err and "Traceback" not in err, err
-    assert err.startswith(f"platonic {command}: error: "), err
-    return err
 
 
 def temporaries(folder: Path):
@@ -388,7 +372,7 @@ def test_resume_on_a_disk_that_fills_up_is_one_line_and_keeps_the_run(base_run, 
     with disk_full(monkeypatch, full):
         code, _, stderr = run_cli(argv)
     assert code == 2
-    err = one_line(stderr, "train")
+    err = one_line(stderr, "train", kind="error")
     assert "No space left on device" in err
     if where == "checkpoints":
         last = run_dir / "checkpoints" / "last.pt"
@@ -458,7 +442,7 @@ def test_resume_into_a_full_filesystem(base_run, tmp_path, tiny_fs, leave):
     argv = ["train", "--resume", "--quiet", *_set(_tiny_overrides(out, base_run[1], "run.steps=6"))]
     code, _, stderr = run_cli(argv)
     assert code == 2
-    err = one_line(stderr, "train")
+    err = one_line(stderr, "train", kind="error")
     assert "No space left on device" in err and str(run_dir) in err, err
     if leave:
         assert "still holds step 4" in err, err
@@ -479,7 +463,7 @@ def test_make_dataset_into_a_full_filesystem(tmp_path, tiny_fs):
                "--out", str(out), "--quiet"]
     code, _, stderr = run_cli(command)
     assert code == 2
-    err = one_line(stderr, "make-dataset")
+    err = one_line(stderr, "make-dataset", kind="error")
     assert "No space left on device" in err and f"'{out}/" in err, err
     check_collection_files(out)
     assert [p for p in temporaries(out) if p.parent != out] == []
@@ -549,7 +533,7 @@ def test_no_loadable_checkpoint_names_each_file_and_why(base_run, tmp_path):
                  ["train", "--resume", "--quiet", *_set(_tiny_overrides(tmp_path / "runs", base_run[1], "run.steps=6"))]):
         code, _, stderr = run_cli(argv)
         assert code == 2
-        err = one_line(stderr, argv[0])
+        err = one_line(stderr, argv[0], kind="error")
         assert f"no loadable checkpoint in {folder}" in err, err
         assert "step_0000004.pt (checkpoint format 2, this version reads 1)" in err, err
         assert "last.pt" in err and "step_0000002.pt" in err, err
@@ -564,10 +548,10 @@ def test_a_dangling_last_checkpoint_is_not_a_fresh_folder(base_run, tmp_path):
         p.unlink()
     CORRUPTIONS["a dangling symlink"](folder / "last.pt")
     code, _, stderr = run_cli(["train", "--quiet", *_set(_tiny_overrides(tmp_path / "runs", base_run[1]))])
-    assert code == 2 and "already holds a run" in one_line(stderr, "train")
+    assert code == 2 and "already holds a run" in one_line(stderr, "train", kind="error")
     code, _, stderr = run_cli(["generate", "--run", str(run_dir), "-n", "1"])
     assert code == 2
-    err = one_line(stderr, "generate")
+    err = one_line(stderr, "generate", kind="error")
     assert f"no loadable checkpoint in {folder}" in err and "last.pt (no checkpoint at" in err, err
 
 
@@ -584,14 +568,14 @@ def test_a_bad_config_file_is_one_line_naming_it(tmp_path, content, message):
     config.write_bytes(content)
     code, _, stderr = run_cli(["train", "--config", str(config), "--quiet"])
     assert code == 2
-    err = one_line(stderr, "train")
+    err = one_line(stderr, "train", kind="error")
     assert f"{config}: {message}" in err, err
 
 
-def test_a_bad_override_is_one_line(tmp_path):
+def test_a_bad_override_is_one_line(tmp_path, kind="error"):
     code, _, stderr = run_cli(["train", "--quiet", "--set", "train.lr_g=[1,"])
     assert code == 2
-    assert "train.lr_g: could not parse '[1,'" in one_line(stderr, "train")
+    assert "train.lr_g: could not parse '[1,'" in one_line(stderr, "train", kind="error")
 
 
 def test_resume_with_a_binary_config_yaml_names_it(base_run, tmp_path):
@@ -600,7 +584,7 @@ def test_resume_with_a_binary_config_yaml_names_it(base_run, tmp_path):
     code, _, stderr = run_cli(["train", "--resume", "--quiet",
                                *_set(_tiny_overrides(tmp_path / "runs", base_run[1], "run.steps=6"))])
     assert code == 2
-    err = one_line(stderr, "train")
+    err = one_line(stderr, "train", kind="error")
     assert f"{run_dir / 'config.yaml'} is not a text file" in err, err
 
 
@@ -616,7 +600,7 @@ def test_make_dataset_envmap_that_cannot_be_used(tmp_path, kind):
                                "--formation", "physical", "--lighting", "envmap", "--envmap", str(env), "--spp", "1",
                                "--out", str(out), "--quiet"])
     assert code == 2
-    err = one_line(stderr, "make-dataset")
+    err = one_line(stderr, "make-dataset", kind="error")
     assert f"--envmap '{env}'" in err, err
     assert not out.exists()
 
@@ -654,4 +638,4 @@ def test_unreadable_photos_are_skipped_by_train_and_refused_by_reconstruct(base_
     for bad in ("torn.png", "noise.png"):
         code, _, stderr = run_cli(["reconstruct", "--run", str(run_dir), str(photos / bad)])
         assert code == 2
-        assert str(photos / bad) in one_line(stderr, "reconstruct")
+        assert str(photos / bad) in one_line(stderr, "reconstruct", kind="error")

@@ -3,8 +3,6 @@ no EXR, a marching step float32 cannot take, a CUDA variant without CUDA, Ctrl-C
 prepared, a comparison that cannot fit in memory, a photo too thin to train on, a collection with a
 missing volume, an empty or meta batch; and a bug is not dressed up as one (it keeps its traceback)."""
 
-import contextlib
-import io
 import os
 import signal
 import subprocess
@@ -17,10 +15,10 @@ import torch
 from PIL import Image
 
 import mitsuba_platonic
-from mitsuba_platonic.cli import main
 from mitsuba_platonic.data import shapes
 from mitsuba_platonic.views import front_view
 from mitsuba_platonic.volume import test_volume
+from cli_runner import one_line, run_cli
 from tiny_shapes import ellipsoid
 
 CLASS = "mushroom"
@@ -31,22 +29,6 @@ TINY = "tiny_user_error_blob"
 def tiny_class():
     with shapes.registered(TINY, ellipsoid):
         yield
-
-
-def run_cli(argv):
-    """``main(argv)`` → (exit code, stdout, stderr)."""
-    out, err = io.StringIO(), io.StringIO()
-    with contextlib.redirect_stdout(out), contextlib.redirect_stderr(err):
-        code = main(argv)
-    return code, out.getvalue(), err.getvalue()
-
-
-def one_line(stderr, command):
-    """The single line a user error prints, checked: one line, no traceback, the usual prefix."""
-    err = stderr.strip()
-    assert "\n" not in err and "Traceback" not in err, err
-    assert err.startswith(f"platonic {command}: "), err
-    return err
 
 
 def _train_args(tmp_path):

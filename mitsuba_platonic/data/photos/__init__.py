@@ -39,7 +39,7 @@ from .decode import SUPPORTED_FORMATS, DecodedImage, decode_image
 from .frame import CROPS, MAX_ASPECT, frame_and_resample
 from .mask import BACKGROUNDS, clean_mask, premultiplied_linear, srgb_decoding_table, \
     white_background_alpha
-from .prepare import ImageOptions, prepare_image
+from .prepare import ImageOptions, PhotoOptions, prepare_image
 from .rejections import REASONS, ImageRejected, PhotoCollectionWarning
 from .scan import CollectionReport, PhotoEntry, SkippedFile
 from .split import SPLITS, split_counts
@@ -51,6 +51,7 @@ __all__ = [
     "PhotoEntry",
     "DecodedImage",
     "ImageOptions",
+    "PhotoOptions",
     "ImageRejected",
     "PhotoCollectionWarning",
     "decode_image",

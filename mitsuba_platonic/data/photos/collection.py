@@ -73,8 +73,8 @@ class PhotoCollection(Dataset):
         fractions = check_splits(splits)
         if isinstance(seed, bool) or not isinstance(seed, (int, np.integer)):
             raise UserError(f"seed must be an integer, got {seed!r}")
-        options = ImageOptions(resolution, background, threshold, crop, margin, bool(clean),
-                               bool(fill_holes), erode)
+        options = ImageOptions(resolution=resolution, background=background, threshold=threshold, crop=crop,
+                               margin=margin, clean=bool(clean), fill_holes=bool(fill_holes), erode=erode)
         self._init_from(scan(folder, options, fractions, int(seed)), split, alpha_only)
 
     def _init_from(self, scanned: Scan, split: str, alpha_only: bool) -> None:

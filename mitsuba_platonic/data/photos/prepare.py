@@ -2,14 +2,15 @@
 
 :func:`prepare_image` = :func:`~.mask.premultiplied_linear` (colour and mask) followed by
 :func:`~.frame.frame_and_resample` (crop, centred transparent padding, antialiased
-resampling); :class:`ImageOptions` holds and validates the options a collection applies to
-every one of its files.
+resampling); :class:`PhotoOptions` are the options a collection applies to every one of its
+files (the data config's photo keys are these fields), :class:`ImageOptions` adds the resolution
+and validates them.
 """
 
 from __future__ import annotations
 
-from dataclasses import asdict, dataclass
-from typing import Optional
+from dataclasses import dataclass, fields
+from typing import Any, Dict, Optional
 
 import numpy as np
 
@@ -18,17 +19,24 @@ from .decode import DecodedImage
 from .frame import CROPS, check_aspect, frame_and_resample
 from .mask import BACKGROUNDS, premultiplied_linear
 
-__all__ = ["ImageOptions", "prepare_image"]
+__all__ = ["PhotoOptions", "ImageOptions", "prepare_image"]
 
 
-@dataclass(frozen=True)
-class ImageOptions:
-    """The image options of a collection (validated on construction).
+@dataclass
+class PhotoOptions:
+    """How a collection turns each photo into a training image; the one owner of these settings:
+    the data config's section (``mitsuba_platonic.config.DataConfig``) inherits them.
 
-    See :class:`~mitsuba_platonic.data.photos.PhotoCollection` for what each one means.
+    background: null | 'white' (RGB photos on white are masked by their near-white pixels);
+    threshold: how near to white, in [0, 1); crop: 'image' | 'bbox'; margin: a transparent border,
+    a share of R per side in [0, 0.5) (with crop 'bbox' the object otherwise touches the image
+    edge, where rendered views seldom put it); clean: remove frame lines and specks from masks
+    (false for exact masks, e.g. rendered cut-outs, whose thin parts are real); fill_holes: keep
+    white areas enclosed by an object on white opaque (a white label on a mug); erode: shrink
+    masks by this many source pixels (cut-outs that carry a light fringe of their old
+    background). :class:`~mitsuba_platonic.data.photos.PhotoCollection` says more.
     """
 
-    resolution: int = 64
     background: Optional[str] = None
     threshold: float = 0.05
     crop: str = "image"
@@ -37,15 +45,20 @@ class ImageOptions:
     fill_holes: bool = False
     erode: int = 0
 
+    def image_kwargs(self) -> Dict[str, Any]:
+        """These options as keyword arguments (of :func:`prepare_image`, ``PhotoCollection``)."""
+        return {f.name: getattr(self, f.name) for f in fields(PhotoOptions)}
+
+
+@dataclass
+class ImageOptions(PhotoOptions):
+    """The image options of a collection, with its resolution (validated on construction)."""
+
+    resolution: int = 64
+
     def __post_init__(self):
         _check_options(self.resolution, self.background, self.threshold, self.crop,
                        self.margin, self.erode)
-
-    def image_kwargs(self) -> dict:
-        """Keyword arguments of :func:`prepare_image` (all fields but ``resolution``)."""
-        kwargs = asdict(self)
-        del kwargs["resolution"]
-        return kwargs
 
 
 def _check_options(resolution, background, threshold, crop, margin, erode) -> None:
