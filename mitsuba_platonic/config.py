@@ -28,7 +28,7 @@ from pydantic_core import SchemaValidator, core_schema
 from .data.collection import FORMATIONS
 from .data.photos import BACKGROUNDS, CROPS, PhotoOptions
 from .errors import UserError
-from .models import NORMS, RESOLUTIONS
+from .models import NORMS, RESOLUTIONS, UPSAMPLES
 from .render.settings import RenderSettings as RenderConfig
 from .views import DISTRIBUTIONS
 
@@ -100,13 +100,16 @@ class ModelConfig:
     loss stays at 0.21 and novel-view IoU at 0.18 (0.007 and 0.63 without; docs/training.md);
     'none' also makes data-parallel training identical to single-process training.
     encoder_hidden: width of the encoder's last layer before its Linear to z (0, the default:
-    none; the authors' encoder: 1024, see docs/paper.md)."""
+    none; the authors' encoder: 1024, see docs/paper.md). upsample: how G doubles its
+    resolution, 'transposed' (the paper's k4 s2 transposed convolutions) | 'resize' (nearest ×2
+    and a k3 convolution; mitsuba_platonic.models.UPSAMPLES)."""
 
     resolution: int = 32
     latent: int = 64
     width: int = 16
     norm: str = "none"
     encoder_hidden: int = 0
+    upsample: str = "transposed"
 
 
 @dataclass
@@ -190,6 +193,7 @@ class Config:
         _positive("model.latent", self.model.latent)
         _positive("model.width", self.model.width)
         _choice("model.norm", self.model.norm, NORMS)
+        _choice("model.upsample", self.model.upsample, UPSAMPLES)
         _non_negative("model.encoder_hidden", self.model.encoder_hidden)
         try:
             self.render.validate()                           # the renderer's settings check themselves

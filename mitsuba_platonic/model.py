@@ -47,7 +47,8 @@ def net_config(cfg: Config) -> NetConfig:
     channels = CHANNELS[cfg.render.model]
     return NetConfig(resolution=cfg.model.resolution, volume_channels=channels, image_channels=channels,
                      latent=cfg.model.latent, width=cfg.model.width, norm=cfg.model.norm,
-                     encoder_hidden=cfg.model.encoder_hidden, view_codes=view_codes(cfg)).validate()
+                     encoder_hidden=cfg.model.encoder_hidden, upsample=cfg.model.upsample,
+                     view_codes=view_codes(cfg)).validate()
 
 
 class Model(nn.Module):

@@ -6,7 +6,9 @@ can use 16³ or 32³ and narrow widths while a GPU run uses the paper's 64³ (``
 - G (3D-GAN style): z (with ``view_codes`` > 0: z and a view code, the PrGAN-style baseline's
   input) → ConvTranspose3d(k4, s1) to 4³ → (k4, s2, p1) stages doubling the
   resolution and halving the width, the last one to C channels at R³ → sigmoid.
-  At R = 64 and width 64: 512 → 256 → 128 → 64 → C, as in the paper.
+  At R = 64 and width 64: 512 → 256 → 128 → 64 → C, as in the paper. With ``upsample:
+  resize`` each (k4, s2, p1) transposed convolution becomes a nearest ×2 upsampling and a k3
+  convolution (no period-2 checkerboard).
 - D (2D): Conv2d(k4, s2, p1) stages from R² down to 4², doubling the width (64 → 128 → 256 → 512
   at R = 64), LeakyReLU 0.2, then Conv2d(k4) to one logit.
 - E: D's trunk, then Linear → z; or, with ``encoder_hidden`` = H > 0, the authors' head:
@@ -27,10 +29,14 @@ from typing import List
 import torch
 from torch import nn
 
-__all__ = ["NetConfig", "Encoder", "Generator", "Discriminator", "VolumeDiscriminator", "build_networks",
+__all__ = ["NORMS", "UPSAMPLES", "NetConfig", "Encoder", "Generator", "Discriminator", "VolumeDiscriminator", "build_networks",
            "init_weights"]
 
 NORMS = ("batch", "instance", "none")
+#: How G doubles its resolution: the paper's transposed convolution (k4, s2, p1), or a nearest
+#: upsampling followed by a k3 convolution, which cannot make a transposed convolution's
+#: period-2 checkerboard (Odena, Dumoulin and Olah 2016).
+UPSAMPLES = ("transposed", "resize")
 RESOLUTIONS = (16, 32, 64, 128)
 
 
@@ -41,7 +47,7 @@ class NetConfig:
     encoder_hidden: width of E's last layer before the Linear to z (0: none, E's trunk feeds
     the Linear directly); view_codes: length of a view code appended to z as G's input (the
     PrGAN-style baseline, ``train.mode: prgan``: a one-hot of one of 8 ring views; 0: none, G
-    sees z only)."""
+    sees z only); upsample: how G's stages double the resolution (:data:`UPSAMPLES`)."""
 
     resolution: int = 32
     volume_channels: int = 4
@@ -50,6 +56,7 @@ class NetConfig:
     width: int = 32
     norm: str = "batch"
     encoder_hidden: int = 0
+    upsample: str = "transposed"
     view_codes: int = 0
 
     def validate(self) -> "NetConfig":
@@ -64,6 +71,8 @@ class NetConfig:
             raise ValueError(f"width must be a positive int, got {self.width!r}")
         if self.norm not in NORMS:
             raise ValueError(f"norm must be one of {NORMS}, got {self.norm!r}")
+        if self.upsample not in UPSAMPLES:
+            raise ValueError(f"upsample must be one of {UPSAMPLES}, got {self.upsample!r}")
         if not isinstance(self.encoder_hidden, int) or self.encoder_hidden < 0:
             raise ValueError(f"encoder_hidden must be a non-negative int, got {self.encoder_hidden!r}")
         if not isinstance(self.view_codes, int) or self.view_codes < 0:
@@ -99,6 +108,13 @@ def _trunk(cfg: NetConfig, in_channels: int, dims: int) -> nn.Sequential:
     return nn.Sequential(*layers)
 
 
+def _up(kind: str, c_in: int, c_out: int, bias: bool) -> List[nn.Module]:
+    """One ×2 stage of G (:data:`UPSAMPLES`)."""
+    if kind == "transposed":
+        return [nn.ConvTranspose3d(c_in, c_out, 4, 2, 1, bias=bias)]
+    return [nn.Upsample(scale_factor=2, mode="nearest"), nn.Conv3d(c_in, c_out, 3, 1, 1, bias=bias)]
+
+
 class Generator(nn.Module):
     """G: ``(B, latent + view_codes)`` → ``(B, C, R, R, R)`` volume in (0, 1) (sigmoid)."""
 
@@ -110,10 +126,10 @@ class Generator(nn.Module):
                                    _norm(cfg.norm, top, 3), nn.ReLU(inplace=True)]
         c = top
         for _ in range(cfg.stages - 1):
-            layers += [nn.ConvTranspose3d(c, c // 2, 4, 2, 1, bias=cfg.norm == "none"),
+            layers += [*_up(cfg.upsample, c, c // 2, bias=cfg.norm == "none"),
                        _norm(cfg.norm, c // 2, 3), nn.ReLU(inplace=True)]
             c //= 2
-        layers += [nn.ConvTranspose3d(c, cfg.volume_channels, 4, 2, 1), nn.Sigmoid()]
+        layers += [*_up(cfg.upsample, c, cfg.volume_channels, bias=True), nn.Sigmoid()]
         self.net = nn.Sequential(*layers)
 
     def forward(self, z: torch.Tensor) -> torch.Tensor:

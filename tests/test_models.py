@@ -182,3 +182,25 @@ def test_paper_config_builds_the_published_networks_and_trains(tmp_path):
         assert all(np.isfinite(v) for v in out.values()), out
     for k, params in before.items():
         assert any(not torch.equal(a, b) for a, b in zip(params, trainer.nets[k].parameters())), k
+
+
+def test_the_resize_generator_alternates_less_along_depth():
+    """Transposed convolutions (k4, s2) give even and odd output layers different kernel taps, so
+    a randomly initialised G's pre-sigmoid volume alternates along depth; nearest ×2 and a k3
+    convolution do not. Mean depth_stripes over 5 seeded inits (measured: 0.21 and 0.05)."""
+    from mitsuba_platonic.evaluate.metrics import depth_stripes
+    from mitsuba_platonic.models import Generator, NetConfig
+    mean = {}
+    for up in ("transposed", "resize"):
+        scores = []
+        for seed in range(5):
+            torch.manual_seed(seed)
+            g = Generator(NetConfig(resolution=16, volume_channels=1, image_channels=1, latent=8, width=4,
+                                    norm="none", upsample=up))
+            with torch.no_grad():
+                x = g.net[:-1](torch.randn(1, 8)[:, :, None, None, None])[0, 0, 3:13, 3:13, 3:13]
+            scores.append(depth_stripes((x - x.min()) / (x.max() - x.min())))   # away from the faces
+        mean[up] = sum(scores) / len(scores)
+    assert mean["resize"] < 0.5 * mean["transposed"], mean
+    with pytest.raises(ValueError, match="upsample"):
+        NetConfig(upsample="bilinear").validate()
