@@ -40,6 +40,8 @@ VARIANTS = {
     "views4": ["train.random_views=4"],
     "rec20": ["train.rec_weight=20.0"],
     "rec5": ["train.rec_weight=5.0"],
+    "resize": ["model.upsample=resize"],                               # no transposed-convolution checkerboard
+    "resize_views2": ["model.upsample=resize", "train.random_views=2"],
 }
 
 
