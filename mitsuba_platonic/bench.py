@@ -109,6 +109,7 @@ class BenchSettings:
     physical_ref_spp: int = 32
     physical_max_depth: int = 4
     physical: bool = True                       # the path-tracer rows (the slowest part of a run)
+    physical_max_resolution: int = 64           # … measured up to this N (128³ path tracing: most of an hour)
     train: bool = True
     train_resolution: int = 32
     train_width: int = 16
@@ -122,7 +123,7 @@ class BenchSettings:
                 raise ValueError(f"resolutions must be among {RESOLUTIONS}, got {n!r}")
         if not self.resolutions:
             raise ValueError("resolutions: give at least one")
-        for name in ("batch", "repeats", "physical_ref_spp", "physical_max_depth", "train_width",
+        for name in ("batch", "repeats", "physical_ref_spp", "physical_max_depth", "physical_max_resolution", "train_width",
                      "train_batch", "train_steps"):
             v = getattr(self, name)
             if not isinstance(v, int) or isinstance(v, bool) or v < 1:
@@ -547,7 +548,7 @@ def _bench_model(s: BenchSettings, n: int, model: str, views: torch.Tensor, repe
     else:
         add(row, authors_ea, ref)
 
-    if not s.physical:
+    if not s.physical or n > s.physical_max_resolution:
         return rows
     t0 = time.perf_counter()
     # one call for the whole batch: the path tracer draws pair b's sky as the b-th draw from the seed
@@ -632,7 +633,8 @@ def markdown_tables(result: Dict[str, Any], plot_dir: Optional[str] = None) -> s
         "error ‖g − g_ref‖/‖g_ref‖ of the gradient of a random-weighted loss; *bound*: the memory-traffic lower "
         "bound of forward+backward, and the measured time over it. The default is in bold. The authors' layer "
         "and the path tracer are other image formations: the first is compared with our reference, the second "
-        f"with itself at spp {meta['physical_ref_spp_used']}.",
+        f"with itself at spp {meta['physical_ref_spp_used']} (measured up to "
+        f"{meta['settings'].get('physical_max_resolution', 64)}³).",
         "",
     ]
     rows = result["rows"]

@@ -276,7 +276,8 @@ def _cmd_bench(args: argparse.Namespace) -> int:
     settings = BenchSettings(resolutions=tuple(args.resolutions), batch=args.batch, repeats=args.repeats,
                              threads=args.threads, models=tuple(parse_models(args.models)), volume=args.volume,
                              seed=args.seed, quick=args.quick, physical_ref_spp=args.physical_ref_spp,
-                             physical=not args.no_physical, train=not args.no_train,
+                             physical=not args.no_physical, physical_max_resolution=args.physical_max_resolution,
+                             train=not args.no_train,
                              train_steps=args.train_steps)
     result = run_bench(settings, log=lambda line: print(line, flush=True))
     written = write_outputs(result, out)
@@ -318,6 +319,9 @@ def _add_bench(sub: "argparse._SubParsersAction") -> None:
     p.add_argument("--no-train", action="store_true", help="skip the training-speed measurement")
     p.add_argument("--no-physical", action="store_true",
                    help="skip the path-tracer rows (most of a run's time at 64³ and above)")
+    p.add_argument("--physical-max-resolution", type=_positive_int, default=64, metavar="N",
+                   help="measure the path tracer only up to N³ (default: %(default)s; at 128³ its rows take "
+                        "most of an hour on 2 cores)")
     p.add_argument("--quick", action="store_true",
                    help="a reduced set: the smallest resolution, fewer configurations, one timed call, "
                         "path tracer at spp 1 only, one training step (seconds at 16³, batch 2)")
