@@ -23,7 +23,7 @@ import numpy as np
 import torch
 
 from mitsuba_platonic.config import load_config
-from mitsuba_platonic.evaluate import held_out_scores, truth_in_input_frame
+from mitsuba_platonic.evaluate import held_out_scores, held_out_truths
 from mitsuba_platonic.evaluate import metrics as M
 from mitsuba_platonic.quickstart import CONFIG
 from mitsuba_platonic.train.data import load_training_data
@@ -50,9 +50,7 @@ def volume_scores(model, data, limit: int = 64) -> dict:
     input frame, and of the reconstructions' depth stripes and half-opacity depth (voxels)."""
     recon = model.reconstruct(data.held_out[:limit]).cpu()
     rows = []
-    for v, r in zip(recon, data.held_out_records[:limit]):
-        truth = truth_in_input_frame(torch.from_numpy(np.load(Path(r["folder"]) / r["volume"])["volume"]).float(),
-                                     r["view"], "ea")
+    for v, truth in zip(recon, held_out_truths(data.held_out_records[:limit], "ea")):
         rows.append((M.volume_iou(v, truth), M.chamfer_distance(v, truth), M.depth_stripes(v),
                      M.half_opacity_depth(v), M.depth_stripes(truth)))
     a = np.array(rows, dtype=np.float64)

@@ -12,16 +12,14 @@ import pytest
 import torch
 
 from mitsuba_platonic.config import ConfigError, load_config
-from mitsuba_platonic.data import shapes
 from mitsuba_platonic.model import RING_VIEWS
 from mitsuba_platonic.render.closed_form import rotate
 from mitsuba_platonic.train.data import load_training_data
 from mitsuba_platonic.train.trainer import Trainer, ring_views
 from mitsuba_platonic.views import front_view, to_angles
 
-from tiny_shapes import ellipsoid
+from tiny_shapes import TINY
 
-TINY = "tiny_baselines"
 CONFIGS = Path(__file__).resolve().parents[1] / "configs"
 
 #: The named terms of G's objective in each mode (reconstruction; gan3d is a generation task).
@@ -29,10 +27,7 @@ TERMS = {"platonic": {"adv2d", "rec"}, "platonic3d": {"adv2d", "adv3d", "rec"}, 
          "prgan": {"adv2d", "rec"}}
 
 
-@pytest.fixture(scope="module", autouse=True)
-def tiny_class():
-    with shapes.registered(TINY, ellipsoid):
-        yield
+pytestmark = pytest.mark.usefixtures("tiny_class")
 
 
 @pytest.fixture(scope="module")

@@ -7,19 +7,14 @@ import pytest
 import torch
 
 from mitsuba_platonic.config import load_config
-from mitsuba_platonic.data import shapes
 from mitsuba_platonic.train.data import load_training_data
 from mitsuba_platonic.train.losses import d_loss, hard_accuracy_counts, soft_accuracy_counts
 from mitsuba_platonic.train.trainer import Trainer
-from tiny_shapes import ellipsoid
-
-TINY = "tiny_ball"
+from tiny_shapes import TINY
 
 
-@pytest.fixture(scope="module", autouse=True)
-def tiny_class():
-    with shapes.registered(TINY, ellipsoid):
-        yield
+
+pytestmark = pytest.mark.usefixtures("tiny_class")
 
 
 def _trainer(tmp_path, *extra):

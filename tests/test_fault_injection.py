@@ -36,25 +36,20 @@ from PIL import Image
 from mitsuba_platonic.checkpoint import (CHECKPOINT_VERSION, checkpoint_files, read_checkpoint,
                                          save_checkpoint)
 from mitsuba_platonic.config import load_config
-from mitsuba_platonic.data import shapes
 from mitsuba_platonic.data.collection import load_manifest
 from mitsuba_platonic.fileio import atomic_write
 from mitsuba_platonic.images import load_exr
 from mitsuba_platonic.train import run as R
 from mitsuba_platonic.train.data import load_training_data
 from cli_runner import one_line, run_cli
-from tiny_shapes import ellipsoid
+from tiny_shapes import TINY
 
 SEED = 10                                   # issue 10
 CLASS = "mushroom"                          # a built-in class: subprocesses see it too
-TINY = "tiny_fault_injection_blob"
 N = 16
 
 
-@pytest.fixture(scope="module", autouse=True)
-def tiny_class():
-    with shapes.registered(TINY, ellipsoid):
-        yield
+pytestmark = pytest.mark.usefixtures("tiny_class")
 
 
 def temporaries(folder: Path):

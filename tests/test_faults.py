@@ -12,27 +12,16 @@ import torch
 
 from mitsuba_platonic.cli import main
 from mitsuba_platonic.config import ConfigError, load_config
-from mitsuba_platonic.data import shapes
 from mitsuba_platonic.data.collection import CollectionSpec, load_manifest, make_collection
 from mitsuba_platonic.train import run as R
 from mitsuba_platonic.train.trainer import Trainer
-from tiny_shapes import ellipsoid
+from cli_runner import one_line
+from tiny_shapes import TINY
 
 CLASS = "mushroom"
-TINY = "tiny_fault_blob"
 
 
-@pytest.fixture(scope="module", autouse=True)
-def tiny_class():
-    with shapes.registered(TINY, ellipsoid):
-        yield
-
-
-def _error_line(capsys, command):
-    err = capsys.readouterr().err.strip()
-    assert "\n" not in err and "Traceback" not in err, err
-    assert err.startswith(f"platonic {command}: error: "), err
-    return err
+pytestmark = pytest.mark.usefixtures("tiny_class")
 
 
 # --------------------------------------------------------------------------- make-dataset --overwrite
@@ -50,7 +39,7 @@ def test_overwrite_keeps_files_in_a_folder_that_is_no_collection(tmp_path, capsy
     photo.write_text("x")
     assert _make(tmp_path / "u", "--overwrite") == 2
     assert photo.read_text() == "x"
-    err = _error_line(capsys, "make-dataset")
+    err = one_line(capsys.readouterr().err, "make-dataset", kind="error")
     assert str(tmp_path / "u") in err and "images/my_photo.jpg" in err and "not a collection" in err
 
 
@@ -62,7 +51,7 @@ def test_overwrite_keeps_files_the_collection_did_not_write(tmp_path, capsys):
     (out / "volumes" / "hand_made.npz").write_bytes(b"keep me too")
     capsys.readouterr()
     assert _make(out, "--overwrite", "--seed", "3") == 2
-    err = _error_line(capsys, "make-dataset")
+    err = one_line(capsys.readouterr().err, "make-dataset", kind="error")
     assert str(out) in err and "exr/notes.txt" in err and "volumes/hand_made.npz" in err
     assert (out / "exr" / "notes.txt").read_text() == "keep me"
     assert (out / "volumes" / "hand_made.npz").read_bytes() == b"keep me too"
@@ -173,7 +162,7 @@ def test_run_names_are_one_folder_name(tmp_path, name, capsys):
         _cfg(tmp_path, setting)
     args = sum((["--set", a] for a in _overrides(tmp_path, setting, f"run.out_dir={tmp_path}/o/runs")), [])
     assert main(["train", "--quiet", *args]) == 2
-    assert "run.name" in _error_line(capsys, "train")
+    assert "run.name" in one_line(capsys.readouterr().err, "train", kind="error")
     assert not (tmp_path / "x").exists() and not (tmp_path / "o").exists()
 
 
@@ -196,7 +185,7 @@ def test_a_second_run_in_a_busy_run_folder_is_refused(tmp_path, monkeypatch, cap
     monkeypatch.setattr(Trainer, "step", first_step_runs_b)
     run_dir = R.train(_cfg(tmp_path), progress=False)
     assert second["rc"] == 2
-    err = _error_line(capsys, "train")
+    err = one_line(capsys.readouterr().err, "train", kind="error")
     assert str(run_dir) in err and "in use" in err
     assert R.load_checkpoint(run_dir / "checkpoints" / "last.pt")["step"] == 4
     assert not (run_dir / "run.lock").exists()                           # released at the end
@@ -247,9 +236,9 @@ def test_no_loadable_checkpoint_is_a_one_line_error(tmp_path, capsys):
     capsys.readouterr()
     for command in (["generate", "--run", str(run_dir), "-n", "1"], ["reconstruct", "--run", str(run_dir), str(img)]):
         assert main(command) == 2
-        err = _error_line(capsys, command[0])
+        err = one_line(capsys.readouterr().err, command[0], kind="error")
         assert "last.pt" in err and "step_0000002.pt" in err
     args = sum((["--set", a] for a in _overrides(tmp_path, "run.steps=4")), [])
     assert main(["train", "--resume", "--quiet", *args]) == 2
-    err = _error_line(capsys, "train")
+    err = one_line(capsys.readouterr().err, "train", kind="error")
     assert "last.pt" in err and "step_0000002.pt" in err

@@ -6,21 +6,16 @@ import torch
 
 from mitsuba_platonic.checkpoint import RunError, load_checkpoint, save_checkpoint
 from mitsuba_platonic.config import load_config
-from mitsuba_platonic.data import shapes
 from mitsuba_platonic.errors import UserError
 from mitsuba_platonic.model import Model
 from mitsuba_platonic.train import run as R
 from mitsuba_platonic.train.data import load_training_data
 from mitsuba_platonic.train.trainer import Trainer
-from tiny_shapes import ellipsoid
-
-TINY = "tiny_model_blob"
+from tiny_shapes import TINY
 
 
-@pytest.fixture(scope="module", autouse=True)
-def tiny_class():
-    with shapes.registered(TINY, ellipsoid):
-        yield
+
+pytestmark = pytest.mark.usefixtures("tiny_class")
 
 
 def _cfg(tmp_path, *extra):

@@ -15,20 +15,15 @@ import torch
 from PIL import Image
 
 import mitsuba_platonic
-from mitsuba_platonic.data import shapes
 from mitsuba_platonic.views import front_view
 from mitsuba_platonic.volume import test_volume
 from cli_runner import one_line, run_cli
-from tiny_shapes import ellipsoid
+from tiny_shapes import TINY
 
 CLASS = "mushroom"
-TINY = "tiny_user_error_blob"
 
 
-@pytest.fixture(scope="module", autouse=True)
-def tiny_class():
-    with shapes.registered(TINY, ellipsoid):
-        yield
+pytestmark = pytest.mark.usefixtures("tiny_class")
 
 
 def _train_args(tmp_path):

@@ -1,4 +1,7 @@
-"""A cheap procedural shape class for tests that need a collection or a training run."""
+"""A cheap procedural shape class for tests that need a collection or a training run.
+
+``TINY`` names it; the ``tiny_class`` fixture (tests/conftest.py) registers it for a test module:
+``pytestmark = pytest.mark.usefixtures("tiny_class")``."""
 
 from __future__ import annotations
 
@@ -13,3 +16,7 @@ def ellipsoid(rng, n: int) -> torch.Tensor:
     radii = torch.tensor(rng.uniform(0.3, 0.7, size=3))
     density = torch.sigmoid(-(((p / radii) ** 2).sum(-1).sqrt() - 1.0) * n / 2.0)
     return torch.cat([torch.full((3, n, n, n), 0.6), density[None]]).float()
+
+
+#: The class name :func:`ellipsoid` is registered under while a module uses the ``tiny_class`` fixture.
+TINY = "tiny_ellipsoid"

@@ -12,10 +12,10 @@ docs/evaluation.md describes each metric and method.
 
 from .metrics import (chamfer_distance, dssim, fid, image_rmse, silhouette_iou, vgg_distance, volume_iou,
                       volume_rmse)
-from .protocol import (METHODS, billboard, evaluate_pair, held_out_scores, novel_view_errors, rerender,
+from .protocol import (METHODS, billboard, evaluate_pair, held_out_scores, held_out_truths, novel_view_errors, rerender,
                        truth_in_input_frame)
 from .report import evaluate_runs
 
 __all__ = ["dssim", "image_rmse", "silhouette_iou", "volume_rmse", "volume_iou", "chamfer_distance",
            "vgg_distance", "fid", "METHODS", "rerender", "evaluate_pair", "billboard", "novel_view_errors",
-           "held_out_scores", "truth_in_input_frame", "evaluate_runs"]
+           "held_out_scores", "held_out_truths", "truth_in_input_frame", "evaluate_runs"]

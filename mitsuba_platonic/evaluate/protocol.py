@@ -38,14 +38,14 @@ import torch
 from ..errors import UserError
 from ..render import render
 from ..render.physical import Lighting, auto_exposure, render_physical, sample_lighting
-from ..views import camera_frames, from_angles, sample_views, turntable
+from ..views import camera_frames, from_angles, front_view, sample_views, turntable
 from ..volume import CHANNELS, MODELS
 from . import metrics as M
 
 __all__ = ["METHODS", "ISO_LEVEL", "GREY", "N_VIEWS", "rerender_views", "rerender_lighting", "as_rgba",
            "iso_mesh", "voxel_mesh", "render_mesh", "rerender", "PairResult", "evaluate_pair",
            "truth_in_input_frame", "billboard", "novel_view_errors", "NOVEL_VIEWS", "silhouette_iou",
-           "held_out_scores"]
+           "held_out_truths", "held_out_scores"]
 
 #: The re-render methods, in the order of the paper's table columns.
 METHODS = ("VOL", "ISO", "VOX", "IF")
@@ -335,6 +335,24 @@ def novel_view_errors(recon: torch.Tensor, truth_in_frame: torch.Tensor, model: 
     return float((a - b).abs().mean()), M.silhouette_iou(a, b)
 
 
+def held_out_truths(records: Sequence[Dict], model: str) -> List[torch.Tensor]:
+    """The ground truth of held-out collection records (``TrainingData.held_out_records``: their
+    ``folder``, ``volume`` file and ``view``), each in its input camera's frame
+    (:func:`truth_in_input_frame`); a :class:`~mitsuba_platonic.errors.UserError` naming an
+    unreadable volume file."""
+    from pathlib import Path
+
+    out = []
+    for r in records:
+        path = Path(r["folder"]) / r["volume"]
+        try:
+            vol = torch.from_numpy(np.load(path)["volume"]).float()
+        except (OSError, KeyError, ValueError) as e:
+            raise UserError(f"cannot read the ground-truth volume {path}: {e}") from None
+        out.append(truth_in_input_frame(vol, r["view"], model))
+    return out
+
+
 def held_out_scores(net, data, model: Optional[str] = None, limit: int = 64) -> Dict[str, float]:
     """Input-view and novel-view errors of a :class:`~mitsuba_platonic.model.Model` ``net`` on a
     procedural collection's held-out images (``data``: :class:`~mitsuba_platonic.train.data.TrainingData`
@@ -346,17 +364,13 @@ def held_out_scores(net, data, model: Optional[str] = None, limit: int = 64) -> 
     (:func:`novel_view_errors`); means over at most ``limit`` images. ``model``: the image
     formation to render with (default: the model's).
     """
-    from pathlib import Path
-
     model = model or net.formation
-    records = data.held_out_records[:limit]
     images = data.held_out[:limit]
     recon = net.reconstruct(images).cpu()
-    front = from_angles(0.0, 0.0)[None].expand(len(images), 3).contiguous()
+    front = front_view(len(images))
     with torch.no_grad():
         rendered = render(recon, front, model)
-    truths = [truth_in_input_frame(torch.from_numpy(np.load(Path(r["folder"]) / r["volume"])["volume"]).float(),
-                                   r["view"], model) for r in records]
+    truths = held_out_truths(data.held_out_records[:limit], model)
     novel = np.array([novel_view_errors(v, t, model) for v, t in zip(recon, truths)])
     out = {"input_view_mae": float((rendered - images).abs().mean()), "input_view_iou": silhouette_iou(rendered, images),
            "novel_view_mae": float(novel[:, 0].mean()), "novel_view_iou": float(novel[:, 1].mean())}

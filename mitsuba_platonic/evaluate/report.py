@@ -35,7 +35,7 @@ from ..errors import UserError
 from ..render import render
 from ..views import turntable
 from . import metrics as M
-from .protocol import METHODS, N_VIEWS, billboard, evaluate_pair, truth_in_input_frame
+from .protocol import METHODS, N_VIEWS, billboard, evaluate_pair, held_out_truths
 
 __all__ = ["Row", "score_pairs", "write_table", "write_figure", "write_report", "evaluate_runs",
            "add_arguments", "run", "main_evaluate", "FIGURE_VIEWS", "SCALE"]
@@ -238,18 +238,6 @@ def _held_out(cfg, run_dir: Path, data_cache: Optional[PathLike], progress: bool
     return data
 
 
-def _truths(records: Sequence[Dict[str, Any]], model: str) -> List[torch.Tensor]:
-    out = []
-    for r in records:
-        path = Path(r["folder"]) / r["volume"]
-        try:
-            vol = torch.from_numpy(np.load(path)["volume"]).float()
-        except (OSError, KeyError, ValueError) as e:
-            raise UserError(f"cannot read the ground-truth volume {path}: {e}") from None
-        out.append(truth_in_input_frame(vol, r["view"], model))
-    return out
-
-
 def evaluate_runs(run_dirs: Sequence[PathLike], out_dir: PathLike, n_views: int = N_VIEWS,
                   limit: Optional[int] = None, spp: int = 16, max_depth: int = 8, seed: int = 0,
                   baselines: bool = True, vgg_weights: Optional[PathLike] = None,
@@ -277,7 +265,7 @@ def evaluate_runs(run_dirs: Sequence[PathLike], out_dir: PathLike, n_views: int 
         data = _held_out(cfg, run_dir, data_cache, progress)
         m = len(data.held_out) if limit is None else min(limit, len(data.held_out))
         images, records = data.held_out[:m], data.held_out_records[:m]
-        truths = _truths(records, model)
+        truths = held_out_truths(records, model)
         name = f"{run_dir.name} ({cfg.train.mode}, step {step})"
         recon = reconstruct(images).cpu()
         rows.append(score_pairs(name, model, list(zip(images, recon, truths)), **kw))
