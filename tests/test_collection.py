@@ -57,6 +57,20 @@ def test_collection_has_the_promised_files(tmp_path, formation, renderer):
     if formation == "physical":
         assert all("lighting" in r and r["exposure"] > 0 for r in m["images"])
         assert len({tuple(r["lighting"]["sun_direction"]) for r in m["images"]}) == len(m["images"])
+        # metered: each image's factor is its light's, 1 / (the sky's mean luminance)
+        from mitsuba_platonic.render.physical import Lighting, metered_exposure
+        for r in m["images"]:
+            light = Lighting(**{k: tuple(v) if isinstance(v, list) else v for k, v in r["lighting"].items()})
+            assert r["exposure"] == metered_exposure(light)
+
+
+def test_collections_from_before_metering_read_as_auto_exposed():
+    """A collection.json written before the ``exposure`` setting existed was auto-exposed per image;
+    it reads back as such (so it is not mistaken for a metered one and reused by training)."""
+    old = _spec(formation="physical").to_dict()
+    del old["exposure"]
+    assert CollectionSpec.from_dict(old).exposure == "auto"
+    assert CollectionSpec.from_dict(_spec(formation="physical").to_dict()).exposure == "metered"
 
 
 def test_views_and_seeds_are_deterministic_and_spread():
@@ -131,6 +145,7 @@ def test_envmap_lighting(tmp_path):
     (dict(shape_class="teapot"), "shape_class"), (dict(n_shapes=0), "n_shapes"), (dict(resolution=8), "resolution"),
     (dict(formation="xray"), "formation"), (dict(views="cube"), "views"), (dict(views="band", elevation=(50, 10)), "elevation"),
     (dict(formation="physical", lighting="envmap"), "environment map"), (dict(envmaps=("/nope.exr",)), "does not exist"),
+    (dict(exposure="camera"), "exposure"),
 ])
 def test_bad_specs(tmp_path, bad, match):
     with pytest.raises(ValueError, match=match):

@@ -8,8 +8,10 @@ import torch
 
 from mitsuba_platonic import render
 from mitsuba_platonic import views as V
+from mitsuba_platonic.images import save_exr
 from mitsuba_platonic.render.physical import (V_MAX_PHYSICAL, Lighting, auto_exposure, luminance,
-                                              render_physical, render_physical_ad, sample_lighting)
+                                              metered_exposure, render_physical, render_physical_ad,
+                                              sample_lighting, sky_mean_luminance)
 from mitsuba_platonic.volume import test_volume
 
 
@@ -34,6 +36,55 @@ def test_luminance_and_exposure():
     alpha = np.ones((4, 4))
     assert np.isclose(auto_exposure(rgb, alpha) * 2.0, 0.8)
     assert auto_exposure(rgb, np.zeros((4, 4))) == 1.0
+
+
+def _latlong(path, rows):
+    """A lat-long EXR whose row i (polar angle θ from +y) has linear RGB ``rows[i]``; returns the
+    solid-angle weighted mean luminance computed here, independently of Mitsuba."""
+    h = len(rows)
+    img = np.repeat(np.asarray(rows, np.float32)[:, None, :], 2 * h, axis=1)
+    save_exr(path, img)
+    θ = (np.arange(h) + 0.5) / h * np.pi                       # row centres
+    w = np.sin(θ)                                             # solid angle of a row ∝ sin θ
+    return float((luminance(np.asarray(rows, np.float64)) * w).sum() / w.sum())
+
+
+def test_metered_exposure_is_one_over_the_sky_mean_luminance(tmp_path):
+    """The light meter = (1/4π) ∫ Y(L) dω, checked against the same integral summed over the
+    pixels of environment maps written here: a constant sky (exact) and a sky bright above and
+    dark below (≤ 1 %, the meter's Monte Carlo and the map's row discretisation); a sunsky meters
+    the same value every time and a hazier sky of the same sun another one."""
+    for rows in ([[0.5, 0.25, 1.0]] * 16, [[4.0, 3.0, 2.0]] * 8 + [[0.1, 0.1, 0.05]] * 8):
+        path = tmp_path / f"sky{len(set(map(tuple, rows)))}.exr"
+        truth = _latlong(path, rows)
+        light = Lighting("envmap", envmap=str(path), rotation=30.0)
+        assert sky_mean_luminance(light) == pytest.approx(truth, rel=1e-2)
+        assert metered_exposure(light) == pytest.approx(1.0 / truth, rel=1e-2)
+    sun = Lighting("sunsky", sun_direction=(0.0, 0.6, 0.8), turbidity=3.0)
+    assert sky_mean_luminance.__wrapped__(sun) == sky_mean_luminance.__wrapped__(sun) > 0
+    assert sky_mean_luminance(Lighting("sunsky", sun_direction=(0.0, 0.6, 0.8), turbidity=8.0)) \
+        != sky_mean_luminance(sun)
+
+
+def test_metered_images_keep_albedo_and_do_not_depend_on_the_volume():
+    """Under one light, a dark-albedo volume's metered image is darker than a bright one's by about
+    their albedo ratio, with the same factor k for both; auto-exposure maps both to the same
+    brightness (it meters the image, so k depends on the volume: why training through light
+    logged losses of 10³ once the generator's volume went dim)."""
+    vol = test_volume(16, "figure", "ea")
+    bright, dark = vol.clone(), vol.clone()
+    bright[:, :3], dark[:, :3] = 0.8, 0.08
+    view = V.front_view(1)
+    light = [Lighting("sunsky", sun_direction=(0.0, 0.6, 0.8), turbidity=3.0)]
+    (b, kb), (d, kd) = (render_physical(v, view, light, spp=16, max_depth=4, seed=0) for v in (bright, dark))
+    assert kb == kd == [metered_exposure(light[0])]
+    ratio = float(d[:, :3].sum() / b[:, :3].sum())
+    assert 0.01 < ratio < 0.12, ratio                        # ≈ 0.1 once, less with multiple scattering
+    (ab, _), (ad, _) = (render_physical(v, view, light, spp=16, max_depth=4, seed=0, exposure="auto")
+                        for v in (bright, dark))
+    assert float(ad[:, :3].sum() / ab[:, :3].sum()) > 0.5    # auto-exposure hides the albedo
+    with pytest.raises(ValueError, match="exposure"):
+        render_physical(vol, view, light, spp=1, exposure="camera")
 
 
 def test_path_traced_images():
@@ -65,7 +116,7 @@ def _fd_volume(n=8):
     return vol, core, g
 
 
-def test_path_tracer_gradient_matches_finite_differences(monkeypatch):
+def test_path_tracer_gradient_matches_finite_differences():
     """⟨∇L, d⟩ from ``render_physical_ad`` = the central difference (L(v + h d) − L(v − h d)) / 2h,
     L = Σ w · RGB (random positive w), along a random albedo direction and a random direction of
     the dense core's density.
@@ -78,12 +129,9 @@ def test_path_tracer_gradient_matches_finite_differences(monkeypatch):
     core (≈ 4 % relative together), ≈ 2 % for the albedo; the tolerances are 20 % and 10 %.
     With the majorant at the grid maximum (no headroom) the core's σ_t gradient falls to
     0.3–0.5 × the truth or flips sign: relative error 0.55–1.5.
-    Exposure is off: ``render_physical_ad`` treats the auto-exposure as a constant, the difference
-    quotient would not.
+    The metered exposure is on: it depends on the sky only, so it is the same constant in every
+    render (the per-image auto-exposure of the image would not be).
     """
-    import importlib                                   # `mitsuba_platonic.render` the attribute is the function
-    physical = importlib.import_module("mitsuba_platonic.render.physical")
-    monkeypatch.setattr(physical, "auto_exposure", lambda rgb, alpha: 1.0)
     vol, core, g = _fd_volume()
     view = V.sample_views(1, seed=3)
     w = torch.rand(1, 3, 8, 8, generator=g)

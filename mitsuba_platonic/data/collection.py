@@ -118,6 +118,9 @@ class CollectionSpec:
     elevation: (low, high) for 'band', a number for 'ring', ignored for 'sphere'.
     lighting: 'sunsky' | 'envmap' | 'mixed' (physical only); envmaps: EXR paths for 'envmap'.
     spp, max_depth: path tracer samples per pixel and path length (physical only).
+    exposure: 'metered' (k = 1 / the light's mean luminance) | 'auto' (per image, the camera-like
+        95th percentile; collections made before metering read as this) (physical only; see
+        :mod:`mitsuba_platonic.render.physical`).
     seed: master seed of shapes, views and lighting.
     """
 
@@ -134,6 +137,7 @@ class CollectionSpec:
     envmaps: Tuple[str, ...] = ()
     spp: int = 32
     max_depth: int = 8
+    exposure: str = "metered"
     seed: int = 0
 
     def validate(self) -> "CollectionSpec":
@@ -158,6 +162,8 @@ class CollectionSpec:
             raise UserError(f"views must be one of {V.DISTRIBUTIONS}, got {self.views!r}")
         if self.lighting not in LIGHTINGS:
             raise UserError(f"lighting must be one of {LIGHTINGS}, got {self.lighting!r}")
+        if self.exposure not in ("metered", "auto"):
+            raise UserError(f"exposure must be 'metered' or 'auto', got {self.exposure!r}")
         if self.formation == "physical" and self.lighting in ("envmap", "mixed") and not self.envmaps:
             if self.lighting == "envmap":
                 raise UserError("lighting 'envmap' needs at least one environment map (.exr): pass "
@@ -188,6 +194,7 @@ class CollectionSpec:
         if unknown:
             raise UserError(f"unknown collection setting(s) {sorted(unknown)}")
         d = dict(d)
+        d.setdefault("exposure", "auto")               # collections made before metering
         d["envmaps"] = tuple(d.get("envmaps", ()))
         if isinstance(d.get("elevation"), list):
             d["elevation"] = tuple(d["elevation"])
@@ -249,7 +256,7 @@ def _render_shape(spec: CollectionSpec, vol: torch.Tensor, views: torch.Tensor,
         from ..render.physical import render_physical
         batch = vol[None].expand(len(views), -1, -1, -1, -1)
         return render_physical(batch, views, lights, spp=spec.spp, max_depth=spec.max_depth,
-                               seed=spec.seed, filter=spec.filter)
+                               seed=spec.seed, filter=spec.filter, exposure=spec.exposure)
     v = vol if CHANNELS[spec.formation] == 4 else vol[3:]
     with torch.no_grad():
         images = render(v[None].expand(len(views), -1, -1, -1, -1).contiguous(), views,

@@ -242,7 +242,7 @@ def rerender(volume: torch.Tensor, views: torch.Tensor, lighting: Sequence[Light
                 out[method] = render(v[None].expand(k, -1, -1, -1, -1).contiguous(), views, model, backend).cpu()
         elif method == "VOL":
             out[method] = render_physical(rgba[None].expand(k, -1, -1, -1, -1).contiguous(), views, list(lighting),
-                                          spp=spp, max_depth=max_depth, seed=seed, exposure=False)[0]
+                                          spp=spp, max_depth=max_depth, seed=seed, exposure="none")[0]
         elif method == "ISO":
             out[method] = render_mesh(iso_mesh(rgba, iso_level), views, lighting, n, spp, max_depth, seed)
         else:

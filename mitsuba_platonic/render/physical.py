@@ -21,13 +21,29 @@ hidden from the camera, so the radiance image is premultiplied over black, and t
 medium's opacity along the camera ray, 1 − exp(−∫σ_t) = the AO image of the same (capped)
 density, computed exactly by the ray marcher.
 
-Exposure: a sky is orders of magnitude brighter than [0, 1]. Each image is scaled by an
-auto-exposure factor that maps the 95th percentile luminance of its covered pixels to 0.8
-(like a camera's metering); the factor is returned so the radiance can be recovered.
+Exposure (:data:`EXPOSURES`): a sky is far brighter than [0, 1], so each image is scaled by a
+factor k, returned so the radiance can be recovered:
+
+- ``metered`` (the default; collections and training): the light is metered, not the image,
+
+      k = 1 / L̄,    L̄ = (1/4π) ∫ Y(L(ω)) dω        (the emitter's mean luminance over the sphere)
+
+  estimated by :func:`sky_mean_luminance` with the emitter's own importance sampling (sun
+  included). L̄ is the mean radiance of a white diffuse sphere under that light, so an image is
+  radiance in units of it: the same volume under the same light has the same pixel values
+  whatever it looks like, a dark albedo stays dark and a view of the shadowed side stays darker
+  than one of the lit side. Because k does not depend on the volume, it is a constant for the
+  gradient and the training loss means what it means for the EA layer (docs/training.md,
+  "Training through light").
+- ``auto``: like a camera's auto-exposure, the 95th percentile luminance of the image's covered
+  pixels maps to 0.8 (:func:`auto_exposure`; collections made before metering). It depends on
+  the rendered volume: a near-empty render with a few dim covered pixels gets a huge factor.
+- ``none``: k = 1 (raw radiance).
 """
 
 from __future__ import annotations
 
+import functools
 import math
 from dataclasses import asdict, dataclass
 from pathlib import Path
@@ -43,13 +59,20 @@ from .scenes import load_scene
 from .variant import ensure_variant, variant_device
 
 __all__ = ["Lighting", "sample_lighting", "render_physical", "render_physical_ad", "extinction",
-           "V_MAX_PHYSICAL", "luminance", "auto_exposure"]
+           "V_MAX_PHYSICAL", "luminance", "auto_exposure", "sky_mean_luminance", "metered_exposure",
+           "EXPOSURES"]
 
 #: Density cap of the physically based medium (σ_t Δ ≤ ln 1000).
 V_MAX_PHYSICAL = 1.0 - 1e-3
 
 #: Target of the auto-exposure: the 95th percentile luminance of covered pixels maps here.
 EXPOSURE_TARGET = 0.8
+
+#: How an image's exposure factor is chosen (see the module docstring).
+EXPOSURES = ("metered", "auto", "none")
+
+#: Directions the light meter samples (its relative standard error is ≈ 1e-3 for a sunsky).
+METER_SAMPLES = 1 << 14
 
 
 @dataclass(frozen=True)
@@ -130,6 +153,34 @@ def auto_exposure(rgb: np.ndarray, alpha: np.ndarray) -> float:
     return EXPOSURE_TARGET / level if level > 1e-8 else 1.0
 
 
+@functools.lru_cache(maxsize=4096)
+def sky_mean_luminance(lighting: Lighting) -> float:
+    """L̄ = (1/4π) ∫ Y(L(ω)) dω of ``lighting``'s emitter (sun and sky), a float > 0.
+
+    Monte Carlo with the emitter's importance sampling from the origin: ω_i, L(ω_i)/p(ω_i) =
+    ``emitter.sample_direction`` on :data:`METER_SAMPLES` independent samples of a fixed
+    seed, so the same light always meters the same value. Y is the luminance of linear sRGB.
+    """
+    ensure_variant()
+    import drjit as dr
+    import mitsuba as mi
+    emitter = lighting.emitter()
+    sampler = mi.load_dict({"type": "independent"})
+    sampler.seed(0, METER_SAMPLES)                           # a fixed seed: a deterministic meter
+    origin = dr.zeros(mi.Interaction3f)                      # the volume's centre
+    _, weight = emitter.sample_direction(origin, sampler.next_2d())     # L(ω)/p(ω)
+    rgb = np.stack([np.array(weight[c]) for c in range(3)], axis=-1)
+    level = float(luminance(rgb.astype(np.float64)).mean()) / (4.0 * math.pi)
+    if not math.isfinite(level) or level <= 0.0:
+        raise ValueError(f"the light {lighting} has no positive, finite mean luminance ({level})")
+    return level
+
+
+def metered_exposure(lighting: Lighting) -> float:
+    """The ``metered`` exposure factor k = 1 / L̄ of ``lighting`` (:func:`sky_mean_luminance`)."""
+    return 1.0 / sky_mean_luminance(lighting)
+
+
 def extinction(density: torch.Tensor) -> torch.Tensor:
     """σ_t = −ln(1 − min(v, v_max)) / Δ of a density volume ``(…, N, N, N)`` (differentiable)."""
     return -torch.log1p(-density.clamp(0.0, V_MAX_PHYSICAL)) / voxel_size(density.shape[-1])
@@ -154,12 +205,12 @@ def _scene(mi: Any, v: torch.Tensor, view: torch.Tensor, lighting: Lighting, spp
 
 def render_physical(volume: torch.Tensor, views: torch.Tensor, lighting: Sequence[Lighting],
                     spp: int = 32, max_depth: int = 8, seed: int = 0, filter: str = "trilinear",
-                    exposure: bool = True) -> Tuple[torch.Tensor, List[float]]:
+                    exposure: str = "metered") -> Tuple[torch.Tensor, List[float]]:
     """Path-trace ``(B, 4, N, N, N)`` RGBA volumes from ``(B, 3)`` views under ``lighting`` (one each).
 
     Returns ``(images, exposures)``: images ``(B, 4, N, N)`` = premultiplied linear RGB radiance
-    (times the exposure factor) plus alpha, and the exposure factor of each image (1.0 when
-    ``exposure`` is False). Forward only (no gradients).
+    (times the exposure factor) plus alpha, and the exposure factor of each image: ``exposure``
+    is one of :data:`EXPOSURES` (module docstring). Forward only (no gradients).
     """
     from . import render  # the validating entry point, for the alpha pass
     if volume.dim() != 5 or volume.shape[1] != 4:
@@ -169,6 +220,8 @@ def render_physical(volume: torch.Tensor, views: torch.Tensor, lighting: Sequenc
         raise ValueError(f"one lighting per volume expected: {len(lighting)} for batch {volume.shape[0]}")
     if not isinstance(spp, int) or spp < 1 or not isinstance(max_depth, int) or max_depth < 1:
         raise ValueError(f"spp and max_depth must be positive ints, got {spp!r}, {max_depth!r}")
+    if exposure not in EXPOSURES:
+        raise ValueError(f"exposure: expected one of {list(EXPOSURES)}, got {exposure!r}")
     mi = ensure_variant()
     volume = volume.detach().float().cpu()
     alpha = render(volume[:, 3:].clamp(max=V_MAX_PHYSICAL), views, "ao", "mitsuba", filter=filter)
@@ -177,7 +230,8 @@ def render_physical(volume: torch.Tensor, views: torch.Tensor, lighting: Sequenc
         scene = _scene(mi, volume[b], views[b], lighting[b], spp, max_depth, filter)
         rgb = np.array(mi.render(scene, seed=seed + b))[..., :3]          # (H, W, 3) over black
         a = alpha[b, 0].numpy()
-        k = auto_exposure(rgb, a) if exposure else 1.0
+        k = (metered_exposure(lighting[b]) if exposure == "metered" else
+             auto_exposure(rgb, a) if exposure == "auto" else 1.0)
         images.append(torch.cat([torch.from_numpy(rgb * k).permute(2, 0, 1), alpha[b]]))
         exposures.append(k)
     return torch.stack(images).float(), exposures
@@ -217,8 +271,8 @@ def render_physical_ad(volume: torch.Tensor, views: torch.Tensor, lighting: str 
 
     Each pair gets a random sun (drawn from ``seed``, see :func:`sample_lighting`), Mitsuba's
     ``prbvolpath`` renders the radiance, the ray marcher the alpha (AO of the capped density),
-    and the image is scaled by its auto-exposure (computed on the detached render, a constant
-    for the gradient). Returns ``(B, 4, N, N)`` premultiplied RGB + alpha; gradients flow to
+    and the image is scaled by the sky's metered exposure (:func:`metered_exposure`, as the
+    collections are: it depends on the light only, so it is a true constant of the gradient). Returns ``(B, 4, N, N)`` premultiplied RGB + alpha; gradients flow to
     ``volume`` through σ_t, the albedo and the alpha. Only ``lighting='sunsky'`` is supported.
     """
     from . import render
@@ -245,6 +299,5 @@ def render_physical_ad(volume: torch.Tensor, views: torch.Tensor, lighting: str 
         grids = {"volume.interior_medium.sigma_t.data": to_mitsuba_grid(σ[b].float().to(device)),
                  "volume.interior_medium.albedo.data": to_mitsuba_grid(volume[b, :3].float().to(device))}
         rgb = differentiable_render(scene, params, grids, settings, spp, seed + 2 * b).permute(2, 0, 1)
-        k = auto_exposure(rgb.detach().permute(1, 2, 0).cpu().numpy(), alpha[b, 0].detach().cpu().numpy())
-        images.append(torch.cat([rgb.to(volume.device) * k, alpha[b]]))
+        images.append(torch.cat([rgb.to(volume.device) * metered_exposure(light), alpha[b]]))
     return torch.stack(images)

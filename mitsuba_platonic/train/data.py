@@ -43,7 +43,9 @@ def collection_folder(cfg: Config) -> Path:
     """Where a procedural config's collection is cached (one folder per distinct collection)."""
     d = cfg.data
     elev = "" if d.elevation is None else "-e" + "_".join(str(x) for x in np.atleast_1d(d.elevation))
-    name = (f"{d.shape_class}-{d.formation}-{cfg.model.resolution}-{d.n_shapes}x{d.views_per_shape}"
+    # physical images are exposed by the metered light (caches from before metering stay apart)
+    formation = "physical-metered" if d.formation == "physical" else d.formation
+    name = (f"{d.shape_class}-{formation}-{cfg.model.resolution}-{d.n_shapes}x{d.views_per_shape}"
             f"-{d.view_distribution}{elev}-s{d.seed}")
     return Path(d.cache) / name
 
