@@ -536,7 +536,9 @@ def _add_evaluate(sub: "argparse._SubParsersAction") -> None:
     p = sub.add_parser("evaluate", help="score trained runs as in the paper's Table 2 (docs/evaluation.md)",
                        description="Re-render held-out reconstructions and their ground truth (IF, VOL, ISO, "
                                    "VOX) under random skies, compare in 2D and 3D, and write report.md, "
-                                   "figures and results.json.")
+                                   "figures and results.json. Runs trained on a photo folder get a real-photo "
+                                   "section instead: held-out photos at the input view, novel views, front-card "
+                                   "check.")
     add_arguments(p)
     p.set_defaults(handler=_cmd_evaluate)
 

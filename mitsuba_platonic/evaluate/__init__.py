@@ -6,6 +6,8 @@
   under the same random skies with IF, VOL, ISO and VOX; the billboard baseline.
 - :mod:`.report`: score trained runs on their held-out shapes, write a Table-2-like Markdown
   table and figures (``platonic evaluate``).
+- :mod:`.photos`: runs trained on a photo folder (no ground truth): held-out photos scored at the
+  input view, the reconstruction described at views 10–30° above and beside it, the front-card check.
 
 docs/evaluation.md describes each metric and method.
 """

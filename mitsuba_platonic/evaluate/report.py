@@ -15,6 +15,12 @@ extruded through the depth of the cube). Written to ``out_dir``:
   ground truth from the same views;
 - ``results.json``: every pair's metrics and each row's means.
 
+A run trained on a photo folder (``data.source: folder``) has no ground truth; it gets a "Real
+photos" section instead (:mod:`.photos`): its held-out photos reconstructed and rendered with the
+run's renderer, MAE / silhouette IoU / DSSIM at the input view, coverage and depth at views 10–30°
+above and beside it (no ground truth there: reported, not scored), the front-card check, and a
+figure ``figures/<run>_photos.png`` (photo | input view | novel views).
+
 ``main_evaluate(argv)`` is the ``platonic evaluate`` command (``add_arguments`` + ``run``).
 """
 
@@ -35,6 +41,7 @@ from ..errors import UserError
 from ..render import render
 from ..views import turntable
 from . import metrics as M
+from .photos import PhotoSection, evaluate_photo_run, section_markdown, section_results, write_photo_figure
 from .protocol import METHODS, N_VIEWS, billboard, evaluate_pair, held_out_truths
 
 __all__ = ["Row", "score_pairs", "write_table", "write_figure", "write_report", "evaluate_runs",
@@ -171,8 +178,11 @@ def write_figure(row: Row, path: PathLike, views: torch.Tensor = FIGURE_VIEWS) -
 
 
 def write_report(rows: Sequence[Row], out_dir: PathLike, notes: Sequence[str] = (),
-                 methods: Sequence[str] = METHODS) -> Path:
-    """Write ``report.md``, ``figures/*.png`` and ``results.json`` for ``rows`` into ``out_dir``."""
+                 methods: Sequence[str] = METHODS, photo_sections: Sequence[PhotoSection] = ()) -> Path:
+    """Write ``report.md``, ``figures/*.png`` and ``results.json`` for ``rows`` (runs with ground
+    truth, the Table 2 layout) and ``photo_sections`` (folder runs, :mod:`.photos`) into ``out_dir``."""
+    if not rows and not photo_sections:
+        raise UserError("nothing to report: expected at least one scored row or photo section")
     out = Path(out_dir)
     if out.exists() and not out.is_dir():
         raise UserError(f"--out {str(out)!r} exists and is not a folder")
@@ -181,15 +191,23 @@ def write_report(rows: Sequence[Row], out_dir: PathLike, notes: Sequence[str] = 
     for r in rows:
         if r.examples:
             figures.append((r, write_figure(r, out / "figures" / f"{_slug(r.method)}_{r.formation.lower()}.png")))
-    lines = ["# Evaluation", "",
-             "Held-out reconstructions against the ground truth, laid out like Table 2 of the paper. "
-             "DSSIM = (1 − SSIM)/2 of re-renders from the same random views under the same random skies "
-             "(VOL: volumetric path tracing, ISO: iso-surface at density 0.1, VOX: voxels, IF: the training "
-             "image formation); RMSE, IoU (density ≥ ½) and CD (density-weighted chamfer distance, world "
-             "units²) of the volumes in the input camera's frame. As in the paper, DSSIM and VGG are "
-             "multiplied by 10 and RMSE by 10². Lower is better except IoU. — marks a value that was not "
-             "computed. Definitions: docs/evaluation.md.", "",
-             write_table(rows, methods), ""]
+    lines = ["# Evaluation", ""]
+    if rows:
+        lines += ["Held-out reconstructions against the ground truth, laid out like Table 2 of the paper. "
+                 "DSSIM = (1 − SSIM)/2 of re-renders from the same random views under the same random skies "
+                 "(VOL: volumetric path tracing, ISO: iso-surface at density 0.1, VOX: voxels, IF: the training "
+                 "image formation); RMSE, IoU (density ≥ ½) and CD (density-weighted chamfer distance, world "
+                 "units²) of the volumes in the input camera's frame. As in the paper, DSSIM and VGG are "
+                 "multiplied by 10 and RMSE by 10². Lower is better except IoU. — marks a value that was not "
+                 "computed. Definitions: docs/evaluation.md.", "",
+                 write_table(rows, methods), ""]
+    for section in photo_sections:
+        link = None
+        if section.rows and section.rows[0].examples:
+            section.figure = write_photo_figure(section.rows[0], out / "figures" / f"{_slug(section.run)}_photos.png",
+                                                section.folder)
+            link = f"figures/{section.figure.name}"
+        lines += section_markdown(section, link)
     lines += [f"- {n}" for n in notes]
     if figures:
         lines += ["", "## Figures", "", "Input | reconstruction from 3 novel views | ground truth from the same views.", ""]
@@ -197,6 +215,7 @@ def write_report(rows: Sequence[Row], out_dir: PathLike, notes: Sequence[str] = 
     report = out / "report.md"
     report.write_text("\n".join(lines) + "\n")
     results = [{"method": r.method, "formation": r.formation, "means": r.means(), "pairs": r.pairs} for r in rows]
+    results += [entry for section in photo_sections for entry in section_results(section)]
     (out / "results.json").write_text(json.dumps(results, indent=1))
     return report
 
@@ -223,8 +242,8 @@ def _held_out(cfg, run_dir: Path, data_cache: Optional[PathLike], progress: bool
     from ..train.data import collection_folder, load_training_data
 
     if cfg.data.source != "procedural":
-        raise UserError(f"{run_dir} was trained on data.source {cfg.data.source!r}: evaluation needs the "
-                        f"ground-truth volumes of a procedural collection")
+        raise UserError(f"{run_dir} was trained on data.source {cfg.data.source!r}: the ground-truth evaluation "
+                        f"needs a procedural collection ('folder' runs get the real-photo section)")
     if data_cache is not None:
         cfg.data.cache = str(data_cache)
     folder = collection_folder(cfg)
@@ -242,9 +261,14 @@ def evaluate_runs(run_dirs: Sequence[PathLike], out_dir: PathLike, n_views: int 
                   limit: Optional[int] = None, spp: int = 16, max_depth: int = 8, seed: int = 0,
                   baselines: bool = True, vgg_weights: Optional[PathLike] = None,
                   fid_weights: Optional[PathLike] = None, data_cache: Optional[PathLike] = None,
-                  progress: bool = True) -> Path:
+                  progress: bool = True, data_path: Optional[PathLike] = None) -> Path:
     """Score each trained run (and its baselines) on its held-out shapes; write the report. Returns
-    the path of ``report.md``. ``limit``: at most this many held-out images per run (all by default)."""
+    the path of ``report.md``. ``limit``: at most this many held-out images per run (all by default).
+
+    A folder run (``data.source: folder``) is scored on its held-out photos instead
+    (:func:`~.photos.evaluate_photo_run`, its renderer seeded by ``seed``) and gets a "Real
+    photos" section; ``data_path`` replaces such runs' ``data.path``. ``n_views``, ``spp``,
+    ``max_depth`` and the VGG/FID networks apply to the ground-truth protocol only."""
     if not run_dirs:
         raise UserError("no run to evaluate: pass at least one --run DIR")
     if limit is not None and (isinstance(limit, bool) or not isinstance(limit, int) or limit < 1):
@@ -252,6 +276,7 @@ def evaluate_runs(run_dirs: Sequence[PathLike], out_dir: PathLike, n_views: int 
     vgg = M.load_feature_network(vgg_weights, "VGG16") if vgg_weights is not None else None
     fidnet = M.load_feature_network(fid_weights, "Inception-v3") if fid_weights is not None else None
     rows: List[Row] = []
+    sections: List[PhotoSection] = []
     notes: List[str] = []
     t0 = time.perf_counter()
     kw = dict(n_views=n_views, seed=seed, spp=spp, max_depth=max_depth, vgg_network=vgg, fid_network=fidnet,
@@ -262,6 +287,14 @@ def evaluate_runs(run_dirs: Sequence[PathLike], out_dir: PathLike, n_views: int 
             raise UserError(f"{run_dir} was trained for {cfg.train.task!r}; evaluation reconstructs held-out "
                             f"images and needs an encoder (train.task: reconstruction)")
         model = cfg.render.model
+        if cfg.data.source == "folder":
+            name = f"{run_dir.name} ({cfg.train.mode}, step {step})"
+            sections.append(evaluate_photo_run(name, run_dir.name, cfg, reconstruct, untrained if baselines else None,
+                                               limit=limit, seed=seed, data_path=data_path, progress=progress))
+            notes.append(f"{name}: {len(sections[-1].rows[0].photos)} held-out photos, {cfg.model.resolution}³, "
+                         f"rendered with the run's renderer (seed {seed}); no VOL/ISO/VOX re-renders, 3D scores, VGG "
+                         f"or FID: there is no ground truth")
+            continue
         data = _held_out(cfg, run_dir, data_cache, progress)
         m = len(data.held_out) if limit is None else min(limit, len(data.held_out))
         images, records = data.held_out[:m], data.held_out_records[:m]
@@ -277,9 +310,9 @@ def evaluate_runs(run_dirs: Sequence[PathLike], out_dir: PathLike, n_views: int 
             if model == "ea":
                 boards = [billboard(x) for x in images]
                 rows.append(score_pairs(f"{run_dir.name}: billboard", model, list(zip(images, boards, truths)), **kw))
-    notes.append(f"evaluated in {time.perf_counter() - t0:.0f} s; held-out pair k of every row is re-rendered "
-                 f"with views and skies of seed {seed} + k")
-    return write_report(rows, out_dir, notes)
+    notes.append(f"evaluated in {time.perf_counter() - t0:.0f} s" + (
+        f"; held-out pair k of every row is re-rendered with views and skies of seed {seed} + k" if rows else ""))
+    return write_report(rows, out_dir, notes, photo_sections=sections)
 
 
 # -- the command -----------------------------------------------------------------------------
@@ -300,6 +333,9 @@ def add_arguments(p: argparse.ArgumentParser) -> argparse.ArgumentParser:
                    help="a TorchScript Inception-v3 feature extractor for an FID column")
     p.add_argument("--data-cache", default=None, metavar="DIR",
                    help="where the runs' procedural collections are cached (default: each run's data.cache)")
+    p.add_argument("--data-path", default=None, metavar="DIR",
+                   help="the photo folder of folder runs (data.source: folder) when their data.path, relative to "
+                        "where training ran, does not resolve from here")
     p.add_argument("--quiet", action="store_true", help="no progress lines")
     return p
 
@@ -313,7 +349,8 @@ def run(args: argparse.Namespace) -> int:
         raise UserError(f"--seed must be a non-negative int, got {args.seed}")
     report = evaluate_runs(args.run, args.out, n_views=args.views, limit=args.limit, spp=args.spp, seed=args.seed,
                            baselines=not args.no_baselines, vgg_weights=args.vgg_weights,
-                           fid_weights=args.fid_weights, data_cache=args.data_cache, progress=not args.quiet)
+                           fid_weights=args.fid_weights, data_cache=args.data_cache, progress=not args.quiet,
+                           data_path=args.data_path)
     print(f"report: {report}")
     return 0
 
