@@ -132,6 +132,23 @@ class Generator(nn.Module):
         layers += [*_up(cfg.upsample, c, cfg.volume_channels, bias=True), nn.Sigmoid()]
         self.net = nn.Sequential(*layers)
 
+    def init_density(self) -> None:
+        """Start from a uniform, half-transparent volume: the density output's bias is logit(v₀)
+        with v₀ = 1/R (colour biases 0: colour ½), so a ray through the cube has optical depth
+        ≈ 1 in every image formation: VH 1 − e⁻¹, AO/EA 1 − (1 − 1/R)^R ≈ 0.63.
+
+        With a zero bias (v₀ = ½) every ray starts opaque (VH 1 − e^(−R/2), AO/EA 1 − 2^(−R)), the
+        opacity's gradient w.r.t. a voxel is ≈ e^(−R/2) or 2^(−R), and once Adam's first large
+        steps come the generator can overshoot to an empty volume with its sigmoid saturated,
+        where it stays: the VH baseline (reconstruction loss 0.136 after 200 steps, empty images;
+        0.031 from v₀ = 1/R) and EA on path-traced images (0.049 after 400 steps, empty; 0.0077).
+        Measured in docs/training.md, "Initial density".
+        """
+        out = [m for m in self.net if isinstance(m, (nn.Conv3d, nn.ConvTranspose3d))][-1]
+        v0 = 1.0 / self.cfg.resolution
+        with torch.no_grad():
+            out.bias[-1] = math.log(v0 / (1.0 - v0))
+
     def forward(self, z: torch.Tensor) -> torch.Tensor:
         n = self.cfg.latent + self.cfg.view_codes
         if z.dim() != 2 or z.shape[1] != n:
@@ -203,8 +220,11 @@ class Encoder(nn.Module):
 
 
 def init_weights(m: nn.Module) -> None:
-    """DCGAN initialisation: N(0, 0.02) weights, norm scales N(1, 0.02)."""
-    if isinstance(m, (nn.Conv2d, nn.Conv3d, nn.ConvTranspose3d, nn.Linear)):
+    """DCGAN initialisation: N(0, 0.02) weights, norm scales N(1, 0.02); G's output starts from
+    the density 1/R (:meth:`Generator.init_density`)."""
+    if isinstance(m, Generator):                   # ``apply`` reaches G after its layers
+        m.init_density()
+    elif isinstance(m, (nn.Conv2d, nn.Conv3d, nn.ConvTranspose3d, nn.Linear)):
         nn.init.normal_(m.weight, 0.0, 0.02)
         if m.bias is not None:
             nn.init.zeros_(m.bias)
