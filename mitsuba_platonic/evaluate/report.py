@@ -112,7 +112,8 @@ def _fmt(value: Optional[float], key: str) -> str:
     if value is None:
         return "—"                                          # not computed: never a made-up number
     scale = SCALE[key.split("_")[0]]
-    return f"{value * scale:.3f}" if key.startswith("cd") else f"{value * scale:.2f}"
+    # CD: three significant digits (a good reconstruction's is ~1e-4: fixed decimals would print 0.000)
+    return f"{value * scale:.3g}" if key.startswith("cd") else f"{value * scale:.2f}"
 
 
 def write_table(rows: Sequence[Row], methods: Sequence[str] = METHODS) -> str:
