@@ -1,0 +1,66 @@
+"""Benchmark: the cost of a training step through each renderer on a path-traced collection.
+
+    .venv/bin/python benchmarks/train_through_light.py [--steps 10] [--shapes 60] [--cache data]
+
+One process, one collection (``configs/procedural_physical.yaml``: mushrooms at 32³ path-traced
+under random skies, metered exposure, ``--shapes`` × 4 views), the same seed and batch (8) for
+every row; each row builds a fresh :class:`~mitsuba_platonic.train.trainer.Trainer`, runs one
+warm-up step (kernel compilation, scene loading) and then times ``--steps`` steps:
+
+- EA through the Mitsuba ray marcher (``render.backend: mitsuba``), the project's fast path;
+- EA through the closed-form layer (``render.backend: closed_form``), the reference;
+- the differentiable path tracer (``render.backend: physical``, prbvolpath under a random sun per
+  pair) at spp 1 / max depth 2 (the setting ``docs/training.md``, "Training through light",
+  trained with) and at the config's spp 4 / max depth 4.
+
+Prints a Markdown table of seconds per step and images per second (the batch's input-view and
+random-view renders: 16 images a step). Figures only, nothing asserted.
+"""
+
+from __future__ import annotations
+
+import argparse
+import time
+
+import torch
+
+from mitsuba_platonic.config import load_config
+from mitsuba_platonic.train.data import load_training_data
+from mitsuba_platonic.train.trainer import Trainer
+
+CONFIG = "configs/procedural_physical.yaml"
+
+ROWS = {
+    "EA, Mitsuba ray marcher": ["render.backend=mitsuba"],
+    "EA, closed form": ["render.backend=closed_form"],
+    "path tracer, spp 1, depth 2": ["render.physical_spp=1", "render.max_depth=2"],
+    "path tracer, spp 4, depth 4": [],
+}
+
+
+def seconds_per_step(overrides, shapes: int, cache: str, steps: int) -> float:
+    cfg = load_config(CONFIG, [f"data.n_shapes={shapes}", f"data.cache={cache}", *overrides])
+    trainer = Trainer(cfg, load_training_data(cfg, progress=True), torch.device("cpu"))
+    trainer.step(1)                                                  # warm-up: compilation, scene loading
+    t0 = time.perf_counter()
+    for s in range(2, steps + 2):
+        trainer.step(s)
+    return (time.perf_counter() - t0) / steps
+
+
+def main() -> None:
+    p = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    p.add_argument("--steps", type=int, default=10, help="timed steps per row (default: %(default)s)")
+    p.add_argument("--shapes", type=int, default=60, help="shapes in the collection (default: %(default)s)")
+    p.add_argument("--cache", default="data", help="collection cache folder (default: %(default)s)")
+    args = p.parse_args()
+    print("| training step through | s / step | images / s | × the marcher's time |\n|---|---|---|---|")
+    base = None
+    for name, overrides in ROWS.items():
+        t = seconds_per_step(overrides, args.shapes, args.cache, args.steps)
+        base = base or t
+        print(f"| {name} | {t:.3f} | {16 / t:.1f} | {t / base:.1f} |", flush=True)
+
+
+if __name__ == "__main__":
+    main()
