@@ -21,6 +21,7 @@ from __future__ import annotations
 
 import argparse
 import time
+from pathlib import Path
 
 import torch
 
@@ -28,7 +29,7 @@ from mitsuba_platonic.config import load_config
 from mitsuba_platonic.train.data import load_training_data
 from mitsuba_platonic.train.trainer import Trainer
 
-CONFIG = "configs/procedural_physical.yaml"
+CONFIG = Path(__file__).resolve().parents[1] / "configs" / "procedural_physical.yaml"
 
 ROWS = {
     "EA, Mitsuba ray marcher": ["render.backend=mitsuba"],
