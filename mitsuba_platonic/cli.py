@@ -374,7 +374,8 @@ def _cmd_make_dataset(args: argparse.Namespace) -> int:
             formation=args.formation, renderer=args.renderer, filter=args.filter, views=args.view_dist,
             elevation=args.elevation, lighting=args.lighting,
             envmaps=envmaps if (args.formation == "physical" and args.lighting != "sunsky") else (),
-            spp=args.spp, max_depth=args.max_depth, seed=args.seed)
+            spp=args.spp, max_depth=args.max_depth, camera=args.camera, fov=args.fov,
+            distance=args.distance, seed=args.seed)
         folder = out / c if len(classes) > 1 or args.class_subfolder else out
         manifest = make_collection(folder, spec, overwrite=args.overwrite, progress=not args.quiet)
         print(f"{c}: {spec.n_shapes * spec.views_per_shape} images in {folder} (manifest: {manifest})")
@@ -383,6 +384,7 @@ def _cmd_make_dataset(args: argparse.Namespace) -> int:
 
 def _add_make_dataset(sub: "argparse._SubParsersAction") -> None:
     from .data.collection import FORMATIONS
+    from .render.settings import RenderSettings
     from .views import DEFAULT_ELEVATION, DISTRIBUTIONS
 
     p = sub.add_parser(
@@ -414,6 +416,12 @@ def _add_make_dataset(sub: "argparse._SubParsersAction") -> None:
     p.add_argument("--spp", type=_positive_int, default=32, help="physical: samples per pixel (default: %(default)s)")
     p.add_argument("--max-depth", type=_positive_int, default=8,
                    help="physical: longest path (default: %(default)s)")
+    p.add_argument("--camera", choices=("orthographic", "perspective"), default="orthographic",
+                   help="vh/ao/ea images: the camera (default: %(default)s)")
+    p.add_argument("--fov", type=_positive_float, default=RenderSettings.fov,
+                   help="perspective: full field of view in degrees (default: %(default)s)")
+    p.add_argument("--distance", type=_positive_float, default=None,
+                   help="perspective: camera distance from the centre, > 1 (default: 1 / tan(fov/2))")
     p.add_argument("--seed", type=_non_negative_int, default=0, help="master seed (default: %(default)s)")
     p.add_argument("--out", default="data", help="output folder (default: %(default)s/)")
     p.add_argument("--class-subfolder", action="store_true",

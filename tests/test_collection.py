@@ -1,11 +1,14 @@
 """Rendered collections: promised files, a manifest that matches them, resume, bad settings."""
 
 
+import json
+
 import numpy as np
 import pytest
 import torch
 from PIL import Image
 
+from mitsuba_platonic import render
 from mitsuba_platonic.data import shapes
 from mitsuba_platonic.data import collection as C
 from mitsuba_platonic.data.collection import CollectionSpec, load_manifest, make_collection
@@ -62,6 +65,35 @@ def test_collection_has_the_promised_files(tmp_path, formation, renderer):
         for r in m["images"]:
             light = Lighting(**{k: tuple(v) if isinstance(v, list) else v for k, v in r["lighting"].items()})
             assert r["exposure"] == metered_exposure(light)
+
+
+@pytest.mark.parametrize("formation", ["ao", "ea"])
+def test_perspective_collections_render_through_the_pinhole(tmp_path, formation):
+    """A perspective collection's EXR images are the shape rendered by the closed form with the
+    spec's pinhole from the recorded views (the marcher agrees to 1e-4, tests/test_perspective.py),
+    and differ from the orthographic images of the same views; old collection.json files (no
+    camera keys) read as orthographic, so their collections are reused, not refused."""
+    spec = _spec(formation=formation, camera="perspective", fov=50.0, distance=2.5, n_shapes=1, views_per_shape=2)
+    make_collection(tmp_path, spec, progress=False)
+    m = _check_collection(tmp_path, spec)
+    vol = shapes.generate(spec.shape_class, spec.shape_seed(0), spec.resolution)
+    vol = vol if formation == "ea" else vol[3:]
+    views = torch.tensor([r["view"] for r in m["images"]])
+    pinhole = render(vol[None].expand(2, -1, -1, -1, -1).contiguous(), views, formation, "closed_form",
+                     camera="perspective", fov=50.0, distance=2.5)
+    ortho = render(vol[None].expand(2, -1, -1, -1, -1).contiguous(), views, formation, "closed_form")
+    for j, r in enumerate(m["images"]):
+        exr = torch.from_numpy(load_exr(tmp_path / r["exr"])).permute(2, 0, 1)
+        assert (exr - pinhole[j]).abs().max() < 1e-5
+        assert (exr - ortho[j]).abs().max() > 0.1
+    old = _spec().to_dict()
+    for key in ("camera", "fov", "distance"):
+        del old[key]
+    assert CollectionSpec.from_dict(old) == _spec()
+    make_collection(tmp_path / "o", _spec(n_shapes=1, views_per_shape=1), progress=False)
+    spec_file = tmp_path / "o" / "collection.json"
+    spec_file.write_text(json.dumps(old | {"n_shapes": 1, "views_per_shape": 1}))
+    make_collection(tmp_path / "o", _spec(n_shapes=1, views_per_shape=1), progress=False)   # no "other settings"
 
 
 def test_collections_from_before_metering_read_as_auto_exposed():
@@ -145,7 +177,8 @@ def test_envmap_lighting(tmp_path):
     (dict(shape_class="teapot"), "shape_class"), (dict(n_shapes=0), "n_shapes"), (dict(resolution=8), "resolution"),
     (dict(formation="xray"), "formation"), (dict(views="cube"), "views"), (dict(views="band", elevation=(50, 10)), "elevation"),
     (dict(formation="physical", lighting="envmap"), "environment map"), (dict(envmaps=("/nope.exr",)), "does not exist"),
-    (dict(exposure="camera"), "exposure"),
+    (dict(exposure="camera"), "exposure"), (dict(camera="fisheye"), "camera"),
+    (dict(camera="perspective", fov=180.0), "fov"), (dict(formation="physical", camera="perspective"), "orthographic"),
 ])
 def test_bad_specs(tmp_path, bad, match):
     with pytest.raises(ValueError, match=match):

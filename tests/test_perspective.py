@@ -123,3 +123,21 @@ def test_bad_camera_settings_are_one_line_errors(options, match):
 def test_the_path_tracer_refuses_a_camera_option():
     with pytest.raises(UserError, match="unknown option"):
         render(_vol("ea", 8), V.front_view(1), "ea", "physical", camera="perspective")
+
+
+def test_training_data_is_rendered_with_the_training_camera(tmp_path):
+    """A run that trains through a pinhole learns from a collection rendered through the same
+    pinhole: the config's camera reaches the collection spec, and the cache keeps it apart from
+    the orthographic collection of the same settings."""
+    from mitsuba_platonic.config import load_config
+    from mitsuba_platonic.data.collection import load_manifest
+    from mitsuba_platonic.train.data import collection_folder, load_training_data
+
+    base = [f"data.cache={tmp_path}", "data.n_shapes=2", "data.views_per_shape=1", "model.resolution=16",
+            "render.backend=closed_form"]
+    ortho = load_config("configs/quickstart.yaml", base)
+    pinhole = load_config("configs/quickstart.yaml", base + ["render.camera=perspective", "render.fov=50"])
+    assert collection_folder(ortho) != collection_folder(pinhole)
+    load_training_data(pinhole, progress=False)
+    spec = load_manifest(collection_folder(pinhole))["spec"]
+    assert (spec["camera"], spec["fov"], spec["distance"]) == ("perspective", 50.0, None)

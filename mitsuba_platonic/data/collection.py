@@ -48,7 +48,7 @@ from .. import views as V
 from ..errors import Interrupted, UserError
 from ..fileio import atomic_write
 from ..images import save_exr, save_png, to_hwc, to_png_rgba
-from ..render import render
+from ..render import RenderSettings, render
 from ..volume import CHANNELS, MODELS
 from . import shapes
 
@@ -118,6 +118,9 @@ class CollectionSpec:
     elevation: (low, high) for 'band', a number for 'ring', ignored for 'sphere'.
     lighting: 'sunsky' | 'envmap' | 'mixed' (physical only); envmaps: EXR paths for 'envmap'.
     spp, max_depth: path tracer samples per pixel and path length (physical only).
+    camera, fov, distance: the camera of the vh/ao/ea images, as the renderers take it
+        (:class:`~mitsuba_platonic.render.RenderSettings`: 'orthographic', the default, or a
+        'perspective' pinhole; physical images are orthographic only).
     exposure: 'metered' (k = 1 / the light's mean luminance) | 'auto' (per image, the camera-like
         95th percentile; collections made before metering read as this) (physical only; see
         :mod:`mitsuba_platonic.render.physical`).
@@ -137,6 +140,9 @@ class CollectionSpec:
     envmaps: Tuple[str, ...] = ()
     spp: int = 32
     max_depth: int = 8
+    camera: str = RenderSettings.camera
+    fov: float = RenderSettings.fov
+    distance: Optional[float] = RenderSettings.distance
     exposure: str = "metered"
     seed: int = 0
 
@@ -164,6 +170,9 @@ class CollectionSpec:
             raise UserError(f"lighting must be one of {LIGHTINGS}, got {self.lighting!r}")
         if self.exposure not in ("metered", "auto"):
             raise UserError(f"exposure must be 'metered' or 'auto', got {self.exposure!r}")
+        V.lens(self.camera, self.fov, self.distance)            # camera, fov and distance
+        if self.formation == "physical" and self.camera != "orthographic":
+            raise UserError("camera: physical (path-traced) collections are orthographic only")
         if self.formation == "physical" and self.lighting in ("envmap", "mixed") and not self.envmaps:
             if self.lighting == "envmap":
                 raise UserError("lighting 'envmap' needs at least one environment map (.exr): pass "
@@ -260,7 +269,8 @@ def _render_shape(spec: CollectionSpec, vol: torch.Tensor, views: torch.Tensor,
     v = vol if CHANNELS[spec.formation] == 4 else vol[3:]
     with torch.no_grad():
         images = render(v[None].expand(len(views), -1, -1, -1, -1).contiguous(), views,
-                        spec.formation, spec.renderer, filter=spec.filter)
+                        spec.formation, spec.renderer, filter=spec.filter, camera=spec.camera,
+                        fov=spec.fov, distance=spec.distance)
     return images, [1.0] * len(views)
 
 
@@ -297,7 +307,7 @@ def make_collection(out: Union[str, Path], spec: CollectionSpec, overwrite: bool
     if not overwrite and manifest_file.exists():
         try:
             m = json.loads(manifest_file.read_text())
-            if m["spec"] == spec.to_dict() and all((out / r["image"]).exists() and (out / r["exr"]).exists()
+            if CollectionSpec.from_dict(m["spec"]) == spec and all((out / r["image"]).exists() and (out / r["exr"]).exists()
                                                    for r in m["images"]) and not _missing_files(out, spec):
                 return manifest_file                 # finished: read-only, safe for concurrent readers
         except (ValueError, KeyError):
@@ -387,7 +397,8 @@ def _make_collection(out: Path, spec: CollectionSpec, overwrite: bool, progress:
 
     spec_file = out / "collection.json"
     if spec_file.exists() and not overwrite:
-        old = json.loads(spec_file.read_text())
+        # read through from_dict: a setting added later takes the value those collections were made with
+        old = CollectionSpec.from_dict(json.loads(spec_file.read_text())).to_dict()
         if old != spec.to_dict():
             diff = [f"{k}: {old.get(k)!r} → {v!r}" for k, v in spec.to_dict().items() if old.get(k) != v]
             raise UserError(f"{out} holds a collection made with other settings ({'; '.join(diff)}); "

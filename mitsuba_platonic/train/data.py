@@ -45,6 +45,9 @@ def collection_folder(cfg: Config) -> Path:
     elev = "" if d.elevation is None else "-e" + "_".join(str(x) for x in np.atleast_1d(d.elevation))
     # physical images are exposed by the metered light (caches from before metering stay apart)
     formation = "physical-metered" if d.formation == "physical" else d.formation
+    r = cfg.render
+    if r.camera != "orthographic":                                # the images' camera is the renderer's
+        formation += f"-pinhole{r.fov:g}" + ("" if r.distance is None else f"-d{r.distance:g}")
     name = (f"{d.shape_class}-{formation}-{cfg.model.resolution}-{d.n_shapes}x{d.views_per_shape}"
             f"-{d.view_distribution}{elev}-s{d.seed}")
     return Path(d.cache) / name
@@ -62,6 +65,7 @@ def _procedural(cfg: Config, progress: bool) -> TrainingData:
                           views=d.view_distribution,
                           elevation=tuple(d.elevation) if isinstance(d.elevation, list) else d.elevation,
                           lighting=cfg.render.lighting if d.formation == "physical" else "sunsky",
+                          camera=cfg.render.camera, fov=cfg.render.fov, distance=cfg.render.distance,
                           seed=d.seed)
     folder = collection_folder(cfg)
     make_collection(folder, spec, progress=progress)
