@@ -26,6 +26,7 @@ from __future__ import annotations
 import argparse
 import os
 import sys
+import warnings
 from pathlib import Path
 from typing import Callable, List, Optional, Sequence
 
@@ -576,15 +577,22 @@ def main(argv: Optional[Sequence[str]] = None) -> int:
     ``BackendError``, and ``OSError``: a missing file, no permission, a full disk) print a
     one-line message on stderr and return 2; Ctrl-C prints one line (what was saved, for an
     :class:`~mitsuba_platonic.errors.Interrupted`) and returns 130; ``--help`` returns 0. Any
-    other exception is a bug: it propagates with its traceback.
+    other exception is a bug: it propagates with its traceback. A warning (a skipped photo, a
+    checkpoint fallen back from) is one line, ``platonic <command>: warning: …``, not Python's
+    file-and-source-line format.
     """
     parser = build_parser()
     try:
         args = parser.parse_args(argv)
     except SystemExit as e:  # argparse has printed usage / help already
         return int(e.code) if isinstance(e.code, int) else 2
+    def one_line_warning(message, category, filename, lineno, file=None, line=None) -> None:
+        print(f"{PROG} {args.command}: warning: {message}", file=sys.stderr if file is None else file)
+
     try:
-        return int(args.handler(args))
+        with warnings.catch_warnings():                      # restores Python's own display afterwards
+            warnings.showwarning = one_line_warning
+            return int(args.handler(args))
     except (UserError, BackendError, OSError) as e:
         print(f"{PROG} {args.command}: error: {e}", file=sys.stderr)
         return 2

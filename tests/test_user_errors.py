@@ -302,3 +302,22 @@ def test_a_bug_inside_a_training_step_keeps_its_traceback(monkeypatch, tmp_path)
     assert any("training failed in step 1" in note and "nothing was saved" in note
                for note in getattr(info.value, "__notes__", [])), getattr(info.value, "__notes__", None)
     assert not (tmp_path / "runs" / "r" / "checkpoints").exists()
+
+
+def test_warnings_on_the_command_line_are_one_line_each(tmp_path):
+    """A skipped photo warns with one line per file (``platonic train: warning: skipped …``), not
+    Python's warning format with its file name and source line; the error that follows when no
+    photo is usable is still the one-line summary first."""
+    photos = tmp_path / "photos"
+    photos.mkdir()
+    (photos / "a.png").write_text("not an image")
+    (photos / "b.jpg").write_bytes(b"")
+    code, _, err = run_cli(["train", "--config", "configs/photos_tree_ea.yaml", "--set", f"data.path={photos}",
+                            "--set", f"run.out_dir={tmp_path / 'runs'}", "--set", "run.steps=1"])
+    assert code == 2
+    lines = err.strip().splitlines()
+    warned = [x for x in lines if x.startswith("platonic train: warning: skipped ")]
+    assert len(warned) == 2 and any("a.png" in x for x in warned) and any("b.jpg" in x for x in warned)
+    assert not any("collection.py" in x or x.lstrip().startswith("full = ") for x in lines), err
+    errors = [x for x in lines if x.startswith("platonic train: error: ")]
+    assert len(errors) == 1 and "no usable images" in errors[0]
