@@ -76,6 +76,7 @@ from ..render import RenderSettings, render_with
 from ..views import from_angles, front_view
 from ..volume import CHANNELS
 from . import metrics as M
+from .figures import save_image_grid
 from .protocol import billboard
 
 __all__ = ["ABOVE", "BESIDE", "CARD_FRACTION", "TARGET_SHARE", "novel_views", "held_out_photos", "card_check",
@@ -309,36 +310,21 @@ def write_photo_figure(row: PhotoRow, path: PathLike, folder: Optional[PathLike]
     at the 6 novel views (above 10°, 20°, 30°; beside 10°, 20°, 30°), rendered with the run's
     renderer, display images over white; each line labelled with the photo's path relative to
     ``folder``, its half-opacity depth and the card verdict."""
-    import matplotlib
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
     if not row.examples:
         raise UserError(f"row {row.method!r} has no examples to draw")
     names, _ = novel_views()
     titles = ["photo", "input view"] + [n.replace("_", " ") + "°" for n in names]
-    cols = len(titles)
-    fig, axes = plt.subplots(len(row.examples), cols, figsize=(1.2 * cols, 1.35 * len(row.examples) + 0.4),
-                             squeeze=False)
-    for i, (file, photo, renders) in enumerate(row.examples):
+    lines, labels = [], []
+    for file, photo, renders in row.examples:
         rec = next((p for p in row.photos if p["file"] == file), None)
-        for j, (ax, img) in enumerate(zip(axes[i], [photo] + list(renders))):
-            d = M.display_image(img)
-            ax.imshow(d[..., 0] if d.shape[-1] == 1 else d, cmap="gray", vmin=0.0, vmax=1.0, interpolation="nearest")
-            ax.set_xticks([])
-            ax.set_yticks([])
-            if i == 0:
-                ax.set_title(titles[j], fontsize=7)
-        if rec is not None:
+        lines.append([photo] + list(renders))
+        if rec is None:
+            labels.append("")
+        else:
             verdict = "empty" if rec["empty"] else ("CARD" if rec["card"] else "not a card")
-            axes[i][0].set_ylabel(f"{_short(file, folder)}\ndepth {_num(rec['half_opacity_depth'], 1)}\n{verdict}", fontsize=6)
-    fig.suptitle(f"{row.method} ({row.formation}): held-out photos", fontsize=8)
-    fig.tight_layout()
-    path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fig.savefig(path, dpi=100)
-    plt.close(fig)
-    return path
+            labels.append(f"{_short(file, folder)}\ndepth {_num(rec['half_opacity_depth'], 1)}\n{verdict}")
+    return save_image_grid(lines, titles, path, f"{row.method} ({row.formation}): held-out photos",
+                           cell=(1.2, 1.35), extra_height=0.4, labels=labels)
 
 
 @dataclass

@@ -41,6 +41,7 @@ from ..errors import UserError
 from ..render import render
 from ..views import turntable
 from . import metrics as M
+from .figures import save_image_grid
 from .photos import PhotoSection, evaluate_photo_run, section_markdown, section_results, write_photo_figure
 from .protocol import METHODS, N_VIEWS, billboard, evaluate_pair, held_out_truths
 
@@ -145,37 +146,18 @@ def _slug(text: str) -> str:
 def write_figure(row: Row, path: PathLike, views: torch.Tensor = FIGURE_VIEWS) -> Path:
     """A PNG: one line per example of ``row``: input | reconstruction from ``views`` | ground truth
     from the same views (the training image formation, closed form, over white)."""
-    import matplotlib
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
     if not row.examples:
         raise UserError(f"row {row.method!r} has no examples to draw")
     model = row.formation.lower()
     k = len(views)
-    cols = 1 + 2 * k
-    fig, axes = plt.subplots(len(row.examples), cols, figsize=(1.3 * cols, 1.4 * len(row.examples)), squeeze=False)
-    for i, (image, recon, truth) in enumerate(row.examples):
+    lines = []
+    for image, recon, truth in row.examples:
         with torch.no_grad():
             a = render(recon[None].expand(k, -1, -1, -1, -1).contiguous(), views, model)
             b = render(truth[None].expand(k, -1, -1, -1, -1).contiguous(), views, model)
-        panels = [image] + list(a) + list(b)
-        titles = ["input"] + [f"recon {j + 1}" for j in range(k)] + [f"truth {j + 1}" for j in range(k)]
-        for ax, img, title in zip(axes[i], panels, titles):
-            d = M.display_image(img)
-            ax.imshow(d[..., 0] if d.shape[-1] == 1 else d, cmap="gray", vmin=0.0, vmax=1.0,
-                      interpolation="nearest")
-            ax.set_xticks([])
-            ax.set_yticks([])
-            if i == 0:
-                ax.set_title(title, fontsize=7)
-    fig.suptitle(f"{row.method} ({row.formation})", fontsize=8)
-    fig.tight_layout()
-    path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fig.savefig(path, dpi=100)
-    plt.close(fig)
-    return path
+        lines.append([image] + list(a) + list(b))
+    titles = ["input"] + [f"recon {j + 1}" for j in range(k)] + [f"truth {j + 1}" for j in range(k)]
+    return save_image_grid(lines, titles, path, f"{row.method} ({row.formation})", cell=(1.3, 1.4))
 
 
 def write_report(rows: Sequence[Row], out_dir: PathLike, notes: Sequence[str] = (),
