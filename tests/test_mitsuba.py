@@ -5,6 +5,7 @@ import pytest
 import torch
 
 from mitsuba_platonic import render
+from mitsuba_platonic.render.settings import RenderSettings
 from mitsuba_platonic import views as V
 from mitsuba_platonic.volume import test_volume
 
@@ -347,6 +348,36 @@ def test_tiled_lane_order_puts_a_packets_rays_far_apart(n, spp):
     dj = np.abs(packets(j)[:, :, None] - packets(j)[:, None, :])
     apart = np.maximum(di, dj) + np.eye(16, dtype=np.int64)[None] * n   # a lane and itself: excluded
     assert apart.min() >= n // 4
+
+
+@pytest.mark.parametrize("model", ["vh", "ao"])
+def test_pair_layout_backward_reaches_every_face_of_the_cube(model):
+    """The pair layout (VH/AO's tiled backward) keeps slots for w₀ = −1 and w₀ = N − 1, where one
+    voxel of a pair lies outside the cube: a volume dense up to its faces, seen from oblique views,
+    gets the Expand scatters' gradient there too (a dropped or misplaced face would differ by a
+    whole voxel's contribution)."""
+    M = _marcher()
+    if not (M.tiled_backward(32, 1) and M.pair_layout(True, 1, RenderSettings(model=model))):
+        pytest.skip("the pair layout needs the tiled backward (LLVM backend)")
+    b = 3
+    vol = torch.rand(b, 1, 32, 32, 32, generator=torch.Generator().manual_seed(2)) * 0.2
+    views = torch.tensor([[0.6, 0.5, 0.62], [-0.3, -0.9, 0.3], [0.0, 0.0, 1.0]])
+    views = views / views.norm(dim=1, keepdim=True)
+    weights = torch.rand(b, 1, 32, 32)
+
+    def gradient(tiled):
+        M.TILED = tiled
+        try:
+            x = vol.clone().requires_grad_()
+            (render(x, views, model, "mitsuba") * weights).sum().backward()
+        finally:
+            M.TILED = True
+        return x.grad
+
+    expand = gradient(False)
+    for face in [(..., 0), (..., -1), (..., 0, slice(None)), (..., -1, slice(None))]:
+        assert (expand[face] != 0).float().mean() > 0.5        # the faces (w = 0, N − 1, …) are seen
+    assert (gradient(True) - expand).abs().max() <= 1e-5 * expand.abs().max()
 
 
 @pytest.mark.parametrize("model", MODELS)

@@ -78,6 +78,14 @@ rays of one pair make a power-of-two number of lanes (N²·spp), the backward pa
   would load and store the same lines one after the other (the 64³ EA backward kernel, batch 8,
   measured about 25 % faster tiled than in row order).
 
+A one-float ``NoConflicts`` scatter-add costs a horizontal reduction of the packet per lane (to
+catch lanes that share a voxel), while a packet of several floats is added with one plain
+load-add-store per lane. VH and AO (one channel, trilinear) therefore scatter into the *pair
+layout* (:meth:`_Batch.splat`): a trilinear lookup's 8 corners become 4 scatters of the two
+voxels w₀, w₀ + 1 that a row shares, into slots that :func:`_from_pairs` adds back into voxels —
+the same sums (64³ VH/AO backward kernel, batch 8: 28 ms → 11 ms). EA's RGBA packets already add
+per lane.
+
 Otherwise (other N or spp, or the CUDA backend) it uses ``Expand`` on the LLVM backend (each
 thread adds into its own copy of the gradient, summed at the end: exact, but the copies cost two
 fills and a reduction of B·N³·C floats per call) and ``Auto`` (atomics) on CUDA.
@@ -189,6 +197,8 @@ class _Batch:
         self.n_lanes = _tiled_pairs(b) * n * n * opt.spp if tiled else b * n * n * opt.spp
         # tiled: no two threads add into the same volume (module docstring)
         self.mode = dr.ReduceMode.NoConflicts if tiled else _MODE
+        #: the backward's gradient in the pair layout (:meth:`splat`): single-channel trilinear, tiled
+        self.pairs = pair_layout(tiled, c, opt)
         self.model, self.seed = opt.model, seed
         self.Δ = 2.0 / n
         self.t, self.D = opt.lens                                 # the camera: tan(F/2), distance
@@ -225,6 +235,7 @@ class _Batch:
         self.u = u
         # perspective: the path through a slab of unit depth, ℓ = √(1 + t²(x² + y²))
         self.ℓ = dr.sqrt(1.0 + self.t * self.t * (self.x * self.x + self.y * self.y)) if self.t else None
+        self.pair = b                                             # which (volume, view) pair
         self.base = b * (N * N * N)                               # first voxel of this lane's volume
         f = [dr.gather(mi.Float, self.frames, b * 9 + k, self.real) for k in range(9)]
         self.right, self.up, self.ω = mi.Vector3f(*f[0:3]), mi.Vector3f(*f[3:6]), mi.Vector3f(*f[6:9])
@@ -243,13 +254,15 @@ class _Batch:
 
     # -- Lookups ---------------------------------------------------------------------------
 
+    def _q(self, p: Any) -> Any:
+        """The continuous voxel index q = (p + 1) N/2 − ½ of p (w along +x, h along −y, d along −z)."""
+        half = self.N / 2.0
+        return mi.Vector3f((p.x + 1.0) * half - 0.5, (1.0 - p.y) * half - 0.5, (1.0 - p.z) * half - 0.5)
+
     def corners(self, p: Any):
         """[(voxel index, weight, inside)] of the lookup at p: 1 voxel (nearest) or 8 (trilinear)."""
         N = self.N
-        half = N / 2.0
-        q = mi.Vector3f((p.x + 1.0) * half - 0.5,                 # w: along +x
-                        (1.0 - p.y) * half - 0.5,                 # h: along −y
-                        (1.0 - p.z) * half - 0.5)                 # d: along −z
+        q = self._q(p)
         if self.opt.filter == "nearest":
             i = mi.Vector3i(dr.floor(q + 0.5))
             inside = dr.all((i >= 0) & (i < N))
@@ -268,6 +281,37 @@ class _Batch:
                 for ox, wx, mx in x:
                     out.append((oyz + mi.UInt32(ox), wx * wyz, mx & myz))
         return out
+
+    def splat(self, grad: Any, p: Any, corners: list, g: Any) -> None:
+        """Scatter-add ∂L/∂(lookup at p) = g into ``grad`` with the lookup's weights.
+
+        In the pair layout (:attr:`pairs`) a trilinear lookup's 8 corners are 4 scatters of
+        2-float packets: slot (d, h, w₀ + 1) of a row of N + 1 slots holds [∂ of voxel w₀,
+        ∂ of voxel w₀ + 1] (w₀ = ⌊q_w⌋ ∈ [−1, N − 1]; a voxel outside the row gets weight 0), and
+        :func:`_from_pairs` sums the two halves. Dr.Jit's LLVM backend adds a packet with one
+        load-add-store per lane, where a one-float ``NoConflicts`` scatter-add reduces the whole
+        packet once per lane to catch lanes that share a voxel: the same sums, 2.7× faster at 64³.
+        """
+        if not self.pairs:
+            for idx, w, inside in corners:
+                dr.scatter_reduce(dr.ReduceOp.Add, grad, w * g, idx, inside, mode=self.mode)
+            return
+        N = self.N
+        q = self._q(p)
+        i0 = mi.Vector3i(dr.floor(q))
+        t = q - mi.Vector3f(i0)
+        in_row = (i0.x >= -1) & (i0.x < N)
+        g0 = dr.select(i0.x >= 0, 1.0 - t.x, 0.0) * g             # voxel w₀ (none at w₀ = −1)
+        g1 = dr.select(i0.x < N - 1, t.x, 0.0) * g                # voxel w₀ + 1 (none at w₀ = N − 1)
+        row0 = self.pair * (N * N * (N + 1)) + mi.UInt32(i0.x + 1)   # slot (b, d = 0, h = 0, w₀ + 1) …
+        for dz, wz in ((0, 1.0 - t.z), (1, t.z)):
+            for dy, wy in ((0, 1.0 - t.y), (1, t.y)):
+                d, h = i0.z + dz, i0.y + dy
+                inside = in_row & (d >= 0) & (d < N) & (h >= 0) & (h < N)
+                slot = row0 + mi.UInt32((d * N + h) * (N + 1))    # … + (d N + h) rows of N + 1 slots
+                w = wy * wz
+                dr.scatter_reduce(dr.ReduceOp.Add, grad, mi.Vector2f(w * g0, w * g1), slot, inside,
+                                  mode=self.mode)
 
     def _index(self, i: Any) -> Any:
         """Voxel number of voxel (w, h, d) = i of this lane's volume (its channels follow each other)."""
@@ -352,8 +396,7 @@ class _Batch:
             gv = gτ * dτ
             gc = δC * T_k * (1.0 - τ) if ea else None             # ∂C/∂c = T (1 − τ)
             g = mi.Vector4f(gc.x, gc.y, gc.z, gv) if ea else gv   # EA: one packet per voxel
-            for idx, w, inside in corners:
-                dr.scatter_reduce(dr.ReduceOp.Add, grad, w * g, idx, inside, mode=self.mode)
+            self.splat(grad, p, corners, g)
             if ea:
                 R = (1.0 - τ) * c + τ * R
             U *= τ
@@ -369,10 +412,23 @@ class _Batch:
         active = k < marched
         while active:
             p, s = self.segment(k)
-            for idx, w, inside in self.corners(p):
-                dr.scatter_reduce(dr.ReduceOp.Add, grad, w * s * g, idx, inside, mode=self.mode)
+            self.splat(grad, p, [] if self.pairs else self.corners(p), s * g)
             k += 1
             active &= k < marched
+
+
+def pair_layout(tiled: bool, c: int, opt: RenderSettings) -> bool:
+    """Whether a backward pass scatters into the pair layout (:meth:`_Batch.splat`): a tiled
+    (atomic-free) pass of a single-channel (VH, AO) trilinear render. EA's RGBA packets already
+    add with one load-add-store per lane."""
+    return tiled and c == 1 and opt.filter == "trilinear"
+
+
+def _from_pairs(grad: torch.Tensor, b: int, n: int) -> torch.Tensor:
+    """The pair layout ``(B, N, N, N + 1, 2)`` (:meth:`_Batch.splat`) → the gradient ``(B, 1, N, N, N)``:
+    ∂ of voxel w = slot w + 1's first half + slot w's second half."""
+    p = grad.view(b, n, n, n + 1, 2)
+    return torch.add(p[..., 1:, 0], p[..., :-1, 1]).unsqueeze(1)
 
 
 def tiled_ray(lane: Any, n: int, spp: int) -> Any:
@@ -475,7 +531,8 @@ def _forward_pass(data: Any, frames: Any, seed: Any, static: _Static) -> Tuple[l
     (b, c, n), opt, record = static.shape, static.opt, static.record
     batch = _Batch(data, frames, b, c, n, opt, seed)
     vh = opt.model == "vh"
-    Ts = dr.zeros(mi.Float, batch.n_rays * batch.n_steps) if record and not vh else None
+    # every T_k the backward reads (k < segments marched) is written first: no clearing
+    Ts = dr.empty(mi.Float, batch.n_rays * batch.n_steps) if record and not vh else None
     T, C, marched = batch.forward(Ts, whole=record)
     values = [C.x, C.y, C.z, 1.0 - T] if opt.model == "ea" else [1.0 - T]
     if record and vh:
@@ -494,7 +551,7 @@ def _backward_pass(data: Any, frames: Any, seed: Any, Ts: Any, marched: Any, δ:
         if opt.model == "vh":
             Ts = dr.gather(mi.Float, Ts, batch.ray, batch.real)
     δC, δρ = (mi.Color3f(*δ[:3]), δ[3]) if opt.model == "ea" else (mi.Color3f(0.0), δ[0])
-    grad = dr.zeros(mi.Float, b * c * n ** 3)
+    grad = dr.zeros(mi.Float, b * n * n * (n + 1) * 2 if batch.pairs else b * c * n ** 3)
     if opt.model == "vh":
         batch.backward_vh(Ts, marched, grad, δρ)
     else:
@@ -579,7 +636,10 @@ class _March(torch.autograd.Function):
             _spread_over_threads(lanes, 1)
         run = _frozen_backward if FREEZE else _backward_pass
         grad = run(data, frames, seed_arr, Ts, marched, δ, _Static(static.shape, static.opt, False, tiled))
-        out = grad.torch().view(b, n, n, n, c).permute(0, 4, 1, 2, 3)   # (B, C, N, N, N), a view
+        if pair_layout(tiled, c, static.opt):
+            out = _from_pairs(grad.torch(), b, n)
+        else:
+            out = grad.torch().view(b, n, n, n, c).permute(0, 4, 1, 2, 3)   # (B, C, N, N, N), a view
         del δ
         dr.sync_thread()                                          # nothing in flight reads ``keep``
         return out, None, None, None
