@@ -563,11 +563,18 @@ def _bench_model(s: BenchSettings, n: int, model: str, views: torch.Tensor, repe
     return rows
 
 
+def _drjit_thread_count() -> int:
+    """Dr.Jit's worker threads now."""
+    import drjit as dr
+    return dr.thread_count()
+
+
 def _bench_train(r: int, width: int, batch: int, steps: int, warmup: int,
                  log: Callable[[str], None]) -> List[Dict[str, Any]]:
     """Training images/s per renderer (reconstruction, EA, one random view per volume)."""
     from .config import load_config
     from .train.data import TrainingData
+    from .train.run import training_threads
     from .train.trainer import Trainer
 
     g = torch.Generator().manual_seed(0)
@@ -584,12 +591,14 @@ def _bench_train(r: int, width: int, batch: int, steps: int, warmup: int,
             cfg = load_config(None, [f"model.resolution={r}", f"model.width={width}", f"train.batch_size={batch}",
                                      f"render.backend={backend}", "render.model=ea", "data.formation=ea", *extra])
             trainer = Trainer(cfg, data, torch.device("cpu"))
-            for step in range(warmup):
-                trainer.step(step)
-            t0 = time.perf_counter()
-            for step in range(warmup, warmup + steps):
-                trainer.step(step)
-            per_step = (time.perf_counter() - t0) / steps
+            with training_threads(cfg):                       # as a training run sets them (run.drjit_threads)
+                row["drjit_threads"] = _drjit_thread_count() if backend != "closed_form" else None
+                for step in range(warmup):
+                    trainer.step(step)
+                t0 = time.perf_counter()
+                for step in range(warmup, warmup + steps):
+                    trainer.step(step)
+                per_step = (time.perf_counter() - t0) / steps
         except (ValueError, RuntimeError, TypeError, KeyError) as e:
             row["skipped"] = f"{type(e).__name__}: {e}"
             log(f"train {label}: skipped ({row['skipped']})")
@@ -664,12 +673,13 @@ def markdown_tables(result: Dict[str, Any], plot_dir: Optional[str] = None) -> s
         t = result["train"][0]
         lines += [f"### Training speed (reconstruction, EA, {t['resolution']}³, width {t['width']}, batch "
                   f"{t['batch']}, {t['steps']} steps after {t['warmup_steps']} warm-up)", "",
-                  "| renderer | s/step | images/s | vs closed form |", "|---|---:|---:|---:|"]
+                  "| renderer | Dr.Jit threads | s/step | images/s | vs closed form |", "|---|---:|---:|---:|---:|"]
         for t in result["train"]:
+            threads = "—" if t.get("drjit_threads") is None else t["drjit_threads"]
             if t.get("skipped"):
-                lines.append(f"| {t['config']} | skipped: {t['skipped']} |||")
+                lines.append(f"| {t['config']} | {threads} | skipped: {t['skipped']} |||")
             else:
-                lines.append(f"| {t['config']} | {t['s_per_step']:.3f} | {t['images_per_s']:.1f} | "
+                lines.append(f"| {t['config']} | {threads} | {t['s_per_step']:.3f} | {t['images_per_s']:.1f} | "
                              f"{t['vs_closed_form']:.2f}× |")
         lines.append("")
     return "\n".join(lines)

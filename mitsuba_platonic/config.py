@@ -19,7 +19,7 @@ import re
 import typing
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any, Dict, List, Optional, Sequence, Union
+from typing import Any, Dict, List, Literal, Optional, Sequence, Union
 
 import pydantic
 import yaml
@@ -47,7 +47,9 @@ class ConfigError(UserError):
 class RunConfig:
     """name: run folder name under ``out_dir`` (one folder name: no '/', no '..'); seed: master seed;
     device: 'auto' | 'cpu' | 'cuda'; steps: training steps; log_every / sample_every / checkpoint_every: in steps;
-    threads: torch and Dr.Jit CPU threads (0 = all cores); keep_checkpoints: how many to keep."""
+    threads: torch and Dr.Jit CPU threads (0 = all cores); drjit_threads: Dr.Jit's worker threads
+    while training, 'auto' or a count (1: its launches run on the training thread alone; 'auto' picks
+    1 for the marcher at N ≤ 32 on a CPU, docs/training.md "Threads"); keep_checkpoints: how many to keep."""
 
     name: str = "run"
     out_dir: str = "runs"
@@ -58,6 +60,7 @@ class RunConfig:
     sample_every: int = 250
     checkpoint_every: int = 250
     threads: int = 0
+    drjit_threads: Union[Literal["auto"], int] = "auto"
     keep_checkpoints: int = 3
 
 
@@ -172,6 +175,8 @@ class Config:
         for key in ("steps", "log_every", "sample_every", "checkpoint_every", "keep_checkpoints"):
             _positive(f"run.{key}", getattr(self.run, key))
         _non_negative("run.threads", self.run.threads)
+        if self.run.drjit_threads != "auto":
+            _positive("run.drjit_threads", self.run.drjit_threads)
         _non_negative("run.seed", self.run.seed)
         _choice("data.source", self.data.source, SOURCES)
         if self.data.source == "folder" and not self.data.path:

@@ -85,3 +85,12 @@ def test_mappings_sections_and_code_built_configs():
     assert config_from_dict(saved) == Config()
     with pytest.raises(ConfigError, match=r"^train\.lr_d: expected a finite number, got inf$"):
         Config(train=TrainConfig(lr_d=float("inf"))).validate()                   # built in code, not loaded
+
+
+@pytest.mark.parametrize("value, ok", [("auto", True), (1, True), (3, True), (0, False), ("many", False)])
+def test_drjit_threads_is_auto_or_a_count(value, ok):
+    if ok:
+        assert config_from_dict({"run": {"drjit_threads": value}}).run.drjit_threads == value
+    else:
+        with pytest.raises(ConfigError, match="run.drjit_threads"):
+            config_from_dict({"run": {"drjit_threads": value}})

@@ -319,3 +319,32 @@ def test_photo_collection_config_trains(tmp_path):
     before = _params(trainer.nets["G"])
     trainer.step(0)
     assert _changed(before, trainer.nets["G"])
+
+
+@pytest.mark.parametrize("overrides, expected", [
+    (["render.backend=mitsuba", "model.resolution=32"], 1),             # auto: launches on the training thread
+    (["render.backend=mitsuba", "model.resolution=64"], None),          # auto: the pool as it is
+    (["render.backend=mitsuba", "model.resolution=64", "run.threads=1"], 1),
+    (["render.backend=closed_form", "run.drjit_threads=3"], None),      # no Dr.Jit in the closed form
+    (["render.backend=physical", "model.resolution=32"], None),         # long launches: every core
+    (["render.backend=mitsuba", "model.resolution=32", "run.drjit_threads=2"], 2),
+])
+def test_drjit_threads_follow_the_rule_of_docs_training(overrides, expected):
+    assert R.drjit_threads(load_config(None, overrides)) == expected
+
+
+def test_training_threads_are_restored_after_the_run_even_on_an_error():
+    import drjit as dr
+    cfg = load_config(None, ["render.backend=mitsuba", "model.resolution=32", "run.threads=1"])
+    saved = torch.get_num_threads(), dr.thread_count()
+    try:
+        torch.set_num_threads(2)
+        dr.set_thread_count(2)
+        with pytest.raises(RuntimeError, match="inside"):
+            with R.training_threads(cfg):
+                assert (torch.get_num_threads(), dr.thread_count()) == (1, 1)
+                raise RuntimeError("inside")
+        assert (torch.get_num_threads(), dr.thread_count()) == (2, 2)
+    finally:
+        torch.set_num_threads(saved[0])
+        dr.set_thread_count(saved[1])
