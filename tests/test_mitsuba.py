@@ -410,3 +410,57 @@ def test_tiled_backward_equals_the_expand_backward(model, filter, options):
     assert expand.abs().max() > 0
     for _ in range(3):                                          # a race between threads is intermittent
         assert (gradient(True) - expand).abs().max() <= 1e-5 * expand.abs().max()
+
+
+def _blobs(model, n, batch):
+    """Small dense blobs at different places of each volume (mostly empty space), one volume empty,
+    one dense up to a face of the cube."""
+    g = torch.Generator().manual_seed(11)
+    vol = torch.zeros(batch, 4 if model == "ea" else 1, n, n, n)
+    for b in range(batch - 1):
+        lo = torch.randint(0, n - 4, (3,), generator=g).tolist()
+        vol[b, :, lo[0]:lo[0] + 4, lo[1]:lo[1] + 3, lo[2]:lo[2] + 5] = torch.rand(
+            vol.shape[1], 4, 3, 5, generator=g) * 0.9 + 0.05
+    vol[0, :, :, :, -2:] = 0.5                                  # dense up to the face w = N − 1
+    return vol                                                  # the last volume stays empty
+
+
+@pytest.mark.parametrize("model", MODELS)
+@pytest.mark.parametrize("options", [{}, {"filter": "nearest"}, {"step": 0.5}, {"step": 2.0},
+                                     {"spp": 4, "jitter": True}, {"camera": "perspective", "fov": 50.0},
+                                     {"camera": "perspective", "fov": 30.0, "distance": 2.5, "step": 0.5}],
+                         ids=["default", "nearest", "half-step", "step-2", "jittered-spp4", "pinhole",
+                              "pinhole-near-half-step"])
+def test_skipping_empty_space_leaves_the_image_unchanged_to_the_last_bit(model, options):
+    """A forward-only call marches only the segments that meet the box around its pair's occupied
+    voxels; a call that records for the gradient marches every segment. Their images are equal
+    bit for bit (a box one voxel too tight would cut a trilinear footprint and differ)."""
+    n, batch = 16, 5
+    vol = _blobs(model, n, batch)
+    views = torch.cat([V.front_view(1), OBLIQUE[:1], V.sample_views(batch - 2, seed=4)])
+    M = _marcher()
+    boxes = M.occupied_boxes(vol)
+    assert (boxes[-1, :3] > boxes[-1, 3:]).all()                # the empty volume: an empty box
+    with torch.no_grad():
+        skipped = render(vol, views, model, "mitsuba", seed=3, **options)
+    whole = render(vol.clone().requires_grad_(), views, model, "mitsuba", seed=3, **options).detach()
+    assert skipped.abs().max() > 0
+    assert torch.equal(skipped, whole)
+    assert (skipped[-1] == 0).all()
+
+
+def test_a_box_that_cuts_the_trilinear_footprint_is_caught():
+    """The equality above can fail: widening the boxes by less than a voxel changes the image."""
+    M = _marcher()
+    vol = _blobs("ea", 16, 3)
+    views = OBLIQUE[:1].expand(3, -1).contiguous()
+    exact = M.occupied_boxes
+    try:
+        M.occupied_boxes = lambda v: exact(v) + torch.tensor([1.0, 1.0, 1.0, -1.0, -1.0, -1.0]) * (1.4 * 2 / 16)
+        with torch.no_grad():
+            tight = render(vol, views, "ea", "mitsuba")
+    finally:
+        M.occupied_boxes = exact
+    with torch.no_grad():
+        right = render(vol, views, "ea", "mitsuba")
+    assert not torch.equal(tight, right)

@@ -45,6 +45,18 @@ differentiable at v = 1). Otherwise τ_k = exp(s_k log(1 − min(v_k, V_MAX))): 
 clamped to 1 − 1e-6 so the log stays finite (its gradient is 0 above the clamp). The pixel is
 the mean of its spp rays.
 
+Empty space. A forward-only call (no gradient recorded) marches each ray only through the
+segments that can see density: the box around its pair's occupied voxels (v > 0), widened by
+1½ voxels (a trilinear lookup reads the voxels within one voxel of its point). Along the ray
+p(z) = A + z B is linear in the depth coordinate z (A = x right + y up, B = ω for the
+orthographic camera; A = D t (x right + y up), B = ω − t (x right + y up) for the perspective
+one), so the box is the z interval [z₀, z₁] where every axis of p lies inside it, and the ray
+marches segments ⌊d(z₁)/h⌋ − 1 to ⌈d(z₀)/h⌉ + 1 (d(z) = (1 − z)/Δ voxels from the front face),
+skipping segments whose lookups read only zeros. A skipped segment has τ = 1 and adds no
+colour, so the image is the same to the last bit (:func:`occupied_boxes`; a test checks the
+equality). A pass for the gradient marches every segment: an empty voxel's density still has
+a gradient.
+
 Early termination. With ``termination`` ε > 0 a ray stops once T ≤ ε, in the forward and the
 backward pass: an approximation (image error ≤ ε, gradient error measured by ``platonic bench``).
 With ε = 0 (the default) the image stops only where T = 0 exactly, which changes nothing, and a
@@ -337,19 +349,20 @@ class _Batch:
     # -- Forward ---------------------------------------------------------------------------
 
     @dr.syntax
-    def forward(self, record: Optional[Any], whole: bool = False) -> Tuple[Any, Any, Any]:
+    def forward(self, record: Optional[Any], whole: bool = False, boxes: Optional[Any] = None) -> Tuple[Any, Any, Any]:
         """Front-to-back march → (final transmittance T, emitted colour C, segments marched); with
         ``record`` (a Float of n_rays · n_steps) store T_k before each segment for the backward pass;
-        with ``whole`` (a pass for the gradient) never stop at T = 0."""
+        with ``whole`` (a pass for the gradient) never stop at T = 0; with ``boxes`` (6 floats per
+        pair, :func:`occupied_boxes`) march only the segments that meet the pair's box."""
         ea = self.model == "ea"
         n_steps, ε = self.n_steps, self.ε
         whole = whole and ε == 0.0                                # the gradient needs every segment
         ray = dr.arange(mi.UInt32, self.n_rays)                   # T_k of ray r is record[k · n_rays + r]
-        k = mi.UInt32(0)
+        k, k_end = (mi.UInt32(0), mi.UInt32(n_steps)) if boxes is None else self.box_segments(boxes)
         T = mi.Float(1.0)
         depth = mi.Float(0.0)                                     # VH: optical depth Σ s v
         C = mi.Color3f(0.0)
-        active = mi.Bool(True)
+        active = k < k_end
         while active:
             if record is not None:
                 dr.scatter(record, T, k * self.n_rays + ray)       # neighbouring lanes, neighbouring floats
@@ -365,8 +378,31 @@ class _Batch:
                 T *= τ
             k += 1
             # with ε = 0 a forward-only pass stops where T = 0: nothing behind is visible
-            active &= (k < n_steps) & (whole | (T > ε))
+            active &= (k < k_end) & (whole | (T > ε))
         return T, C, k
+
+    def box_segments(self, boxes: Any) -> Tuple[Any, Any]:
+        """[first, end) of the segments whose lookups can read density: those that meet the lane's
+        pair's box (module docstring, "Empty space"); an empty range for a ray that misses it."""
+        lo = mi.Vector3f(*(dr.gather(mi.Float, boxes, self.pair * 6 + a, self.real) for a in range(3)))
+        hi = mi.Vector3f(*(dr.gather(mi.Float, boxes, self.pair * 6 + 3 + a, self.real) for a in range(3)))
+        lateral = self.x * self.right + self.y * self.up
+        if self.ℓ is None:
+            A, B = lateral, self.ω                                # p(z) = A + z B
+        else:
+            A, B = self.D * self.t * lateral, self.ω - self.t * lateral
+        z0, z1 = mi.Float(-1.0), mi.Float(1.0)                    # the cube's depth range
+        for a in range(3):
+            flat = dr.abs(B[a]) < 1e-12                           # p_a does not change along the ray
+            ta, tb = (lo[a] - A[a]) / B[a], (hi[a] - A[a]) / B[a]
+            inside = (A[a] >= lo[a]) & (A[a] <= hi[a])
+            z0 = dr.select(flat, dr.select(inside, z0, 2.0), dr.maximum(z0, dr.minimum(ta, tb)))
+            z1 = dr.select(flat, dr.select(inside, z1, -2.0), dr.minimum(z1, dr.maximum(ta, tb)))
+        h, Δ = self.opt.step, self.Δ
+        first = dr.maximum(dr.floor((1.0 - z1) / (Δ * h)) - 1.0, 0.0)
+        end = dr.minimum(dr.ceil((1.0 - z0) / (Δ * h)) + 1.0, float(self.n_steps))
+        hit = z0 <= z1
+        return mi.UInt32(dr.select(hit, first, 0.0)), mi.UInt32(dr.select(hit, end, 0.0))
 
     # -- Backward --------------------------------------------------------------------------
 
@@ -524,16 +560,17 @@ class _Static:
         return isinstance(other, _Static) and self.key == other.key
 
 
-def _forward_pass(data: Any, frames: Any, seed: Any, static: _Static) -> Tuple[list, Any, Any]:
+def _forward_pass(data: Any, frames: Any, seed: Any, boxes: Optional[Any], static: _Static) -> Tuple[list, Any, Any]:
     """The forward launch: per-ray outputs ([r, g, b, α] or [ρ]), the recorded T_k (or None) and
-    the segments each ray marched. Depends only on its Dr.Jit arrays (volume, camera frames, seed)
-    and ``static``, so ``dr.freeze`` can replay its kernel without re-tracing (see :data:`FREEZE`)."""
+    the segments each ray marched; ``boxes`` (forward-only calls): skip empty space. Depends only
+    on its Dr.Jit arrays (volume, camera frames, seed, boxes) and ``static``, so ``dr.freeze`` can
+    replay its kernel without re-tracing (see :data:`FREEZE`)."""
     (b, c, n), opt, record = static.shape, static.opt, static.record
     batch = _Batch(data, frames, b, c, n, opt, seed)
     vh = opt.model == "vh"
     # every T_k the backward reads (k < segments marched) is written first: no clearing
     Ts = dr.empty(mi.Float, batch.n_rays * batch.n_steps) if record and not vh else None
-    T, C, marched = batch.forward(Ts, whole=record)
+    T, C, marched = batch.forward(Ts, whole=record, boxes=boxes)
     values = [C.x, C.y, C.z, 1.0 - T] if opt.model == "ea" else [1.0 - T]
     if record and vh:
         Ts = T                                                # VH's gradient needs only the final T
@@ -601,6 +638,30 @@ def _channels_last(volume: torch.Tensor, keep: list) -> torch.Tensor:
     return lease.buffer.copy_(view)
 
 
+def occupied_boxes(volume: torch.Tensor) -> torch.Tensor:
+    """``(B, 6)`` float32: per pair, the world-space box (x, y, z low; x, y, z high) around the
+    centres of its voxels of density > 0, widened by 1½ voxels (module docstring, "Empty space");
+    an empty volume gets an empty box (low > high)."""
+    n = volume.shape[-1]
+    Δ = 2.0 / n
+    v = volume[:, -1].detach()                                                # (B, D, H, W), v ≥ 0
+    profile = {"d": v.amax(dim=(2, 3)), "h": v.amax(dim=(1, 3)), "w": v.amax(dim=(1, 2))}   # (B, N) each
+    index = torch.arange(n, device=v.device)
+    ends = {}
+    for name, p in profile.items():
+        occupied = p > 0
+        first = torch.where(occupied, index, n).amin(dim=1)                   # n where nothing is occupied
+        last = torch.where(occupied, index, -1).amax(dim=1)
+        ends[name] = (-1.0 + (first + 0.5) * Δ, -1.0 + (last + 0.5) * Δ)       # voxel centres along the index
+    x = ends["w"]                                                             # x ← w, y ← −h, z ← −d
+    y, z = (-ends["h"][1], -ends["h"][0]), (-ends["d"][1], -ends["d"][0])
+    lo = torch.stack([x[0], y[0], z[0]], dim=1) - 1.5 * Δ
+    hi = torch.stack([x[1], y[1], z[1]], dim=1) + 1.5 * Δ
+    empty = (profile["d"] <= 0).all(dim=1, keepdim=True)
+    lo, hi = torch.where(empty, 2.0, lo), torch.where(empty, -2.0, hi)        # empty: low > high
+    return torch.cat([lo, hi], dim=1).to(device="cpu", dtype=torch.float32)
+
+
 class _March(torch.autograd.Function):
     """torch ↔ Dr.Jit: the forward launch, and the backward launch with the recorded T_k."""
 
@@ -618,7 +679,8 @@ class _March(torch.autograd.Function):
         _spread_over_threads(lanes, 4)
         run = _frozen_forward if FREEZE else _forward_pass
         seed_arr = dr.opaque(mi.UInt32, seed if opt.jitter else 0)   # an input array: a new seed replays
-        values, Ts, marched = run(data, frames, seed_arr, _Static((b, c, n), opt, record))
+        boxes = None if record else _shared(occupied_boxes(volume), keep)   # forward-only: skip empty space
+        values, Ts, marched = run(data, frames, seed_arr, boxes, _Static((b, c, n), opt, record))
         image = _per_ray_to_image(values, b, n, opt.spp)
         ctx.args = (data, frames, seed_arr, Ts, marched, _Static((b, c, n), opt, False), lanes)
         ctx.keep = keep
