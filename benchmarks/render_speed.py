@@ -7,7 +7,8 @@ Prints figures only (no assertions); every ratio is measured within one run on o
 Per model and resolution, forward and forward + backward ms per image of: a plain
 ``affine_grid`` + ``grid_sample`` + ``cumprod`` EA layer (no tricks, a yardstick), the closed form
 (``backend="closed_form"``), the marcher as one Mitsuba ``mi.render`` per (volume, view) pair
-(``render_mitsuba``, the scene path), and the batched marcher (``backend="mitsuba"``). The whole
+(``render_mitsuba``, the scene path), and the batched marcher (``backend="mitsuba"``); then the
+marcher's forward on procedural volumes with and without its empty-space skipping. The whole
 speed/accuracy trade of every option is ``platonic bench``'s job (docs/speed_accuracy.md).
 """
 
@@ -69,6 +70,36 @@ def speed(resolutions: List[int], batch: int, repeats: int) -> None:
                   flush=True)
 
 
+def empty_space(resolutions: List[int], batch: int, repeats: int) -> None:
+    """Forward ms per image of procedural volumes (mostly empty space, exact zeros) with the marcher's
+    empty-space skipping and without it (``marcher.SKIP_EMPTY``), EA, random views."""
+    import importlib
+    from mitsuba_platonic.data.shapes.registry import generate
+    M = importlib.import_module("mitsuba_platonic.render.marcher")
+    print(f"\n## Empty-space skipping: forward ms per image, EA, batch {batch}, best of {repeats}, "
+          f"{batch} shapes per class (exact: the images are equal to the last bit)")
+    print(f"{'N':>4} {'class':>9} | occupied | {'skipping':>8} | {'every segment':>13} | speed-up")
+    for n in resolutions:
+        for cls in ["mushroom", "chair", "airplane"]:
+            vol = torch.stack([generate(cls, seed, n) for seed in range(batch)])
+            views = V.sample_views(batch, seed=1)
+
+            def fwd():
+                with torch.no_grad():
+                    mp.render(vol, views, "ea", "mitsuba")
+
+            times = {}
+            for skip in (True, False):
+                M.SKIP_EMPTY = skip
+                try:
+                    times[skip] = best_time(fwd, repeats) / batch * 1e3
+                finally:
+                    M.SKIP_EMPTY = True
+            occupied = float((vol[:, -1] > 0).float().mean())
+            print(f"{n:>4} {cls:>9} | {occupied:>8.3f} | {times[True]:>8.3f} | {times[False]:>13.3f} | "
+                  f"{times[False] / times[True]:>7.2f}×", flush=True)
+
+
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--resolutions", type=int, nargs="+", default=[32, 64])
@@ -85,6 +116,7 @@ def main() -> None:
           f"torch {torch.__version__} ({torch.get_num_threads()} threads), mitsuba {mi.__version__} "
           f"variant {mi.variant()} ({dr.thread_count()} threads)")
     speed(args.resolutions, args.batch, args.repeats)
+    empty_space(args.resolutions, args.batch, args.repeats)
 
 
 if __name__ == "__main__":

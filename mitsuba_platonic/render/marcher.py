@@ -507,6 +507,11 @@ def tiled_backward(n: int, spp: int) -> bool:
 TILED = os.environ.get("MITSUBA_PLATONIC_TILED", "1") != "0"
 
 
+#: Forward-only calls skip empty space (module docstring, "Empty space"; exact)
+#: (``MITSUBA_PLATONIC_SKIP_EMPTY=0``: march every segment, for comparisons).
+SKIP_EMPTY = os.environ.get("MITSUBA_PLATONIC_SKIP_EMPTY", "1") != "0"
+
+
 #: Scatter-add mode of the backward pass (``Expand``: per-thread copies on the LLVM backend).
 _MODE = dr.ReduceMode.Expand if mi.variant().startswith("llvm") else dr.ReduceMode.Auto
 
@@ -679,7 +684,8 @@ class _March(torch.autograd.Function):
         _spread_over_threads(lanes, 4)
         run = _frozen_forward if FREEZE else _forward_pass
         seed_arr = dr.opaque(mi.UInt32, seed if opt.jitter else 0)   # an input array: a new seed replays
-        boxes = None if record else _shared(occupied_boxes(volume), keep)   # forward-only: skip empty space
+        skip = SKIP_EMPTY and not record                          # forward-only: skip empty space
+        boxes = _shared(occupied_boxes(volume), keep) if skip else None
         values, Ts, marched = run(data, frames, seed_arr, boxes, _Static((b, c, n), opt, record))
         image = _per_ray_to_image(values, b, n, opt.spp)
         ctx.args = (data, frames, seed_arr, Ts, marched, _Static((b, c, n), opt, False), lanes)
