@@ -269,6 +269,25 @@ def test_report_on_synthetic_pairs(tmp_path):
     assert len(results[0]["pairs"]) == 2 and results[0]["pairs"][0]["iou"] == 1.0
 
 
+def test_class_table_is_ssim_per_class_formation_and_method():
+    """Table 3 layout: PlatonicGAN rows only, SSIM = 1 − 2 DSSIM averaged over a cell's runs, — for
+    a formation a class was not trained with, and no table without a PlatonicGAN row."""
+    def row(cls, formation, dssim, mode="platonic"):
+        r = R.Row(f"{cls}-{formation}", formation, shape_class=cls, mode=mode)
+        r.pairs = [{f"dssim_{m}": d for m, d in zip(R.CLASS_METHODS, dssim)}]
+        return r
+
+    rows = [row("mushroom", "VH", (0.05, 0.10, 0.15)), row("mushroom", "VH", (0.15, 0.10, 0.05)),
+            row("chair", "EA", (0.25, 0.20, 0.0)), row("chair", "VH", (0.5, 0.5, 0.5), mode="prgan"),
+            R.Row("untrained", "EA")]
+    lines = R.write_class_table(rows).splitlines()
+    assert lines[0] == "| Class | VH VOL | VH ISO | VH VOX | EA VOL | EA ISO | EA VOX | runs |"
+    assert lines[2] == "| mushroom | 0.80 | 0.80 | 0.80 | — | — | — | 2 |"
+    assert lines[3] == "| chair | — | — | — | 0.50 | 0.60 | 1.00 | 1 |"
+    assert len(lines) == 4
+    assert R.write_class_table([rows[3], rows[4]]) is None
+
+
 def test_evaluate_command_arguments_and_errors(tmp_path):
     import argparse
     args = R.add_arguments(argparse.ArgumentParser()).parse_args(
@@ -318,6 +337,7 @@ def test_evaluate_runs_on_a_tiny_collection_with_a_stand_in_model(tmp_path, monk
     assert results["run: untrained"]["iou"] == 0.0             # nothing at density ≥ ½
     assert results["run: billboard"]["rmse"] > 0.0
     assert "| run (platonic, step 123) | EA |" in report.read_text()
+    assert "| mushroom | 1.00 | 1.00 | 1.00 | 1 |" in report.read_text()   # Table 3: SSIM of a perfect row
 
 
 def test_depth_stripes_measures_period_two_layers():

@@ -45,7 +45,7 @@ from .figures import save_image_grid
 from .photos import PhotoSection, evaluate_photo_run, section_markdown, section_results, write_photo_figure
 from .protocol import METHODS, N_VIEWS, billboard, evaluate_pair, held_out_truths
 
-__all__ = ["Row", "score_pairs", "write_table", "write_figure", "write_report", "evaluate_runs",
+__all__ = ["Row", "score_pairs", "write_table", "write_class_table", "write_figure", "write_report", "evaluate_runs",
            "add_arguments", "run", "main_evaluate", "FIGURE_VIEWS", "SCALE"]
 
 #: The paper's display scales (Table 2): DSSIM and VGG × 10, RMSE × 10².
@@ -59,10 +59,13 @@ PathLike = Union[str, Path]
 @dataclass
 class Row:
     """One table row: ``method`` (e.g. the run's name or a baseline), ``formation`` (VH/AO/EA),
-    per-pair metrics, and up to a few (input image, reconstruction, truth) examples for a figure."""
+    per-pair metrics, and up to a few (input image, reconstruction, truth) examples for a figure.
+    A trained run's row also names its ``shape_class`` and training ``mode`` (empty for baselines)."""
 
     method: str
     formation: str
+    shape_class: str = ""
+    mode: str = ""
     pairs: List[Dict[str, float]] = field(default_factory=list)
     examples: List[Tuple[torch.Tensor, torch.Tensor, torch.Tensor]] = field(default_factory=list)
     extra: Dict[str, float] = field(default_factory=dict)        # set-level metrics (FID)
@@ -139,6 +142,34 @@ def write_table(rows: Sequence[Row], methods: Sequence[str] = METHODS) -> str:
     return "\n".join(lines)
 
 
+#: The re-render methods of the per-class table (the paper's Table 3 leaves out IF).
+CLASS_METHODS = ("VOL", "ISO", "VOX")
+
+
+def write_class_table(rows: Sequence[Row], methods: Sequence[str] = CLASS_METHODS) -> Optional[str]:
+    """The Markdown table (Table 3 layout) of the PlatonicGAN rows (``mode`` 'platonic'): one line
+    per class, SSIM = 1 − 2 DSSIM (higher is better) per image formation × re-render method, the
+    mean over the runs of that class and formation (their count in the last column); — where no
+    run was scored. None when ``rows`` hold no PlatonicGAN run."""
+    ours = [r for r in rows if r.mode == "platonic" and r.shape_class]
+    if not ours:
+        return None
+    formations = [f for f in ("VH", "AO", "EA") if any(r.formation == f for r in ours)]
+    classes = list(dict.fromkeys(r.shape_class for r in ours))            # in the order of the runs
+    head = ["Class"] + [f"{f} {m}" for f in formations for m in methods] + ["runs"]
+    lines = ["| " + " | ".join(head) + " |", "|" + "---|" * len(head)]
+    for c in classes:
+        cells = [c]
+        for f in formations:
+            chosen = [r for r in ours if r.shape_class == c and r.formation == f]
+            for m in methods:
+                vals = [v for v in (r.mean(f"dssim_{m}") for r in chosen) if v is not None]
+                cells.append(f"{1.0 - 2.0 * float(np.mean(vals)):.2f}" if vals else "—")
+        cells.append(str(sum(r.shape_class == c for r in ours)))
+        lines.append("| " + " | ".join(cells) + " |")
+    return "\n".join(lines)
+
+
 def _slug(text: str) -> str:
     return re.sub(r"[^A-Za-z0-9_.-]+", "_", text).strip("_") or "row"
 
@@ -184,6 +215,12 @@ def write_report(rows: Sequence[Row], out_dir: PathLike, notes: Sequence[str] = 
                  "multiplied by 10 and RMSE by 10². Lower is better except IoU. — marks a value that was not "
                  "computed. Definitions: docs/evaluation.md.", "",
                  write_table(rows, methods), ""]
+        classes = write_class_table(rows)
+        if classes is not None:
+            lines += ["## Per class (Table 3 layout)", "",
+                      "SSIM (higher is better) of the PlatonicGAN runs' re-renders per class, image formation "
+                      "and re-render method, averaged over the runs of each cell (runs: how many entered the "
+                      "line). SSIM = 1 − 2 DSSIM of the table above, without the × 10.", "", classes, ""]
     for section in photo_sections:
         link = None
         if section.rows and section.rows[0].examples:
@@ -197,7 +234,8 @@ def write_report(rows: Sequence[Row], out_dir: PathLike, notes: Sequence[str] = 
         lines += [f"![{r.method} ({r.formation})](figures/{p.name})" for r, p in figures]
     report = out / "report.md"
     report.write_text("\n".join(lines) + "\n")
-    results = [{"method": r.method, "formation": r.formation, "means": r.means(), "pairs": r.pairs} for r in rows]
+    results = [{"method": r.method, "formation": r.formation, "shape_class": r.shape_class, "mode": r.mode,
+                "means": r.means(), "pairs": r.pairs} for r in rows]
     results += [entry for section in photo_sections for entry in section_results(section)]
     (out / "results.json").write_text(json.dumps(results, indent=1))
     return report
@@ -285,6 +323,7 @@ def evaluate_runs(run_dirs: Sequence[PathLike], out_dir: PathLike, n_views: int 
         name = f"{run_dir.name} ({cfg.train.mode}, step {step})"
         recon = reconstruct(images).cpu()
         rows.append(score_pairs(name, model, list(zip(images, recon, truths)), **kw))
+        rows[-1].shape_class, rows[-1].mode = cfg.data.shape_class, cfg.train.mode
         notes.append(f"{name}: {m} held-out images of '{cfg.data.shape_class}' ({cfg.data.formation} collection, "
                      f"{cfg.model.resolution}³), {n_views} views per pair, {spp} spp")
         if baselines:
