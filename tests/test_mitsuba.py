@@ -464,3 +464,23 @@ def test_a_box_that_cuts_the_trilinear_footprint_is_caught():
     with torch.no_grad():
         right = render(vol, views, "ea", "mitsuba")
     assert not torch.equal(tight, right)
+
+
+def test_a_second_backward_through_the_scene_path_raises_instead_of_repeating_the_first():
+    """drjit.wrap's render releases its AD graph in the first backward: a second gradient from the
+    same render (retain_graph) used to return the first one again, silently."""
+    from mitsuba_platonic.render.mitsuba_renderer import render_mitsuba
+    vol = _pair("ea", 8, "cloud", batch=2)
+    views = V.sample_views(2, seed=3)
+    x = vol.clone().requires_grad_()
+    image = render_mitsuba(x, views, "ea")
+    w1, w2 = torch.rand_like(image), torch.rand_like(image)
+    first = torch.autograd.grad((image * w1).sum(), x, retain_graph=True)[0]
+    y = vol.clone().requires_grad_()
+    fresh = torch.autograd.grad((render_mitsuba(y, views, "ea") * w1).sum(), y)[0]
+    assert torch.allclose(first, fresh, rtol=1e-5, atol=1e-7)   # the first gradient is right
+    with pytest.raises(RuntimeError, match="differentiated once"):
+        torch.autograd.grad((image * w2).sum(), x)
+    image = render_mitsuba(x, views, "ea")                      # a loss using the image twice: one backward
+    ((image * w1).sum() + (image * w2).sum()).backward()
+    assert x.grad is not None and x.grad.abs().max() > 0

@@ -159,7 +159,28 @@ def differentiable_render(scene: Any, params: Any, grids: Dict[str, torch.Tensor
         binding = _Binding(scene, params, dict(zip(keys, arrays)), settings)
         return dr.custom(_pair_render_op(), dict(binding.grids), binding, spp, seed)
 
-    return render_one(*grids.values())
+    return _OnceOnly.apply(render_one(*grids.values()))
+
+
+class _OnceOnly(torch.autograd.Function):
+    """Identity whose backward may run once: ``drjit.wrap``'s render releases its Dr.Jit AD graph in
+    the first backward, so a second one (``retain_graph``) would silently return the first
+    gradient again. It raises instead."""
+
+    @staticmethod
+    def forward(ctx, image: torch.Tensor) -> torch.Tensor:
+        ctx.done = False
+        return image.view_as(image)
+
+    @staticmethod
+    def backward(ctx, grad: torch.Tensor):
+        if ctx.done:
+            raise RuntimeError("a render of the Mitsuba scene path (render_mitsuba, the path tracer) can be "
+                               "differentiated once: its first backward releases Dr.Jit's graph, so a second "
+                               "one would repeat the first gradient; render again for another gradient, or "
+                               "use backend 'mitsuba' (the batched marcher), which supports retain_graph")
+        ctx.done = True
+        return grad
 
 
 def _sensor_transform(mi, right, up, w):
