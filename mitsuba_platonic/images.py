@@ -95,15 +95,18 @@ def save_png(path: PathLike, img: np.ndarray) -> Path:
 
     C = 1 writes grey (``L``), C = 3 ``RGB``, C = 4 ``RGBA`` (straight alpha, as PNG expects:
     un-premultiply or :func:`composite` premultiplied renders first). Values are clipped to
-    [0, 1]. Parent folders are created.
+    [0, 1]. Parent folders are created. The file appears whole or not at all (written to a
+    temporary sibling and renamed): a run killed while writing a sample leaves no torn PNG.
     """
     from PIL import Image
 
+    from .fileio import atomic_write
+
     arr = to_uint8(_as_image(img, channels=(1, 3, 4)))
     path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
     mode = {1: "L", 3: "RGB", 4: "RGBA"}[arr.shape[2]]
-    Image.fromarray(arr[..., 0] if mode == "L" else arr, mode=mode).save(path, format="PNG")
+    picture = Image.fromarray(arr[..., 0] if mode == "L" else arr, mode=mode)
+    atomic_write(path, lambda tmp: picture.save(tmp, format="PNG"))
     return path
 
 

@@ -330,3 +330,22 @@ def test_heatmap_and_composite():
     premultiplied = np.array([[[0.2, 0.0, 0.0, 0.4]]])
     np.testing.assert_allclose(composite(premultiplied, 0.5), [[[0.2 + 0.3, 0.3, 0.3]]])
     np.testing.assert_allclose(composite(np.array([[[0.4]]]), 0.5), [[[0.7, 0.7, 0.7]]])
+
+
+def test_an_interrupted_png_write_leaves_the_old_file_whole(tmp_path, monkeypatch):
+    """save_png writes a temporary sibling and renames it: killed mid-write (here: the encoder raises
+    after writing part of the file), the target keeps its old content and no temporary is left."""
+    from pathlib import Path
+    from PIL import Image
+    path = save_png(tmp_path / "sample.png", np.full((4, 4, 3), 0.5))
+    before = path.read_bytes()
+
+    def torn(self, fp, format=None, **kw):
+        Path(fp).write_bytes(b"\x89PNG\r\n")                    # the first bytes of a PNG, then the crash
+        raise KeyboardInterrupt
+
+    monkeypatch.setattr(Image.Image, "save", torn)
+    with pytest.raises(KeyboardInterrupt):
+        save_png(path, np.zeros((4, 4, 3)))
+    assert path.read_bytes() == before
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["sample.png"]
