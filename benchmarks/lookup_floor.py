@@ -1,0 +1,100 @@
+"""Benchmark: what the EA march's lookups alone cost, against the marcher's forward and backward.
+
+Prints figures only (no assertions), measured in one run:
+
+    .venv/bin/python benchmarks/lookup_floor.py [--resolutions 32 64] [--batch 8] [--repeats 5]
+
+A trilinear EA lookup is 8 corner gathers of an RGBA packet (32 floats) per sample, and the
+march takes N samples per ray (step 1, 1 spp). "lookups only" is a Dr.Jit kernel that makes
+exactly the marcher's lookups along every ray (its own ray geometry, ``_Batch.segment`` and
+``_Batch.corners``) and sums them, with no compositing and no early stop: a lower bound for any
+forward pass that reads the volume this way, and the backward pass reads it again (and adds as
+much into the gradient). Kernel times come from Dr.Jit's kernel history (no torch side).
+"""
+
+from __future__ import annotations
+
+import argparse
+import importlib
+from typing import Any, Callable
+
+import torch
+
+from mitsuba_platonic import views as V
+from mitsuba_platonic.render.settings import RenderSettings
+from mitsuba_platonic.volume import test_volume
+
+M = importlib.import_module("mitsuba_platonic.render.marcher")     # the module, not render()'s name
+mi, dr = M.mi, M.dr
+
+
+@dr.syntax
+def lookups_only(batch: Any) -> Any:
+    """Σ over every segment of every ray of the 8 corner RGBA packets the marcher's lookup reads."""
+    k = mi.UInt32(0)
+    acc = mi.Vector4f(0.0)
+    while k < batch.n_steps:
+        p, _ = batch.segment(k)
+        for idx, _, inside in batch.corners(p):
+            acc += dr.gather(mi.Vector4f, batch.data, idx, inside)
+        k += 1
+    return acc
+
+
+def kernel_ms(run: Callable[[], Any], repeats: int) -> float:
+    """The best total JIT-kernel time of ``repeats`` calls, after a warm-up call."""
+    run()
+    dr.kernel_history()                                          # clears it
+    best = float("inf")
+    for _ in range(repeats):
+        run()
+        best = min(best, sum(k["execution_time"] for k in dr.kernel_history()
+                             if str(k["type"]).endswith("JIT")))
+    return best
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    ap.add_argument("--resolutions", type=int, nargs="+", default=[32, 64])
+    ap.add_argument("--batch", type=int, default=8)
+    ap.add_argument("--repeats", type=int, default=5)
+    args = ap.parse_args()
+    b = args.batch
+    dr.set_flag(dr.JitFlag.KernelHistory, True)
+    print(f"# EA, trilinear, step 1, 1 spp, batch {b}, random views, 'figure' volume; {mi.variant()} with "
+          f"{dr.thread_count()} Dr.Jit threads; ms per image of Dr.Jit kernel time (best of {args.repeats})")
+    print(f"{'N':>4} | {'lookups only':>12} | {'G floats/s':>10} | {'forward (records)':>17} | {'backward':>8} | "
+          f"f+b ÷ lookups")
+    for n in args.resolutions:
+        vol = test_volume(n, "figure", "ea").expand(b, -1, -1, -1, -1).contiguous()
+        views = V.sample_views(b, seed=1)
+        keep: list = []
+        data = M._shared(M._channels_last(vol, keep), keep)
+        frames = M._frames(views, keep)
+        opt = RenderSettings(backend="mitsuba", model="ea").validate()
+
+        def lookups() -> None:
+            M._spread_over_threads(b * n * n, 4)
+            batch = M._Batch(data, frames, b, 4, n, opt, dr.opaque(mi.UInt32, 0))
+            dr.eval(lookups_only(batch))
+
+        floor = kernel_ms(lookups, args.repeats)
+        x = vol.clone().requires_grad_()
+
+        def forward() -> torch.Tensor:
+            return M.march(x, views, opt)
+
+        fwd = kernel_ms(forward, args.repeats)
+        image = forward()
+
+        def backward() -> None:
+            torch.autograd.grad(image.sum(), x, retain_graph=True)
+
+        bwd = kernel_ms(backward, args.repeats)
+        floats = b * n * n * M.n_segments(n, 1.0) * 32
+        print(f"{n:>4} | {floor / b:>12.3f} | {floats / floor / 1e6:>10.2f} | {fwd / b:>17.3f} | {bwd / b:>8.3f} | "
+              f"{(fwd + bwd) / floor:>12.2f}", flush=True)
+
+
+if __name__ == "__main__":
+    main()
