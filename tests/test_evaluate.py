@@ -219,6 +219,20 @@ def test_evaluate_pair_identical_and_different():
     assert moved.metrics["iou"] < 0.8 and moved.metrics["cd"] > 0.0
 
 
+def test_the_if_column_of_a_run_trained_through_light_is_path_traced():
+    """For backend 'physical' IF is the run's own image formation: the path tracer under the pair's
+    skies (at the run's max depth), not the EA layer; at VOL's depth it is VOL's image exactly."""
+    recon, vol = _sphere(centre=(-0.2, 0.15, -0.1)), _sphere()
+    kw = dict(n_views=2, spp=1, max_depth=2, methods=("IF", "VOL"))
+    traced = P.evaluate_pair(recon, vol, "ea", backend="physical", **kw)
+    for a, b in zip(traced.images["IF"], traced.images["VOL"]):
+        assert torch.equal(a, b)
+    layered = P.evaluate_pair(recon, vol, "ea", **kw)
+    assert not torch.equal(layered.images["IF"][0], traced.images["IF"][0])
+    deeper = P.evaluate_pair(recon, vol, "ea", backend="physical", if_max_depth=4, **kw)
+    assert not torch.equal(deeper.images["IF"][0], deeper.images["VOL"][0])   # its own depth
+
+
 def test_voxel_mesh_counts_exposed_faces_only():
     v = torch.zeros(4, 4, 4, 4)
     v[:3] = 0.5
@@ -301,7 +315,8 @@ def test_evaluate_command_arguments_and_errors(tmp_path):
         R.main_evaluate(["--run", "x", "--out", str(tmp_path / "out"), "--spp", "0"])
 
 
-def test_evaluate_runs_on_a_tiny_collection_with_a_stand_in_model(tmp_path, monkeypatch):
+@pytest.mark.parametrize("backend", ["closed_form", "physical"])
+def test_evaluate_runs_on_a_tiny_collection_with_a_stand_in_model(tmp_path, monkeypatch, backend):
     """The run plumbing: held-out split, manifest volumes, truth in the input frame, baselines,
     report. The trained networks are replaced by a stand-in that returns the ground truth for the
     held-out image, so the trained row must score perfectly (IoU 1, RMSE 0, DSSIM 0)."""
@@ -311,7 +326,7 @@ def test_evaluate_runs_on_a_tiny_collection_with_a_stand_in_model(tmp_path, monk
 
     cfg = load_config(None, [f"data.cache={tmp_path / 'data'}", "data.shape_class=mushroom", "data.n_shapes=2",
                              "data.views_per_shape=1", "data.split=0.5", "model.resolution=16",
-                             "render.model=ea", "render.backend=closed_form"])
+                             "render.model=ea", f"render.backend={backend}"])
     calls = {}
 
     def fake_load(run_dir):
@@ -338,6 +353,7 @@ def test_evaluate_runs_on_a_tiny_collection_with_a_stand_in_model(tmp_path, monk
     assert results["run: billboard"]["rmse"] > 0.0
     assert "| run (platonic, step 123) | EA |" in report.read_text()
     assert "| mushroom | 1.00 | 1.00 | 1.00 | 1 |" in report.read_text()   # Table 3: SSIM of a perfect row
+    assert ("IF path traced (max depth" in report.read_text()) == (backend == "physical")
 
 
 def test_depth_stripes_measures_period_two_layers():

@@ -218,11 +218,13 @@ def _expose(recon: torch.Tensor, ref: torch.Tensor) -> Tuple[torch.Tensor, torch
 def rerender(volume: torch.Tensor, views: torch.Tensor, lighting: Sequence[Lighting], model: str,
              methods: Sequence[str] = METHODS, spp: int = 16, max_depth: int = 8, seed: int = 0,
              backend: str = "closed_form", iso_level: float = ISO_LEVEL,
-             vox_threshold: float = VOX_THRESHOLD) -> Dict[str, torch.Tensor]:
+             vox_threshold: float = VOX_THRESHOLD, if_max_depth: Optional[int] = None) -> Dict[str, torch.Tensor]:
     """Render one ``(C, N, N, N)`` volume with each of ``methods`` from ``views`` (radiance unexposed).
 
-    ``IF`` uses ``model`` and ``backend``; ``VOL`` ``spp``/``max_depth``; ``ISO``/``VOX`` ``spp``/
-    ``max_depth`` too. Returns method → images (see the module docstring).
+    ``IF`` uses ``model`` and ``backend``: for ``backend='physical'`` (a run trained through the
+    path tracer) it is that path tracer under the pair's lighting, radiance unexposed like VOL,
+    with the run's ``if_max_depth`` (default ``max_depth``); ``VOL`` ``spp``/``max_depth``;
+    ``ISO``/``VOX`` ``spp``/``max_depth`` too. Returns method → images (see the module docstring).
     """
     unknown = [m for m in methods if m not in METHODS]
     if unknown:
@@ -237,7 +239,11 @@ def rerender(volume: torch.Tensor, views: torch.Tensor, lighting: Sequence[Light
     k = len(views)
     out: Dict[str, torch.Tensor] = {}
     for method in methods:
-        if method == "IF":
+        if method == "IF" and backend == "physical":          # the training image formation: path traced
+            out[method] = render_physical(rgba[None].expand(k, -1, -1, -1, -1).contiguous(), views, list(lighting),
+                                          spp=spp, max_depth=if_max_depth or max_depth, seed=seed,
+                                          exposure="none")[0]
+        elif method == "IF":
             with torch.no_grad():
                 out[method] = render(v[None].expand(k, -1, -1, -1, -1).contiguous(), views, model, backend).cpu()
         elif method == "VOL":
@@ -263,7 +269,7 @@ class PairResult:
 def evaluate_pair(recon: torch.Tensor, reference: torch.Tensor, model: str, n_views: int = N_VIEWS,
                   seed: int = 0, methods: Sequence[str] = METHODS, spp: int = 16, max_depth: int = 8,
                   backend: str = "closed_form", iou_threshold: float = M.IOU_THRESHOLD,
-                  vgg_network: Optional[torch.nn.Module] = None) -> PairResult:
+                  vgg_network: Optional[torch.nn.Module] = None, if_max_depth: Optional[int] = None) -> PairResult:
     """Score a reconstruction against its reference volume (both ``(C, N, N, N)`` in the same frame).
 
     2D: both are re-rendered by :func:`rerender` from the same :func:`rerender_views` under the same
@@ -278,12 +284,12 @@ def evaluate_pair(recon: torch.Tensor, reference: torch.Tensor, model: str, n_vi
                         f"and {tuple(reference.shape)}")
     views = rerender_views(n_views, seed)
     lights = rerender_lighting(n_views, seed)
-    kw = dict(methods=methods, spp=spp, max_depth=max_depth, seed=seed, backend=backend)
+    kw = dict(methods=methods, spp=spp, max_depth=max_depth, seed=seed, backend=backend, if_max_depth=if_max_depth)
     a = rerender(recon, views, lights, model, **kw)
     b = rerender(reference, views, lights, model, **kw)
     result = PairResult(images={}, views=views)
     for m in methods:
-        x, y = (a[m], b[m]) if m == "IF" else _expose(a[m], b[m])
+        x, y = (a[m], b[m]) if m == "IF" and backend != "physical" else _expose(a[m], b[m])
         result.images[m] = (x, y)
         x01, y01 = x.clamp(0.0, 1.0), y.clamp(0.0, 1.0)       # radiance above 1 is clipped, as a display does
         result.metrics[f"dssim_{m}"] = float(np.mean([M.dssim(p, q) for p, q in zip(x01, y01)]))

@@ -85,7 +85,7 @@ def score_pairs(method: str, model: str, triples: Sequence[Tuple[torch.Tensor, t
                 n_views: int = N_VIEWS, seed: int = 0, spp: int = 16, max_depth: int = 8,
                 methods: Sequence[str] = METHODS, backend: str = "closed_form",
                 vgg_network: Optional[torch.nn.Module] = None, fid_network: Optional[torch.nn.Module] = None,
-                n_examples: int = 3, progress: bool = False) -> Row:
+                n_examples: int = 3, progress: bool = False, if_max_depth: Optional[int] = None) -> Row:
     """Score (input image, reconstruction, truth-in-input-frame) triples into one :class:`Row`.
 
     Pair k uses the views and skies of seed ``seed + k`` (the same for every row, so rows see the
@@ -96,7 +96,7 @@ def score_pairs(method: str, model: str, triples: Sequence[Tuple[torch.Tensor, t
     if_recon, if_ref = [], []
     for k, (image, recon, truth) in enumerate(triples):
         res = evaluate_pair(recon, truth, model, n_views=n_views, seed=seed + k, methods=methods, spp=spp,
-                            max_depth=max_depth, backend=backend, vgg_network=vgg_network)
+                            max_depth=max_depth, backend=backend, vgg_network=vgg_network, if_max_depth=if_max_depth)
         row.pairs.append(res.metrics)
         if "IF" in res.images:
             if_recon.append(res.images["IF"][0])
@@ -322,16 +322,21 @@ def evaluate_runs(run_dirs: Sequence[PathLike], out_dir: PathLike, n_views: int 
         truths = held_out_truths(records, model)
         name = f"{run_dir.name} ({cfg.train.mode}, step {step})"
         recon = reconstruct(images).cpu()
-        rows.append(score_pairs(name, model, list(zip(images, recon, truths)), **kw))
+        # IF is the run's own image formation: path traced (at its max_depth) for a run trained through light
+        physical = cfg.render.backend == "physical"
+        kw_run = dict(kw, backend="physical", if_max_depth=cfg.render.max_depth) if physical else kw
+        rows.append(score_pairs(name, model, list(zip(images, recon, truths)), **kw_run))
         rows[-1].shape_class, rows[-1].mode = cfg.data.shape_class, cfg.train.mode
         notes.append(f"{name}: {m} held-out images of '{cfg.data.shape_class}' ({cfg.data.formation} collection, "
-                     f"{cfg.model.resolution}³), {n_views} views per pair, {spp} spp")
+                     f"{cfg.model.resolution}³), {n_views} views per pair, {spp} spp"
+                     + (f"; IF path traced (max depth {cfg.render.max_depth}), as it trained" if physical else ""))
         if baselines:
             fresh = untrained()(images).cpu()
-            rows.append(score_pairs(f"{run_dir.name}: untrained", model, list(zip(images, fresh, truths)), **kw))
+            rows.append(score_pairs(f"{run_dir.name}: untrained", model, list(zip(images, fresh, truths)), **kw_run))
             if model == "ea":
                 boards = [billboard(x) for x in images]
-                rows.append(score_pairs(f"{run_dir.name}: billboard", model, list(zip(images, boards, truths)), **kw))
+                rows.append(score_pairs(f"{run_dir.name}: billboard", model, list(zip(images, boards, truths)),
+                                        **kw_run))
     notes.append(f"evaluated in {time.perf_counter() - t0:.0f} s" + (
         f"; held-out pair k of every row is re-rendered with views and skies of seed {seed} + k" if rows else ""))
     return write_report(rows, out_dir, notes, photo_sections=sections)
