@@ -16,10 +16,10 @@ from __future__ import annotations
 import argparse
 import os
 import platform
-import time
 
 import torch
 
+from mitsuba_platonic.compare import best_of
 from mitsuba_platonic.config import load_config
 from mitsuba_platonic.train.data import TrainingData
 from mitsuba_platonic.train.run import drjit_threads, training_threads
@@ -37,13 +37,7 @@ def seconds_per_step(r: int, backend: str, threads: str, steps: int, repeats: in
     with training_threads(cfg):
         for step in range(5):
             trainer.step(step)
-        best = float("inf")
-        for _ in range(repeats):
-            t0 = time.perf_counter()
-            for step in range(steps):
-                trainer.step(step)
-            best = min(best, (time.perf_counter() - t0) / steps)
-    return best
+        return best_of(lambda: [trainer.step(step) for step in range(steps)], repeats) / steps
 
 
 def main() -> None:

@@ -563,15 +563,11 @@ def _bench_model(s: BenchSettings, n: int, model: str, views: torch.Tensor, repe
     return rows
 
 
-def _drjit_thread_count() -> int:
-    """Dr.Jit's worker threads now."""
-    import drjit as dr
-    return dr.thread_count()
-
-
 def _bench_train(r: int, width: int, batch: int, steps: int, warmup: int,
                  log: Callable[[str], None]) -> List[Dict[str, Any]]:
     """Training images/s per renderer (reconstruction, EA, one random view per volume)."""
+    import drjit as dr
+
     from .config import load_config
     from .train.data import TrainingData
     from .train.run import training_threads
@@ -592,7 +588,7 @@ def _bench_train(r: int, width: int, batch: int, steps: int, warmup: int,
                                      f"render.backend={backend}", "render.model=ea", "data.formation=ea", *extra])
             trainer = Trainer(cfg, data, torch.device("cpu"))
             with training_threads(cfg):                       # as a training run sets them (run.drjit_threads)
-                row["drjit_threads"] = _drjit_thread_count() if backend != "closed_form" else None
+                row["drjit_threads"] = None if backend == "closed_form" else dr.thread_count()
                 for step in range(warmup):
                     trainer.step(step)
                 t0 = time.perf_counter()

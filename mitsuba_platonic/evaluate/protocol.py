@@ -237,18 +237,23 @@ def rerender(volume: torch.Tensor, views: torch.Tensor, lighting: Sequence[Light
     n = v.shape[-1]
     rgba = as_rgba(v)
     k = len(views)
+    traced: Dict[int, torch.Tensor] = {}                      # path-traced renders by depth: IF may equal VOL
+
+    def path_traced(depth: int) -> torch.Tensor:
+        if depth not in traced:
+            traced[depth] = render_physical(rgba[None].expand(k, -1, -1, -1, -1).contiguous(), views, list(lighting),
+                                            spp=spp, max_depth=depth, seed=seed, exposure="none")[0]
+        return traced[depth]
+
     out: Dict[str, torch.Tensor] = {}
     for method in methods:
         if method == "IF" and backend == "physical":          # the training image formation: path traced
-            out[method] = render_physical(rgba[None].expand(k, -1, -1, -1, -1).contiguous(), views, list(lighting),
-                                          spp=spp, max_depth=if_max_depth or max_depth, seed=seed,
-                                          exposure="none")[0]
+            out[method] = path_traced(if_max_depth or max_depth)
         elif method == "IF":
             with torch.no_grad():
                 out[method] = render(v[None].expand(k, -1, -1, -1, -1).contiguous(), views, model, backend).cpu()
         elif method == "VOL":
-            out[method] = render_physical(rgba[None].expand(k, -1, -1, -1, -1).contiguous(), views, list(lighting),
-                                          spp=spp, max_depth=max_depth, seed=seed, exposure="none")[0]
+            out[method] = path_traced(max_depth)
         elif method == "ISO":
             out[method] = render_mesh(iso_mesh(rgba, iso_level), views, lighting, n, spp, max_depth, seed)
         else:

@@ -271,16 +271,20 @@ class _Batch:
         half = self.N / 2.0
         return mi.Vector3f((p.x + 1.0) * half - 0.5, (1.0 - p.y) * half - 0.5, (1.0 - p.z) * half - 0.5)
 
+    def _cell(self, p: Any) -> Tuple[Any, Any]:
+        """The trilinear cell of p: its lowest corner i₀ = ⌊q⌋ and the fractions t = q − i₀."""
+        q = self._q(p)
+        i0 = mi.Vector3i(dr.floor(q))
+        return i0, q - mi.Vector3f(i0)
+
     def corners(self, p: Any):
         """[(voxel index, weight, inside)] of the lookup at p: 1 voxel (nearest) or 8 (trilinear)."""
         N = self.N
-        q = self._q(p)
         if self.opt.filter == "nearest":
-            i = mi.Vector3i(dr.floor(q + 0.5))
+            i = mi.Vector3i(dr.floor(self._q(p) + 0.5))
             inside = dr.all((i >= 0) & (i < N))
             return [(self._index(i), mi.Float(1.0), inside)]
-        i0 = mi.Vector3i(dr.floor(q))
-        t = q - mi.Vector3f(i0)
+        i0, t = self._cell(p)
         # per axis, the two neighbours' offsets, weights and in-range masks; a corner combines one of each
         x = [(i0.x, 1.0 - t.x, (i0.x >= 0) & (i0.x < N)), (i0.x + 1, t.x, (i0.x >= -1) & (i0.x < N - 1))]
         y = [(i0.y * N, 1.0 - t.y, (i0.y >= 0) & (i0.y < N)), ((i0.y + 1) * N, t.y, (i0.y >= -1) & (i0.y < N - 1))]
@@ -309,9 +313,7 @@ class _Batch:
                 dr.scatter_reduce(dr.ReduceOp.Add, grad, w * g, idx, inside, mode=self.mode)
             return
         N = self.N
-        q = self._q(p)
-        i0 = mi.Vector3i(dr.floor(q))
-        t = q - mi.Vector3f(i0)
+        i0, t = self._cell(p)
         in_row = (i0.x >= -1) & (i0.x < N)
         g0 = dr.select(i0.x >= 0, 1.0 - t.x, 0.0) * g             # voxel w₀ (none at w₀ = −1)
         g1 = dr.select(i0.x < N - 1, t.x, 0.0) * g                # voxel w₀ + 1 (none at w₀ = N − 1)

@@ -243,8 +243,8 @@ def drjit_threads(cfg: Config) -> Optional[int]:
     ``run.drjit_threads`` if it is a count. 'auto': 1 (each launch runs on the training thread)
     when the marcher trains at N ≤ :data:`SERIAL_MARCHER_MAX_RESOLUTION` on the LLVM backend,
     because Dr.Jit's idle workers keep spinning for 20 ms after every launch and take the cores
-    from torch's convolutions, while a 32³ launch only takes a few ms (32³, batch 8, width 16:
-    77 → 60 ms a step; at 64³ the workers pay for themselves, 436 vs 466 ms); otherwise
+    from torch's convolutions, while a 32³ launch only takes a few ms (measured in
+    docs/training.md, "Threads"; at 64³ the workers pay for themselves); otherwise
     ``run.threads`` (all cores when 0). The closed form uses no Dr.Jit.
     """
     if cfg.render.backend == "closed_form":
