@@ -124,7 +124,10 @@ class TrainConfig:
     at ``elevation`` (0° by default; reconstruction: 0°, the input view's), G(z, one-hot view)).
     batch_size: global batch (split across processes); random_views: random views per volume per step;
     view_distribution / elevation: p_view; loss: 'nonsaturating' | 'wgan-gp'; gp_weight: WGAN-GP λ;
-    rec_weight: λ of the reconstruction term; weight_3d: weight of the 3D adversarial term;
+    rec_weight: λ of the reconstruction term; rec_target: what that term compares, 'image' (the
+    input image with the render of v at the input view: PlatonicGAN's, 2D data only) or 'volume'
+    (v with the input image's ground-truth volume in its camera's frame: 3D supervision, the 3D
+    modes only; the 3D-GAN baseline's, which renders nothing); weight_3d: weight of the 3D adversarial term;
     lr_g, lr_e, lr_d: Adam learning rates (lr_d 2e-5, not the authors' 1e-5: measured in
     docs/training.md); betas: Adam betas; d_gate: update D only while its *soft* accuracy
     ½(mean σ(l_real) + 1 − mean σ(l_fake)) ≤ this (0.6, the authors' gate; null: always). It never
@@ -141,6 +144,7 @@ class TrainConfig:
     loss: str = "nonsaturating"
     gp_weight: float = 10.0
     rec_weight: float = 5.0
+    rec_target: str = "image"
     weight_3d: float = 1.0
     lr_g: float = 1e-3
     lr_e: float = 1e-3
@@ -167,7 +171,7 @@ class Config:
         from .train.data import SOURCES
         from .train.losses import LOSSES
         from .train.run import DEVICES
-        from .train.trainer import MODES, MODES_3D, TASKS
+        from .train.trainer import MODES, MODES_3D, REC_TARGETS, TASKS
         from .views import DEFAULT_ELEVATION
         _typed(self.to_dict())                               # a config built in code: its types, finite numbers
         _folder_name("run.name", self.run.name)
@@ -220,8 +224,13 @@ class Config:
             raise ConfigError(f"train.d_gate: expected null or a number in (0, 1], got {self.train.d_gate!r}")
         if self.train.mode in MODES_3D and self.data.source != "procedural":
             raise ConfigError(f"train.mode: {self.train.mode!r} needs 3D ground truth, i.e. data.source 'procedural'")
-        if self.train.mode == "gan3d" and self.train.task != "generation":
-            raise ConfigError("train.task: the 3D-GAN baseline ('gan3d') is a generation task")
+        _choice("train.rec_target", self.train.rec_target, REC_TARGETS)
+        if self.train.rec_target == "volume" and self.train.mode not in MODES_3D:
+            raise ConfigError(f"train.rec_target: 'volume' needs 3D ground truth, i.e. train.mode one of "
+                              f"{list(MODES_3D)}, got {self.train.mode!r}")
+        if self.train.mode == "gan3d" and self.train.task == "reconstruction" and self.train.rec_target != "volume":
+            raise ConfigError("train.rec_target: the 3D-GAN baseline ('gan3d') renders nothing, so its reconstruction "
+                              "term compares volumes; expected 'volume', got 'image'")
         if self.train.mode == "prgan":                       # the PrGAN-style baseline: VH, 8 views on one ring
             prgan = "the PrGAN-style baseline ('prgan')"
             if self.render.model != "vh":

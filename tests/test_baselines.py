@@ -22,8 +22,8 @@ from tiny_shapes import TINY
 
 CONFIGS = Path(__file__).resolve().parents[1] / "configs"
 
-#: The named terms of G's objective in each mode (reconstruction; gan3d is a generation task).
-TERMS = {"platonic": {"adv2d", "rec"}, "platonic3d": {"adv2d", "adv3d", "rec"}, "gan3d": {"adv3d"},
+#: The named terms of G's objective in each mode, for reconstruction (gan3d's compares volumes).
+TERMS = {"platonic": {"adv2d", "rec"}, "platonic3d": {"adv2d", "adv3d", "rec"}, "gan3d": {"adv3d", "rec3d"},
          "prgan": {"adv2d", "rec"}}
 
 
@@ -35,12 +35,11 @@ def cache(tmp_path_factory):
     return tmp_path_factory.mktemp("data")
 
 
-def _cfg(cache, mode, *extra):
-    task = "generation" if mode == "gan3d" else "reconstruction"
+def _cfg(cache, mode, *extra, task="reconstruction"):
     model = "vh" if mode == "prgan" else "ea"
     ring = ["data.view_distribution=ring", "data.elevation=0", "train.view_distribution=ring"] \
         if mode == "prgan" else []
-    loss = ["train.loss=wgan-gp"] if mode == "gan3d" else []
+    loss = ["train.loss=wgan-gp", "train.rec_target=volume"] if mode == "gan3d" else []
     return load_config(None, [
         "run.name=r", f"data.cache={cache}", f"data.shape_class={TINY}", "data.n_shapes=4",
         "data.views_per_shape=2", "model.resolution=16", "model.width=4", "model.latent=8",
@@ -110,13 +109,90 @@ def test_platonic_g_update_needs_the_adversarial_and_the_input_view_term(cache):
     assert (full - _g_update(cfg, drop="rec")).abs().max() > 0
 
 
-def test_gan3d_trains_g_on_d3_only(cache):
-    trainer = _trainer(_cfg(cache, "gan3d"))
+def test_gan3d_generation_gets_gradient_from_d3_alone(cache, monkeypatch):
+    trainer = _trainer(_cfg(cache, "gan3d", task="generation"))
+    norms = _probe_terms(trainer, monkeypatch)
+    monkeypatch.setattr(trainer, "render", lambda *a: pytest.fail("gan3d rendered an image"))
+    trainer.step(0)
+    assert set(norms) == {"adv3d"} and norms["adv3d"] > 0
+
+
+@pytest.mark.parametrize("task", ["generation", "reconstruction"])
+def test_gan3d_trains_g_on_d3_only(cache, task):
+    trainer = _trainer(_cfg(cache, "gan3d", task=task))
     d_before = [p.detach().clone() for p in trainer.nets["D"].parameters()]
     g_before = [p.detach().clone() for p in trainer.nets["G"].parameters()]
     trainer.step(0)
     assert all(torch.equal(a, b) for a, b in zip(d_before, trainer.nets["D"].parameters()))
     assert any(not torch.equal(a, b) for a, b in zip(g_before, trainer.nets["G"].parameters()))
+
+
+# -- the volume reconstruction term (rec_target: volume) -------------------------------------
+
+@pytest.mark.parametrize("mode", ["gan3d", "platonic3d"])
+def test_volume_rec_term_compares_v_with_its_images_truth_in_the_input_frame(cache, mode, monkeypatch):
+    """rec3d = ‖v − v*‖² with v* read here from the image's own collection record (volume file,
+    view) through the evaluation's truth_in_input_frame; and v* rendered from the input view
+    reproduces the image, so the pairing and the frame are those of the photo."""
+    import numpy as np
+    from mitsuba_platonic.data.collection import load_manifest
+    from mitsuba_platonic.evaluate.protocol import truth_in_input_frame
+    from mitsuba_platonic.render import render
+    from mitsuba_platonic.train.data import collection_folder
+
+    cfg = _cfg(cache, mode, "train.rec_target=volume")
+    trainer = _trainer(cfg)
+    folder = collection_folder(cfg)
+    train_records = [r for r in load_manifest(folder)["images"] if r["shape"] < len(trainer.volumes)]
+    assert len(train_records) == len(trainer.images)
+    seen = {}
+    original = trainer._volume_rec
+
+    def recording(v, idx, out):
+        seen["v"], seen["idx"] = v.detach().clone(), idx.clone()
+        seen["loss"] = original(v, idx, out)
+        return seen["loss"]
+
+    monkeypatch.setattr(trainer, "_volume_rec", recording)
+    norms = _probe_terms(trainer, monkeypatch)
+    if mode == "gan3d":
+        monkeypatch.setattr(trainer, "render", lambda *a: pytest.fail("gan3d rendered an image"))
+    out = trainer.step(0)
+    assert set(norms) == TERMS[mode] - {"rec"} | {"rec3d"} and norms["rec3d"] > 0
+    def truth(r):
+        vol = torch.from_numpy(np.load(folder / r["volume"])["volume"]).float()
+        return truth_in_input_frame(vol, r["view"], "ea")
+
+    rows = [train_records[i] for i in seen["idx"].tolist()]
+    truths = torch.stack([truth(r) for r in rows])
+    expected = torch.nn.functional.mse_loss(seen["v"], truths)
+    assert abs(float(seen["loss"]) - float(expected)) <= 1e-6 * float(expected)
+    assert abs(out["loss_rec3d"] - float(expected)) <= 1e-6 * float(expected)
+    # the truth seen from the input view is the photo; another shape, or the same shape in the
+    # frame of its other view, is not
+    images, front = trainer.images[seen["idx"]], front_view(len(rows))
+    error = float((render(truths, front, model="ea", backend="closed_form") - images).abs().mean())
+    assert error < 0.01 * float(images.abs().mean())        # resampling round-off (0.4–0.5 % here)
+    for other in ([next(q for q in train_records if q["shape"] != r["shape"]) for r in rows],
+                  [{**r, "view": next(q["view"] for q in train_records
+                                      if q["shape"] == r["shape"] and q["view"] != r["view"])} for r in rows]):
+        wrong = render(torch.stack([truth(q) for q in other]), front, model="ea", backend="closed_form")
+        assert float((wrong - images).abs().mean()) > 5 * error
+
+
+@pytest.mark.parametrize("extra,key", [
+    (("train.rec_target=volume",), "train.rec_target"),          # 'platonic' has no ground truth
+    (("train.rec_target=depth",), "train.rec_target"),
+])
+def test_volume_rec_target_needs_a_3d_mode(cache, extra, key):
+    with pytest.raises(ConfigError) as e:
+        _cfg(cache, "platonic", *extra)
+    assert str(e.value).startswith(key + ":") and "\n" not in str(e.value)
+
+
+def test_gan3d_reconstruction_refuses_an_image_rec_target(cache):
+    with pytest.raises(ConfigError, match=r"^train\.rec_target: the 3D-GAN baseline"):
+        _cfg(cache, "gan3d", "train.rec_target=image")
 
 
 # -- PrGAN-style: VH, 8 ring views, the view in G's input -----------------------------------

@@ -94,7 +94,7 @@ def test_bad_inputs():
     ("train.lr_d=abc", r"train\.lr_d: expected a number"),
     ("train.betas=[0.5]", r"train\.betas"),
     ("render.backend=optix", r"render\.backend"),
-    ("train.mode=gan3d", r"train\.task"),
+    ("train.mode=gan3d", r"train\.rec_target"),
     ("render.model=vh", r"render\.model"),
     ("run.steps=true", r"run\.steps: expected int"),
     ("trainsteps", r"key=value"),

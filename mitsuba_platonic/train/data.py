@@ -31,12 +31,16 @@ SOURCES = ("procedural", "folder")
 class TrainingData:
     """images: ``(N, C, R, R)`` training images (C = 4 premultiplied linear RGBA, or 1 alpha);
     held_out: ``(M, C, R, R)``; volumes: ``(K, 4, R, R, R)`` training shapes' ground truth or None;
-    held_out_records: evaluation metadata per held-out image (procedural only)."""
+    held_out_records: evaluation metadata per held-out image (procedural only);
+    image_shapes: ``(N,)`` index into ``volumes`` of each training image's shape, and image_views:
+    ``(N, 3)`` its camera's view (both with ``volumes`` only)."""
 
     images: torch.Tensor
     held_out: torch.Tensor
     volumes: Optional[torch.Tensor] = None
     held_out_records: List[Dict[str, Any]] = field(default_factory=list)
+    image_shapes: Optional[torch.Tensor] = None
+    image_views: Optional[torch.Tensor] = None
 
 
 def collection_folder(cfg: Config) -> Path:
@@ -72,23 +76,27 @@ def _procedural(cfg: Config, progress: bool) -> TrainingData:
     records = load_manifest(folder)["images"]
     n_train = max(1, int(round(d.split * d.n_shapes)))
     alpha_only = CHANNELS[cfg.render.model] == 1
-    train, held, held_records = [], [], []
+    train, train_records, held, held_records = [], [], [], []
     for r in records:
         img = prepare_image(decode_image(folder / r["image"]), cfg.model.resolution, clean=False, soften=False)
         img = torch.from_numpy(img[3:] if alpha_only else img)
         if r["shape"] < n_train:
             train.append(img)
+            train_records.append(r)
         else:
             held.append(img)
             held_records.append({**r, "folder": str(folder)})
-    volumes = None
+    volumes = shapes = views = None
     if cfg.train.mode in MODES_3D:                                # the modes trained with 3D ground truth
         volumes = torch.stack([torch.from_numpy(np.load(folder / "volumes" / f"{i:05d}.npz")["volume"])
                                for i in range(n_train)])
         if alpha_only:
             volumes = volumes[:, 3:]
+        shapes = torch.tensor([r["shape"] for r in train_records], dtype=torch.long)
+        views = torch.tensor([list(r["view"]) for r in train_records], dtype=torch.float32)
     empty = torch.zeros(0, *train[0].shape)
-    return TrainingData(torch.stack(train), torch.stack(held) if held else empty, volumes, held_records)
+    return TrainingData(torch.stack(train), torch.stack(held) if held else empty, volumes, held_records,
+                        shapes, views)
 
 
 def _folder(cfg: Config) -> TrainingData:

@@ -10,6 +10,13 @@ uninterrupted one would:
    accuracy on this batch, ½(mean σ(l_real) + 1 − mean σ(l_fake)), is above ``d_gate``);
 5. G (and E) update on  L_G = adv(D(I_view)) + λ_rec ‖x − I_front‖² (+ w₃ adv₃(D3(v))).
 
+The reconstruction term compares images by default (``train.rec_target: image``, as above). With
+``rec_target: volume`` (the 3D modes) it compares volumes instead: λ_rec ‖v − v*‖², where v* is
+the input image's ground-truth volume resampled into its camera's frame (where v lives, the frame
+:func:`~mitsuba_platonic.evaluate.protocol.truth_in_input_frame` scores against): 3D supervision,
+as the 3D-GAN's reconstruction variant (3D-VAE-GAN, Wu et al. 2016) and the paper's Platonic3D
+("the 3DGAN framework plus the PlatonicGAN adversarial term") use it.
+
 Modes (which critics train G; ``tests/test_baselines.py`` checks the gradient flow of each):
 
 - 'platonic': the above; G's gradient comes from D (2D adversarial) and, for reconstruction,
@@ -21,7 +28,8 @@ Modes (which critics train G; ``tests/test_baselines.py`` checks the gradient fl
   resampled into the frames of views drawn from the data's view distribution (else D3 could tell
   fakes from their orientation alone).
 - 'gan3d': the 3D-GAN baseline: WGAN-GP (or the config's loss) between G(z) and ground-truth
-  volumes; no rendering, no 2D discriminator: G's only gradient is D3's.
+  volumes; no rendering, no 2D discriminator: G's only gradients are D3's and, for
+  reconstruction (z = E(x)), the volume reconstruction term (``rec_target: volume``).
 - 'prgan': the PrGAN-style baseline (Gadelha et al.): visual hull images only, random views
   drawn from the :data:`~mitsuba_platonic.model.RING_VIEWS` = 8 azimuths k · 45° on one ring
   (``train.elevation``, 0° by default: in view space the input view ω₀ is ring view 0), and the
@@ -61,7 +69,7 @@ from .data import TrainingData
 from .losses import d_loss, g_loss, gradient_penalty, hard_accuracy_counts, soft_accuracy_counts
 from .renderer import make_renderer
 
-__all__ = ["Trainer", "TASKS", "MODES", "MODES_3D", "ring_views"]
+__all__ = ["Trainer", "TASKS", "MODES", "MODES_3D", "REC_TARGETS", "ring_views"]
 
 #: What E/G learn: reconstruct the input image, or generate from z ~ N(0, I).
 TASKS = ("reconstruction", "generation")
@@ -69,6 +77,9 @@ TASKS = ("reconstruction", "generation")
 MODES = ("platonic", "platonic3d", "gan3d", "prgan")
 #: Modes that learn from ground-truth volumes (a 3D critic D3).
 MODES_3D = ("platonic3d", "gan3d")
+#: train.rec_target: the reconstruction term compares the input image with v's render at the
+#: input view, or v with the input image's ground-truth volume (3D modes)
+REC_TARGETS = ("image", "volume")
 
 
 def ring_views(elevation: float = 0.0) -> torch.Tensor:
@@ -213,7 +224,9 @@ class Trainer:
         terms = {"adv2d": loss_adv}
         if t.mode == "platonic3d":
             terms["adv3d"] = t.weight_3d * loss_g3
-        if rec:
+        if rec and t.rec_target == "volume":
+            terms["rec3d"] = t.rec_weight * self._volume_rec(v_input, idx, out)
+        elif rec:
             i_front = self.render(v_input, front_view(b).to(self.device), seed + 1)
             loss_rec = F.mse_loss(i_front, x)
             terms["rec"] = t.rec_weight * loss_rec
@@ -227,7 +240,8 @@ class Trainer:
 
     def _g_objective(self, terms: Dict[str, torch.Tensor]) -> torch.Tensor:
         """G's (and E's) loss: the sum of its weighted terms, named 'adv2d' (D on rendered views),
-        'adv3d' (D3 on volumes) and 'rec' (the input view). One place that sees every term, so
+        'adv3d' (D3 on volumes), 'rec' (the input view) and 'rec3d' (the input image's ground-truth
+        volume). One place that sees every term, so
         the tests can check which of them reach G."""
         return sum(terms.values())
 
@@ -279,18 +293,40 @@ class Trainer:
         self._critic_update("D3", self.opt_d3, real, v.detach(), eps, None, out)
         return g_loss(t.loss, self.modules["D3"](v))
 
+    def _volume_rec(self, v: torch.Tensor, idx: torch.Tensor, out: Dict[str, float]) -> torch.Tensor:
+        """‖v − v*‖² (mean over voxels) for this process's rows of the batch ``idx`` of training
+        images: v* is each image's ground-truth volume resampled into its camera's frame."""
+        rows = self._shard(idx)
+        truth = self.volumes[self.data.image_shapes[rows].to(self.device)]
+        truth = rotate(truth, self.data.image_views[rows].to(self.device)).clamp(0.0, 1.0)
+        loss = F.mse_loss(v, truth)
+        out["loss_rec3d"] = float(self._all_sum(loss.detach().cpu()) / self.world)
+        return loss
+
     def _step_gan3d(self, step: int) -> Dict[str, float]:
-        """The 3D-GAN baseline: WGAN-GP (or the config's loss) between G(z) and ground-truth volumes."""
+        """The 3D-GAN baseline: WGAN-GP (or the config's loss) between G(z) and ground-truth
+        volumes; for reconstruction z = E(x), D3's real volumes are in the frames of the data's
+        views (as Platonic3D's), and G also learns from the volume reconstruction term."""
         t, G, D3 = self.cfg.train, self.modules["G"], self.modules["D3"]
         g = self.generator(step)
         B = t.batch_size
+        rec = t.task == "reconstruction"
         real = self._shard(self.volumes[torch.randint(len(self.volumes), (B,), generator=g).to(self.device)])
-        z = self._shard(torch.randn(B, self.cfg.model.latent, generator=g)).to(self.device)
+        if rec:
+            idx = torch.randint(len(self.images), (B,), generator=g)
+            frames = self._shard(self._views(B, g, self.cfg.data)).to(self.device)
+            real = rotate(real, frames).clamp(0.0, 1.0)
+        z_prior = self._shard(torch.randn(B, self.cfg.model.latent, generator=g)).to(self.device)
         eps = self._shard(torch.rand(B, generator=g)).to(self.device)
         self.nets.train()
         out: Dict[str, float] = {}
-        self._critic_update("D3", self.opt_d3, real, G(z).detach(), eps, None, out)
-        loss_g = self._g_objective({"adv3d": g_loss(t.loss, D3(G(z)))})
+        z = self.modules["E"](self._shard(self.images[idx.to(self.device)])) if rec else z_prior
+        v = G(z)
+        self._critic_update("D3", self.opt_d3, real, v.detach(), eps, None, out)
+        terms = {"adv3d": g_loss(t.loss, D3(v))}
+        if rec:
+            terms["rec3d"] = t.rec_weight * self._volume_rec(v, idx, out)
+        loss_g = self._g_objective(terms)
         self.opt_g.zero_grad(set_to_none=True)
         loss_g.backward()
         self.opt_g.step()
