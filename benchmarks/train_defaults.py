@@ -16,17 +16,25 @@ only, nothing asserted.
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import time
 from pathlib import Path
 
 import numpy as np
 import torch
+from torch import nn
 
 from mitsuba_platonic.config import load_config
 from mitsuba_platonic.evaluate import held_out_scores, held_out_truths
 from mitsuba_platonic.evaluate import metrics as M
+from mitsuba_platonic.data.collection import load_manifest
+from mitsuba_platonic.data.photos import decode_image, prepare_image
+from mitsuba_platonic.evaluate.protocol import NOVEL_VIEWS
+from mitsuba_platonic.models import Discriminator, init_weights
+from mitsuba_platonic.render import render
+from mitsuba_platonic.views import to_angles
 from mitsuba_platonic.quickstart import CONFIG
-from mitsuba_platonic.train.data import load_training_data
+from mitsuba_platonic.train.data import collection_folder, load_training_data
 from mitsuba_platonic.train.trainer import Trainer
 
 VARIANTS = {
@@ -42,7 +50,63 @@ VARIANTS = {
     "rec5": ["train.rec_weight=5.0"],
     "resize": ["model.upsample=resize"],                               # no transposed-convolution checkerboard
     "resize_views2": ["model.upsample=resize", "train.random_views=2"],
+    "d_kaiming": [],                                                   # D re-initialised (D_INITS below)
+    "d_kaiming_lrd1e-4": ["train.lr_d=1e-4"],
+    "d_kaiming_lrd1e-4_views4": ["train.lr_d=1e-4", "train.random_views=4"],
+    "d_batchnorm": [],
 }
+
+
+def _kaiming(m: nn.Module) -> None:
+    if isinstance(m, (nn.Conv2d, nn.Linear)):
+        nn.init.kaiming_normal_(m.weight, a=0.2, nonlinearity="leaky_relu")
+        nn.init.zeros_(m.bias)
+
+
+def _replace_d(trainer: Trainer, kind: str) -> None:
+    """Give the trainer a D initialised otherwise (docs/training.md, "A discriminator that never
+    learns"): He (Kaiming) weights for LeakyReLU(0.2), so an untrained D's logits are O(0.1)
+    instead of O(1e-3); or the paper's D, with BatchNorm (G and E keep model.norm)."""
+    torch.manual_seed(trainer.cfg.run.seed)
+    if kind == "kaiming":
+        trainer.nets["D"].apply(_kaiming)
+    else:
+        d = Discriminator(dataclasses.replace(trainer.model.net, norm="batch"))
+        d.apply(init_weights)
+        trainer.nets["D"] = trainer.modules["D"] = d
+    t = trainer.cfg.train
+    trainer.opt_d = torch.optim.Adam(trainer.nets["D"].parameters(), lr=t.lr_d, betas=tuple(t.betas))
+
+
+#: Variants that change D's initialisation, which no config key sets.
+D_INITS = {"d_kaiming": "kaiming", "d_kaiming_lrd1e-4": "kaiming", "d_kaiming_lrd1e-4_views4": "kaiming",
+           "d_batchnorm": "batchnorm"}
+
+
+def view_diagnosis(model, cfg, data, limit: int = 64) -> dict:
+    """Where novel views fail: per novel view (:data:`NOVEL_VIEWS`), the held-out silhouette IoU and
+    the mean silhouette area of reconstruction minus truth (pixels); and the novel-view IoU on
+    *training* images (their records read from the collection's manifest), which tells
+    underfitting (both low) from overfitting (training high)."""
+    folder = collection_folder(cfg)
+    n_train = max(1, int(round(cfg.data.split * cfg.data.n_shapes)))
+    records = [r for r in load_manifest(folder)["images"] if r["shape"] < n_train][:limit]
+    train = torch.stack([torch.from_numpy(prepare_image(decode_image(folder / r["image"]), cfg.model.resolution,
+                                                        clean=False, soften=False)) for r in records])
+    out = {}
+    for split, images, recs in (("held_out", data.held_out[:limit], data.held_out_records[:limit]),
+                                ("train", train, [{**r, "folder": str(folder)} for r in records])):
+        recon = model.reconstruct(images).cpu()
+        iou, area = np.zeros(len(NOVEL_VIEWS)), np.zeros(len(NOVEL_VIEWS))
+        for v, truth in zip(recon, held_out_truths(recs, "ea")):
+            with torch.no_grad():
+                a = render(v[None].expand(len(NOVEL_VIEWS), -1, -1, -1, -1).contiguous(), NOVEL_VIEWS, "ea")
+                b = render(truth[None].expand(len(NOVEL_VIEWS), -1, -1, -1, -1).contiguous(), NOVEL_VIEWS, "ea")
+            iou += [M.silhouette_iou(a[k:k + 1], b[k:k + 1]) for k in range(len(NOVEL_VIEWS))]
+            area += ((a[:, 3] > M.SILHOUETTE_THRESHOLD).flatten(1).sum(1)
+                     - (b[:, 3] > M.SILHOUETTE_THRESHOLD).flatten(1).sum(1)).numpy()
+        out[split] = {"iou": iou / len(recon), "area": area / len(recon)}
+    return out
 
 
 def volume_scores(model, data, limit: int = 64) -> dict:
@@ -62,15 +126,18 @@ def run(name: str, overrides, steps: int, cache: Path) -> dict:
     cfg = load_config(CONFIG, [f"data.cache={cache}", *overrides])
     data = load_training_data(cfg, progress=False)
     trainer = Trainer(cfg, data, torch.device("cpu"))
+    if name in D_INITS:
+        _replace_d(trainer, D_INITS[name])
     t0 = time.perf_counter()
     logs = [trainer.step(s) for s in range(steps)]
     seconds = time.perf_counter() - t0
     m = held_out_scores(trainer.model, data, cfg.render.model)
     m.update(volume_scores(trainer.model, data))
+    m["views"] = view_diagnosis(trainer.model, cfg, data)
     acc = np.array([o["acc_d"] for o in logs])
     hard = np.array([o["acc_d_hard"] for o in logs])
     return {"name": name, **m, "d_updated": float(np.mean([o["d_updated"] for o in logs])),
-            "acc_soft": (acc.min(), acc.max()), "hard_over_06": float((hard > 0.6).mean()),
+            "acc_soft": (acc.min(), acc.max()), "acc_last": float(acc[-250:].mean()), "hard_over_06": float((hard > 0.6).mean()),
             "loss_rec": float(np.mean([o["loss_rec"] for o in logs[-50:]])), "s_per_step": seconds / steps}
 
 
@@ -85,20 +152,29 @@ def main() -> None:
     rows = []
     print(f"{args.steps} steps per variant, quickstart config (32³, EA, the marcher)", flush=True)
     print("| variant | novel MAE | novel IoU | input MAE | input IoU | 3D IoU | CD | stripes | ½-opacity depth | "
-          "rec loss (last 50) | D updated | soft acc range | hard acc > 0.6 | s/step |", flush=True)
-    print("|---|---|---|---|---|---|---|---|---|---|---|---|---|---|", flush=True)
+          "rec loss (last 50) | D updated | soft acc range | soft acc, last 250 steps | hard acc > 0.6 | s/step |",
+          flush=True)
+    print("|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|", flush=True)
+    notes = []
     for name in args.variants.split(","):
         r = run(name, VARIANTS[name], args.steps, args.cache)
         rows.append(r)
         print(f"| {name} | {r['novel_view_mae']:.4f} | {r['novel_view_iou']:.3f} | {r['input_view_mae']:.4f} | "
               f"{r['input_view_iou']:.3f} | {r['iou_3d']:.3f} | {r['chamfer']:.4f} | {r['stripes']:.3f} | "
               f"{r['half_depth']:.1f} | {r['loss_rec']:.4f} | {r['d_updated']:.2f} | "
-              f"{r['acc_soft'][0]:.4f}–{r['acc_soft'][1]:.4f} | {r['hard_over_06']:.2f} | {r['s_per_step']:.3f} |",
-              flush=True)
+              f"{r['acc_soft'][0]:.4f}–{r['acc_soft'][1]:.4f} | {r['acc_last']:.3f} | {r['hard_over_06']:.2f} | "
+              f"{r['s_per_step']:.3f} |", flush=True)
+        v = r["views"]
+        notes.append(f"{name}: novel-view IoU per view (held-out) {np.round(v['held_out']['iou'], 3).tolist()}, "
+                     f"silhouette area − truth's (px) {np.round(v['held_out']['area'], 1).tolist()}; on training "
+                     f"images: mean IoU {v['train']['iou'].mean():.3f}, per view {np.round(v['train']['iou'], 3).tolist()}")
     bb = rows[-1]
     print(f"| billboard | {bb['billboard_novel_view_mae']:.4f} | {bb['billboard_novel_view_iou']:.3f} | | | | | | | "
-          f"| | | | |")
+          f"| | | | | |")
     print(f"\nGround truth in the input frame: stripes {bb['stripes_truth']:.3f}")
+    print("Novel views (azimuth, elevation): " + ", ".join(f"({round(float(a)) + 0}°, {round(float(e)) + 0}°)"
+                                                         for a, e in zip(*to_angles(NOVEL_VIEWS))))
+    print("\n".join(notes))
 
 
 if __name__ == "__main__":

@@ -294,6 +294,17 @@ TABLE2 = ["baseline_platonic_vh.yaml", "baseline_platonic_ao.yaml", "baseline_pl
           "baseline_prgan.yaml", "baseline_platonic3d.yaml", "baseline_gan3d.yaml"]
 
 
+def test_platonic3d_row_is_the_3d_gan_row_plus_the_2d_adversarial_term():
+    """The paper's Platonic3D is "the 3DGAN framework plus the PlatonicGAN adversarial term": the
+    two configs differ in the mode alone (the rest of their training, data and networks equal)."""
+    p3d, gan = (load_config(CONFIGS / n).to_dict() for n in ("baseline_platonic3d.yaml", "baseline_gan3d.yaml"))
+    assert (p3d["train"]["mode"], gan["train"]["mode"]) == ("platonic3d", "gan3d")
+    assert p3d["train"]["rec_target"] == "volume"
+    for d in (p3d, gan):
+        d["train"].pop("mode"), d["run"].pop("name")
+    assert p3d["train"] == gan["train"] and p3d["data"] == gan["data"] and p3d["model"] == gan["model"]
+
+
 @pytest.mark.parametrize("name", TABLE2)
 def test_table2_configs_load_and_share_the_quickstart_schedule(name):
     cfg = load_config(CONFIGS / name)
