@@ -484,3 +484,23 @@ def test_a_second_backward_through_the_scene_path_raises_instead_of_repeating_th
     image = render_mitsuba(x, views, "ea")                      # a loss using the image twice: one backward
     ((image * w1).sum() + (image * w2).sum()).backward()
     assert x.grad is not None and x.grad.abs().max() > 0
+
+
+@pytest.mark.parametrize("model", MODELS)
+def test_gradients_of_successive_calls_are_separate_tensors(model):
+    """The gradient is handed to torch in Dr.Jit's memory (a second backward launch writes it in
+    torch's layout): later calls, which replay the same recorded kernels, must not write into an
+    earlier call's gradient, and torch may add into it in place (a leaf's .grad accumulates)."""
+    g = torch.Generator().manual_seed(0)
+    c = 4 if model == "ea" else 1
+    grads, copies = [], []
+    for _ in range(3):
+        x = (torch.rand(8, c, 32, 32, 32, generator=g) * 0.3).requires_grad_()
+        render(x, V.sample_views(8, "sphere", seed=g), model, "mitsuba").sum().backward()
+        grads.append(x.grad)
+        copies.append(x.grad.clone())
+    assert len({t.data_ptr() for t in grads}) == 3
+    grads[0].add_(1.0)
+    assert torch.equal(grads[0], copies[0] + 1.0)
+    assert all(torch.equal(a, b) for a, b in zip(grads[1:], copies[1:]))
+    assert all(t.shape == (8, c, 32, 32, 32) and t.is_contiguous() for t in grads)
