@@ -3,7 +3,7 @@
     .venv/bin/python benchmarks/train_defaults.py [--steps 1000] [--variants ungated,gate06,...]
 
 Each variant trains the quickstart's configuration (``configs/quickstart.yaml``: mushrooms,
-32³, EA through the marcher, reconstruction) for ``--steps`` steps from the same seed, on the
+32³, EA through the marcher, reconstruction) for ``--steps`` steps from the same seed (``--seeds``: several), on the
 same collection, then scores the held-out images (shapes no run saw) as the quickstart's report
 does (:func:`mitsuba_platonic.evaluate.held_out_scores`: MAE and silhouette IoU at the input view
 and at novel views, and the billboard), and in 3D against the ground truth in the input frame
@@ -122,8 +122,8 @@ def volume_scores(model, data, limit: int = 64) -> dict:
             "half_depth": float(np.nanmedian(a[:, 3])), "stripes_truth": float(a[:, 4].mean())}
 
 
-def run(name: str, overrides, steps: int, cache: Path) -> dict:
-    cfg = load_config(CONFIG, [f"data.cache={cache}", *overrides])
+def run(name: str, overrides, steps: int, cache: Path, seed: int = 0) -> dict:
+    cfg = load_config(CONFIG, [f"data.cache={cache}", f"run.seed={seed}", *overrides])
     data = load_training_data(cfg, progress=False)
     trainer = Trainer(cfg, data, torch.device("cpu"))
     if name in D_INITS:
@@ -147,6 +147,8 @@ def main() -> None:
     ap.add_argument("--variants", default=",".join(VARIANTS))
     ap.add_argument("--cache", type=Path, default=Path("data/bench_defaults"))
     ap.add_argument("--threads", type=int, default=2, help="torch threads")
+    ap.add_argument("--seeds", type=int, nargs="+", default=[0],
+                    help="run.seed of each repetition (networks and batches; the collection stays the same)")
     args = ap.parse_args()
     torch.set_num_threads(args.threads)
     rows = []
@@ -156,9 +158,11 @@ def main() -> None:
           flush=True)
     print("|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|", flush=True)
     notes = []
-    for name in args.variants.split(","):
-        r = run(name, VARIANTS[name], args.steps, args.cache)
+    for name, seed in [(n, s) for n in args.variants.split(",") for s in args.seeds]:
+        r = run(name, VARIANTS[name], args.steps, args.cache, seed)
         rows.append(r)
+        if len(args.seeds) > 1:
+            name = f"{name}, seed {seed}"
         print(f"| {name} | {r['novel_view_mae']:.4f} | {r['novel_view_iou']:.3f} | {r['input_view_mae']:.4f} | "
               f"{r['input_view_iou']:.3f} | {r['iou_3d']:.3f} | {r['chamfer']:.4f} | {r['stripes']:.3f} | "
               f"{r['half_depth']:.1f} | {r['loss_rec']:.4f} | {r['d_updated']:.2f} | "
