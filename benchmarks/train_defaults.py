@@ -22,7 +22,6 @@ from pathlib import Path
 
 import numpy as np
 import torch
-from torch import nn
 
 from mitsuba_platonic.config import load_config
 from mitsuba_platonic.evaluate import held_out_scores, held_out_truths
@@ -50,37 +49,22 @@ VARIANTS = {
     "rec5": ["train.rec_weight=5.0"],
     "resize": ["model.upsample=resize"],                               # no transposed-convolution checkerboard
     "resize_views2": ["model.upsample=resize", "train.random_views=2"],
-    "d_kaiming": [],                                                   # D re-initialised (D_INITS below)
-    "d_kaiming_lrd1e-4": ["train.lr_d=1e-4"],
-    "d_kaiming_lrd1e-4_views4": ["train.lr_d=1e-4", "train.random_views=4"],
-    "d_batchnorm": [],
+    "d_kaiming": ["model.critic_init=he"],                             # He's initialisation of D
+    "d_kaiming_lrd1e-4": ["model.critic_init=he", "train.lr_d=1e-4"],
+    "d_kaiming_lrd1e-4_views4": ["model.critic_init=he", "train.lr_d=1e-4", "train.random_views=4"],
+    "d_batchnorm": [],                                                 # the paper's D (_paper_d)
 }
 
 
-def _kaiming(m: nn.Module) -> None:
-    if isinstance(m, (nn.Conv2d, nn.Linear)):
-        nn.init.kaiming_normal_(m.weight, a=0.2, nonlinearity="leaky_relu")
-        nn.init.zeros_(m.bias)
-
-
-def _replace_d(trainer: Trainer, kind: str) -> None:
-    """Give the trainer a D initialised otherwise (docs/training.md, "A discriminator that never
-    learns"): He (Kaiming) weights for LeakyReLU(0.2), so an untrained D's logits are O(0.1)
-    instead of O(1e-3); or the paper's D, with BatchNorm (G and E keep model.norm)."""
+def _paper_d(trainer: Trainer) -> None:
+    """Give the trainer the paper's D, with BatchNorm (G and E keep model.norm), drawn from the
+    run's seed: no config key makes D's normalisation differ from G's."""
     torch.manual_seed(trainer.cfg.run.seed)
-    if kind == "kaiming":
-        trainer.nets["D"].apply(_kaiming)
-    else:
-        d = Discriminator(dataclasses.replace(trainer.model.net, norm="batch"))
-        d.apply(init_weights)
-        trainer.nets["D"] = trainer.modules["D"] = d
+    d = Discriminator(dataclasses.replace(trainer.model.net, norm="batch"))
+    d.apply(init_weights)
+    trainer.nets["D"] = trainer.modules["D"] = d
     t = trainer.cfg.train
-    trainer.opt_d = torch.optim.Adam(trainer.nets["D"].parameters(), lr=t.lr_d, betas=tuple(t.betas))
-
-
-#: Variants that change D's initialisation, which no config key sets.
-D_INITS = {"d_kaiming": "kaiming", "d_kaiming_lrd1e-4": "kaiming", "d_kaiming_lrd1e-4_views4": "kaiming",
-           "d_batchnorm": "batchnorm"}
+    trainer.opt_d = torch.optim.Adam(d.parameters(), lr=t.lr_d, betas=tuple(t.betas))
 
 
 def view_diagnosis(model, cfg, data, limit: int = 64) -> dict:
@@ -126,8 +110,8 @@ def run(name: str, overrides, steps: int, cache: Path, seed: int = 0) -> dict:
     cfg = load_config(CONFIG, [f"data.cache={cache}", f"run.seed={seed}", *overrides])
     data = load_training_data(cfg, progress=False)
     trainer = Trainer(cfg, data, torch.device("cpu"))
-    if name in D_INITS:
-        _replace_d(trainer, D_INITS[name])
+    if name == "d_batchnorm":
+        _paper_d(trainer)
     t0 = time.perf_counter()
     logs = [trainer.step(s) for s in range(steps)]
     seconds = time.perf_counter() - t0

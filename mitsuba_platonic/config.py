@@ -28,7 +28,7 @@ from pydantic_core import SchemaValidator, core_schema
 from .data.collection import FORMATIONS
 from .data.photos import BACKGROUNDS, CROPS, PhotoOptions
 from .errors import UserError
-from .models import NORMS, RESOLUTIONS, UPSAMPLES
+from .models import CRITIC_INITS, NORMS, RESOLUTIONS, UPSAMPLES
 from .render.settings import RenderSettings as RenderConfig
 from .views import DISTRIBUTIONS
 
@@ -105,7 +105,11 @@ class ModelConfig:
     encoder_hidden: width of the encoder's last layer before its Linear to z (0, the default:
     none; the authors' encoder: 1024, see docs/paper.md). upsample: how G doubles its
     resolution, 'transposed' (the paper's k4 s2 transposed convolutions) | 'resize' (nearest ×2
-    and a k3 convolution; mitsuba_platonic.models.UPSAMPLES)."""
+    and a k3 convolution; mitsuba_platonic.models.UPSAMPLES). critic_init: how the critics D and
+    D3 start, 'dcgan' (N(0, 0.02), as every network and the paper) | 'he' (He's initialisation
+    for LeakyReLU, drawn from the run's seed after the others): without normalisation a DCGAN
+    critic's logits are ~5e-4 and it does not learn in the quickstart's 2,000 steps
+    (docs/training.md, "A discriminator that never learns")."""
 
     resolution: int = 32
     latent: int = 64
@@ -113,6 +117,7 @@ class ModelConfig:
     norm: str = "none"
     encoder_hidden: int = 0
     upsample: str = "transposed"
+    critic_init: str = "dcgan"
 
 
 @dataclass
@@ -203,6 +208,7 @@ class Config:
         _positive("model.width", self.model.width)
         _choice("model.norm", self.model.norm, NORMS)
         _choice("model.upsample", self.model.upsample, UPSAMPLES)
+        _choice("model.critic_init", self.model.critic_init, CRITIC_INITS)
         _non_negative("model.encoder_hidden", self.model.encoder_hidden)
         try:
             self.render.validate()                           # the renderer's settings check themselves

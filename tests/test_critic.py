@@ -81,3 +81,58 @@ def test_d_steps_make_that_many_fresh_updates_in_every_mode(tmp_path, mode, task
         opt.step()
     for (k, a), b in zip(net.named_parameters(), reference.parameters()):
         assert torch.allclose(a, b, atol=1e-6), k
+
+
+# -- how the critics start (model.critic_init) ----------------------------------------------
+
+def _discs_and_bars(n, g):
+    """n dark discs (real) and n dark bars (fake), 32² premultiplied RGBA, random sizes."""
+    y, x = torch.meshgrid(torch.linspace(-1, 1, 32), torch.linspace(-1, 1, 32), indexing="ij")
+    out = []
+    for kind in ("disc", "bar"):
+        r = 0.3 + 0.4 * torch.rand(n, 1, 1, generator=g)
+        mask = ((x ** 2 + y ** 2).sqrt() < r) if kind == "disc" else ((x.abs() < 0.3 * r) & (y.abs() < r))
+        alpha = mask.float()[:, None]
+        out.append(torch.cat([alpha * torch.tensor([0.3, 0.1, 0.05])[None, :, None, None], alpha], 1))
+    return out
+
+
+def _critic_accuracy_after_training(init, steps=200):
+    from mitsuba_platonic.models import Discriminator, NetConfig, init_critic_he, init_weights
+    torch.manual_seed(0)
+    D = Discriminator(NetConfig(resolution=32, width=16, norm="none"))
+    D.apply(init_weights)
+    if init == "he":
+        D.apply(init_critic_he)
+    opt = torch.optim.Adam(D.parameters(), lr=2e-5, betas=(0.5, 0.9))         # the default lr_D
+    g = torch.Generator().manual_seed(1)
+    for _ in range(steps):
+        real, fake = _discs_and_bars(8, g)
+        loss = d_loss("nonsaturating", D(real), D(fake))
+        opt.zero_grad()
+        loss.backward()
+        opt.step()
+    real, fake = _discs_and_bars(64, g)
+    with torch.no_grad():
+        num, den = soft_accuracy_counts(D(real), D(fake))
+    return float(num / den)
+
+
+def test_a_he_initialised_critic_learns_where_a_dcgan_one_without_norm_barely_moves():
+    """docs/training.md, "A discriminator that never learns": at lr_D 2e-5 and no normalisation,
+    200 updates on an easy task (discs against bars) leave a DCGAN-initialised D near chance and
+    take a He-initialised one well above it (measured 0.51 and 0.69)."""
+    assert _critic_accuracy_after_training("dcgan") < 0.56
+    assert _critic_accuracy_after_training("he") > 0.62
+
+
+def test_critic_init_he_redraws_the_critics_and_nothing_else(tmp_path):
+    dcgan = _trainer(tmp_path, "train.mode=platonic3d")
+    he = _trainer(tmp_path, "train.mode=platonic3d", "model.critic_init=he")
+    for name in ("E", "G"):
+        assert all(torch.equal(a, b) for a, b in zip(dcgan.nets[name].parameters(), he.nets[name].parameters()))
+    for name in ("D", "D3"):
+        w_dcgan, w_he = (t.nets[name].trunk[0].weight for t in (dcgan, he))
+        fan_in = w_he[0].numel()
+        assert abs(float(w_dcgan.std()) - 0.02) < 0.004
+        assert abs(float(w_he.std()) - (2.0 / (1.04 * fan_in)) ** 0.5) < 0.2 * (2.0 / (1.04 * fan_in)) ** 0.5

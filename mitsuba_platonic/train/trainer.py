@@ -62,7 +62,7 @@ from torch import nn
 
 from ..config import Config, ConfigError
 from ..model import RING_VIEWS, Model
-from ..models import Discriminator, VolumeDiscriminator, init_weights
+from ..models import Discriminator, VolumeDiscriminator, init_critic_he, init_weights
 from ..render.closed_form import rotate
 from ..views import DEFAULT_ELEVATION, from_angles, front_view, sample_views
 from .data import TrainingData
@@ -108,6 +108,11 @@ class Trainer:
             nets["D3"] = VolumeDiscriminator(self.model.net)
         self.nets = nn.ModuleDict(nets)
         self.nets.apply(init_weights)
+        if cfg.model.critic_init == "he":                    # the critics re-drawn, from the run's seed
+            torch.manual_seed(cfg.run.seed)
+            for name in ("D", "D3"):
+                if name in self.nets:
+                    self.nets[name].apply(init_critic_he)
         self.nets.to(device)
         self.modules: Dict[str, nn.Module] = dict(self.nets.items())
         if world > 1:
