@@ -27,7 +27,6 @@ from mitsuba_platonic.config import load_config
 from mitsuba_platonic.evaluate import held_out_scores, held_out_truths
 from mitsuba_platonic.evaluate import metrics as M
 from mitsuba_platonic.data.collection import load_manifest
-from mitsuba_platonic.data.photos import decode_image, prepare_image
 from mitsuba_platonic.evaluate.protocol import NOVEL_VIEWS
 from mitsuba_platonic.models import Discriminator, init_weights
 from mitsuba_platonic.render import render
@@ -70,16 +69,14 @@ def _paper_d(trainer: Trainer) -> None:
 def view_diagnosis(model, cfg, data, limit: int = 64) -> dict:
     """Where novel views fail: per novel view (:data:`NOVEL_VIEWS`), the held-out silhouette IoU and
     the mean silhouette area of reconstruction minus truth (pixels); and the novel-view IoU on
-    *training* images (their records read from the collection's manifest), which tells
-    underfitting (both low) from overfitting (training high)."""
+    *training* images (``data.images`` holds them in the manifest's order, whose records give
+    their ground truth), which tells underfitting (both low) from overfitting (training high)."""
     folder = collection_folder(cfg)
     n_train = max(1, int(round(cfg.data.split * cfg.data.n_shapes)))
-    records = [r for r in load_manifest(folder)["images"] if r["shape"] < n_train][:limit]
-    train = torch.stack([torch.from_numpy(prepare_image(decode_image(folder / r["image"]), cfg.model.resolution,
-                                                        clean=False, soften=False)) for r in records])
+    records = [{**r, "folder": str(folder)} for r in load_manifest(folder)["images"] if r["shape"] < n_train]
     out = {}
     for split, images, recs in (("held_out", data.held_out[:limit], data.held_out_records[:limit]),
-                                ("train", train, [{**r, "folder": str(folder)} for r in records])):
+                                ("train", data.images[:limit], records[:limit])):
         recon = model.reconstruct(images).cpu()
         iou, area = np.zeros(len(NOVEL_VIEWS)), np.zeros(len(NOVEL_VIEWS))
         for v, truth in zip(recon, held_out_truths(recs, "ea")):

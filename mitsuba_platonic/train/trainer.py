@@ -82,6 +82,13 @@ MODES_3D = ("platonic3d", "gan3d")
 REC_TARGETS = ("image", "volume")
 
 
+def _in_frames(volumes: torch.Tensor, views: torch.Tensor) -> torch.Tensor:
+    """Ground-truth ``(B, C, N, N, N)`` volumes resampled into the frames of cameras at ``views``
+    (the closed form's rotation, as :func:`~mitsuba_platonic.evaluate.protocol.truth_in_input_frame`),
+    clamped to [0, 1] (trilinear round-off)."""
+    return rotate(volumes, views).clamp(0.0, 1.0)
+
+
 def ring_views(elevation: float = 0.0) -> torch.Tensor:
     """The PrGAN-style baseline's views: ``(8, 3)``, azimuths k · 45° (k = 0 … 7) at ``elevation``
     degrees; at 0° view 0 is the input view ω₀."""
@@ -287,23 +294,26 @@ class Trainer:
 
     def _update_d3(self, v: torch.Tensor, g: torch.Generator, eps: torch.Tensor, out: Dict[str, float]) -> torch.Tensor:
         """D3 updates (ground truth vs v.detach()); returns G's 3D adversarial loss on v."""
-        t = self.cfg.train
-        B = t.batch_size
+        self._critic_update("D3", self.opt_d3, self._real_volumes(g), v.detach(), eps, None, out)
+        return g_loss(self.cfg.train.loss, self.modules["D3"](v))
+
+    def _real_volumes(self, g: torch.Generator) -> torch.Tensor:
+        """D3's real batch: this process's rows of B ground-truth volumes drawn with ``g``. For
+        reconstruction, G's volumes are in input cameras' frames, so these are shown in the frames
+        of cameras drawn from the data's views, not in object space (else D3 could tell fakes from
+        their orientation alone)."""
+        B = self.cfg.train.batch_size
         real = self._shard(self.volumes[torch.randint(len(self.volumes), (B,), generator=g).to(self.device)])
-        if t.task == "reconstruction":
-            # v is in the input camera's frame: show D3 ground truth in the frames of cameras drawn
-            # from the data's views (evaluate.truth_in_input_frame's resampling), not in object space
-            frames = self._shard(self._views(B, g, self.cfg.data)).to(self.device)
-            real = rotate(real, frames).clamp(0.0, 1.0)
-        self._critic_update("D3", self.opt_d3, real, v.detach(), eps, None, out)
-        return g_loss(t.loss, self.modules["D3"](v))
+        if self.cfg.train.task != "reconstruction":
+            return real
+        return _in_frames(real, self._shard(self._views(B, g, self.cfg.data)).to(self.device))
 
     def _volume_rec(self, v: torch.Tensor, idx: torch.Tensor, out: Dict[str, float]) -> torch.Tensor:
         """‖v − v*‖² (mean over voxels) for this process's rows of the batch ``idx`` of training
         images: v* is each image's ground-truth volume resampled into its camera's frame."""
         rows = self._shard(idx)
-        truth = self.volumes[self.data.image_shapes[rows].to(self.device)]
-        truth = rotate(truth, self.data.image_views[rows].to(self.device)).clamp(0.0, 1.0)
+        truth = _in_frames(self.volumes[self.data.image_shapes[rows].to(self.device)],
+                           self.data.image_views[rows].to(self.device))
         loss = F.mse_loss(v, truth)
         out["loss_rec3d"] = float(self._all_sum(loss.detach().cpu()) / self.world)
         return loss
@@ -316,11 +326,8 @@ class Trainer:
         g = self.generator(step)
         B = t.batch_size
         rec = t.task == "reconstruction"
-        real = self._shard(self.volumes[torch.randint(len(self.volumes), (B,), generator=g).to(self.device)])
-        if rec:
-            idx = torch.randint(len(self.images), (B,), generator=g)
-            frames = self._shard(self._views(B, g, self.cfg.data)).to(self.device)
-            real = rotate(real, frames).clamp(0.0, 1.0)
+        real = self._real_volumes(g)
+        idx = torch.randint(len(self.images), (B,), generator=g) if rec else None
         z_prior = self._shard(torch.randn(B, self.cfg.model.latent, generator=g)).to(self.device)
         eps = self._shard(torch.rand(B, generator=g)).to(self.device)
         self.nets.train()
