@@ -14,7 +14,11 @@ warm-up step (kernel compilation, scene loading) and then times ``--steps`` step
   trained with) and at the config's spp 4 / max depth 4.
 
 Prints a Markdown table of seconds per step and images per second (the batch's input-view and
-random-view renders: 16 images a step). Figures only, nothing asserted.
+random-view renders: 16 images a step), and the Dr.Jit kernels' own time per step, measured in
+``--steps`` further steps with Dr.Jit's kernel history on (it makes each launch wait for its
+timing, so it is kept out of the wall-time steps): what is left of a step once the kernels are
+subtracted (launches, bindings, torch and the networks) is all that batching renders into fewer
+launches could save. Figures only, nothing asserted.
 """
 
 from __future__ import annotations
@@ -22,7 +26,9 @@ from __future__ import annotations
 import argparse
 import time
 from pathlib import Path
+from typing import Tuple
 
+import drjit as dr
 import torch
 
 from mitsuba_platonic.config import load_config
@@ -39,14 +45,24 @@ ROWS = {
 }
 
 
-def seconds_per_step(overrides, shapes: int, cache: str, steps: int) -> float:
+def seconds_per_step(overrides, shapes: int, cache: str, steps: int) -> Tuple[float, float]:
+    """(wall seconds per step, Dr.Jit kernel seconds per step) of a fresh trainer."""
     cfg = load_config(CONFIG, [f"data.n_shapes={shapes}", f"data.cache={cache}", *overrides])
     trainer = Trainer(cfg, load_training_data(cfg, progress=True), torch.device("cpu"))
     trainer.step(1)                                                  # warm-up: compilation, scene loading
     t0 = time.perf_counter()
     for s in range(2, steps + 2):
         trainer.step(s)
-    return (time.perf_counter() - t0) / steps
+    wall = (time.perf_counter() - t0) / steps
+    dr.sync_thread()
+    dr.set_flag(dr.JitFlag.KernelHistory, True)
+    dr.kernel_history()                                              # clears it
+    for s in range(steps + 2, 2 * steps + 2):
+        trainer.step(s)
+    dr.sync_thread()
+    kernels = sum(k["execution_time"] for k in dr.kernel_history() if str(k["type"]).endswith("JIT"))
+    dr.set_flag(dr.JitFlag.KernelHistory, False)
+    return wall, kernels / 1e3 / steps
 
 
 def main() -> None:
@@ -55,12 +71,13 @@ def main() -> None:
     p.add_argument("--shapes", type=int, default=60, help="shapes in the collection (default: %(default)s)")
     p.add_argument("--cache", default="data", help="collection cache folder (default: %(default)s)")
     args = p.parse_args()
-    print("| training step through | s / step | images / s | × the marcher's time |\n|---|---|---|---|")
+    print("| training step through | s / step | images / s | × the marcher's time | Dr.Jit kernels, s / step | "
+          "the rest of the step |\n|---|---|---|---|---|---|")
     base = None
     for name, overrides in ROWS.items():
-        t = seconds_per_step(overrides, args.shapes, args.cache, args.steps)
+        t, k = seconds_per_step(overrides, args.shapes, args.cache, args.steps)
         base = base or t
-        print(f"| {name} | {t:.3f} | {16 / t:.1f} | {t / base:.1f} |", flush=True)
+        print(f"| {name} | {t:.3f} | {16 / t:.1f} | {t / base:.1f} | {k:.3f} | {max(t - k, 0.0):.3f} |", flush=True)
 
 
 if __name__ == "__main__":
