@@ -138,7 +138,9 @@ class TrainConfig:
     ½(mean σ(l_real) + 1 − mean σ(l_fake)) ≤ this (0.6, the authors' gate; null: always). It never
     triggers at lr_d 2e-5 in the quickstart, and keeps a faster D (lr_d 1e-4) from collapsing G,
     which it does ungated (docs/training.md); d_steps: D (or D3) updates per G update, each on a
-    fresh loss, in every mode."""
+    fresh loss, in every mode; d_roll: 'none' | 'uniform': D sees every real and rendered image
+    turned in-plane by its own random angle, so that the tilt of views drawn in the input camera's
+    frame cannot give fakes away (:mod:`mitsuba_platonic.train.roll`, docs/training.md)."""
 
     task: str = "reconstruction"
     mode: str = "platonic"
@@ -157,6 +159,7 @@ class TrainConfig:
     betas: List[float] = field(default_factory=lambda: [0.5, 0.9])
     d_gate: Optional[float] = 0.6
     d_steps: int = 1
+    d_roll: str = "none"
 
 
 @dataclass
@@ -175,6 +178,7 @@ class Config:
         # the train package imports this module: its choice lists are imported here, not at the top
         from .train.data import SOURCES
         from .train.losses import LOSSES
+        from .train.roll import ROLLS
         from .train.run import DEVICES
         from .train.trainer import MODES, MODES_3D, REC_TARGETS, TASKS
         from .views import DEFAULT_ELEVATION
@@ -221,6 +225,7 @@ class Config:
         _positive("train.batch_size", self.train.batch_size)
         _positive("train.random_views", self.train.random_views)
         _positive("train.d_steps", self.train.d_steps)
+        _choice("train.d_roll", self.train.d_roll, ROLLS)
         for key in ("lr_g", "lr_e", "lr_d"):
             if not getattr(self.train, key) > 0:
                 raise ConfigError(f"train.{key}: expected a positive learning rate, got {getattr(self.train, key)!r}")

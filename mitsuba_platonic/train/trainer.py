@@ -7,7 +7,9 @@ uninterrupted one would:
 2. z = E(x) (reconstruction) or z ~ N(0, I) (generation); v = G(z);
 3. I_view = R(ω, v); for reconstruction also I_front = R(ω₀, v) (the input view by convention);
 4. ``d_steps`` D updates on x vs I_view (each skipped, and the rest with it, while D's soft
-   accuracy on this batch, ½(mean σ(l_real) + 1 − mean σ(l_fake)), is above ``d_gate``);
+   accuracy on this batch, ½(mean σ(l_real) + 1 − mean σ(l_fake)), is above ``d_gate``); with
+   ``d_roll: uniform`` D sees each of them turned in-plane by its own random angle (the images
+   of G's adversarial term too: :mod:`.roll`);
 5. G (and E) update on  L_G = adv(D(I_view)) + λ_rec ‖x − I_front‖² (+ w₃ adv₃(D3(v))).
 
 The reconstruction term compares images by default (``train.rec_target: image``, as above). With
@@ -52,6 +54,7 @@ fake batch, gated by the soft accuracy when a gate is set.
 
 from __future__ import annotations
 
+import math
 from typing import Dict, Optional, Tuple
 
 import numpy as np
@@ -68,6 +71,7 @@ from ..views import DEFAULT_ELEVATION, from_angles, front_view, sample_views
 from .data import TrainingData
 from .losses import d_loss, g_loss, gradient_penalty, hard_accuracy_counts, soft_accuracy_counts
 from .renderer import make_renderer
+from .roll import roll
 
 __all__ = ["Trainer", "TASKS", "MODES", "MODES_3D", "REC_TARGETS", "ring_views"]
 
@@ -202,6 +206,8 @@ class Trainer:
         else:
             views = self._shard(self._views(B * K, g).view(B, K, 3)).reshape(-1, 3)
         eps = self._shard(torch.rand(B * K, generator=g))
+        # train.d_roll 'uniform': an angle per real and per fake image D sees (train/roll.py)
+        ψ = self._shard(torch.rand(2, B * K, generator=g).mul(2 * math.pi).T).T if t.d_roll == "uniform" else None
         b = x.shape[0]
         rec = t.task == "reconstruction"
 
@@ -224,7 +230,10 @@ class Trainer:
 
         # -- D: real photos vs rendered views, gated by its soft accuracy -----------------------
         real_d = x.repeat_interleave(K, 0) if K > 1 else x
-        self._critic_update("D", self.opt_d, real_d, i_view.detach(), eps, t.d_gate, out)
+        fake_d = i_view
+        if ψ is not None:                                    # each image turned by its own angle
+            real_d, fake_d = roll(real_d, ψ[0].to(self.device)), roll(i_view, ψ[1].to(self.device))
+        self._critic_update("D", self.opt_d, real_d, fake_d.detach(), eps, t.d_gate, out)
 
         # -- D3 (Platonic3D): ground-truth volumes vs generated ----------------------------------
         loss_g3 = torch.zeros((), device=self.device)
@@ -232,7 +241,7 @@ class Trainer:
             loss_g3 = self._update_d3(v, g, eps, out)
 
         # -- G and E: fool D from random views (and D3), reconstruct the input view --------------
-        loss_adv = g_loss(t.loss, D(i_view))
+        loss_adv = g_loss(t.loss, D(fake_d))
         terms = {"adv2d": loss_adv}
         if t.mode == "platonic3d":
             terms["adv3d"] = t.weight_3d * loss_g3

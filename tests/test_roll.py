@@ -1,0 +1,110 @@
+"""train.d_roll: the images D judges turned in-plane (train/roll.py): the turn's direction and
+exactness, the tilt it exists for, and what D sees in a training step."""
+
+import math
+
+import pytest
+import torch
+
+from mitsuba_platonic.config import ConfigError, load_config
+from mitsuba_platonic.render import render
+from mitsuba_platonic.render.closed_form import rotate
+from mitsuba_platonic.train import trainer as trainer_module
+from mitsuba_platonic.train.data import load_training_data
+from mitsuba_platonic.train.roll import roll
+from mitsuba_platonic.train.trainer import Trainer
+from mitsuba_platonic.views import camera_frames, from_angles
+from mitsuba_platonic.volume import test_volume
+
+from tiny_shapes import TINY
+
+
+def test_a_quarter_turn_is_counter_clockwise_and_exact():
+    images = torch.rand(2, 4, 8, 8)
+    # pixel centres land on pixel centres: the same numbers as numpy-style rot90 (counter-clockwise)
+    assert torch.allclose(roll(images, torch.full((2,), math.pi / 2)), torch.rot90(images, 1, dims=(2, 3)),
+                          atol=1e-6)
+    assert torch.allclose(roll(images, torch.zeros(2)), images, atol=1e-6)
+
+
+def test_each_image_turns_by_its_own_angle():
+    dot = torch.zeros(1, 1, 8, 8)
+    dot[..., 3:5, 6] = 1.0                                    # right of the centre
+    out = roll(dot.expand(2, -1, -1, -1), torch.tensor([math.pi / 2, -math.pi / 2]))
+    top, bottom = out[0, 0, :4].sum(), out[1, 0, 4:].sum()    # a turn up, a turn down
+    assert top > 0.99 * out[0].sum() and bottom > 0.99 * out[1].sum()
+
+
+def test_roll_is_differentiable():
+    images = torch.rand(2, 1, 6, 6, dtype=torch.float64, requires_grad=True)
+    angles = torch.tensor([0.3, 2.0], dtype=torch.float64)
+    assert torch.autograd.gradcheck(lambda x: roll(x, angles), (images,))
+
+
+def test_roll_rejects_mismatched_angles():
+    with pytest.raises(ValueError, match="angles"):
+        roll(torch.rand(2, 1, 4, 4), torch.zeros(3))
+
+
+@pytest.mark.parametrize("elevation", [40.0, -25.0])
+def test_views_drawn_in_the_input_frame_are_tilted_by_the_input_elevation(elevation):
+    """Why d_roll exists: a volume in the frame of an input camera at elevation θ₀, seen from
+    beside it (ω = ±x of that frame), is the world's upright photo from that direction turned by
+    ±θ₀; the photo itself is far off."""
+    v = test_volume(32, "figure", "ao")
+    w_in = from_angles(torch.tensor([30.0]), elevation)
+    v_in = rotate(v, w_in).clamp(0.0, 1.0)                    # as the trainer's ground truth in input frames
+    right = camera_frames(w_in)[0].float()                   # the world direction of view +x of that frame
+    for sign in (1.0, -1.0):
+        fake = render(v_in, torch.tensor([[sign, 0.0, 0.0]]), "ao")
+        photo = render(v, sign * right, "ao")
+        tilted = roll(photo, torch.tensor([sign * math.radians(elevation)]))
+        assert (fake - tilted).abs().mean() < 0.1 * (fake - photo).abs().mean()
+
+
+@pytest.fixture(scope="module")
+def cache(tmp_path_factory):
+    return tmp_path_factory.mktemp("data")
+
+
+def _trainer(cache, roll_setting):
+    cfg = load_config(None, [
+        "run.name=r", f"data.cache={cache}", f"data.shape_class={TINY}", "data.n_shapes=4",
+        "data.views_per_shape=2", "model.resolution=16", "model.width=4", "model.latent=8",
+        "train.batch_size=2", "train.random_views=2", "train.d_gate=null", "render.backend=closed_form",
+        f"train.d_roll={roll_setting}"])
+    return Trainer(cfg, load_training_data(cfg, progress=False), torch.device("cpu"))
+
+
+@pytest.mark.usefixtures("tiny_class")
+@pytest.mark.parametrize("setting", ["none", "uniform"])
+def test_d_sees_exactly_the_turned_images(cache, monkeypatch, setting):
+    """With 'uniform', every image D judges (its update's reals and fakes, G's adversarial term)
+    is an output of roll with angles in [0, 2π), one per image; with 'none', roll never runs."""
+    trainer = _trainer(cache, setting)
+    turned, seen = [], []
+
+    def recording_roll(images, angles):
+        out = roll(images, angles)
+        turned.append((out, angles))
+        return out
+
+    monkeypatch.setattr(trainer_module, "roll", recording_roll)
+    trainer.nets["D"].register_forward_hook(lambda module, args, output: seen.append(args[0]))
+    trainer.step(0)
+    assert len(seen) == 3                                    # D's real, D's fake, G's adversarial term
+    if setting == "none":
+        assert turned == []
+        return
+    assert len(turned) == 2                                  # the reals, the fakes
+    for _, angles in turned:
+        assert angles.shape == (4,) and (angles >= 0).all() and (angles < 2 * math.pi).all()
+    assert not torch.equal(turned[0][1], turned[1][1])
+    outputs = [out for out, _ in turned]
+    for image in seen:
+        assert any(torch.equal(image, out) for out in outputs)
+
+
+def test_config_rejects_unknown_roll():
+    with pytest.raises(ConfigError, match="train.d_roll"):
+        load_config(None, ["train.d_roll=random"])
