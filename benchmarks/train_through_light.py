@@ -18,7 +18,8 @@ random-view renders: 16 images a step), and the Dr.Jit kernels' own time per ste
 ``--steps`` further steps with Dr.Jit's kernel history on (it makes each launch wait for its
 timing, so it is kept out of the wall-time steps): what is left of a step once the kernels are
 subtracted (launches, bindings, torch and the networks) is all that batching renders into fewer
-launches could save. Figures only, nothing asserted.
+launches could save; and how many launches (every kind in the history: kernels, copies,
+clears, reductions) a step makes. Figures only, nothing asserted.
 """
 
 from __future__ import annotations
@@ -45,8 +46,8 @@ ROWS = {
 }
 
 
-def seconds_per_step(overrides, shapes: int, cache: str, steps: int) -> Tuple[float, float]:
-    """(wall seconds per step, Dr.Jit kernel seconds per step) of a fresh trainer."""
+def seconds_per_step(overrides, shapes: int, cache: str, steps: int) -> Tuple[float, float, float]:
+    """(wall seconds, Dr.Jit kernel seconds, Dr.Jit launches) per step of a fresh trainer."""
     cfg = load_config(CONFIG, [f"data.n_shapes={shapes}", f"data.cache={cache}", *overrides])
     trainer = Trainer(cfg, load_training_data(cfg, progress=True), torch.device("cpu"))
     trainer.step(1)                                                  # warm-up: compilation, scene loading
@@ -60,9 +61,10 @@ def seconds_per_step(overrides, shapes: int, cache: str, steps: int) -> Tuple[fl
     for s in range(steps + 2, 2 * steps + 2):
         trainer.step(s)
     dr.sync_thread()
-    kernels = sum(k["execution_time"] for k in dr.kernel_history() if str(k["type"]).endswith("JIT"))
+    history = dr.kernel_history()
+    kernels = sum(k["execution_time"] for k in history if str(k["type"]).endswith("JIT"))
     dr.set_flag(dr.JitFlag.KernelHistory, False)
-    return wall, kernels / 1e3 / steps
+    return wall, kernels / 1e3 / steps, len(history) / steps
 
 
 def main() -> None:
@@ -72,12 +74,13 @@ def main() -> None:
     p.add_argument("--cache", default="data", help="collection cache folder (default: %(default)s)")
     args = p.parse_args()
     print("| training step through | s / step | images / s | × the marcher's time | Dr.Jit kernels, s / step | "
-          "the rest of the step |\n|---|---|---|---|---|---|")
+          "the rest of the step | Dr.Jit launches / step |\n|---|---|---|---|---|---|---|")
     base = None
     for name, overrides in ROWS.items():
-        t, k = seconds_per_step(overrides, args.shapes, args.cache, args.steps)
+        t, k, n = seconds_per_step(overrides, args.shapes, args.cache, args.steps)
         base = base or t
-        print(f"| {name} | {t:.3f} | {16 / t:.1f} | {t / base:.1f} | {k:.3f} | {max(t - k, 0.0):.3f} |", flush=True)
+        print(f"| {name} | {t:.3f} | {16 / t:.1f} | {t / base:.1f} | {k:.3f} | {max(t - k, 0.0):.3f} | {n:.0f} |",
+              flush=True)
 
 
 if __name__ == "__main__":
