@@ -52,6 +52,8 @@ VARIANTS = {
     "d_kaiming_lrd1e-4": ["model.critic_init=he", "train.lr_d=1e-4"],
     "d_kaiming_lrd1e-4_views4": ["model.critic_init=he", "train.lr_d=1e-4", "train.random_views=4"],
     "d_batchnorm": [],                                                 # the paper's D (_paper_d)
+    "d_kaiming_lrd1e-4_gate08": ["model.critic_init=he", "train.lr_d=1e-4", "train.d_gate=0.8"],
+    "d_kaiming_lrd1e-4_dsteps5": ["model.critic_init=he", "train.lr_d=1e-4", "train.d_steps=5"],
     "roll": ["train.d_roll=uniform"],                                  # D's images turned (train/roll.py)
     "d_kaiming_lrd1e-4_roll": ["model.critic_init=he", "train.lr_d=1e-4", "train.d_roll=uniform"],
     "d_kaiming_lrd1e-4_views4_roll": ["model.critic_init=he", "train.lr_d=1e-4", "train.random_views=4",
