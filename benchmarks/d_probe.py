@@ -10,7 +10,8 @@ non-saturating loss) on training photos against G's renders of other training ph
 the input view or at random views (p_view: the sphere). Each D is then scored on held-out photos
 against renders of held-out reconstructions, at both kinds of view: its hard accuracy
 ½(share of photos with logit > 0 + share of renders with logit < 0), over 8 batches of 16.
-Renders rounded to 8 bits, as the photos are stored, are scored too ("8-bit").
+Renders rounded to 8 bits, as the photos are stored, are scored too ("8-bit"). Also printed: how
+the held-out renders at the input view differ from their photos (colour spread, opaque pixels).
 
 In training, D never gets far from chance (docs/training.md, "A discriminator that never
 learns"): this separates "nothing tells the renders apart" from "the training dynamics keep D
@@ -66,9 +67,18 @@ def main() -> None:
             image = trainer.render(G(E(photos)), views, 0)
         return torch.round(image * 255) / 255 if eight_bit else image
 
+    photos, held = trainer.images, data.held_out
+    g_stats = torch.Generator().manual_seed(3)
+    for name, images in (("held-out photos", held[:64]), ("their renders at the input view",
+                                                           renders(held[:64], "input view", g_stats))):
+        alpha = images[:, 3]
+        covered = alpha > 0.5
+        colour = (images[:, :3] / alpha.clamp(min=1e-3)[:, None]).permute(1, 0, 2, 3)[:, covered]
+        print(f"# {name}: colour std over covered pixels (R, G, B) "
+              f"{', '.join(f'{x:.3f}' for x in colour.std(dim=1).tolist())}, "
+              f"share of covered pixels with alpha > 0.99: {float((alpha[covered] > 0.99).float().mean()):.3f}")
     print("| D (init, lr) | trained on renders at | held-out accuracy: input view | 8-bit | random views | 8-bit |")
     print("|---|---|---|---|---|---|")
-    photos, held = trainer.images, data.held_out
     for init, lr in CRITICS:
         for kind in KINDS:
             torch.manual_seed(0)
