@@ -47,9 +47,11 @@ def main() -> None:
     ap.add_argument("--d-steps", type=int, default=600, help="updates of each probed D")
     ap.add_argument("--cache", type=Path, default=Path("data/bench_defaults"))
     ap.add_argument("--threads", type=int, default=2, help="torch threads")
+    ap.add_argument("--set", dest="overrides", action="append", default=[], metavar="KEY=VALUE",
+                    help="a config override of the quickstart's (docs/training.md's table: model.upsample=transposed)")
     args = ap.parse_args()
     torch.set_num_threads(args.threads)
-    cfg = load_config(CONFIG, [f"data.cache={args.cache}"])
+    cfg = load_config(CONFIG, [f"data.cache={args.cache}", *args.overrides])
     data = load_training_data(cfg, progress=False)
     trainer = Trainer(cfg, data, torch.device("cpu"))
     t0 = time.perf_counter()

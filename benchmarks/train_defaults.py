@@ -48,6 +48,8 @@ VARIANTS = {
     "rec5": ["train.rec_weight=5.0"],
     "resize": ["model.upsample=resize"],                               # no transposed-convolution checkerboard
     "resize_views2": ["model.upsample=resize", "train.random_views=2"],
+    "resize_last": ["model.upsample=resize_last"],                      # only G's last stage resized
+    "resize_last_views2": ["model.upsample=resize_last", "train.random_views=2"],
     "d_kaiming": ["model.critic_init=he"],                             # He's initialisation of D
     "d_kaiming_lrd1e-4": ["model.critic_init=he", "train.lr_d=1e-4"],
     "d_kaiming_lrd1e-4_views4": ["model.critic_init=he", "train.lr_d=1e-4", "train.random_views=4"],
@@ -134,6 +136,9 @@ def main() -> None:
     ap.add_argument("--variants", default=",".join(VARIANTS))
     ap.add_argument("--cache", type=Path, default=Path("data/bench_defaults"))
     ap.add_argument("--threads", type=int, default=2, help="torch threads")
+    ap.add_argument("--set", dest="overrides", action="append", default=[], metavar="KEY=VALUE",
+                    help="a config override for every variant (before the variant's own), e.g. "
+                         "model.upsample=transposed for the tables measured before the quickstart resized G's last stage")
     ap.add_argument("--seeds", type=int, nargs="+", default=[0],
                     help="run.seed of each repetition (networks and batches; the collection stays the same)")
     args = ap.parse_args()
@@ -146,7 +151,7 @@ def main() -> None:
     print("|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|", flush=True)
     notes = []
     for name, seed in [(n, s) for n in args.variants.split(",") for s in args.seeds]:
-        r = run(name, VARIANTS[name], args.steps, args.cache, seed)
+        r = run(name, [*args.overrides, *VARIANTS[name]], args.steps, args.cache, seed)
         rows.append(r)
         if len(args.seeds) > 1:
             name = f"{name}, seed {seed}"

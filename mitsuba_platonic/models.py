@@ -8,7 +8,7 @@ can use 16³ or 32³ and narrow widths while a GPU run uses the paper's 64³ (``
   resolution and halving the width, the last one to C channels at R³ → sigmoid.
   At R = 64 and width 64: 512 → 256 → 128 → 64 → C, as in the paper. With ``upsample:
   resize`` each (k4, s2, p1) transposed convolution becomes a nearest ×2 upsampling and a k3
-  convolution (no period-2 checkerboard).
+  convolution (no period-2 checkerboard); with ``resize_last`` only the last one does.
 - D (2D): Conv2d(k4, s2, p1) stages from R² down to 4², doubling the width (64 → 128 → 256 → 512
   at R = 64), LeakyReLU 0.2, then Conv2d(k4) to one logit.
 - E: D's trunk, then Linear → z; or, with ``encoder_hidden`` = H > 0, the authors' head:
@@ -35,8 +35,10 @@ __all__ = ["NORMS", "UPSAMPLES", "CRITIC_INITS", "NetConfig", "Encoder", "Genera
 NORMS = ("batch", "instance", "none")
 #: How G doubles its resolution: the paper's transposed convolution (k4, s2, p1), or a nearest
 #: upsampling followed by a k3 convolution, which cannot make a transposed convolution's
-#: period-2 checkerboard (Odena, Dumoulin and Olah 2016).
-UPSAMPLES = ("transposed", "resize")
+#: period-2 checkerboard (Odena, Dumoulin and Olah 2016), in every stage ('resize') or only in
+#: the last one ('resize_last': the checkerboard at R³ comes from it, and the k3 convolutions
+#: at full resolution are what makes 'resize' slow).
+UPSAMPLES = ("transposed", "resize", "resize_last")
 RESOLUTIONS = (16, 32, 64, 128)
 #: How the critics (D, D3) start: the DCGAN initialisation of every network (:func:`init_weights`),
 #: or He's for LeakyReLU(0.2) (:func:`init_critic_he`).
@@ -128,11 +130,13 @@ class Generator(nn.Module):
         layers: List[nn.Module] = [nn.ConvTranspose3d(cfg.latent + cfg.view_codes, top, 4, 1, 0, bias=cfg.norm == "none"),
                                    _norm(cfg.norm, top, 3), nn.ReLU(inplace=True)]
         c = top
+        inner = "transposed" if cfg.upsample == "resize_last" else cfg.upsample
         for _ in range(cfg.stages - 1):
-            layers += [*_up(cfg.upsample, c, c // 2, bias=cfg.norm == "none"),
+            layers += [*_up(inner, c, c // 2, bias=cfg.norm == "none"),
                        _norm(cfg.norm, c // 2, 3), nn.ReLU(inplace=True)]
             c //= 2
-        layers += [*_up(cfg.upsample, c, cfg.volume_channels, bias=True), nn.Sigmoid()]
+        last = "resize" if cfg.upsample == "resize_last" else cfg.upsample
+        layers += [*_up(last, c, cfg.volume_channels, bias=True), nn.Sigmoid()]
         self.net = nn.Sequential(*layers)
 
     def init_density(self) -> None:
