@@ -16,11 +16,12 @@ from __future__ import annotations
 
 import argparse
 import importlib
-from typing import Any, Callable
+from typing import Any
 
 import torch
 
 from mitsuba_platonic import views as V
+from mitsuba_platonic.compare import best_kernel_ms
 from mitsuba_platonic.render.settings import RenderSettings
 from mitsuba_platonic.volume import test_volume
 
@@ -41,18 +42,6 @@ def lookups_only(batch: Any) -> Any:
     return acc
 
 
-def kernel_ms(run: Callable[[], Any], repeats: int) -> float:
-    """The best total JIT-kernel time of ``repeats`` calls, after a warm-up call."""
-    run()
-    dr.kernel_history()                                          # clears it
-    best = float("inf")
-    for _ in range(repeats):
-        run()
-        best = min(best, sum(k["execution_time"] for k in dr.kernel_history()
-                             if str(k["type"]).endswith("JIT")))
-    return best
-
-
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--resolutions", type=int, nargs="+", default=[32, 64])
@@ -60,7 +49,6 @@ def main() -> None:
     ap.add_argument("--repeats", type=int, default=5)
     args = ap.parse_args()
     b = args.batch
-    dr.set_flag(dr.JitFlag.KernelHistory, True)
     print(f"# EA, trilinear, step 1, 1 spp, batch {b}, random views, 'figure' volume; {mi.variant()} with "
           f"{dr.thread_count()} Dr.Jit threads; ms per image of Dr.Jit kernel time (best of {args.repeats})")
     print(f"{'N':>4} | {'lookups only':>12} | {'G floats/s':>10} | {'forward (records)':>17} | {'backward':>8} | "
@@ -78,19 +66,19 @@ def main() -> None:
             batch = M._Batch(data, frames, b, 4, n, opt, dr.opaque(mi.UInt32, 0))
             dr.eval(lookups_only(batch))
 
-        floor = kernel_ms(lookups, args.repeats)
+        floor = best_kernel_ms(lookups, args.repeats)
         x = vol.clone().requires_grad_()
 
         def forward() -> torch.Tensor:
             return M.march(x, views, opt)
 
-        fwd = kernel_ms(forward, args.repeats)
+        fwd = best_kernel_ms(forward, args.repeats)
         image = forward()
 
         def backward() -> None:
             torch.autograd.grad(image.sum(), x, retain_graph=True)
 
-        bwd = kernel_ms(backward, args.repeats)
+        bwd = best_kernel_ms(backward, args.repeats)
         floats = b * n * n * M.n_segments(n, 1.0) * 32
         print(f"{n:>4} | {floor / b:>12.3f} | {floats / floor / 1e6:>10.2f} | {fwd / b:>17.3f} | {bwd / b:>8.3f} | "
               f"{(fwd + bwd) / floor:>12.2f}", flush=True)

@@ -32,6 +32,7 @@ from typing import Any, Callable, Tuple
 import torch
 
 from mitsuba_platonic import views as V
+from mitsuba_platonic.compare import best_kernel_ms, best_of
 from mitsuba_platonic.render.settings import RenderSettings
 from mitsuba_platonic.volume import test_volume
 
@@ -90,8 +91,9 @@ def texture_march(volume: torch.Tensor, views: torch.Tensor, weights: torch.Tens
     return image, g
 
 
-def wall_ms(fn: Callable[[], Any], repeats: int) -> float:
-    """Best wall time of ``repeats`` calls after a warm-up, in ms."""
+def queued_ms(fn: Callable[[], Any], repeats: int) -> float:
+    """Best wall time of ``repeats`` calls after a warm-up, in ms, *without* waiting for Dr.Jit's
+    launches (what a timer stopped when ``dr.eval`` returns reports)."""
     fn()
     best = float("inf")
     for _ in range(repeats):
@@ -102,20 +104,10 @@ def wall_ms(fn: Callable[[], Any], repeats: int) -> float:
     return best * 1e3
 
 
-def kernel_ms(fn: Callable[[], Any], repeats: int) -> float:
-    """Best total JIT-kernel execution time of ``repeats`` calls after a warm-up, in ms (the kernel
-    history is on only here: recording it makes every launch wait for its timing)."""
-    dr.set_flag(dr.JitFlag.KernelHistory, True)
+def synced_ms(fn: Callable[[], Any], repeats: int) -> float:
+    """Best wall time of ``repeats`` calls after a warm-up, in ms, each waiting for its launches."""
     fn()
-    dr.sync_thread()
-    dr.kernel_history()                                                   # clears it
-    best = float("inf")
-    for _ in range(repeats):
-        fn()
-        dr.sync_thread()
-        best = min(best, sum(k["execution_time"] for k in dr.kernel_history() if str(k["type"]).endswith("JIT")))
-    dr.set_flag(dr.JitFlag.KernelHistory, False)
-    return best
+    return best_of(fn, repeats) * 1e3
 
 
 def main() -> None:
@@ -147,17 +139,17 @@ def main() -> None:
         image_err = float((tex_image - ours.detach()).abs().max())
         grad_err = float((tex_grad - x.grad).norm() / x.grad.norm())
 
-        fwd = wall_ms(lambda: texture_march(vol, views, weights, grad=False, sync=True), args.repeats)
-        queued = wall_ms(lambda: texture_march(vol, views, weights, grad=True, sync=False), args.repeats)
-        synced = wall_ms(lambda: texture_march(vol, views, weights, grad=True, sync=True), args.repeats)
-        kernels = kernel_ms(lambda: texture_march(vol, views, weights, grad=True, sync=False), args.repeats)
+        fwd = synced_ms(lambda: texture_march(vol, views, weights, grad=False, sync=True), args.repeats)
+        queued = queued_ms(lambda: texture_march(vol, views, weights, grad=True, sync=False), args.repeats)
+        synced = synced_ms(lambda: texture_march(vol, views, weights, grad=True, sync=True), args.repeats)
+        kernels = best_kernel_ms(lambda: texture_march(vol, views, weights, grad=True, sync=False), args.repeats)
 
         def marcher() -> None:
             y = vol.clone().requires_grad_()
             (M.march(y, views, opt) * weights).sum().backward()
             dr.sync_thread()
 
-        ours_ms = wall_ms(marcher, args.repeats)
+        ours_ms = synced_ms(marcher, args.repeats)
         print(f"{n:>4} | {fwd / b:>18.3f} | {queued / b:>18.3f} | {synced / b:>10.3f} | {kernels / b:>11.3f} | "
               f"{ours_ms / b:>11.3f} | {synced / ours_ms:>16.2f} | {image_err:>9.1e} | {grad_err:>12.1e}", flush=True)
 

@@ -29,9 +29,9 @@ import time
 from pathlib import Path
 from typing import Tuple
 
-import drjit as dr
 import torch
 
+from mitsuba_platonic.compare import kernel_time
 from mitsuba_platonic.config import load_config
 from mitsuba_platonic.train.data import load_training_data
 from mitsuba_platonic.train.trainer import Trainer
@@ -55,16 +55,8 @@ def seconds_per_step(overrides, shapes: int, cache: str, steps: int) -> Tuple[fl
     for s in range(2, steps + 2):
         trainer.step(s)
     wall = (time.perf_counter() - t0) / steps
-    dr.sync_thread()
-    dr.set_flag(dr.JitFlag.KernelHistory, True)
-    dr.kernel_history()                                              # clears it
-    for s in range(steps + 2, 2 * steps + 2):
-        trainer.step(s)
-    dr.sync_thread()
-    history = dr.kernel_history()
-    kernels = sum(k["execution_time"] for k in history if str(k["type"]).endswith("JIT"))
-    dr.set_flag(dr.JitFlag.KernelHistory, False)
-    return wall, kernels / 1e3 / steps, len(history) / steps
+    kernels, launches = kernel_time(lambda: [trainer.step(s) for s in range(steps + 2, 2 * steps + 2)])
+    return wall, kernels / 1e3 / steps, launches / steps
 
 
 def main() -> None:

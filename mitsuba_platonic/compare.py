@@ -36,7 +36,7 @@ from .render.settings import OPTIONS_OF, RenderSettings
 from .views import to_angles, validate_views
 from .volume import CHANNELS
 
-__all__ = ["compare", "format_table", "time_render", "best_of", "DISPLAY_BACKGROUND", "HEATMAP_CMAP",
+__all__ = ["compare", "format_table", "time_render", "best_of", "kernel_time", "best_kernel_ms", "DISPLAY_BACKGROUND", "HEATMAP_CMAP",
            "memory_estimate", "available_memory", "check_memory", "comparison_views", "write_summary"]
 
 #: Grey level EA renders (premultiplied RGBA) are composited over for display.
@@ -119,6 +119,30 @@ def best_of(fn: Callable[[], Any], repeats: int) -> float:
         _sync()
         best = min(best, time.perf_counter() - t0)
     return best
+
+
+def kernel_time(fn: Callable[[], Any]) -> Tuple[float, int]:
+    """Run ``fn`` once with Dr.Jit's kernel history on: (milliseconds of JIT-kernel execution,
+    launches of every kind: kernels, copies, clears, reductions). The history is on only for this
+    call, because recording it makes every launch wait for its timing query."""
+    import drjit as dr
+    dr.sync_thread()
+    dr.set_flag(dr.JitFlag.KernelHistory, True)
+    try:
+        dr.kernel_history()                                  # clears it
+        fn()
+        dr.sync_thread()
+        history = dr.kernel_history()
+    finally:
+        dr.set_flag(dr.JitFlag.KernelHistory, False)
+    return sum(k["execution_time"] for k in history if str(k["type"]).endswith("JIT")), len(history)
+
+
+def best_kernel_ms(fn: Callable[[], Any], repeats: int) -> float:
+    """The shortest JIT-kernel time (:func:`kernel_time`, ms) of ``repeats`` calls of ``fn`` after
+    one warm-up call (which absorbs tracing and compilation)."""
+    fn()
+    return min(kernel_time(fn)[0] for _ in range(repeats))
 
 
 def time_render(fn: Callable[[], torch.Tensor], repeats: int = 3) -> tuple[torch.Tensor, float]:
