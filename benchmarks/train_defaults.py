@@ -60,6 +60,14 @@ VARIANTS = {
     "d_kaiming_lrd1e-4_roll": ["model.critic_init=he", "train.lr_d=1e-4", "train.d_roll=uniform"],
     "d_kaiming_lrd1e-4_views4_roll": ["model.critic_init=he", "train.lr_d=1e-4", "train.random_views=4",
                                       "train.d_roll=uniform"],
+    # R1-regularised critics (train.r1_weight = γ) instead of, or besides, the gate
+    "d_kaiming_lrd1e-4_r1_1_ungated": ["model.critic_init=he", "train.lr_d=1e-4", "train.r1_weight=1",
+                                       "train.d_gate=null"],
+    "d_kaiming_lrd1e-4_r1_10_ungated": ["model.critic_init=he", "train.lr_d=1e-4", "train.r1_weight=10",
+                                        "train.d_gate=null"],
+    "d_kaiming_lrd4e-4_r1_1_ungated": ["model.critic_init=he", "train.lr_d=4e-4", "train.r1_weight=1",
+                                       "train.d_gate=null"],
+    "d_kaiming_lrd1e-4_r1_1": ["model.critic_init=he", "train.lr_d=1e-4", "train.r1_weight=1"],
 }
 
 

@@ -140,7 +140,10 @@ class TrainConfig:
     which it does ungated (docs/training.md); d_steps: D (or D3) updates per G update, each on a
     fresh loss, in every mode; d_roll: 'none' | 'uniform': D sees every real and rendered image
     turned in-plane by its own random angle, so that the tilt of views drawn in the input camera's
-    frame cannot give fakes away (:mod:`mitsuba_platonic.train.roll`, docs/training.md)."""
+    frame cannot give fakes away (:mod:`mitsuba_platonic.train.roll`, docs/training.md);
+    r1_weight: γ of the R1 penalty γ/2 · E‖∇ₓD(x)‖² on real images (Mescheder et al. 2018),
+    added to every critic's non-saturating loss (0: none; WGAN-GP has its own penalty)
+    (:func:`mitsuba_platonic.train.losses.r1_penalty`, docs/training.md)."""
 
     task: str = "reconstruction"
     mode: str = "platonic"
@@ -160,6 +163,7 @@ class TrainConfig:
     d_gate: Optional[float] = 0.6
     d_steps: int = 1
     d_roll: str = "none"
+    r1_weight: float = 0.0
 
 
 @dataclass
@@ -231,6 +235,11 @@ class Config:
                 raise ConfigError(f"train.{key}: expected a positive learning rate, got {getattr(self.train, key)!r}")
         if len(self.train.betas) != 2 or not all(0.0 <= b < 1.0 for b in self.train.betas):
             raise ConfigError(f"train.betas: expected two numbers in [0, 1), got {self.train.betas!r}")
+        if not self.train.r1_weight >= 0.0:
+            raise ConfigError(f"train.r1_weight: expected a number ≥ 0, got {self.train.r1_weight!r}")
+        if self.train.r1_weight > 0 and self.train.loss != "nonsaturating":
+            raise ConfigError("train.r1_weight: the R1 penalty is for the non-saturating loss; "
+                              f"train.loss {self.train.loss!r} has its own (train.gp_weight)")
         if self.train.d_gate is not None and not 0.0 < self.train.d_gate <= 1.0:
             raise ConfigError(f"train.d_gate: expected null or a number in (0, 1], got {self.train.d_gate!r}")
         if self.train.mode in MODES_3D and self.data.source != "procedural":

@@ -2,6 +2,7 @@
 
 Non-saturating (logits l):  L_D = softplus(−l_real) + softplus(l_fake)   (= −log D(x) − log(1 − D(G)))
                             L_G = softplus(−l_fake)                      (= −log D(G))
+R1 (optional, non-saturating): L_D += γ/2 · mean over reals of ‖∇_x l(x)‖²  (Mescheder et al. 2018)
 WGAN-GP:                    L_D = l_fake − l_real + λ (‖∇_x̂ D(x̂)‖ − 1)²,  x̂ = ε x + (1 − ε) G
                             L_G = −l_fake
 Soft accuracy of D on a batch (the authors' gate: D is updated only while it is ≤ 0.6, so D
@@ -21,7 +22,7 @@ from typing import Callable, Tuple
 import torch
 import torch.nn.functional as F
 
-__all__ = ["LOSSES", "d_loss", "g_loss", "gradient_penalty", "soft_accuracy_counts", "hard_accuracy_counts"]
+__all__ = ["LOSSES", "d_loss", "g_loss", "gradient_penalty", "r1_penalty", "soft_accuracy_counts", "hard_accuracy_counts"]
 
 #: The GAN losses of :func:`d_loss` / :func:`g_loss` (anything but the first is WGAN-GP).
 LOSSES = ("nonsaturating", "wgan-gp")
@@ -46,6 +47,18 @@ def gradient_penalty(D: Callable[[torch.Tensor], torch.Tensor], real: torch.Tens
     x = (eps.view(shape) * real + (1.0 - eps.view(shape)) * fake).requires_grad_(True)
     (grad,) = torch.autograd.grad(D(x).sum(), x, create_graph=True)
     return ((grad.flatten(1).norm(dim=1) - 1.0) ** 2).mean()
+
+
+def r1_penalty(D: Callable[[torch.Tensor], torch.Tensor], real: torch.Tensor) -> Tuple[torch.Tensor, torch.Tensor]:
+    """(logits D(x), mean over the batch of ‖∇ₓ D(x)‖₂²) at the real images x, differentiable in
+    D's weights: the R1 penalty (times γ/2), which keeps D flat on the data so that a D that
+    learns cannot sharpen into the steep boundary that makes G's gradients explode.
+
+    One forward pass serves both the logits of the loss and the penalty."""
+    x = real.detach().requires_grad_(True)
+    logits = D(x)
+    (grad,) = torch.autograd.grad(logits.sum(), x, create_graph=True)
+    return logits, grad.flatten(1).pow(2).sum(1).mean()
 
 
 def soft_accuracy_counts(real: torch.Tensor, fake: torch.Tensor) -> Tuple[torch.Tensor, torch.Tensor]:

@@ -69,7 +69,7 @@ from ..models import Discriminator, VolumeDiscriminator, init_critic_he, init_we
 from ..render.closed_form import rotate
 from ..views import DEFAULT_ELEVATION, from_angles, front_view, sample_views
 from .data import TrainingData
-from .losses import d_loss, g_loss, gradient_penalty, hard_accuracy_counts, soft_accuracy_counts
+from .losses import d_loss, g_loss, gradient_penalty, hard_accuracy_counts, r1_penalty, soft_accuracy_counts
 from .renderer import make_renderer
 from .roll import roll
 
@@ -271,7 +271,8 @@ class Trainer:
         """``d_steps`` updates of critic ``name`` ('D' or 'D3') on real vs (detached) fake.
 
         Each update evaluates a fresh loss with the critic's current weights (WGAN-GP adds its
-        penalty at x̂ = ε real + (1 − ε) fake). With a ``gate``, an update happens only while the
+        penalty at x̂ = ε real + (1 − ε) fake; ``r1_weight`` > 0 adds γ/2 ‖∇ₓD(x)‖² at the reals).
+        With a ``gate``, an update happens only while the
         critic's soft accuracy on this batch is ≤ gate; the first refusal ends the loop. Logs
         ``loss_<name>`` and ``acc_<name>`` (soft) / ``acc_<name>_hard`` of the first evaluation,
         and ``<name>_updated``, the share of the ``d_steps`` updates that happened.
@@ -280,8 +281,14 @@ class Trainer:
         key = name.lower()
         updates = 0
         for i in range(t.d_steps):
-            l_real, l_fake = critic(real), critic(fake)
+            if t.r1_weight > 0:                              # γ/2 ‖∇ₓD(x)‖² at the reals
+                l_real, r1 = r1_penalty(critic, real)
+            else:
+                l_real, r1 = critic(real), None
+            l_fake = critic(fake)
             loss = d_loss(t.loss, l_real, l_fake)
+            if r1 is not None:
+                loss = loss + 0.5 * t.r1_weight * r1
             if t.loss == "wgan-gp":
                 loss = loss + t.gp_weight * gradient_penalty(critic, real, fake, eps[: len(real)].to(self.device))
             acc = self._ratio(soft_accuracy_counts(l_real, l_fake))
