@@ -33,6 +33,7 @@ from mitsuba_platonic.render import render
 from mitsuba_platonic.views import to_angles
 from mitsuba_platonic.quickstart import CONFIG
 from mitsuba_platonic.train.data import collection_folder, load_training_data
+from mitsuba_platonic.train.losses import colour_tv
 from mitsuba_platonic.train.trainer import Trainer
 
 VARIANTS = {
@@ -67,6 +68,10 @@ VARIANTS = {
                                         "train.d_gate=null"],
     "d_kaiming_lrd4e-4_r1_1_ungated": ["model.critic_init=he", "train.lr_d=4e-4", "train.r1_weight=1",
                                        "train.d_gate=null"],
+    # the density-weighted colour TV prior on G (train.colour_tv), alone and with the R1 critic
+    "colour_tv0.1": ["train.colour_tv=0.1"],
+    "d_kaiming_lrd1e-4_r1_1_ungated_colour_tv0.1": ["model.critic_init=he", "train.lr_d=1e-4", "train.r1_weight=1",
+                                                    "train.d_gate=null", "train.colour_tv=0.1"],
     "d_kaiming_lrd1e-4_r1_1": ["model.critic_init=he", "train.lr_d=1e-4", "train.r1_weight=1"],
 }
 
@@ -94,29 +99,34 @@ def view_diagnosis(model, cfg, data, limit: int = 64) -> dict:
     for split, images, recs in (("held_out", data.held_out[:limit], data.held_out_records[:limit]),
                                 ("train", data.images[:limit], records[:limit])):
         recon = model.reconstruct(images).cpu()
-        iou, area = np.zeros(len(NOVEL_VIEWS)), np.zeros(len(NOVEL_VIEWS))
+        iou, area, mae = np.zeros(len(NOVEL_VIEWS)), np.zeros(len(NOVEL_VIEWS)), np.zeros(len(NOVEL_VIEWS))
         for v, truth in zip(recon, held_out_truths(recs, "ea")):
             with torch.no_grad():
                 a = render(v[None].expand(len(NOVEL_VIEWS), -1, -1, -1, -1).contiguous(), NOVEL_VIEWS, "ea")
                 b = render(truth[None].expand(len(NOVEL_VIEWS), -1, -1, -1, -1).contiguous(), NOVEL_VIEWS, "ea")
             iou += [M.silhouette_iou(a[k:k + 1], b[k:k + 1]) for k in range(len(NOVEL_VIEWS))]
+            mae += (a - b).abs().flatten(1).mean(1).numpy()
             area += ((a[:, 3] > M.SILHOUETTE_THRESHOLD).flatten(1).sum(1)
                      - (b[:, 3] > M.SILHOUETTE_THRESHOLD).flatten(1).sum(1)).numpy()
-        out[split] = {"iou": iou / len(recon), "area": area / len(recon)}
+        out[split] = {"iou": iou / len(recon), "area": area / len(recon), "mae": mae / len(recon)}
     return out
 
 
 def volume_scores(model, data, limit: int = 64) -> dict:
     """Means over held-out images of 3D IoU and chamfer distance against the ground truth in the
-    input frame, and of the reconstructions' depth stripes and half-opacity depth (voxels)."""
+    input frame, and of the reconstructions' depth stripes, half-opacity depth (voxels) and
+    density-weighted colour TV (:func:`~mitsuba_platonic.train.losses.colour_tv`: speckle), with
+    the truth's stripes and colour TV."""
     recon = model.reconstruct(data.held_out[:limit]).cpu()
     rows = []
     for v, truth in zip(recon, held_out_truths(data.held_out_records[:limit], "ea")):
         rows.append((M.volume_iou(v, truth), M.chamfer_distance(v, truth), M.depth_stripes(v),
-                     M.half_opacity_depth(v), M.depth_stripes(truth)))
+                     M.half_opacity_depth(v), M.depth_stripes(truth), float(colour_tv(v[None])),
+                     float(colour_tv(truth[None]))))
     a = np.array(rows, dtype=np.float64)
     return {"iou_3d": float(a[:, 0].mean()), "chamfer": float(a[:, 1].mean()), "stripes": float(a[:, 2].mean()),
-            "half_depth": float(np.nanmedian(a[:, 3])), "stripes_truth": float(a[:, 4].mean())}
+            "half_depth": float(np.nanmedian(a[:, 3])), "stripes_truth": float(a[:, 4].mean()),
+            "colour_tv": float(a[:, 5].mean()), "colour_tv_truth": float(a[:, 6].mean())}
 
 
 def run(name: str, overrides, steps: int, cache: Path, seed: int = 0) -> dict:
@@ -170,6 +180,8 @@ def main() -> None:
               f"{r['s_per_step']:.3f} |", flush=True)
         v = r["views"]
         notes.append(f"{name}: novel-view IoU per view (held-out) {np.round(v['held_out']['iou'], 3).tolist()}, "
+                     f"MAE per view {np.round(v['held_out']['mae'], 4).tolist()}, "
+                     f"colour TV {r['colour_tv']:.4f} (truth {r['colour_tv_truth']:.4f}), "
                      f"silhouette area − truth's (px) {np.round(v['held_out']['area'], 1).tolist()}; on training "
                      f"images: mean IoU {v['train']['iou'].mean():.3f}, per view {np.round(v['train']['iou'], 3).tolist()}")
     bb = rows[-1]

@@ -143,7 +143,9 @@ class TrainConfig:
     frame cannot give fakes away (:mod:`mitsuba_platonic.train.roll`, docs/training.md);
     r1_weight: γ of the R1 penalty γ/2 · E‖∇ₓD(x)‖² on real images (Mescheder et al. 2018),
     added to every critic's non-saturating loss (0: none; WGAN-GP has its own penalty)
-    (:func:`mitsuba_platonic.train.losses.r1_penalty`, docs/training.md)."""
+    (:func:`mitsuba_platonic.train.losses.r1_penalty`, docs/training.md); colour_tv: weight of
+    G's density-weighted colour total variation (EA, not 'gan3d'; 0: none)
+    (:func:`mitsuba_platonic.train.losses.colour_tv`, docs/training.md)."""
 
     task: str = "reconstruction"
     mode: str = "platonic"
@@ -164,6 +166,7 @@ class TrainConfig:
     d_steps: int = 1
     d_roll: str = "none"
     r1_weight: float = 0.0
+    colour_tv: float = 0.0
 
 
 @dataclass
@@ -240,6 +243,12 @@ class Config:
         if self.train.r1_weight > 0 and self.train.loss != "nonsaturating":
             raise ConfigError("train.r1_weight: the R1 penalty is for the non-saturating loss; "
                               f"train.loss {self.train.loss!r} has its own (train.gp_weight)")
+        if not self.train.colour_tv >= 0.0:
+            raise ConfigError(f"train.colour_tv: expected a number ≥ 0, got {self.train.colour_tv!r}")
+        if self.train.colour_tv > 0 and self.render.model != "ea":
+            raise ConfigError(f"train.colour_tv: colour needs render.model 'ea', got {self.render.model!r}")
+        if self.train.colour_tv > 0 and self.train.mode == "gan3d":
+            raise ConfigError("train.colour_tv: the 'gan3d' baseline trains G on volumes alone, without priors")
         if self.train.d_gate is not None and not 0.0 < self.train.d_gate <= 1.0:
             raise ConfigError(f"train.d_gate: expected null or a number in (0, 1], got {self.train.d_gate!r}")
         if self.train.mode in MODES_3D and self.data.source != "procedural":

@@ -3,6 +3,9 @@
 Non-saturating (logits l):  L_D = softplus(−l_real) + softplus(l_fake)   (= −log D(x) − log(1 − D(G)))
                             L_G = softplus(−l_fake)                      (= −log D(G))
 R1 (optional, non-saturating): L_D += γ/2 · mean over reals of ‖∇_x l(x)‖²  (Mescheder et al. 2018)
+Colour TV (optional prior on G, EA volumes [r, g, b, ρ]): over every pair (i, j) of face-neighbouring
+voxels, w_ij = min(ρ_i, ρ_j) (held constant) and
+                            L_tv = Σ w_ij ‖c_i − c_j‖₁ / (3 Σ w_ij)
 WGAN-GP:                    L_D = l_fake − l_real + λ (‖∇_x̂ D(x̂)‖ − 1)²,  x̂ = ε x + (1 − ε) G
                             L_G = −l_fake
 Soft accuracy of D on a batch (the authors' gate: D is updated only while it is ≤ 0.6, so D
@@ -22,7 +25,7 @@ from typing import Callable, Tuple
 import torch
 import torch.nn.functional as F
 
-__all__ = ["LOSSES", "d_loss", "g_loss", "gradient_penalty", "r1_penalty", "soft_accuracy_counts", "hard_accuracy_counts"]
+__all__ = ["LOSSES", "d_loss", "g_loss", "gradient_penalty", "r1_penalty", "colour_tv", "soft_accuracy_counts", "hard_accuracy_counts"]
 
 #: The GAN losses of :func:`d_loss` / :func:`g_loss` (anything but the first is WGAN-GP).
 LOSSES = ("nonsaturating", "wgan-gp")
@@ -59,6 +62,29 @@ def r1_penalty(D: Callable[[torch.Tensor], torch.Tensor], real: torch.Tensor) ->
     logits = D(x)
     (grad,) = torch.autograd.grad(logits.sum(), x, create_graph=True)
     return logits, grad.flatten(1).pow(2).sum(1).mean()
+
+
+def colour_tv(volume: torch.Tensor) -> torch.Tensor:
+    """The density-weighted total variation of an EA volume's colour (formula above): the mean
+    absolute colour step between neighbouring voxels where *both* hold matter.
+
+    Where the input view cannot see (behind the visible surface, T ≈ 0) nothing else constrains
+    colour but the critic; this prior carries the visible colour into the body instead of leaving
+    it to G's noise. The weights are detached: the term moves colour, never density (it cannot
+    be lowered by emptying the volume). Empty regions (w = 0) cost nothing; a volume without
+    matter gives 0."""
+    if volume.dim() != 5 or volume.shape[1] != 4:
+        raise ValueError(f"colour_tv: expected an EA volume (B, 4, D, H, W), got {tuple(volume.shape)}")
+    c, ρ = volume[:, :3], volume[:, 3:].detach()
+    num = volume.new_zeros(())
+    den = volume.new_zeros(())
+    for axis in (2, 3, 4):
+        n = volume.shape[axis]
+        w = torch.minimum(ρ.narrow(axis, 0, n - 1), ρ.narrow(axis, 1, n - 1))       # both voxels dense
+        step = (c.narrow(axis, 0, n - 1) - c.narrow(axis, 1, n - 1)).abs().sum(1, keepdim=True)
+        num = num + (w * step).sum()
+        den = den + w.sum()
+    return num / (3.0 * den).clamp_min(1e-12)
 
 
 def soft_accuracy_counts(real: torch.Tensor, fake: torch.Tensor) -> Tuple[torch.Tensor, torch.Tensor]:

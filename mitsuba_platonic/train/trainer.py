@@ -69,7 +69,8 @@ from ..models import Discriminator, VolumeDiscriminator, init_critic_he, init_we
 from ..render.closed_form import rotate
 from ..views import DEFAULT_ELEVATION, from_angles, front_view, sample_views
 from .data import TrainingData
-from .losses import d_loss, g_loss, gradient_penalty, hard_accuracy_counts, r1_penalty, soft_accuracy_counts
+from .losses import (colour_tv, d_loss, g_loss, gradient_penalty, hard_accuracy_counts, r1_penalty,
+                     soft_accuracy_counts)
 from .renderer import make_renderer
 from .roll import roll
 
@@ -245,6 +246,8 @@ class Trainer:
         terms = {"adv2d": loss_adv}
         if t.mode == "platonic3d":
             terms["adv3d"] = t.weight_3d * loss_g3
+        if t.colour_tv > 0:                                  # colour carried into the unseen body
+            terms["colour_tv"] = t.colour_tv * colour_tv(v)
         if rec and t.rec_target == "volume":
             terms["rec3d"] = t.rec_weight * self._volume_rec(v_input, idx, out)
         elif rec:
@@ -261,8 +264,8 @@ class Trainer:
 
     def _g_objective(self, terms: Dict[str, torch.Tensor]) -> torch.Tensor:
         """G's (and E's) loss: the sum of its weighted terms, named 'adv2d' (D on rendered views),
-        'adv3d' (D3 on volumes), 'rec' (the input view) and 'rec3d' (the input image's ground-truth
-        volume). One place that sees every term, so
+        'adv3d' (D3 on volumes), 'rec' (the input view), 'rec3d' (the input image's ground-truth
+        volume) and 'colour_tv' (a prior, when its weight is set). One place that sees every term, so
         the tests can check which of them reach G."""
         return sum(terms.values())
 
