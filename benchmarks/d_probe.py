@@ -33,6 +33,7 @@ from mitsuba_platonic.train.data import load_training_data
 from mitsuba_platonic.train.losses import d_loss
 from mitsuba_platonic.train.trainer import Trainer
 from mitsuba_platonic.views import front_view, sample_views
+from presets import add_preset_argument, expand
 
 CONFIG = Path(__file__).resolve().parents[1] / "configs" / "quickstart.yaml"
 
@@ -48,10 +49,11 @@ def main() -> None:
     ap.add_argument("--cache", type=Path, default=Path("data/bench_defaults"))
     ap.add_argument("--threads", type=int, default=2, help="torch threads")
     ap.add_argument("--set", dest="overrides", action="append", default=[], metavar="KEY=VALUE",
-                    help="a config override of the quickstart's (docs/training.md's table: model.upsample=transposed)")
+                    help="a config override of the quickstart's")
+    add_preset_argument(ap)
     args = ap.parse_args()
     torch.set_num_threads(args.threads)
-    cfg = load_config(CONFIG, [f"data.cache={args.cache}", *args.overrides])
+    cfg = load_config(CONFIG, [f"data.cache={args.cache}", *expand(args.presets, args.overrides)])
     data = load_training_data(cfg, progress=False)
     trainer = Trainer(cfg, data, torch.device("cpu"))
     t0 = time.perf_counter()

@@ -35,6 +35,7 @@ from mitsuba_platonic.quickstart import CONFIG
 from mitsuba_platonic.train.data import collection_folder, load_training_data
 from mitsuba_platonic.train.losses import colour_tv
 from mitsuba_platonic.train.trainer import Trainer
+from presets import add_preset_argument, expand
 
 VARIANTS = {
     "default": [],                                                     # configs/quickstart.yaml as it is
@@ -72,6 +73,8 @@ VARIANTS = {
     "colour_tv0.1": ["train.colour_tv=0.1"],
     "d_kaiming_lrd1e-4_r1_1_ungated_colour_tv0.1": ["model.critic_init=he", "train.lr_d=1e-4", "train.r1_weight=1",
                                                     "train.d_gate=null", "train.colour_tv=0.1"],
+    "d_kaiming_lrd1e-4_r1_1_ungated_colour_tv1": ["model.critic_init=he", "train.lr_d=1e-4", "train.r1_weight=1",
+                                                  "train.d_gate=null", "train.colour_tv=1"],
     "d_kaiming_lrd1e-4_r1_1": ["model.critic_init=he", "train.lr_d=1e-4", "train.r1_weight=1"],
 }
 
@@ -156,7 +159,8 @@ def main() -> None:
     ap.add_argument("--threads", type=int, default=2, help="torch threads")
     ap.add_argument("--set", dest="overrides", action="append", default=[], metavar="KEY=VALUE",
                     help="a config override for every variant (before the variant's own), e.g. "
-                         "model.upsample=transposed for the tables measured before the quickstart resized G's last stage")
+                         "model.critic_init=dcgan")
+    add_preset_argument(ap)
     ap.add_argument("--seeds", type=int, nargs="+", default=[0],
                     help="run.seed of each repetition (networks and batches; the collection stays the same)")
     args = ap.parse_args()
@@ -169,7 +173,7 @@ def main() -> None:
     print("|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|", flush=True)
     notes = []
     for name, seed in [(n, s) for n in args.variants.split(",") for s in args.seeds]:
-        r = run(name, [*args.overrides, *VARIANTS[name]], args.steps, args.cache, seed)
+        r = run(name, [*expand(args.presets, args.overrides), *VARIANTS[name]], args.steps, args.cache, seed)
         rows.append(r)
         if len(args.seeds) > 1:
             name = f"{name}, seed {seed}"

@@ -1,0 +1,30 @@
+"""Named groups of config overrides for the benchmarks that train the quickstart's config
+(``train_defaults.py``, ``d_probe.py``): the quickstart as it was when a table in
+docs/training.md was measured, so that table stays reproducible after a default moved on.
+
+    --preset gated_d --preset transposed_g      # the quickstart before both changes
+"""
+
+from __future__ import annotations
+
+from typing import Dict, List
+
+PRESETS: Dict[str, List[str]] = {
+    # the paper's G: every ×2 stage a transposed convolution (the quickstart's before resize_last)
+    "transposed_g": ["model.upsample=transposed"],
+    # the paper's D set-up: DCGAN initialisation, lr_D 2e-5, the soft-accuracy gate at 0.6, no R1
+    # (the quickstart's before the R1 critic)
+    "gated_d": ["model.critic_init=dcgan", "train.lr_d=2e-5", "train.d_gate=0.6", "train.r1_weight=0"],
+}
+
+
+def add_preset_argument(ap) -> None:
+    """``--preset NAME`` (repeatable) on an argparse parser; see :func:`expand`."""
+    ap.add_argument("--preset", dest="presets", action="append", default=[], choices=sorted(PRESETS),
+                    help="a named group of overrides applied before --set (benchmarks/presets.py): "
+                         "the quickstart as it was for the older tables of docs/training.md")
+
+
+def expand(presets: List[str], overrides: List[str]) -> List[str]:
+    """The presets' overrides, in the order given, then ``overrides`` (which win)."""
+    return [o for p in presets for o in PRESETS[p]] + list(overrides)
