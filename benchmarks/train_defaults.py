@@ -69,13 +69,11 @@ VARIANTS = {
                                         "train.d_gate=null"],
     "d_kaiming_lrd4e-4_r1_1_ungated": ["model.critic_init=he", "train.lr_d=4e-4", "train.r1_weight=1",
                                        "train.d_gate=null"],
-    # the density-weighted colour TV prior on G (train.colour_tv), alone and with the R1 critic
-    "colour_tv0.1": ["train.colour_tv=0.1"],
+    # the density-weighted colour TV prior on G (train.colour_tv), with the R1 critic
     "d_kaiming_lrd1e-4_r1_1_ungated_colour_tv0.1": ["model.critic_init=he", "train.lr_d=1e-4", "train.r1_weight=1",
                                                     "train.d_gate=null", "train.colour_tv=0.1"],
     "d_kaiming_lrd1e-4_r1_1_ungated_colour_tv1": ["model.critic_init=he", "train.lr_d=1e-4", "train.r1_weight=1",
                                                   "train.d_gate=null", "train.colour_tv=1"],
-    "d_kaiming_lrd1e-4_r1_1": ["model.critic_init=he", "train.lr_d=1e-4", "train.r1_weight=1"],
 }
 
 

@@ -238,13 +238,11 @@ class Config:
                 raise ConfigError(f"train.{key}: expected a positive learning rate, got {getattr(self.train, key)!r}")
         if len(self.train.betas) != 2 or not all(0.0 <= b < 1.0 for b in self.train.betas):
             raise ConfigError(f"train.betas: expected two numbers in [0, 1), got {self.train.betas!r}")
-        if not self.train.r1_weight >= 0.0:
-            raise ConfigError(f"train.r1_weight: expected a number ≥ 0, got {self.train.r1_weight!r}")
+        _non_negative("train.r1_weight", self.train.r1_weight)
         if self.train.r1_weight > 0 and self.train.loss != "nonsaturating":
             raise ConfigError("train.r1_weight: the R1 penalty is for the non-saturating loss; "
                               f"train.loss {self.train.loss!r} has its own (train.gp_weight)")
-        if not self.train.colour_tv >= 0.0:
-            raise ConfigError(f"train.colour_tv: expected a number ≥ 0, got {self.train.colour_tv!r}")
+        _non_negative("train.colour_tv", self.train.colour_tv)
         if self.train.colour_tv > 0 and self.render.model != "ea":
             raise ConfigError(f"train.colour_tv: colour needs render.model 'ea', got {self.render.model!r}")
         if self.train.colour_tv > 0 and self.train.mode == "gan3d":

@@ -215,7 +215,7 @@ def test_r1_weight_adds_half_gamma_times_the_penalty_at_the_reals_to_the_critic_
 
 def test_r1_weight_is_refused_when_negative_or_with_wgan_gp():
     from mitsuba_platonic.config import ConfigError
-    with pytest.raises(ConfigError, match=r"train.r1_weight: expected a number ≥ 0, got -1"):
+    with pytest.raises(ConfigError, match=r"train.r1_weight: expected a non-negative value, got -1"):
         load_config(None, ["train.r1_weight=-1"])
     with pytest.raises(ConfigError, match="train.r1_weight: the R1 penalty is for the non-saturating loss"):
         load_config(None, ["train.r1_weight=1", "train.loss=wgan-gp"])

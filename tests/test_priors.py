@@ -58,7 +58,7 @@ def test_colour_tv_refuses_a_volume_without_colour():
 def test_the_config_refuses_colour_tv_without_colour_or_below_zero():
     with pytest.raises(ConfigError, match="train.colour_tv: colour needs render.model 'ea', got 'vh'"):
         load_config(None, ["train.colour_tv=0.1", "render.model=vh", "data.formation=vh"])
-    with pytest.raises(ConfigError, match=r"train.colour_tv: expected a number ≥ 0, got -0.5"):
+    with pytest.raises(ConfigError, match=r"train.colour_tv: expected a non-negative value, got -0.5"):
         load_config(None, ["train.colour_tv=-0.5"])
     assert load_config(None, []).train.colour_tv == 0.0
 
