@@ -74,6 +74,11 @@ VARIANTS = {
                                                     "train.d_gate=null", "train.colour_tv=0.1"],
     "d_kaiming_lrd1e-4_r1_1_ungated_colour_tv1": ["model.critic_init=he", "train.lr_d=1e-4", "train.r1_weight=1",
                                                   "train.d_gate=null", "train.colour_tv=1"],
+    # a moving average of E's and G's weights (train.ema), scored instead of the trained weights
+    "ema0.99": ["train.ema=0.99"],
+    "ema0.999": ["train.ema=0.999"],
+    # the same E and G trained from 3D ground truth (the 3D-GAN's terms): what they can reach
+    "gan3d_volume": ["train.mode=gan3d", "train.rec_target=volume"],
 }
 
 
@@ -113,6 +118,14 @@ def view_diagnosis(model, cfg, data, limit: int = 64) -> dict:
     return out
 
 
+def _centroid(volume: torch.Tensor) -> np.ndarray:
+    """The density-weighted centre of a ``(C, N, N, N)`` volume, in voxels along its three axes
+    (depth first: axis 0 runs along the input camera's rays)."""
+    ρ = volume[-1].double()
+    grid = torch.meshgrid(*[torch.arange(n, dtype=torch.float64) for n in ρ.shape], indexing="ij")
+    return np.array([float((ρ * g).sum() / ρ.sum().clamp_min(1e-12)) for g in grid])
+
+
 def volume_scores(model, data, limit: int = 64) -> dict:
     """Means over held-out images of 3D IoU and chamfer distance against the ground truth in the
     input frame, and of the reconstructions' depth stripes, half-opacity depth (voxels) and
@@ -123,9 +136,9 @@ def volume_scores(model, data, limit: int = 64) -> dict:
     for v, truth in zip(recon, held_out_truths(data.held_out_records[:limit], "ea")):
         rows.append((M.volume_iou(v, truth), M.chamfer_distance(v, truth), M.depth_stripes(v),
                      M.half_opacity_depth(v), M.depth_stripes(truth), float(colour_tv(v[None])),
-                     float(colour_tv(truth[None]))))
+                     float(colour_tv(truth[None])), *(_centroid(v) - _centroid(truth))))
     a = np.array(rows, dtype=np.float64)
-    return {"iou_3d": float(a[:, 0].mean()), "chamfer": float(a[:, 1].mean()), "stripes": float(a[:, 2].mean()),
+    return {"centroid_offset": a[:, 7:10].mean(0), "centroid_error": np.abs(a[:, 7:10]).mean(0),"iou_3d": float(a[:, 0].mean()), "chamfer": float(a[:, 1].mean()), "stripes": float(a[:, 2].mean()),
             "half_depth": float(np.nanmedian(a[:, 3])), "stripes_truth": float(a[:, 4].mean()),
             "colour_tv": float(a[:, 5].mean()), "colour_tv_truth": float(a[:, 6].mean())}
 
@@ -139,14 +152,19 @@ def run(name: str, overrides, steps: int, cache: Path, seed: int = 0) -> dict:
     t0 = time.perf_counter()
     logs = [trainer.step(s) for s in range(steps)]
     seconds = time.perf_counter() - t0
-    m = held_out_scores(trainer.model, data, cfg.render.model)
-    m.update(volume_scores(trainer.model, data))
-    m["views"] = view_diagnosis(trainer.model, cfg, data)
-    acc = np.array([o["acc_d"] for o in logs])
-    hard = np.array([o["acc_d_hard"] for o in logs])
-    return {"name": name, **m, "d_updated": float(np.mean([o["d_updated"] for o in logs])),
+    model = trainer.inference_model                          # the moving average with train.ema
+    m = held_out_scores(model, data, cfg.render.model)
+    m.update(volume_scores(model, data))
+    m["views"] = view_diagnosis(model, cfg, data)
+    if model is not trainer.model:                           # the same run's trained weights, for comparison
+        m["trained"] = held_out_scores(trainer.model, data, cfg.render.model)
+    d = "d" if "acc_d" in logs[0] else "d3"                   # the 3D-GAN ('gan3d') has only D3
+    rec = "loss_rec" if "loss_rec" in logs[0] else "loss_rec3d"
+    acc = np.array([o[f"acc_{d}"] for o in logs])
+    hard = np.array([o[f"acc_{d}_hard"] for o in logs])
+    return {"name": name, **m, "d_updated": float(np.mean([o[f"{d}_updated"] for o in logs])),
             "acc_soft": (acc.min(), acc.max()), "acc_last": float(acc[-250:].mean()), "hard_over_06": float((hard > 0.6).mean()),
-            "loss_rec": float(np.mean([o["loss_rec"] for o in logs[-50:]])), "s_per_step": seconds / steps}
+            "loss_rec": float(np.mean([o[rec] for o in logs[-50:]])), "s_per_step": seconds / steps}
 
 
 def main() -> None:
@@ -184,8 +202,13 @@ def main() -> None:
         notes.append(f"{name}: novel-view IoU per view (held-out) {np.round(v['held_out']['iou'], 3).tolist()}, "
                      f"MAE per view {np.round(v['held_out']['mae'], 4).tolist()}, "
                      f"colour TV {r['colour_tv']:.4f} (truth {r['colour_tv_truth']:.4f}), "
+                     f"centroid − truth's (voxels; depth, then across) mean {np.round(r['centroid_offset'], 2).tolist()}, "
+                     f"mean |·| {np.round(r['centroid_error'], 2).tolist()}, "
                      f"silhouette area − truth's (px) {np.round(v['held_out']['area'], 1).tolist()}; on training "
-                     f"images: mean IoU {v['train']['iou'].mean():.3f}, per view {np.round(v['train']['iou'], 3).tolist()}")
+                     f"images: mean IoU {v['train']['iou'].mean():.3f}, per view {np.round(v['train']['iou'], 3).tolist()}"
+                     + (f"; the trained weights (not the average): novel MAE {r['trained']['novel_view_mae']:.4f}, "
+                        f"IoU {r['trained']['novel_view_iou']:.3f}, input MAE {r['trained']['input_view_mae']:.4f}, "
+                        f"IoU {r['trained']['input_view_iou']:.3f}" if "trained" in r else ""))
     bb = rows[-1]
     print(f"| billboard | {bb['billboard_novel_view_mae']:.4f} | {bb['billboard_novel_view_iou']:.3f} | | | | | | | "
           f"| | | | | |")

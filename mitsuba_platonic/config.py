@@ -145,7 +145,10 @@ class TrainConfig:
     added to every critic's non-saturating loss (0: none; WGAN-GP has its own penalty)
     (:func:`mitsuba_platonic.train.losses.r1_penalty`, docs/training.md); colour_tv: weight of
     G's density-weighted colour total variation (EA, not 'gan3d'; 0: none)
-    (:func:`mitsuba_platonic.train.losses.colour_tv`, docs/training.md)."""
+    (:func:`mitsuba_platonic.train.losses.colour_tv`, docs/training.md); ema: null, or the decay β
+    of an exponential moving average of E's and G's weights, which samples, checkpoints' inference
+    weights and evaluation then use (:meth:`mitsuba_platonic.train.trainer.Trainer.inference_model`,
+    docs/training.md)."""
 
     task: str = "reconstruction"
     mode: str = "platonic"
@@ -167,6 +170,7 @@ class TrainConfig:
     d_roll: str = "none"
     r1_weight: float = 0.0
     colour_tv: float = 0.0
+    ema: Optional[float] = None
 
 
 @dataclass
@@ -247,6 +251,8 @@ class Config:
             raise ConfigError(f"train.colour_tv: colour needs render.model 'ea', got {self.render.model!r}")
         if self.train.colour_tv > 0 and self.train.mode == "gan3d":
             raise ConfigError("train.colour_tv: the 'gan3d' baseline trains G on volumes alone, without priors")
+        if self.train.ema is not None and not 0.0 < self.train.ema < 1.0:
+            raise ConfigError(f"train.ema: expected null or a decay in (0, 1), e.g. 0.999, got {self.train.ema!r}")
         if self.train.d_gate is not None and not 0.0 < self.train.d_gate <= 1.0:
             raise ConfigError(f"train.d_gate: expected null or a number in (0, 1], got {self.train.d_gate!r}")
         if self.train.mode in MODES_3D and self.data.source != "procedural":

@@ -91,10 +91,15 @@ class Model(nn.Module):
 
     @classmethod
     def from_read(cls, ckpt) -> "Model":
-        """The model of a :class:`~mitsuba_platonic.checkpoint.Checkpoint` already read."""
-        nets = ckpt.state["trainer"]["nets"]
+        """The model of a :class:`~mitsuba_platonic.checkpoint.Checkpoint` already read: the moving
+        average of E's and G's weights when the run kept one (``train.ema``), else E and G as trained."""
+        trainer = ckpt.state["trainer"]
+        nets = trainer["nets"]
         model = cls.from_config(ckpt.config, init=False)
-        model.load_state_dict({k: v for k, v in nets.items() if k.startswith(("E.", "G."))})
+        if "ema" in trainer:
+            model.load_state_dict(trainer["ema"])
+        else:
+            model.load_state_dict({k: v for k, v in nets.items() if k.startswith(("E.", "G."))})
         model.step, model.origin = ckpt.step, ckpt.path
         device = next(iter(nets.values())).device if nets else torch.device("cpu")
         return model.to(device)

@@ -385,7 +385,7 @@ def _train(cfg: Config, run_dir: Path, resume: bool, progress: bool, stop_at: Op
                                 | {"img/s": f"{rate:.1f}"})
             bar.update(1)
             if rank == 0 and step % cfg.run.sample_every == 0:
-                write_samples(trainer.model, sample_inputs, run_dir / "samples", step, samples_seed)
+                write_samples(trainer.inference_model, sample_inputs, run_dir / "samples", step, samples_seed)
             if step % cfg.run.checkpoint_every == 0:
                 if log:                                      # first: the rows after a checkpoint are dropped on
                     log.flush()                              # resume, rows missing before it would stay lost
@@ -415,7 +415,7 @@ def _train(cfg: Config, run_dir: Path, resume: bool, progress: bool, stop_at: Op
                     log.flush()
                     checkpoint(step)
                     if step == cfg.run.steps:
-                        write_samples(trainer.model, sample_inputs, run_dir / "samples", step, samples_seed)
+                        write_samples(trainer.inference_model, sample_inputs, run_dir / "samples", step, samples_seed)
             except OSError as e:                             # the final samples on a full disk
                 clean = False
                 raise RunError(f"after step {step}: {e}; {saved['path']} holds step {saved['step']}") from None

@@ -54,6 +54,7 @@ fake batch, gated by the soft accuracy when a gate is set.
 
 from __future__ import annotations
 
+import copy
 import math
 from typing import Dict, Optional, Tuple
 
@@ -126,6 +127,9 @@ class Trainer:
                 if name in self.nets:
                     self.nets[name].apply(init_critic_he)
         self.nets.to(device)
+        #: train.ema: the moving average of E's and G's weights (a copy of ``model``, never trained)
+        self.ema: Optional[Model] = (copy.deepcopy(self.model).requires_grad_(False)
+                                     if cfg.train.ema is not None else None)
         self.modules: Dict[str, nn.Module] = dict(self.nets.items())
         if world > 1:
             from torch.nn.parallel import DistributedDataParallel as DDP
@@ -153,6 +157,8 @@ class Trainer:
         state = {"nets": self.nets.state_dict(), "opt_g": self.opt_g.state_dict(), "opt_d": self.opt_d.state_dict()}
         if self.opt_d3 is not None:
             state["opt_d3"] = self.opt_d3.state_dict()
+        if self.ema is not None:
+            state["ema"] = self.ema.state_dict()
         return state
 
     def load_state_dict(self, state: Dict[str, object]) -> None:
@@ -161,6 +167,26 @@ class Trainer:
         self.opt_d.load_state_dict(state["opt_d"])
         if self.opt_d3 is not None:
             self.opt_d3.load_state_dict(state["opt_d3"])
+        if self.ema is not None:
+            self.ema.load_state_dict(state["ema"])
+
+    @property
+    def inference_model(self) -> Model:
+        """The model that samples, evaluation and exports use: the moving average ``ema`` when
+        ``train.ema`` is set, else the trained ``model`` itself."""
+        return self.ema if self.ema is not None else self.model
+
+    def _update_ema(self, step: int) -> None:
+        """θ_ema ← β_t θ_ema + (1 − β_t) θ for E's and G's weights, after G's update of ``step``
+        (0-based), with β_t = min(β, (1 + t) / (10 + t)): early on, while the weights move fast, the
+        average forgets quickly (β_0 = 0.1), and it reaches β after about 10 / (1 − β) steps.
+        Buffers (BatchNorm's running statistics) are copied, not averaged."""
+        β = min(self.cfg.train.ema, (1.0 + step) / (10.0 + step))
+        with torch.no_grad():
+            for θ_ema, θ in zip(self.ema.parameters(), self.model.parameters()):
+                θ_ema.lerp_(θ, 1.0 - β)
+            for b_ema, b in zip(self.ema.buffers(), self.model.buffers()):
+                b_ema.copy_(b)
 
     # -- one step ---------------------------------------------------------------------------
 
@@ -259,6 +285,8 @@ class Trainer:
         self.opt_g.zero_grad(set_to_none=True)
         loss.backward()
         self.opt_g.step()
+        if self.ema is not None:
+            self._update_ema(step)
         out["loss_g"] = float(self._all_sum(loss_adv.detach().cpu()) / self.world)
         return out
 
@@ -361,5 +389,7 @@ class Trainer:
         self.opt_g.zero_grad(set_to_none=True)
         loss_g.backward()
         self.opt_g.step()
+        if self.ema is not None:
+            self._update_ema(step)
         out["loss_g"] = float(self._all_sum(loss_g.detach().cpu()) / self.world)
         return out
