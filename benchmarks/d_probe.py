@@ -28,6 +28,7 @@ import numpy as np
 import torch
 
 from mitsuba_platonic.config import load_config
+from mitsuba_platonic.model import critic_config
 from mitsuba_platonic.models import Discriminator, init_critic_he, init_weights
 from mitsuba_platonic.train.data import load_training_data
 from mitsuba_platonic.train.losses import d_loss
@@ -86,7 +87,7 @@ def main() -> None:
     for init, lr in CRITICS:
         for kind in KINDS:
             torch.manual_seed(0)
-            D = Discriminator(trainer.model.net)
+            D = Discriminator(critic_config(cfg))
             D.apply(init_weights)
             if init == "he":
                 D.apply(init_critic_he)

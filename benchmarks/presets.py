@@ -2,7 +2,7 @@
 (``train_defaults.py``, ``d_probe.py``): the quickstart as it was when a table in
 docs/training.md was measured, so that table stays reproducible after a default moved on.
 
-    --preset gated_d --preset transposed_g      # the quickstart before both changes
+    --preset gated_d --preset transposed_g --preset dcgan_eg     # the quickstart before all three changes
 """
 
 from __future__ import annotations
@@ -15,6 +15,9 @@ PRESETS: Dict[str, List[str]] = {
     # the paper's D set-up: DCGAN initialisation, lr_D 2e-5, the soft-accuracy gate at 0.6, no R1
     # (the quickstart's before the R1 critic)
     "gated_d": ["model.critic_init=dcgan", "train.lr_d=2e-5", "train.d_gate=0.6", "train.r1_weight=0"],
+    # E and G from the DCGAN initialisation, D as wide as they are (the quickstart's before
+    # model.init: he and model.critic_width: 32)
+    "dcgan_eg": ["model.init=dcgan", "model.critic_width=null"],
 }
 
 

@@ -79,6 +79,12 @@ VARIANTS = {
     "ema0.999": ["train.ema=0.999"],
     # the same E and G trained from 3D ground truth (the 3D-GAN's terms): what they can reach
     "gan3d_volume": ["train.mode=gan3d", "train.rec_target=volume"],
+    # He's initialisation of E and G (model.init), a wider D (model.critic_width)
+    "init_he": ["model.init=he"],
+    "init_he_gan3d_volume": ["model.init=he", "train.mode=gan3d", "train.rec_target=volume"],
+    "critic32": ["model.critic_width=32"],
+    "init_he_critic32": ["model.init=he", "model.critic_width=32"],
+    "init_he_critic64": ["model.init=he", "model.critic_width=64"],
 }
 
 

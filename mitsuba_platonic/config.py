@@ -28,7 +28,7 @@ from pydantic_core import SchemaValidator, core_schema
 from .data.collection import FORMATIONS
 from .data.photos import BACKGROUNDS, CROPS, PhotoOptions
 from .errors import UserError
-from .models import CRITIC_INITS, NORMS, RESOLUTIONS, UPSAMPLES
+from .models import CRITIC_INITS, INITS, NORMS, RESOLUTIONS, UPSAMPLES
 from .render.settings import RenderSettings as RenderConfig
 from .views import DISTRIBUTIONS
 
@@ -109,7 +109,13 @@ class ModelConfig:
     D3 start, 'dcgan' (N(0, 0.02), as every network and the paper) | 'he' (He's initialisation
     for LeakyReLU, drawn from the run's seed after the others): without normalisation a DCGAN
     critic's logits are ~5e-4 and it does not learn in the quickstart's 2,000 steps
-    (docs/training.md, "A discriminator that never learns")."""
+    (docs/training.md, "A discriminator that never learns"). init: how E and G start, 'dcgan'
+    (the paper's) | 'he' (He's, scaled by each layer's fan-in; G's output layer keeps the start
+    at density 1/R: mitsuba_platonic.models.init_he): without normalisation the DCGAN
+    initialisation gives every input image the same first volume (docs/training.md).
+    critic_width: channels of the critics' (D's, D3's) first layer, doubling per stage as E's;
+    null: ``width``. D is a 2D network: at 32 it costs little next to G's 3D convolutions
+    (docs/training.md, "A wider D")."""
 
     resolution: int = 32
     latent: int = 64
@@ -118,6 +124,8 @@ class ModelConfig:
     encoder_hidden: int = 0
     upsample: str = "transposed"
     critic_init: str = "dcgan"
+    init: str = "dcgan"
+    critic_width: Optional[int] = None
 
 
 @dataclass
@@ -224,6 +232,9 @@ class Config:
         _choice("model.norm", self.model.norm, NORMS)
         _choice("model.upsample", self.model.upsample, UPSAMPLES)
         _choice("model.critic_init", self.model.critic_init, CRITIC_INITS)
+        _choice("model.init", self.model.init, INITS)
+        if self.model.critic_width is not None:
+            _positive("model.critic_width", self.model.critic_width)
         _non_negative("model.encoder_hidden", self.model.encoder_hidden)
         try:
             self.render.validate()                           # the renderer's settings check themselves

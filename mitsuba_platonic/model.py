@@ -18,6 +18,7 @@ and G under the same names, next to the critics D and D3 that only training need
 
 from __future__ import annotations
 
+import dataclasses
 from pathlib import Path
 from typing import Optional, Union
 
@@ -31,7 +32,7 @@ from .models import Encoder, Generator, NetConfig, init_weights
 from .render.settings import RenderSettings
 from .volume import CHANNELS
 
-__all__ = ["Model", "net_config", "RING_VIEWS", "view_codes"]
+__all__ = ["Model", "net_config", "critic_config", "RING_VIEWS", "view_codes"]
 
 #: Views of the PrGAN-style baseline: azimuths k · 360°/8 on one elevation ring (Gadelha et al.).
 RING_VIEWS = 8
@@ -49,6 +50,11 @@ def net_config(cfg: Config) -> NetConfig:
                      latent=cfg.model.latent, width=cfg.model.width, norm=cfg.model.norm,
                      encoder_hidden=cfg.model.encoder_hidden, upsample=cfg.model.upsample,
                      view_codes=view_codes(cfg)).validate()
+
+
+def critic_config(cfg: Config) -> NetConfig:
+    """The critics' (D's, D3's) shapes: :func:`net_config` at ``model.critic_width`` when it is set."""
+    return dataclasses.replace(net_config(cfg), width=cfg.model.critic_width or cfg.model.width)
 
 
 class Model(nn.Module):

@@ -29,8 +29,8 @@ from typing import List
 import torch
 from torch import nn
 
-__all__ = ["NORMS", "UPSAMPLES", "CRITIC_INITS", "NetConfig", "Encoder", "Generator", "Discriminator",
-           "VolumeDiscriminator", "build_networks", "init_weights", "init_critic_he"]
+__all__ = ["NORMS", "UPSAMPLES", "CRITIC_INITS", "INITS", "NetConfig", "Encoder", "Generator", "Discriminator",
+           "VolumeDiscriminator", "build_networks", "init_weights", "init_critic_he", "init_he"]
 
 NORMS = ("batch", "instance", "none")
 #: How G doubles its resolution: the paper's transposed convolution (k4, s2, p1), or a nearest
@@ -43,6 +43,8 @@ RESOLUTIONS = (16, 32, 64, 128)
 #: How the critics (D, D3) start: the DCGAN initialisation of every network (:func:`init_weights`),
 #: or He's for LeakyReLU(0.2) (:func:`init_critic_he`).
 CRITIC_INITS = ("dcgan", "he")
+#: How E and G start: the DCGAN initialisation, or He's (:func:`init_he`).
+INITS = ("dcgan", "he")
 
 
 @dataclass(frozen=True)
@@ -151,10 +153,14 @@ class Generator(nn.Module):
         0.031 from v₀ = 1/R) and EA on path-traced images (0.049 after 400 steps, empty; 0.0077).
         Measured in docs/training.md, "Initial density".
         """
-        out = [m for m in self.net if isinstance(m, (nn.Conv3d, nn.ConvTranspose3d))][-1]
+        out = self.convolutions()[-1]
         v0 = 1.0 / self.cfg.resolution
         with torch.no_grad():
             out.bias[-1] = math.log(v0 / (1.0 - v0))
+
+    def convolutions(self) -> List[nn.Module]:
+        """G's (transposed) convolutions, input first; the last one gives the volume."""
+        return [m for m in self.net if isinstance(m, (nn.Conv3d, nn.ConvTranspose3d))]
 
     def forward(self, z: torch.Tensor) -> torch.Tensor:
         n = self.cfg.latent + self.cfg.view_codes
@@ -252,6 +258,44 @@ def init_critic_he(m: nn.Module) -> None:
         nn.init.kaiming_normal_(m.weight, a=0.2, nonlinearity="leaky_relu")
         if m.bias is not None:
             nn.init.zeros_(m.bias)
+
+
+def fan_in(m: nn.Module) -> int:
+    """How many inputs one output of layer ``m`` sums: in_features (Linear), c_in · k^d (a
+    convolution, any stride), c_in · ⌈k/s⌉^d (a transposed convolution: of its k^d taps, every
+    s-th along each axis meets an input), for an input larger than the kernel."""
+    if isinstance(m, nn.Linear):
+        return m.in_features
+    taps = 1
+    for k, s in zip(m.kernel_size, m.stride):
+        taps *= -(-k // s) if isinstance(m, (nn.ConvTranspose2d, nn.ConvTranspose3d)) else k
+    return m.in_channels * taps // m.groups
+
+
+def init_he(net: nn.Module) -> None:
+    """He's initialisation of E or G (``model.init: he``): weights N(0, g² / fan_in), zero biases,
+    with fan_in from :func:`fan_in` and the gain g of the next activation, √2 for G's ReLU and
+    √(2 / (1 + 0.2²)) for E's LeakyReLU(0.2); then a layer's outputs keep their inputs' scale.
+
+    G's output layer keeps the DCGAN N(0, 0.02) and :meth:`Generator.init_density`: the first
+    volume is still the fog of density 1/R, now varying with the input image. Without
+    normalisation the DCGAN initialisation shrinks the signal by ≈ 0.02 √fan_in a layer: in the
+    quickstart's E and G (width 16), the spread of G's last hidden layer over 16 images is 3e-6
+    (0.08 with this initialisation), so every image starts with the same volume
+    (docs/training.md, "E and G that start blind").
+    """
+    layers = net.convolutions() if isinstance(net, Generator) else \
+        [m for m in net.modules() if isinstance(m, (nn.Conv2d, nn.Linear))]
+    fans = [fan_in(m) for m in layers]
+    if isinstance(net, Generator):                           # its first layer maps z at 1³ to 4³:
+        layers, fans, gain = layers[:-1], [layers[0].in_channels, *fans[1:-1]], math.sqrt(2.0)   # one tap meets z
+    else:
+        gain = math.sqrt(2.0 / (1.0 + 0.2 ** 2))
+    with torch.no_grad():
+        for m, fan in zip(layers, fans):
+            m.weight.normal_(0.0, gain / math.sqrt(fan))
+            if m.bias is not None:
+                m.bias.zero_()
 
 
 def build_networks(cfg: NetConfig, volume_discriminator: bool = False) -> nn.ModuleDict:

@@ -138,6 +138,24 @@ def test_critic_init_he_redraws_the_critics_and_nothing_else(tmp_path):
         assert abs(float(w_he.std()) - (2.0 / (1.04 * fan_in)) ** 0.5) < 0.2 * (2.0 / (1.04 * fan_in)) ** 0.5
 
 
+def test_critic_width_widens_the_critics_and_nothing_else(tmp_path):
+    """model.critic_width = 8 at model.width = 4: D's and D3's stages have 8, 16 channels (16³:
+    two stages), E and G keep 4, and a training step runs."""
+    narrow = _trainer(tmp_path, "train.mode=platonic3d")
+    wide = _trainer(tmp_path, "train.mode=platonic3d", "model.critic_width=8")
+    for name in ("D", "D3"):
+        convs = [m for m in wide.nets[name].trunk if isinstance(m, (torch.nn.Conv2d, torch.nn.Conv3d))]
+        assert [m.out_channels for m in convs] == [8, 16]
+        assert wide.nets[name].head.in_channels == 16
+    for name in ("E", "G"):
+        assert [p.shape for p in narrow.nets[name].parameters()] == [p.shape for p in wide.nets[name].parameters()]
+    assert [m.out_channels for m in narrow.nets["D"].trunk if isinstance(m, torch.nn.Conv2d)] == [4, 8]
+    out = wide.step(0)
+    assert math.isfinite(out["loss_d"]) and math.isfinite(out["loss_d3"])
+    with pytest.raises(Exception, match="model.critic_width: expected a positive value"):
+        load_config(None, ["model.critic_width=0"])
+
+
 # -- the R1 penalty (train.r1_weight) -----------------------------------------------------------
 
 def test_r1_penalty_of_a_linear_critic_is_its_squared_weight_norm():

@@ -255,3 +255,80 @@ def test_generators_start_half_transparent_and_learn_a_silhouette(resolution):
     with torch.no_grad():
         [m for m in zero["G"].modules() if isinstance(m, torch.nn.ConvTranspose3d)][-1].bias.zero_()
     assert fit(zero["G"]) > 0.3                           # still mostly opaque
+
+
+# -- how E and G start (model.init) --------------------------------------------------------------
+
+@pytest.mark.parametrize("layer", [
+    torch.nn.Conv2d(3, 2, 4, 2, 1),                 # E's (and D's) strided k4
+    torch.nn.Conv3d(5, 2, 3, 1, 1),                 # G's resize stage
+    torch.nn.ConvTranspose3d(3, 2, 4, 2, 1),        # G's transposed ×2 stage
+    torch.nn.Linear(7, 2),
+])
+def test_fan_in_counts_the_inputs_one_output_sums(layer):
+    """Counted by the layer itself: all weights 1, bias 0, input all 1s: an interior output is the
+    number of inputs it sums."""
+    from mitsuba_platonic.models import fan_in
+    with torch.no_grad():
+        layer.weight.fill_(1.0)
+        layer.bias.zero_()
+        shape = (1, 7) if isinstance(layer, torch.nn.Linear) else (1, layer.in_channels, *[8] * (layer.weight.dim() - 2))
+        out = layer(torch.ones(shape))
+    centre = out[0, 0] if isinstance(layer, torch.nn.Linear) else out[(0, 0, *[out.shape[-1] // 2] * (out.dim() - 2))]
+    assert fan_in(layer) == int(centre)
+
+
+def _spread_through_g(init):
+    """Per layer of G (after each activation), the spread over 16 images of G(E(x)) at the start."""
+    from mitsuba_platonic.models import Encoder, Generator, init_he, init_weights
+    torch.manual_seed(0)
+    cfg = NetConfig(resolution=32, width=16, latent=64, norm="none", upsample="resize_last")
+    E, G = Encoder(cfg), Generator(cfg)
+    E.apply(init_weights)
+    G.apply(init_weights)
+    if init == "he":
+        init_he(E)
+        init_he(G)
+    x = torch.rand(16, 4, 32, 32)
+    spreads, a = [], E(x)[:, :, None, None, None]
+    with torch.no_grad():
+        for m in G.net:
+            a = m(a)
+            if isinstance(m, (torch.nn.ReLU, torch.nn.Sigmoid)):
+                spreads.append((float(a.std(0).mean()), a))
+    return spreads
+
+
+def test_he_initialised_e_and_g_carry_the_image_to_the_volume_and_start_in_the_fog():
+    """docs/training.md, "E and G that start blind": with the DCGAN initialisation and no
+    normalisation the spread of G's last hidden layer over 16 images is ≈ 3e-6 (every image
+    starts with the same volume), with He's it stays ≈ 0.1 through every layer; the first volume
+    is still the fog of density 1/R and colour about ½ (G's output layer keeps its start)."""
+    dcgan, he = _spread_through_g("dcgan"), _spread_through_g("he")
+    assert dcgan[-2][0] < 1e-4
+    assert all(0.03 < s < 1.0 for s, _ in he[:-1])
+    volume = he[-1][1]
+    assert abs(float(volume[:, 3].mean()) * 32 - 1.0) < 0.1
+    assert abs(float(volume[:, :3].mean()) - 0.5) < 0.05
+    assert float(volume.std(0).mean()) > 10 * dcgan[-1][0]           # and it varies with the image
+
+
+def test_model_init_he_redraws_e_and_g_and_nothing_else(tmp_path, tiny_class):
+    from mitsuba_platonic.train.data import load_training_data
+    from mitsuba_platonic.train.trainer import Trainer
+    from tiny_shapes import TINY
+
+    def trainer(*extra):
+        cfg = load_config(None, [f"run.out_dir={tmp_path}/runs", f"data.cache={tmp_path}/data",
+                                 f"data.shape_class={TINY}", "data.n_shapes=2", "data.views_per_shape=1",
+                                 "model.resolution=16", "model.width=4", "model.latent=8", *extra])
+        return Trainer(cfg, load_training_data(cfg, progress=False), torch.device("cpu"))
+
+    dcgan, he = trainer(), trainer("model.init=he")
+    assert all(torch.equal(a, b) for a, b in zip(dcgan.nets["D"].parameters(), he.nets["D"].parameters()))
+    first = he.model.G.convolutions()[0]                              # z (8) → 4³ at width 4 · 2²
+    assert abs(float(first.weight.detach().std()) - (2.0 / 8) ** 0.5) < 0.1 * (2.0 / 8) ** 0.5
+    for name in ("E", "G"):
+        assert not torch.equal(next(dcgan.nets[name].parameters()), next(he.nets[name].parameters()))
+    last = (m.weight.detach() for m in (dcgan.model.G.convolutions()[-1], he.model.G.convolutions()[-1]))
+    assert abs(float(next(last).std()) - 0.02) < 0.004 and abs(float(next(last).std()) - 0.02) < 0.004

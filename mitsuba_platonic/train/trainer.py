@@ -65,8 +65,8 @@ import torch.nn.functional as F
 from torch import nn
 
 from ..config import Config, ConfigError
-from ..model import RING_VIEWS, Model
-from ..models import Discriminator, VolumeDiscriminator, init_critic_he, init_weights
+from ..model import RING_VIEWS, Model, critic_config
+from ..models import Discriminator, VolumeDiscriminator, init_critic_he, init_he, init_weights
 from ..render.closed_form import rotate
 from ..views import DEFAULT_ELEVATION, from_angles, front_view, sample_views
 from .data import TrainingData
@@ -116,11 +116,16 @@ class Trainer:
         self.cfg, self.data, self.device, self.rank, self.world = cfg, data, device, rank, world
         torch.manual_seed(cfg.run.seed)                      # network initialisation: one draw for all
         self.model = Model.from_config(cfg, init=False)
-        nets = {"E": self.model.E, "G": self.model.G, "D": Discriminator(self.model.net)}
+        critic = critic_config(cfg)
+        nets = {"E": self.model.E, "G": self.model.G, "D": Discriminator(critic)}
         if needs_3d:
-            nets["D3"] = VolumeDiscriminator(self.model.net)
+            nets["D3"] = VolumeDiscriminator(critic)
         self.nets = nn.ModuleDict(nets)
         self.nets.apply(init_weights)
+        if cfg.model.init == "he":                           # E and G re-drawn, from the run's seed
+            torch.manual_seed(cfg.run.seed)
+            init_he(self.model.E)
+            init_he(self.model.G)
         if cfg.model.critic_init == "he":                    # the critics re-drawn, from the run's seed
             torch.manual_seed(cfg.run.seed)
             for name in ("D", "D3"):
