@@ -144,9 +144,10 @@ def volume_scores(model, data, limit: int = 64) -> dict:
                      M.half_opacity_depth(v), M.depth_stripes(truth), float(colour_tv(v[None])),
                      float(colour_tv(truth[None])), *(_centroid(v) - _centroid(truth))))
     a = np.array(rows, dtype=np.float64)
-    return {"centroid_offset": a[:, 7:10].mean(0), "centroid_error": np.abs(a[:, 7:10]).mean(0),"iou_3d": float(a[:, 0].mean()), "chamfer": float(a[:, 1].mean()), "stripes": float(a[:, 2].mean()),
+    return {"iou_3d": float(a[:, 0].mean()), "chamfer": float(a[:, 1].mean()), "stripes": float(a[:, 2].mean()),
             "half_depth": float(np.nanmedian(a[:, 3])), "stripes_truth": float(a[:, 4].mean()),
-            "colour_tv": float(a[:, 5].mean()), "colour_tv_truth": float(a[:, 6].mean())}
+            "colour_tv": float(a[:, 5].mean()), "colour_tv_truth": float(a[:, 6].mean()),
+            "centroid_offset": a[:, 7:10].mean(0), "centroid_error": np.abs(a[:, 7:10]).mean(0)}
 
 
 def run(name: str, overrides, steps: int, cache: Path, seed: int = 0) -> dict:

@@ -28,7 +28,7 @@ from pydantic_core import SchemaValidator, core_schema
 from .data.collection import FORMATIONS
 from .data.photos import BACKGROUNDS, CROPS, PhotoOptions
 from .errors import UserError
-from .models import CRITIC_INITS, INITS, NORMS, RESOLUTIONS, UPSAMPLES
+from .models import INITS, NORMS, RESOLUTIONS, UPSAMPLES
 from .render.settings import RenderSettings as RenderConfig
 from .views import DISTRIBUTIONS
 
@@ -115,7 +115,7 @@ class ModelConfig:
     initialisation gives every input image the same first volume (docs/training.md).
     critic_width: channels of the critics' (D's, D3's) first layer, doubling per stage as E's;
     null: ``width``. D is a 2D network: at 32 it costs little next to G's 3D convolutions
-    (docs/training.md, "A wider D")."""
+    (docs/training.md, "E and G that start blind, and a wider D")."""
 
     resolution: int = 32
     latent: int = 64
@@ -231,7 +231,7 @@ class Config:
         _positive("model.width", self.model.width)
         _choice("model.norm", self.model.norm, NORMS)
         _choice("model.upsample", self.model.upsample, UPSAMPLES)
-        _choice("model.critic_init", self.model.critic_init, CRITIC_INITS)
+        _choice("model.critic_init", self.model.critic_init, INITS)
         _choice("model.init", self.model.init, INITS)
         if self.model.critic_width is not None:
             _positive("model.critic_width", self.model.critic_width)

@@ -29,7 +29,7 @@ from typing import List
 import torch
 from torch import nn
 
-__all__ = ["NORMS", "UPSAMPLES", "CRITIC_INITS", "INITS", "NetConfig", "Encoder", "Generator", "Discriminator",
+__all__ = ["NORMS", "UPSAMPLES", "INITS", "NetConfig", "Encoder", "Generator", "Discriminator",
            "VolumeDiscriminator", "build_networks", "init_weights", "init_critic_he", "init_he"]
 
 NORMS = ("batch", "instance", "none")
@@ -40,10 +40,9 @@ NORMS = ("batch", "instance", "none")
 #: at full resolution are what makes 'resize' slow).
 UPSAMPLES = ("transposed", "resize", "resize_last")
 RESOLUTIONS = (16, 32, 64, 128)
-#: How the critics (D, D3) start: the DCGAN initialisation of every network (:func:`init_weights`),
-#: or He's for LeakyReLU(0.2) (:func:`init_critic_he`).
-CRITIC_INITS = ("dcgan", "he")
-#: How E and G start: the DCGAN initialisation, or He's (:func:`init_he`).
+#: How a network starts (``model.critic_init`` for D and D3, ``model.init`` for E and G): the
+#: DCGAN initialisation of every network (:func:`init_weights`), or He's (:func:`init_critic_he`
+#: for the critics, :func:`init_he` for E and G).
 INITS = ("dcgan", "he")
 
 
@@ -247,7 +246,8 @@ def init_weights(m: nn.Module) -> None:
 
 
 def init_critic_he(m: nn.Module) -> None:
-    """He (Kaiming) normal weights for LeakyReLU(0.2), zero biases, on a critic's convolutions.
+    """He (Kaiming) normal weights for LeakyReLU(0.2), zero biases, on a critic's convolutions
+    (and E's, whose trunk is a critic's: :func:`init_he`).
 
     Without normalisation the DCGAN initialisation N(0, 0.02) shrinks activations by about
     0.02 √fan-in ≈ 0.3 a layer: an untrained D's logits have a standard deviation of 5e-4, and at
@@ -274,8 +274,9 @@ def fan_in(m: nn.Module) -> int:
 
 def init_he(net: nn.Module) -> None:
     """He's initialisation of E or G (``model.init: he``): weights N(0, g² / fan_in), zero biases,
-    with fan_in from :func:`fan_in` and the gain g of the next activation, √2 for G's ReLU and
-    √(2 / (1 + 0.2²)) for E's LeakyReLU(0.2); then a layer's outputs keep their inputs' scale.
+    with the gain g of the next activation; then a layer's outputs keep their inputs' scale. E is
+    built like a critic's trunk (strided convolutions, LeakyReLU(0.2)) and gets
+    :func:`init_critic_he`; G gets g = √2 (ReLU) and fan_in from :func:`fan_in`.
 
     G's output layer keeps the DCGAN N(0, 0.02) and :meth:`Generator.init_density`: the first
     volume is still the fog of density 1/R, now varying with the input image. Without
@@ -284,16 +285,14 @@ def init_he(net: nn.Module) -> None:
     (0.08 with this initialisation), so every image starts with the same volume
     (docs/training.md, "E and G that start blind").
     """
-    layers = net.convolutions() if isinstance(net, Generator) else \
-        [m for m in net.modules() if isinstance(m, (nn.Conv2d, nn.Linear))]
-    fans = [fan_in(m) for m in layers]
-    if isinstance(net, Generator):                           # its first layer maps z at 1³ to 4³:
-        layers, fans, gain = layers[:-1], [layers[0].in_channels, *fans[1:-1]], math.sqrt(2.0)   # one tap meets z
-    else:
-        gain = math.sqrt(2.0 / (1.0 + 0.2 ** 2))
+    if not isinstance(net, Generator):                       # E: strided convolutions and LeakyReLU(0.2),
+        net.apply(init_critic_he)                            # a critic's trunk: the critics' He initialisation
+        return
+    layers = net.convolutions()[:-1]
+    fans = [layers[0].in_channels] + [fan_in(m) for m in layers[1:]]   # the first maps z at 1³ to 4³: one tap
     with torch.no_grad():
         for m, fan in zip(layers, fans):
-            m.weight.normal_(0.0, gain / math.sqrt(fan))
+            m.weight.normal_(0.0, math.sqrt(2.0 / fan))       # gain √2 of the ReLU that follows
             if m.bias is not None:
                 m.bias.zero_()
 

@@ -71,8 +71,6 @@ def test_checkpoints_keep_the_average_and_the_model_reads_it(tmp_path):
     for t in range(4):
         trainer.step(t)
     x = trainer.images[:3]
-    trainer.ema.eval()
-    trainer.model.eval()
     with torch.no_grad():
         expected, trained = trainer.ema.reconstruct(x), trainer.model.reconstruct(x)
     assert not torch.allclose(expected, trained)

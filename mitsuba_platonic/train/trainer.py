@@ -286,12 +286,7 @@ class Trainer:
             loss_rec = F.mse_loss(i_front, x)
             terms["rec"] = t.rec_weight * loss_rec
             out["loss_rec"] = float(self._all_sum(loss_rec.detach().cpu()) / self.world)
-        loss = self._g_objective(terms)
-        self.opt_g.zero_grad(set_to_none=True)
-        loss.backward()
-        self.opt_g.step()
-        if self.ema is not None:
-            self._update_ema(step)
+        self._update_g(self._g_objective(terms), step)
         out["loss_g"] = float(self._all_sum(loss_adv.detach().cpu()) / self.world)
         return out
 
@@ -301,6 +296,14 @@ class Trainer:
         volume) and 'colour_tv' (a prior, when its weight is set). One place that sees every term, so
         the tests can check which of them reach G."""
         return sum(terms.values())
+
+    def _update_g(self, loss: torch.Tensor, step: int) -> None:
+        """One Adam step of G (and E) on ``loss``, then the moving average (``train.ema``) follows."""
+        self.opt_g.zero_grad(set_to_none=True)
+        loss.backward()
+        self.opt_g.step()
+        if self.ema is not None:
+            self._update_ema(step)
 
     def _critic_update(self, name: str, opt: torch.optim.Optimizer, real: torch.Tensor, fake: torch.Tensor,
                        eps: torch.Tensor, gate: Optional[float], out: Dict[str, float]) -> None:
@@ -391,10 +394,6 @@ class Trainer:
         if rec:
             terms["rec3d"] = t.rec_weight * self._volume_rec(v, idx, out)
         loss_g = self._g_objective(terms)
-        self.opt_g.zero_grad(set_to_none=True)
-        loss_g.backward()
-        self.opt_g.step()
-        if self.ema is not None:
-            self._update_ema(step)
+        self._update_g(loss_g, step)
         out["loss_g"] = float(self._all_sum(loss_g.detach().cpu()) / self.world)
         return out
