@@ -8,7 +8,8 @@ same collection, then scores the held-out images (shapes no run saw) as the quic
 does (:func:`mitsuba_platonic.evaluate.held_out_scores`: MAE and silhouette IoU at the input view
 and at novel views, and the billboard), and in 3D against the ground truth in the input frame
 (:mod:`mitsuba_platonic.evaluate.metrics`: volume IoU, the density-weighted chamfer distance,
-``depth_stripes`` and ``half_opacity_depth``). It also reports how D was trained: the share of
+``depth_stripes``, ``half_opacity_depth`` and ``best_tilt``: the pose error, set beside the input
+camera's elevation). It also reports how D was trained: the share of
 steps on which D was updated, and D's soft and hard accuracy. Prints a Markdown table; figures
 only, nothing asserted.
 """
@@ -85,6 +86,9 @@ VARIANTS = {
     "critic32": ["model.critic_width=32"],
     "init_he_critic32": ["model.init=he", "model.critic_width=32"],
     "init_he_critic64": ["model.init=he", "model.critic_width=64"],
+    # D's reals turned by the tilt a right volume's random view has (train.d_roll, train/roll.py)
+    "roll_matched": ["train.d_roll=matched"],
+    "roll_uniform": ["train.d_roll=uniform"],
 }
 
 
@@ -139,15 +143,22 @@ def volume_scores(model, data, limit: int = 64) -> dict:
     the truth's stripes and colour TV."""
     recon = model.reconstruct(data.held_out[:limit]).cpu()
     rows = []
-    for v, truth in zip(recon, held_out_truths(data.held_out_records[:limit], "ea")):
+    records = data.held_out_records[:limit]
+    for v, truth, r in zip(recon, held_out_truths(records, "ea"), records):
+        θ0 = float(to_angles(torch.tensor(r["view"]))[1])       # the input camera's elevation
         rows.append((M.volume_iou(v, truth), M.chamfer_distance(v, truth), M.depth_stripes(v),
                      M.half_opacity_depth(v), M.depth_stripes(truth), float(colour_tv(v[None])),
-                     float(colour_tv(truth[None])), *(_centroid(v) - _centroid(truth))))
+                     float(colour_tv(truth[None])), *(_centroid(v) - _centroid(truth)),
+                     *M.best_tilt(v, truth), θ0))
     a = np.array(rows, dtype=np.float64)
+    β, θ0 = a[:, 10], a[:, 12]
     return {"iou_3d": float(a[:, 0].mean()), "chamfer": float(a[:, 1].mean()), "stripes": float(a[:, 2].mean()),
             "half_depth": float(np.nanmedian(a[:, 3])), "stripes_truth": float(a[:, 4].mean()),
             "colour_tv": float(a[:, 5].mean()), "colour_tv_truth": float(a[:, 6].mean()),
-            "centroid_offset": a[:, 7:10].mean(0), "centroid_error": np.abs(a[:, 7:10]).mean(0)}
+            "centroid_offset": a[:, 7:10].mean(0), "centroid_error": np.abs(a[:, 7:10]).mean(0),
+            "tilt_error": float(np.abs(β).mean()), "tilt_iou": float(a[:, 11].mean()),
+            "tilt_vs_elevation": float(np.corrcoef(β, θ0)[0, 1]), "tilt_minus_elevation": float(np.abs(β - θ0).mean()),
+            "elevation": float(np.abs(θ0).mean())}
 
 
 def run(name: str, overrides, steps: int, cache: Path, seed: int = 0) -> dict:
@@ -211,6 +222,9 @@ def main() -> None:
                      f"colour TV {r['colour_tv']:.4f} (truth {r['colour_tv_truth']:.4f}), "
                      f"centroid − truth's (voxels; depth, then across) mean {np.round(r['centroid_offset'], 2).tolist()}, "
                      f"mean |·| {np.round(r['centroid_error'], 2).tolist()}, "
+                     f"pose: best-aligning tilt |β| {r['tilt_error']:.1f}° (3D IoU there {r['tilt_iou']:.3f}), "
+                     f"corr(β, input elevation θ₀) {r['tilt_vs_elevation']:.2f}, |β − θ₀| {r['tilt_minus_elevation']:.1f}° "
+                     f"(|θ₀| {r['elevation']:.1f}°), "
                      f"silhouette area − truth's (px) {np.round(v['held_out']['area'], 1).tolist()}; on training "
                      f"images: mean IoU {v['train']['iou'].mean():.3f}, per view {np.round(v['train']['iou'], 3).tolist()}"
                      + (f"; the trained weights (not the average): novel MAE {r['trained']['novel_view_mae']:.4f}, "

@@ -148,7 +148,9 @@ class TrainConfig:
     which it does ungated (docs/training.md); d_steps: D (or D3) updates per G update, each on a
     fresh loss, in every mode; d_roll: 'none' | 'uniform': D sees every real and rendered image
     turned in-plane by its own random angle, so that the tilt of views drawn in the input camera's
-    frame cannot give fakes away (:mod:`mitsuba_platonic.train.roll`, docs/training.md);
+    frame cannot give fakes away; 'matched' (reconstruction): the reals turned by the tilt a right
+    volume's view would have, for an input elevation drawn from the train section's view distribution
+    (:mod:`mitsuba_platonic.train.roll`, docs/training.md);
     r1_weight: γ of the R1 penalty γ/2 · E‖∇ₓD(x)‖² on real images (Mescheder et al. 2018),
     added to every critic's non-saturating loss (0: none; WGAN-GP has its own penalty)
     (:func:`mitsuba_platonic.train.losses.r1_penalty`, docs/training.md); colour_tv: weight of
@@ -248,6 +250,10 @@ class Config:
         _positive("train.random_views", self.train.random_views)
         _positive("train.d_steps", self.train.d_steps)
         _choice("train.d_roll", self.train.d_roll, ROLLS)
+        if self.train.d_roll == "matched" and (self.train.task != "reconstruction" or self.train.mode == "gan3d"):
+            raise ConfigError("train.d_roll: 'matched' turns the photos by the tilt of views drawn in an input "
+                              "camera's frame, so it needs train.task 'reconstruction' and a 2D critic "
+                              f"(not mode 'gan3d'), got task {self.train.task!r}, mode {self.train.mode!r}")
         for key in ("lr_g", "lr_e", "lr_d"):
             if not getattr(self.train, key) > 0:
                 raise ConfigError(f"train.{key}: expected a positive learning rate, got {getattr(self.train, key)!r}")

@@ -381,3 +381,37 @@ def test_half_opacity_depth_tells_a_front_card_from_a_solid():
     # T after layer k is 0.7^(k − 9) from layer 10 on: below ½ after layer 11 (0.7² = 0.49)
     assert half_opacity_depth(solid) == 11.0
     assert np.isnan(half_opacity_depth(np.zeros((n, n, n), np.float32)))
+
+
+@pytest.mark.parametrize("elevation", [35.0, -20.0])
+def test_best_tilt_of_an_upright_reconstruction_is_the_input_elevation(elevation):
+    """A volume seen from an input camera at elevation θ₀ (its truth in that frame) against the
+    same volume seen from the same azimuth at elevation 0 (a reconstruction standing upright in
+    the frame): best_tilt finds β = θ₀, where the IoU is near 1; for the truth itself, β = 0."""
+    from mitsuba_platonic.render.closed_form import rotate
+    from mitsuba_platonic.views import from_angles
+    v = test_volume(32, "figure", "ao").reshape(1, 1, 32, 32, 32)
+    truth = rotate(v, from_angles(torch.tensor([30.0]), elevation))[0].clamp(0, 1)
+    upright = rotate(v, from_angles(torch.tensor([30.0]), 0.0))[0].clamp(0, 1)
+    β, iou = M.best_tilt(upright, truth)
+    assert β == elevation and iou > 0.8
+    assert iou > M.volume_iou(upright, truth) + 0.2
+    assert M.best_tilt(truth, truth) == (0.0, 1.0)
+
+
+def test_best_tilt_of_a_leaning_rod():
+    """Analytic: a rod along the frame's up axis h against the same rod leaning by α in the (d, h)
+    plane is best aligned by a tilt of magnitude α."""
+    n = 32
+    c = (np.arange(n) + 0.5) / n * 2 - 1
+    d, h, w = np.meshgrid(c, c, c, indexing="ij")
+
+    def rod(α):                                                 # within 0.2 of the line through 0 along (sin α, cos α, 0)
+        a = np.radians(α)
+        along = d * np.sin(a) + h * np.cos(a)
+        return ((d ** 2 + h ** 2 + w ** 2 - along ** 2 <= 0.04) & (np.abs(along) <= 0.8)).astype(np.float32)
+
+    assert abs(M.best_tilt(rod(0.0), rod(40.0))[0]) == 40.0
+    assert abs(M.best_tilt(rod(0.0), rod(-25.0))[0]) == 25.0
+    with pytest.raises(UserError, match="step"):
+        M.best_tilt(rod(0.0), rod(0.0), step=0.0)

@@ -11,7 +11,7 @@ from mitsuba_platonic.render import render
 from mitsuba_platonic.render.closed_form import rotate
 from mitsuba_platonic.train import trainer as trainer_module
 from mitsuba_platonic.train.data import load_training_data
-from mitsuba_platonic.train.roll import roll
+from mitsuba_platonic.train.roll import input_frame_roll, roll
 from mitsuba_platonic.train.trainer import Trainer
 from mitsuba_platonic.views import camera_frames, from_angles
 from mitsuba_platonic.volume import test_volume
@@ -62,6 +62,36 @@ def test_views_drawn_in_the_input_frame_are_tilted_by_the_input_elevation(elevat
         assert (fake - tilted).abs().mean() < 0.1 * (fake - photo).abs().mean()
 
 
+@pytest.mark.parametrize("elevation", [40.0, -25.0, 70.0])
+@pytest.mark.parametrize("azimuth, view_elevation", [(90.0, 0.0), (-90.0, 0.0), (45.0, 20.0), (135.0, -30.0),
+                                                     (60.0, 60.0)])
+def test_input_frame_roll_turns_the_photo_into_the_frames_view(elevation, azimuth, view_elevation):
+    """'matched': for any view ω in the frame of an input camera at elevation θ₀, the world's
+    upright photo from the same direction turned by ψ(θ₀, ω) is the frame's view (up to
+    resampling), where the unturned photo and the photo turned the other way are far off."""
+    v = test_volume(32, "figure", "ao")
+    w_in = from_angles(torch.tensor([30.0]), elevation)
+    v_in = rotate(v, w_in).clamp(0.0, 1.0)
+    right, up, forward = (a.float() for a in camera_frames(w_in))
+    w = from_angles(torch.tensor([azimuth]), view_elevation)
+    world = w[:, :1] * right + w[:, 1:2] * up + w[:, 2:] * forward     # ω in world coordinates
+    fake, photo = render(v_in, w, "ao"), render(v, world, "ao")
+    ψ = input_frame_roll(w, torch.tensor([elevation]))
+    turned = (fake - roll(photo, ψ)).abs().mean()
+    assert turned < 0.15 * (fake - photo).abs().mean()
+    assert turned < 0.15 * (fake - roll(photo, -ψ)).abs().mean()
+
+
+def test_input_frame_roll_in_closed_form():
+    """ψ = ±θ₀ beside the input (ω = ±x of its frame), 0 in front and behind, 0 for θ₀ = 0."""
+    views = torch.tensor([[1.0, 0.0, 0.0], [-1.0, 0.0, 0.0], [0.0, 0.0, 1.0], [0.0, 0.0, -1.0], [0.6, 0.0, 0.8]])
+    ψ = input_frame_roll(views, torch.full((5,), 35.0))
+    assert torch.allclose(ψ[:4], torch.tensor([math.radians(35.0), -math.radians(35.0), 0.0, 0.0]), atol=1e-6)
+    assert torch.allclose(input_frame_roll(views, torch.zeros(5)), torch.zeros(5), atol=1e-7)
+    with pytest.raises(ValueError, match="elevations"):
+        input_frame_roll(views, torch.zeros(4))
+
+
 @pytest.fixture(scope="module")
 def cache(tmp_path_factory):
     return tmp_path_factory.mktemp("data")
@@ -103,6 +133,49 @@ def test_d_sees_exactly_the_turned_images(cache, monkeypatch, setting):
     outputs = [out for out, _ in turned]
     for image in seen:
         assert any(torch.equal(image, out) for out in outputs)
+
+
+@pytest.mark.usefixtures("tiny_class")
+def test_matched_turns_the_reals_by_their_slots_views_and_leaves_the_fakes(cache, monkeypatch):
+    """'matched': roll runs once per step, on D's reals, with ψ(θ₀, ω) for each slot's random view
+    ω and an input elevation θ₀ from the train section's views (here 'sphere': any); D's fakes
+    and G's adversarial images are the renders themselves."""
+    trainer = _trainer(cache, "matched")
+    turned, seen, views = [], [], []
+
+    def recording_roll(images, angles):
+        out = roll(images, angles)
+        turned.append((images, out, angles))
+        return out
+
+    def recording_frame_roll(w, θ0):
+        views.append((w, θ0))
+        return input_frame_roll(w, θ0)
+
+    monkeypatch.setattr(trainer_module, "roll", recording_roll)
+    monkeypatch.setattr(trainer_module, "input_frame_roll", recording_frame_roll)
+    rendered = []
+    render = trainer.render
+    trainer.render = lambda v, w, seed: rendered.append((w, render(v, w, seed))) or rendered[-1][1]
+    trainer.nets["D"].register_forward_hook(lambda module, args, output: seen.append(args[0]))
+    trainer.step(0)
+    assert len(turned) == 1 and len(views) == 1
+    (w, θ0), (reals, out, angles) = views[0], turned[0]
+    random_views, fakes = rendered[0]
+    assert torch.equal(w, random_views)                      # each real's own slot's view
+    assert θ0.shape == (4,) and (θ0.abs() <= 90).all() and θ0.std() > 0
+    assert torch.allclose(angles, input_frame_roll(w, θ0))
+    assert torch.equal(reals[0::2], reals[1::2])            # the batch's photos, repeated per view (K = 2)
+    assert all((trainer.images == r).flatten(1).all(1).any() for r in reals)
+    assert torch.equal(seen[0], out)                         # D's reals: turned
+    assert torch.equal(seen[1], fakes) and torch.equal(seen[2], fakes)  # D's fakes, G's term: as rendered
+
+
+def test_config_rejects_matched_roll_without_an_input_frame():
+    for override in ("train.task=generation", "train.mode=gan3d"):
+        with pytest.raises(ConfigError, match="'matched'"):
+            load_config(None, ["train.d_roll=matched", override, "train.rec_target=volume"]
+                        if override.endswith("gan3d") else ["train.d_roll=matched", override])
 
 
 def test_config_rejects_unknown_roll():

@@ -17,6 +17,8 @@ linear RGBA, values in [0, 1], as :func:`mitsuba_platonic.render` returns them):
 - :func:`volume_iou`: IoU of the occupied voxels, density ≥ ``threshold`` (default ½).
 - :func:`chamfer_distance`: the paper's density-weighted directional chamfer distance (formula
   in its docstring).
+- :func:`best_tilt`: the turn about the input camera's horizontal axis that best aligns a
+  reconstruction with its truth (the pose error of view-space reconstruction).
 
 Distributions: :func:`fid` (Fréchet distance of network features of two image sets); needs a
 weights file the user gives. No package installed here ships pretrained VGG16 or Inception
@@ -38,7 +40,7 @@ from ..errors import UserError
 from ..volume import voxel_size
 
 __all__ = ["dssim", "display_image", "image_rmse", "silhouette_iou", "volume_rmse", "volume_iou",
-           "chamfer_distance", "depth_stripes", "half_opacity_depth", "load_feature_network", "vgg_distance",
+           "chamfer_distance", "best_tilt", "depth_stripes", "half_opacity_depth", "load_feature_network", "vgg_distance",
            "fid", "SSIM_SIGMA", "IOU_THRESHOLD", "SILHOUETTE_THRESHOLD"]
 
 #: Gaussian window of SSIM (Wang et al. 2004): σ = 1.5 px, truncated at 3.5σ → 11×11 pixels.
@@ -191,6 +193,32 @@ def volume_iou(output: ArrayLike, target: ArrayLike, threshold: float = IOU_THRE
     so, st = o >= th, t >= th
     union = int((so | st).sum())
     return 1.0 if union == 0 else float((so & st).sum()) / union
+
+
+def best_tilt(output: ArrayLike, target: ArrayLike, step: float = 5.0,
+              threshold: float = IOU_THRESHOLD) -> Tuple[float, float]:
+    """The tilt β (degrees) that best aligns ``output`` with ``target``, and the volume IoU there.
+
+    Both volumes lie in an input camera's frame (axes d, h, w of ``(N, N, N)``: depth, image row,
+    column). β runs over [−90°, 90°] in steps of ``step``; ``output`` is resampled as seen from a
+    camera raised by β about the frame's horizontal axis, i.e. from the view (0, sin β, cos β)
+    (:func:`mitsuba_platonic.render.closed_form.rotate`, trilinear), and scored by
+    :func:`volume_iou`; the first best β wins ties. β = 0 for a reconstruction in the truth's pose.
+    For a reconstruction that stands upright in the frame whatever the input camera's elevation
+    θ₀, β ≈ θ₀: the pose failure of view-space reconstruction the paper names (its Fig. 11).
+    """
+    from ..render.closed_form import rotate          # the renderer's resampling (no cycle: it needs no evaluate)
+    from ..views import from_angles
+
+    o, t = _density_pair(output, target)
+    if not 0.0 < step <= 90.0:
+        raise UserError(f"step must be in (0, 90] degrees, got {step!r}")
+    βs = torch.arange(-90.0, 90.0 + 1e-9, step, dtype=torch.float64)
+    ot = torch.from_numpy(o)[None, None].expand(len(βs), -1, -1, -1, -1).contiguous()
+    turned = rotate(ot, from_angles(torch.zeros_like(βs), βs).to(torch.float64))[:, 0].clamp(0.0, 1.0)
+    ious = [volume_iou(v, t, threshold) for v in turned.numpy()]
+    k = int(np.argmax(ious))
+    return float(βs[k]), float(ious[k])
 
 
 def depth_stripes(volume: ArrayLike, axis: int = 0) -> float:

@@ -19,6 +19,24 @@ The rotation, for image coordinates (x, y) ∈ [−1, 1]² (x right, y up; docs/
 the output pixel at (x, y) reads the input at R(−ψ) (x, y) with bilinear interpolation and
 zeros outside (a rotation by ψ counter-clockwise). Corners that turn out of the square are lost
 for reals and fakes alike; a centred object within the inscribed circle keeps every pixel.
+
+``matched``: turn the *reals* only, by the tilt a right reconstruction's view would have, and keep
+"up". In the input frame the world's up is u = (0, cos θ₀, sin θ₀) (the input camera's right is
+horizontal). A camera at ω, upright in that frame, with right r and up t (``views.camera_frames``),
+sees u at the angle α = atan2(u·r, u·t) from its image's up towards its right, so its image is the
+world's upright photo from the same direction turned counter-clockwise by
+
+    ψ(θ₀, ω) = −atan2(u·r, u·t)          (beside the input, ω = ±x: ψ = ±θ₀; front and back: 0)
+
+(:func:`input_frame_roll`). With θ₀ drawn from the photos' view distribution (``train.view_distribution``,
+``train.elevation``) and ω the slot's random view, each real is turned by ψ(θ₀, ω): the reals' tilts
+are then distributed as the fakes' are when G's volume is the right one, tilted by the input's
+elevation in its frame; a volume kept upright in the frame, whose fakes are never tilted, is what D
+can now tell apart. Unlike 'uniform', the turns are not arbitrary: a real is turned only as far as a
+right volume's view of it would be (0 in front and behind, ±θ₀ beside), so D keeps "which way is
+up".
+What it cannot match: a fake's tilt also goes with the elevation it shows the object from, a real's
+is drawn independently of its (unknown) pose.
 """
 
 from __future__ import annotations
@@ -26,10 +44,12 @@ from __future__ import annotations
 import torch
 import torch.nn.functional as F
 
-__all__ = ["roll", "ROLLS"]
+from ..views import camera_frames
 
-#: train.d_roll: 'none' (D sees the images as rendered) | 'uniform' (module docstring).
-ROLLS = ("none", "uniform")
+__all__ = ["roll", "input_frame_roll", "ROLLS"]
+
+#: train.d_roll: 'none' (D sees the images as rendered) | 'uniform' | 'matched' (module docstring).
+ROLLS = ("none", "uniform", "matched")
 
 
 def roll(images: torch.Tensor, angles: torch.Tensor) -> torch.Tensor:
@@ -45,3 +65,17 @@ def roll(images: torch.Tensor, angles: torch.Tensor) -> torch.Tensor:
     theta = torch.stack([torch.stack([c, -s, zero], dim=1), torch.stack([s, c, zero], dim=1)], dim=1)
     grid = F.affine_grid(theta.to(images), list(images.shape), align_corners=False)
     return F.grid_sample(images, grid, mode="bilinear", padding_mode="zeros", align_corners=False)
+
+
+def input_frame_roll(views: torch.Tensor, elevation: torch.Tensor) -> torch.Tensor:
+    """ψ(θ₀, ω) (module docstring), radians ``(B,)``: the counter-clockwise turn that takes the
+    world's upright photo from direction ω to the image of a camera at ω upright in the frame of
+    an input camera at elevation θ₀ (``elevation``, degrees, ``(B,)``); ``views`` ``(B, 3)`` in
+    that frame."""
+    if views.dim() != 2 or views.shape[1] != 3 or elevation.shape != views.shape[:1]:
+        raise ValueError(f"input_frame_roll expects views (B, 3) and elevations (B,), got {tuple(views.shape)} "
+                         f"and {tuple(elevation.shape)}")
+    right, up, _ = camera_frames(views)
+    θ0 = torch.deg2rad(elevation.to(torch.float64))
+    u = torch.stack([torch.zeros_like(θ0), torch.cos(θ0), torch.sin(θ0)], dim=-1)   # world up, input frame
+    return -torch.atan2((u * right).sum(-1), (u * up).sum(-1)).to(torch.float32)

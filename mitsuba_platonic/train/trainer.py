@@ -9,7 +9,8 @@ uninterrupted one would:
 4. ``d_steps`` D updates on x vs I_view (each skipped, and the rest with it, while D's soft
    accuracy on this batch, ½(mean σ(l_real) + 1 − mean σ(l_fake)), is above ``d_gate``); with
    ``d_roll: uniform`` D sees each of them turned in-plane by its own random angle (the images
-   of G's adversarial term too: :mod:`.roll`);
+   of G's adversarial term too), with ``matched`` the reals turned by the tilt of a right
+   volume's view (:mod:`.roll`);
 5. G (and E) update on  L_G = adv(D(I_view)) + λ_rec ‖x − I_front‖² (+ w₃ adv₃(D3(v))).
 
 The reconstruction term compares images by default (``train.rec_target: image``, as above). With
@@ -68,12 +69,12 @@ from ..config import Config, ConfigError
 from ..model import RING_VIEWS, Model, critic_config
 from ..models import Discriminator, VolumeDiscriminator, init_critic_he, init_he, init_weights
 from ..render.closed_form import rotate
-from ..views import DEFAULT_ELEVATION, from_angles, front_view, sample_views
+from ..views import DEFAULT_ELEVATION, from_angles, front_view, sample_views, to_angles
 from .data import TrainingData
 from .losses import (colour_tv, d_loss, g_loss, gradient_penalty, hard_accuracy_counts, r1_penalty,
                      soft_accuracy_counts)
 from .renderer import make_renderer
-from .roll import roll
+from .roll import input_frame_roll, roll
 
 __all__ = ["Trainer", "TASKS", "MODES", "MODES_3D", "REC_TARGETS", "ring_views"]
 
@@ -240,6 +241,9 @@ class Trainer:
         eps = self._shard(torch.rand(B * K, generator=g))
         # train.d_roll 'uniform': an angle per real and per fake image D sees (train/roll.py)
         ψ = self._shard(torch.rand(2, B * K, generator=g).mul(2 * math.pi).T).T if t.d_roll == "uniform" else None
+        if t.d_roll == "matched":                            # the reals turned as a right volume's views are
+            θ0 = self._shard(to_angles(self._views(B * K, g))[1])
+            ψ_real = input_frame_roll(views, θ0)
         b = x.shape[0]
         rec = t.task == "reconstruction"
 
@@ -265,6 +269,8 @@ class Trainer:
         fake_d = i_view
         if ψ is not None:                                    # each image turned by its own angle
             real_d, fake_d = roll(real_d, ψ[0].to(self.device)), roll(i_view, ψ[1].to(self.device))
+        elif t.d_roll == "matched":
+            real_d = roll(real_d, ψ_real.to(self.device))
         self._critic_update("D", self.opt_d, real_d, fake_d.detach(), eps, t.d_gate, out)
 
         # -- D3 (Platonic3D): ground-truth volumes vs generated ----------------------------------
