@@ -157,6 +157,7 @@ def volume_scores(model, data, limit: int = 64) -> dict:
             "colour_tv": float(a[:, 5].mean()), "colour_tv_truth": float(a[:, 6].mean()),
             "centroid_offset": a[:, 7:10].mean(0), "centroid_error": np.abs(a[:, 7:10]).mean(0),
             "tilt_error": float(np.abs(β).mean()), "tilt_iou": float(a[:, 11].mean()),
+            "tilt_within_10": float((np.abs(β) <= 10.0).mean()),
             "tilt_vs_elevation": float(np.corrcoef(β, θ0)[0, 1]), "tilt_minus_elevation": float(np.abs(β - θ0).mean()),
             "elevation": float(np.abs(θ0).mean())}
 
@@ -222,7 +223,8 @@ def main() -> None:
                      f"colour TV {r['colour_tv']:.4f} (truth {r['colour_tv_truth']:.4f}), "
                      f"centroid − truth's (voxels; depth, then across) mean {np.round(r['centroid_offset'], 2).tolist()}, "
                      f"mean |·| {np.round(r['centroid_error'], 2).tolist()}, "
-                     f"pose: best-aligning tilt |β| {r['tilt_error']:.1f}° (3D IoU there {r['tilt_iou']:.3f}), "
+                     f"pose: best-aligning tilt |β| {r['tilt_error']:.1f}° (3D IoU there {r['tilt_iou']:.3f}, "
+                     f"share within 10° {r['tilt_within_10']:.2f}), "
                      f"corr(β, input elevation θ₀) {r['tilt_vs_elevation']:.2f}, |β − θ₀| {r['tilt_minus_elevation']:.1f}° "
                      f"(|θ₀| {r['elevation']:.1f}°), "
                      f"silhouette area − truth's (px) {np.round(v['held_out']['area'], 1).tolist()}; on training "
