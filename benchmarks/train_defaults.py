@@ -151,15 +151,17 @@ def volume_scores(model, data, limit: int = 64) -> dict:
                      float(colour_tv(truth[None])), *(_centroid(v) - _centroid(truth)),
                      *M.best_tilt(v, truth), θ0))
     a = np.array(rows, dtype=np.float64)
-    β, θ0 = a[:, 10], a[:, 12]
+    ok = np.isfinite(a[:, 10])                                # best_tilt: NaN where nothing overlaps
+    β, θ0 = a[ok, 10], a[ok, 12]
+    corr = float(np.corrcoef(β, θ0)[0, 1]) if len(β) > 1 and β.std() > 0 else float("nan")
     return {"iou_3d": float(a[:, 0].mean()), "chamfer": float(a[:, 1].mean()), "stripes": float(a[:, 2].mean()),
             "half_depth": float(np.nanmedian(a[:, 3])), "stripes_truth": float(a[:, 4].mean()),
             "colour_tv": float(a[:, 5].mean()), "colour_tv_truth": float(a[:, 6].mean()),
             "centroid_offset": a[:, 7:10].mean(0), "centroid_error": np.abs(a[:, 7:10]).mean(0),
             "tilt_error": float(np.abs(β).mean()), "tilt_iou": float(a[:, 11].mean()),
-            "tilt_within_10": float((np.abs(β) <= 10.0).mean()),
-            "tilt_vs_elevation": float(np.corrcoef(β, θ0)[0, 1]), "tilt_minus_elevation": float(np.abs(β - θ0).mean()),
-            "elevation": float(np.abs(θ0).mean())}
+            "tilt_within_10": float((np.abs(β) <= 10.0).mean()), "tilt_undefined": int((~ok).sum()),
+            "tilt_vs_elevation": corr, "tilt_minus_elevation": float(np.abs(β - θ0).mean()),
+            "elevation": float(np.abs(a[:, 12]).mean())}
 
 
 def run(name: str, overrides, steps: int, cache: Path, seed: int = 0) -> dict:
@@ -224,7 +226,7 @@ def main() -> None:
                      f"centroid − truth's (voxels; depth, then across) mean {np.round(r['centroid_offset'], 2).tolist()}, "
                      f"mean |·| {np.round(r['centroid_error'], 2).tolist()}, "
                      f"pose: best-aligning tilt |β| {r['tilt_error']:.1f}° (3D IoU there {r['tilt_iou']:.3f}, "
-                     f"share within 10° {r['tilt_within_10']:.2f}), "
+                     f"share within 10° {r['tilt_within_10']:.2f}; undefined for {r['tilt_undefined']}), "
                      f"corr(β, input elevation θ₀) {r['tilt_vs_elevation']:.2f}, |β − θ₀| {r['tilt_minus_elevation']:.1f}° "
                      f"(|θ₀| {r['elevation']:.1f}°), "
                      f"silhouette area − truth's (px) {np.round(v['held_out']['area'], 1).tolist()}; on training "

@@ -149,8 +149,9 @@ class TrainConfig:
     fresh loss, in every mode; d_roll: 'none' | 'uniform': D sees every real and rendered image
     turned in-plane by its own random angle, so that the tilt of views drawn in the input camera's
     frame cannot give fakes away; 'matched' (reconstruction): the reals turned by the tilt a right
-    volume's view would have, for an input elevation drawn from the train section's view distribution
-    (:mod:`mitsuba_platonic.train.roll`, docs/training.md);
+    volume's view would have, for an input elevation drawn from the collection's view distribution
+    (procedural data; for photos the train section's) (:mod:`mitsuba_platonic.train.roll`,
+    docs/training.md);
     r1_weight: γ of the R1 penalty γ/2 · E‖∇ₓD(x)‖² on real images (Mescheder et al. 2018),
     added to every critic's non-saturating loss (0: none; WGAN-GP has its own penalty)
     (:func:`mitsuba_platonic.train.losses.r1_penalty`, docs/training.md); colour_tv: weight of

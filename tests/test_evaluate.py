@@ -413,5 +413,15 @@ def test_best_tilt_of_a_leaning_rod():
 
     assert abs(M.best_tilt(rod(0.0), rod(40.0))[0]) == 40.0
     assert abs(M.best_tilt(rod(0.0), rod(-25.0))[0]) == 25.0
-    with pytest.raises(UserError, match="step"):
-        M.best_tilt(rod(0.0), rod(0.0), step=0.0)
+    for step in (0.0, 7.0, True):
+        with pytest.raises(UserError, match="step must be a number of degrees that divides 90"):
+            M.best_tilt(rod(0.0), rod(0.0), step=step)
+
+
+def test_best_tilt_breaks_ties_towards_zero_and_has_no_tilt_without_overlap():
+    n = 16
+    empty, block = np.zeros((n, n, n), np.float32), np.zeros((n, n, n), np.float32)
+    block[6:10, 6:10, 6:10] = 1.0
+    assert M.best_tilt(empty, empty) == (0.0, 1.0)              # every tilt ties (IoU 1): the nearest 0
+    β, iou = M.best_tilt(empty, block)                          # nothing to align
+    assert np.isnan(β) and iou == 0.0

@@ -200,24 +200,36 @@ def best_tilt(output: ArrayLike, target: ArrayLike, step: float = 5.0,
     """The tilt β (degrees) that best aligns ``output`` with ``target``, and the volume IoU there.
 
     Both volumes lie in an input camera's frame (axes d, h, w of ``(N, N, N)``: depth, image row,
-    column). β runs over [−90°, 90°] in steps of ``step``; ``output`` is resampled as seen from a
-    camera raised by β about the frame's horizontal axis, i.e. from the view (0, sin β, cos β)
-    (:func:`mitsuba_platonic.render.closed_form.rotate`, trilinear), and scored by
-    :func:`volume_iou`; the first best β wins ties. β = 0 for a reconstruction in the truth's pose.
-    For a reconstruction that stands upright in the frame whatever the input camera's elevation
-    θ₀, β ≈ θ₀: the pose failure of view-space reconstruction the paper names (its Fig. 11).
+    column). β runs over the grid −90°, −90° + ``step``, …, 90° (``step`` must divide 90);
+    ``output`` is resampled as seen from a camera raised by β about the frame's horizontal axis,
+    i.e. from the view (0, sin β, cos β) (:func:`mitsuba_platonic.render.closed_form.rotate`,
+    trilinear), and scored by :func:`volume_iou`. Of equally good β the one nearest 0 wins; where
+    no β gives any overlap (best IoU 0, e.g. an output with no voxel at ``threshold``) the tilt is
+    undefined and β is NaN. β = 0 for a reconstruction in the truth's pose. For one that stands
+    upright in the frame whatever the input camera's elevation θ₀, β ≈ θ₀: the pose failure of
+    view-space reconstruction that the paper names (docs/training.md, "The pose of a
+    reconstruction").
     """
     from ..render.closed_form import rotate          # the renderer's resampling (no cycle: it needs no evaluate)
     from ..views import from_angles
 
     o, t = _density_pair(output, target)
-    if not 0.0 < step <= 90.0:
-        raise UserError(f"step must be in (0, 90] degrees, got {step!r}")
-    βs = torch.arange(-90.0, 90.0 + 1e-9, step, dtype=torch.float64)
-    ot = torch.from_numpy(o)[None, None].expand(len(βs), -1, -1, -1, -1).contiguous()
-    turned = rotate(ot, from_angles(torch.zeros_like(βs), βs).to(torch.float64))[:, 0].clamp(0.0, 1.0)
-    ious = [volume_iou(v, t, threshold) for v in turned.numpy()]
-    k = int(np.argmax(ious))
+    th = _threshold(threshold)
+    if isinstance(step, bool) or not isinstance(step, (int, float)) or not 0.0 < step <= 90.0 \
+            or abs(90.0 / step - round(90.0 / step)) > 1e-9:
+        raise UserError(f"step must be a number of degrees that divides 90 (e.g. 5), got {step!r}")
+    m = int(round(90.0 / step))
+    βs = np.arange(-m, m + 1) * float(step)
+    volume = torch.from_numpy(o)[None, None]
+    ious = []
+    for β in βs:                                      # one resampling at a time: memory of one volume
+        view = from_angles(torch.zeros(1), torch.tensor([β])).to(torch.float64)
+        ious.append(volume_iou(rotate(volume, view)[0, 0].clamp(0.0, 1.0), t, th))
+    ious = np.array(ious)
+    if ious.max() == 0.0:
+        return float("nan"), 0.0
+    best = np.flatnonzero(ious == ious.max())
+    k = int(best[np.argmin(np.abs(βs[best]))])
     return float(βs[k]), float(ious[k])
 
 

@@ -28,15 +28,19 @@ world's upright photo from the same direction turned counter-clockwise by
 
     ψ(θ₀, ω) = −atan2(u·r, u·t)          (beside the input, ω = ±x: ψ = ±θ₀; front and back: 0)
 
-(:func:`input_frame_roll`). With θ₀ drawn from the photos' view distribution (``train.view_distribution``,
-``train.elevation``) and ω the slot's random view, each real is turned by ψ(θ₀, ω): the reals' tilts
-are then distributed as the fakes' are when G's volume is the right one, tilted by the input's
-elevation in its frame; a volume kept upright in the frame, whose fakes are never tilted, is what D
-can now tell apart. Unlike 'uniform', the turns are not arbitrary: a real is turned only as far as a
-right volume's view of it would be (0 in front and behind, ±θ₀ beside), so D keeps "which way is
-up".
+(:func:`input_frame_roll`). With θ₀ drawn from the photos' view distribution (the collection's,
+``data.view_distribution`` and ``data.elevation``, for a procedural one; for photo folders, whose
+poses nobody knows, the assumed p_view, ``train.view_distribution`` and ``train.elevation``) and ω
+the slot's random view, each real is turned by ψ(θ₀, ω): the reals' tilts are then distributed as
+the fakes' are when G's volume is the right one, tilted by the input's elevation in its frame; a
+volume kept upright in the frame, whose fakes are never tilted, is what D can now tell apart.
+Unlike 'uniform', the turns are those a right volume's views have, not arbitrary ones, so D keeps
+"which way is up" where that tells anything: 0 in front and behind, ±θ₀ beside, atan(0.6 tan θ₀)
+at ω = (0.6, 0, 0.8); views above or below the input turn further, up to ±π at the frame's
+poles, where a right volume's view is upside down too.
 What it cannot match: a fake's tilt also goes with the elevation it shows the object from, a real's
-is drawn independently of its (unknown) pose.
+is drawn independently of its (unknown) pose; and only the reals are resampled, so they are
+slightly smoother than the fakes (bilinear) and lose the corners that turn out of the square.
 """
 
 from __future__ import annotations
@@ -44,7 +48,7 @@ from __future__ import annotations
 import torch
 import torch.nn.functional as F
 
-from ..views import camera_frames
+from ..views import camera_frames, validate_views
 
 __all__ = ["roll", "input_frame_roll", "ROLLS"]
 
@@ -69,13 +73,15 @@ def roll(images: torch.Tensor, angles: torch.Tensor) -> torch.Tensor:
 
 def input_frame_roll(views: torch.Tensor, elevation: torch.Tensor) -> torch.Tensor:
     """ψ(θ₀, ω) (module docstring), radians ``(B,)``: the counter-clockwise turn that takes the
-    world's upright photo from direction ω to the image of a camera at ω upright in the frame of
-    an input camera at elevation θ₀ (``elevation``, degrees, ``(B,)``); ``views`` ``(B, 3)`` in
-    that frame."""
-    if views.dim() != 2 or views.shape[1] != 3 or elevation.shape != views.shape[:1]:
-        raise ValueError(f"input_frame_roll expects views (B, 3) and elevations (B,), got {tuple(views.shape)} "
-                         f"and {tuple(elevation.shape)}")
+    world's upright photo from the world direction that ω names to the image of a camera at ω
+    upright in the frame of an input camera at elevation θ₀ (``elevation``, degrees, ``(B,)``);
+    ``views`` ``(B, 3)``, given in that frame."""
+    if not (isinstance(views, torch.Tensor) and isinstance(elevation, torch.Tensor)) or views.dim() != 2 \
+            or views.shape[1] != 3 or elevation.shape != views.shape[:1]:
+        raise ValueError(f"input_frame_roll expects tensors: views (B, 3) and elevations (B,), got "
+                         f"{tuple(getattr(views, 'shape', ()))} and {tuple(getattr(elevation, 'shape', ()))}")
+    validate_views(views)                                    # finite, non-zero directions
     right, up, _ = camera_frames(views)
-    θ0 = torch.deg2rad(elevation.to(torch.float64))
+    θ0 = torch.deg2rad(elevation.to(views.device, torch.float64))
     u = torch.stack([torch.zeros_like(θ0), torch.cos(θ0), torch.sin(θ0)], dim=-1)   # world up, input frame
     return -torch.atan2((u * right).sum(-1), (u * up).sum(-1)).to(torch.float32)

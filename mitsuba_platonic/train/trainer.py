@@ -242,7 +242,8 @@ class Trainer:
         # train.d_roll 'uniform': an angle per real and per fake image D sees (train/roll.py)
         ψ = self._shard(torch.rand(2, B * K, generator=g).mul(2 * math.pi).T).T if t.d_roll == "uniform" else None
         if t.d_roll == "matched":                            # the reals turned as a right volume's views are
-            θ0 = self._shard(to_angles(self._views(B * K, g))[1])
+            photos = cfg.data if cfg.data.source == "procedural" else None   # their views; else p_view
+            θ0 = self._shard(to_angles(self._views(B * K, g, photos))[1])
             ψ_real = input_frame_roll(views, θ0)
         b = x.shape[0]
         rec = t.task == "reconstruction"
