@@ -239,12 +239,13 @@ class Trainer:
         else:
             views = self._shard(self._views(B * K, g).view(B, K, 3)).reshape(-1, 3)
         eps = self._shard(torch.rand(B * K, generator=g))
-        # train.d_roll 'uniform': an angle per real and per fake image D sees (train/roll.py)
-        ψ = self._shard(torch.rand(2, B * K, generator=g).mul(2 * math.pi).T).T if t.d_roll == "uniform" else None
-        if t.d_roll == "matched":                            # the reals turned as a right volume's views are
+        # train.d_roll: the angles D's reals and fakes are turned by (train/roll.py); None: as they are
+        ψ_real = ψ_fake = None
+        if t.d_roll == "uniform":                            # an angle per real and per fake image
+            ψ_real, ψ_fake = self._shard(torch.rand(2, B * K, generator=g).mul(2 * math.pi).T).T
+        elif t.d_roll == "matched":                          # the reals turned as a right volume's views are
             photos = cfg.data if cfg.data.source == "procedural" else None   # their views; else p_view
-            θ0 = self._shard(to_angles(self._views(B * K, g, photos))[1])
-            ψ_real = input_frame_roll(views, θ0)
+            ψ_real = input_frame_roll(views, self._shard(to_angles(self._views(B * K, g, photos))[1]))
         b = x.shape[0]
         rec = t.task == "reconstruction"
 
@@ -268,10 +269,10 @@ class Trainer:
         # -- D: real photos vs rendered views, gated by its soft accuracy -----------------------
         real_d = x.repeat_interleave(K, 0) if K > 1 else x
         fake_d = i_view
-        if ψ is not None:                                    # each image turned by its own angle
-            real_d, fake_d = roll(real_d, ψ[0].to(self.device)), roll(i_view, ψ[1].to(self.device))
-        elif t.d_roll == "matched":
+        if ψ_real is not None:
             real_d = roll(real_d, ψ_real.to(self.device))
+        if ψ_fake is not None:
+            fake_d = roll(i_view, ψ_fake.to(self.device))
         self._critic_update("D", self.opt_d, real_d, fake_d.detach(), eps, t.d_gate, out)
 
         # -- D3 (Platonic3D): ground-truth volumes vs generated ----------------------------------
