@@ -151,7 +151,14 @@ class TrainConfig:
     frame cannot give fakes away; 'matched' (reconstruction): the reals turned by the tilt a right
     volume's view would have, for an input elevation drawn from the collection's view distribution
     (procedural data; for photos the train section's) (:mod:`mitsuba_platonic.train.roll`,
-    docs/training.md);
+    docs/training.md); pose: where G's volume stands, 'input' (in the input camera's frame, the
+    paper's view-space reconstruction) | 'elevation' (reconstruction, mode 'platonic'): G builds the
+    object upright in its own frame, a pose head reads the input camera's elevation θ̂ from E's
+    code, the input-view term renders the volume tilted by θ̂ and the random views are drawn
+    around the upright object, as the photos' cameras were; pose_weight: λ of the term that
+    teaches the head the elevations of G's own renders from those random views (0: none; only
+    with 'elevation') (:mod:`mitsuba_platonic.train.trainer`, docs/training.md, "An elevation read
+    from the photo");
     r1_weight: γ of the R1 penalty γ/2 · E‖∇ₓD(x)‖² on real images (Mescheder et al. 2018),
     added to every critic's non-saturating loss (0: none; WGAN-GP has its own penalty)
     (:func:`mitsuba_platonic.train.losses.r1_penalty`, docs/training.md); colour_tv: weight of
@@ -179,6 +186,8 @@ class TrainConfig:
     d_gate: Optional[float] = 0.6
     d_steps: int = 1
     d_roll: str = "none"
+    pose: str = "input"
+    pose_weight: float = 0.0
     r1_weight: float = 0.0
     colour_tv: float = 0.0
     ema: Optional[float] = None
@@ -202,7 +211,7 @@ class Config:
         from .train.losses import LOSSES
         from .train.roll import ROLLS
         from .train.run import DEVICES
-        from .train.trainer import MODES, MODES_3D, REC_TARGETS, TASKS
+        from .train.trainer import MODES, MODES_3D, POSES, REC_TARGETS, TASKS
         from .views import DEFAULT_ELEVATION
         _typed(self.to_dict())                               # a config built in code: its types, finite numbers
         _folder_name("run.name", self.run.name)
@@ -255,6 +264,20 @@ class Config:
             raise ConfigError("train.d_roll: 'matched' turns the photos by the tilt of views drawn in an input "
                               "camera's frame, so it needs train.task 'reconstruction' and a 2D critic "
                               f"(not mode 'gan3d'), got task {self.train.task!r}, mode {self.train.mode!r}")
+        _choice("train.pose", self.train.pose, POSES)
+        _non_negative("train.pose_weight", self.train.pose_weight)
+        if self.train.pose == "elevation":
+            if self.train.task != "reconstruction" or self.train.mode != "platonic":
+                raise ConfigError("train.pose: 'elevation' reads the input camera's elevation from the photo, so it "
+                                  "needs train.task 'reconstruction' and train.mode 'platonic', got task "
+                                  f"{self.train.task!r}, mode {self.train.mode!r}")
+            if self.train.d_roll != "none":
+                raise ConfigError("train.d_roll: with train.pose 'elevation' the random views are drawn around the "
+                                  "upright object, as the photos' cameras were, so nothing is to be turned; "
+                                  f"expected 'none', got {self.train.d_roll!r}")
+        elif self.train.pose_weight > 0:
+            raise ConfigError("train.pose_weight: the pose term trains the elevation head of train.pose "
+                              f"'elevation'; with pose {self.train.pose!r} expected 0, got {self.train.pose_weight!r}")
         for key in ("lr_g", "lr_e", "lr_d"):
             if not getattr(self.train, key) > 0:
                 raise ConfigError(f"train.{key}: expected a positive learning rate, got {getattr(self.train, key)!r}")

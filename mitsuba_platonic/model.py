@@ -12,8 +12,14 @@ z followed by a one-hot code of one of :data:`RING_VIEWS` views on a ring (:meth
 Its volumes are in the frame of ring view 0, which is the input view ω₀ for reconstruction, so
 :meth:`Model.reconstruct` and :meth:`Model.generate` append the code of view 0.
 
-Its state dict keys are the checkpoint's (``E.*``, ``G.*``): a checkpoint's ``nets`` holds E
-and G under the same names, next to the critics D and D3 that only training needs.
+A model trained with ``train.pose: elevation`` also has a pose head P (z → the input camera's
+elevation θ̂, :class:`~mitsuba_platonic.models.PoseHead`): its G builds the object upright, in
+an object frame, and :meth:`Model.reconstruct` turns that volume into the input camera's frame by
+θ̂ (:func:`~mitsuba_platonic.render.closed_form.tilt`), so every model's reconstructions live in
+the frame of their input view (docs/training.md, "An elevation read from the photo").
+
+Its state dict keys are the checkpoint's (``E.*``, ``G.*``, ``P.*``): a checkpoint's ``nets``
+holds E, G (and P) under the same names, next to the critics D and D3 that only training needs.
 """
 
 from __future__ import annotations
@@ -28,7 +34,8 @@ from torch import nn
 
 from .config import Config
 from .errors import UserError
-from .models import Encoder, Generator, NetConfig, init_weights
+from .models import Encoder, Generator, NetConfig, PoseHead, init_weights
+from .render.closed_form import tilt
 from .render.settings import RenderSettings
 from .volume import CHANNELS
 
@@ -49,7 +56,7 @@ def net_config(cfg: Config) -> NetConfig:
     return NetConfig(resolution=cfg.model.resolution, volume_channels=channels, image_channels=channels,
                      latent=cfg.model.latent, width=cfg.model.width, norm=cfg.model.norm,
                      encoder_hidden=cfg.model.encoder_hidden, upsample=cfg.model.upsample,
-                     view_codes=view_codes(cfg)).validate()
+                     view_codes=view_codes(cfg), pose=cfg.train.pose == "elevation").validate()
 
 
 def critic_config(cfg: Config) -> NetConfig:
@@ -74,6 +81,8 @@ class Model(nn.Module):
         self.origin: Optional[Path] = None
         self.E = Encoder(net)
         self.G = Generator(net)
+        #: the pose head (``train.pose: elevation``), else None
+        self.P: Optional[PoseHead] = PoseHead(net.latent) if net.pose else None
         if init:
             self.apply(init_weights)
 
@@ -105,7 +114,7 @@ class Model(nn.Module):
         if "ema" in trainer:
             model.load_state_dict(trainer["ema"])
         else:
-            model.load_state_dict({k: v for k, v in nets.items() if k.startswith(("E.", "G."))})
+            model.load_state_dict({k: v for k, v in nets.items() if k.startswith(("E.", "G.", "P."))})
         model.step, model.origin = ckpt.step, ckpt.path
         device = next(iter(nets.values())).device if nets else torch.device("cpu")
         return model.to(device)
@@ -163,14 +172,36 @@ class Model(nn.Module):
 
     @torch.no_grad()
     def reconstruct(self, images: torch.Tensor) -> torch.Tensor:
-        """G(E(x)): ``(B, C, R, R)`` images → ``(B, C, R, R, R)`` volumes on the model's device
-        (eval mode: BatchNorm uses running statistics; the previous mode is restored). A
-        PrGAN-style model's G gets the code of ring view 0, the input view."""
+        """G(E(x)): ``(B, C, R, R)`` images → ``(B, C, R, R, R)`` volumes in the input cameras'
+        frames, on the model's device (eval mode: BatchNorm uses running statistics; the previous
+        mode is restored). A PrGAN-style model's G gets the code of ring view 0, the input view.
+        With a pose head, G's upright volume is tilted by the estimated elevation θ̂ = P(z),
+        ``tilt(G(z), θ̂)`` clamped to [0, 1] (trilinear round-off)."""
+        self._needs_encoder()
+
+        def run() -> torch.Tensor:
+            z = self.E(images.to(self.device))
+            v = self.G(self.code(z))
+            return v if self.P is None else tilt(v, self.P(z)).clamp(0.0, 1.0)
+
+        return self._eval(run)
+
+    @torch.no_grad()
+    def estimate_elevation(self, images: torch.Tensor) -> torch.Tensor:
+        """The input cameras' elevations θ̂ in degrees, ``(B,)``, that a model trained with
+        ``train.pose: elevation`` reads from ``(B, C, R, R)`` images; a
+        :class:`~mitsuba_platonic.errors.UserError` for a model without a pose head."""
+        self._needs_encoder()
+        if self.P is None:
+            raise UserError("this model estimates no elevation: it was trained with train.pose: input "
+                            "(its reconstructions are in the input camera's frame as they come)")
+        return self._eval(lambda: torch.rad2deg(self.P(self.E(images.to(self.device)))))
+
+    def _needs_encoder(self) -> None:
         if self.task != "reconstruction":
             where = self.origin.parent.parent if self.origin is not None else "this model"
             raise UserError(f"{where} was trained for {self.task!r}; reconstruction needs an encoder "
                             f"(train.task: reconstruction)")
-        return self._eval(lambda: self.G(self.code(self.E(images.to(self.device)))))
 
     @torch.no_grad()
     def generate(self, n: int, seed: int = 0) -> torch.Tensor:

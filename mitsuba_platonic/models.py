@@ -30,7 +30,7 @@ import torch
 from torch import nn
 
 __all__ = ["NORMS", "UPSAMPLES", "INITS", "NetConfig", "Encoder", "Generator", "Discriminator",
-           "VolumeDiscriminator", "build_networks", "init_weights", "init_critic_he", "init_he"]
+           "VolumeDiscriminator", "PoseHead", "build_networks", "init_weights", "init_critic_he", "init_he"]
 
 NORMS = ("batch", "instance", "none")
 #: How G doubles its resolution: the paper's transposed convolution (k4, s2, p1), or a nearest
@@ -53,7 +53,9 @@ class NetConfig:
     encoder_hidden: width of E's last layer before the Linear to z (0: none, E's trunk feeds
     the Linear directly); view_codes: length of a view code appended to z as G's input (the
     PrGAN-style baseline, ``train.mode: prgan``: a one-hot of one of 8 ring views; 0: none, G
-    sees z only); upsample: how G's stages double the resolution (:data:`UPSAMPLES`)."""
+    sees z only); upsample: how G's stages double the resolution (:data:`UPSAMPLES`); pose:
+    whether a :class:`PoseHead` reads the input camera's elevation from z (``train.pose:
+    elevation``)."""
 
     resolution: int = 32
     volume_channels: int = 4
@@ -64,6 +66,7 @@ class NetConfig:
     encoder_hidden: int = 0
     upsample: str = "transposed"
     view_codes: int = 0
+    pose: bool = False
 
     def validate(self) -> "NetConfig":
         if self.resolution not in RESOLUTIONS:
@@ -83,6 +86,8 @@ class NetConfig:
             raise ValueError(f"encoder_hidden must be a non-negative int, got {self.encoder_hidden!r}")
         if not isinstance(self.view_codes, int) or self.view_codes < 0:
             raise ValueError(f"view_codes must be a non-negative int, got {self.view_codes!r}")
+        if not isinstance(self.pose, bool):
+            raise ValueError(f"pose must be True or False, got {self.pose!r}")
         return self
 
     @property
@@ -229,6 +234,28 @@ class Encoder(nn.Module):
         if x.dim() != 4 or x.shape[1:] != (c, r, r):
             raise ValueError(f"E expects images (B, {c}, {r}, {r}), got {tuple(x.shape)}")
         return self.head(self.hidden(self.trunk(x)).flatten(1))
+
+
+class PoseHead(nn.Module):
+    """P: E's code z ``(B, latent)`` → the input camera's elevation θ̂ ``(B,)`` in radians,
+
+        θ̂ = (π/2) · tanh(w · z + b)
+
+    so θ̂ ∈ (−90°, 90°), the range of an upright camera's elevation. w and b start at 0 (every
+    estimate 0°: the reconstruction starts as a view-space model's) and are plain parameters, not
+    a Linear layer, so no network initialisation (:func:`init_weights`, :func:`init_he`) redraws
+    them. ``train.pose: elevation`` (:mod:`mitsuba_platonic.train.trainer`) trains it.
+    """
+
+    def __init__(self, latent: int):
+        super().__init__()
+        self.weight = nn.Parameter(torch.zeros(latent))
+        self.bias = nn.Parameter(torch.zeros(()))
+
+    def forward(self, z: torch.Tensor) -> torch.Tensor:
+        if z.dim() != 2 or z.shape[1] != self.weight.shape[0]:
+            raise ValueError(f"P expects codes (B, {self.weight.shape[0]}), got {tuple(z.shape)}")
+        return (math.pi / 2) * torch.tanh(z @ self.weight + self.bias)
 
 
 def init_weights(m: nn.Module) -> None:

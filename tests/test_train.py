@@ -269,10 +269,12 @@ def _ddp_worker(rank, world, port, cfg_overrides, tmp, result_file):
     os._exit(0)
 
 
-def test_two_processes_with_half_the_batch_make_the_single_process_update(tmp_path):
-    """gloo, 2 processes, no batch-statistics layers (norm: none): same parameters after 2 steps."""
+@pytest.mark.parametrize("pose", [[], ["train.pose=elevation", "train.pose_weight=1.0"]], ids=["input", "elevation"])
+def test_two_processes_with_half_the_batch_make_the_single_process_update(tmp_path, pose):
+    """gloo, 2 processes, no batch-statistics layers (norm: none): same parameters after 2 steps,
+    also with the pose head, which E's and P's second forward pass (G's renders) reaches."""
     import torch.multiprocessing as mp
-    overrides = ["model.norm=none", "train.batch_size=4", "train.task=reconstruction"]
+    overrides = ["model.norm=none", "train.batch_size=4", "train.task=reconstruction", *pose]
     cfg = _cfg(tmp_path, *overrides)
     load_training_data(cfg, progress=False)                  # render the collection once, up front
     single = Trainer(cfg, load_training_data(cfg, progress=False), torch.device("cpu"))

@@ -46,7 +46,7 @@ from typing import Optional, Tuple
 from ..views import camera_frames
 from ..volume import voxel_size, world_to_grid
 
-__all__ = ["FILTERS", "ORTHOGRAPHIC", "camera_space_points", "path_factor", "rotate", "reduce_depth",
+__all__ = ["FILTERS", "ORTHOGRAPHIC", "camera_space_points", "path_factor", "rotate", "tilt", "reduce_depth",
            "render_closed_form"]
 
 #: Lookup filters both renderers accept, mapped to ``grid_sample`` modes.
@@ -63,15 +63,21 @@ def camera_space_points(views: torch.Tensor, n: int, dtype: torch.dtype = torch.
 
     ``p = S(z_k) (x_j · right + y_i · up) + z_k · ω`` (see the module docstring); float64 maths.
     """
-    right, up, w = camera_frames(views)
-    c = -1.0 + (torch.arange(n, dtype=torch.float64) + 0.5) * voxel_size(n)
+    return _frame_points(*camera_frames(views), n, lens).to(dtype)
+
+
+def _frame_points(right: torch.Tensor, up: torch.Tensor, w: torch.Tensor, n: int,
+                  lens: Tuple[float, float] = ORTHOGRAPHIC) -> torch.Tensor:
+    """``p = S(z_k) (x_j · right + y_i · up) + z_k · ω`` for frames ``(B, 3)`` each: ``(B, N, N, N, 3)``
+    in the frames' dtype (differentiable in the frames)."""
+    c = -1.0 + (torch.arange(n, dtype=w.dtype, device=w.device) + 0.5) * voxel_size(n)
     xs, ys, zs = c, -c, -c
     t, d = lens
     scale = torch.ones_like(zs) if t == 0.0 else (d - zs) * t          # S(z_k)
     p = (zs[None, :, None, None, None] * w[:, None, None, None, :]
          + scale[None, :, None, None, None] * (ys[None, None, :, None, None] * up[:, None, None, None, :]
                                                 + xs[None, None, None, :, None] * right[:, None, None, None, :]))
-    return p.to(dtype)
+    return p
 
 
 def path_factor(n: int, lens: Tuple[float, float], dtype: torch.dtype = torch.float32) -> Optional[torch.Tensor]:
@@ -98,6 +104,34 @@ def rotate(volume: torch.Tensor, views: torch.Tensor, filter: str = "trilinear",
     grid = world_to_grid(camera_space_points(views, n, torch.float64, lens)).to(volume.dtype)
     return F.grid_sample(volume, grid.to(volume.device), mode=FILTERS[filter],
                          padding_mode="zeros", align_corners=False)
+
+
+def tilt(volume: torch.Tensor, elevation: torch.Tensor) -> torch.Tensor:
+    """Resample ``volume`` ``(B, C, N, N, N)`` into the frame of a camera at azimuth 0 and
+    ``elevation`` θ ``(B,)`` (radians), differentiably in θ as well as in the volume.
+
+    The same resampling as :func:`rotate` at the view ω(0, θ) = (0, sin θ, cos θ) (trilinear, zero
+    outside the cube, orthographic), with the frame written in θ rather than taken from
+    :func:`~mitsuba_platonic.views.camera_frames` (which holds views constant):
+
+        right = (1, 0, 0),   up = ω × right = (0, cos θ, −sin θ),   ω = (0, sin θ, cos θ)
+
+    so at θ = ±90° it is the pole's frame of :func:`rotate` (right = +x) without a special case.
+    Rendering the result from the front view ω₀ renders ``volume`` from ω(0, θ): a volume in an
+    upright object frame, seen by the input camera at an elevation E estimated
+    (``train.pose: elevation``, :mod:`mitsuba_platonic.train.trainer`).
+    """
+    if elevation.shape != volume.shape[:1]:
+        raise ValueError(f"elevation must have shape ({volume.shape[0]},), one angle per volume, "
+                         f"got {tuple(elevation.shape)}")
+    θ = elevation.to(torch.float64)
+    s, c = torch.sin(θ), torch.cos(θ)
+    zero, one = torch.zeros_like(θ), torch.ones_like(θ)
+    right = torch.stack([one, zero, zero], dim=-1)
+    up = torch.stack([zero, c, -s], dim=-1)
+    w = torch.stack([zero, s, c], dim=-1)
+    grid = world_to_grid(_frame_points(right, up, w, volume.shape[-1]).to(volume.device)).to(volume.dtype)
+    return F.grid_sample(volume, grid, mode="bilinear", padding_mode="zeros", align_corners=False)
 
 
 def reduce_depth(camera_volume: torch.Tensor, model: str, path: Optional[torch.Tensor] = None) -> torch.Tensor:

@@ -13,6 +13,27 @@ uninterrupted one would:
    volume's view (:mod:`.roll`);
 5. G (and E) update on  L_G = adv(D(I_view)) + λ_rec ‖x − I_front‖² (+ w₃ adv₃(D3(v))).
 
+Where the volume stands (``train.pose``). With 'input' (the paper's view-space reconstruction)
+v lives in the input camera's frame: I_front renders it from ω₀ and the random views ω are drawn
+around that frame. A camera above the object sees its up axis tilted, so a right volume is tilted
+by the input's elevation θ₀ in that frame, its views from random ω are rolled, and D, whose photos
+were all taken by upright cameras, pushes G to build the object upright in every input frame
+instead (docs/training.md, "The pose of a reconstruction"). With 'elevation' G builds the object
+upright, in its own frame; a pose head P reads the input camera's elevation θ̂ = P(z) from E's
+code, and
+
+    I_front = R(ω₀, tilt(v, θ̂))       (v seen from elevation θ̂, differentiable in θ̂)
+    I_view  = R(ω, v),  ω ~ p_view     (around the upright object, as the photos' cameras were)
+
+The input-view term alone does not teach P the elevation (it stays uncorrelated with θ₀,
+docs/training.md), so P also learns from G's own renders, whose elevations are known:
+
+    L_pose = λ_pose · mean (P(E(I_view)) − asin ω_y)²      (I_view detached: it trains E and P)
+
+and a reconstruction is ``tilt(G(z), P(z))`` (:meth:`~mitsuba_platonic.model.Model.reconstruct`).
+Only the elevation is estimated: an azimuth turns an upright object into an upright object, so G
+is free to build it already turned to the input's azimuth.
+
 The reconstruction term compares images by default (``train.rec_target: image``, as above). With
 ``rec_target: volume`` (the 3D modes) it compares volumes instead: λ_rec ‖v − v*‖², where v* is
 the input image's ground-truth volume resampled into its camera's frame (where v lives, the frame
@@ -68,7 +89,7 @@ from torch import nn
 from ..config import Config, ConfigError
 from ..model import RING_VIEWS, Model, critic_config
 from ..models import Discriminator, VolumeDiscriminator, init_critic_he, init_he, init_weights
-from ..render.closed_form import rotate
+from ..render.closed_form import rotate, tilt
 from ..views import DEFAULT_ELEVATION, from_angles, front_view, sample_views, to_angles
 from .data import TrainingData
 from .losses import (colour_tv, d_loss, g_loss, gradient_penalty, hard_accuracy_counts, r1_penalty,
@@ -76,7 +97,7 @@ from .losses import (colour_tv, d_loss, g_loss, gradient_penalty, hard_accuracy_
 from .renderer import make_renderer
 from .roll import input_frame_roll, roll
 
-__all__ = ["Trainer", "TASKS", "MODES", "MODES_3D", "REC_TARGETS", "ring_views"]
+__all__ = ["Trainer", "TASKS", "MODES", "MODES_3D", "REC_TARGETS", "POSES", "ring_views"]
 
 #: What E/G learn: reconstruct the input image, or generate from z ~ N(0, I).
 TASKS = ("reconstruction", "generation")
@@ -87,6 +108,8 @@ MODES_3D = ("platonic3d", "gan3d")
 #: train.rec_target: the reconstruction term compares the input image with v's render at the
 #: input view, or v with the input image's ground-truth volume (3D modes)
 REC_TARGETS = ("image", "volume")
+#: train.pose: G's volume in the input camera's frame, or upright and tilted by an elevation E reads
+POSES = ("input", "elevation")
 
 
 def _in_frames(volumes: torch.Tensor, views: torch.Tensor) -> torch.Tensor:
@@ -119,6 +142,8 @@ class Trainer:
         self.model = Model.from_config(cfg, init=False)
         critic = critic_config(cfg)
         nets = {"E": self.model.E, "G": self.model.G, "D": Discriminator(critic)}
+        if self.model.P is not None:                         # train.pose: elevation (starts at 0°)
+            nets["P"] = self.model.P
         if needs_3d:
             nets["D3"] = VolumeDiscriminator(critic)
         self.nets = nn.ModuleDict(nets)
@@ -146,6 +171,8 @@ class Trainer:
         groups = [{"params": self.nets["G"].parameters(), "lr": t.lr_g}]
         if t.task == "reconstruction":
             groups.append({"params": self.nets["E"].parameters(), "lr": t.lr_e})
+        if "P" in self.nets:                                 # the pose head learns with E
+            groups.append({"params": self.nets["P"].parameters(), "lr": t.lr_e})
         self.opt_g = torch.optim.Adam(groups, betas=betas)
         self.opt_d = torch.optim.Adam(self.nets["D"].parameters(), lr=t.lr_d, betas=betas)
         self.opt_d3 = (torch.optim.Adam(self.nets["D3"].parameters(), lr=t.lr_d, betas=betas)
@@ -254,6 +281,8 @@ class Trainer:
         if ring_k is None:
             v = G(z)
             v_view, v_input = v.repeat_interleave(K, 0), v
+            if "P" in self.modules:                          # train.pose: elevation: upright v, seen from θ̂
+                v_input = tilt(v, self.modules["P"](z))
         else:
             # the view is part of G's input: one volume per (z, ring view k), rendered from view k;
             # the input view is ring view 0 (one forward pass, so DDP sees each weight used once)
@@ -294,6 +323,8 @@ class Trainer:
             loss_rec = F.mse_loss(i_front, x)
             terms["rec"] = t.rec_weight * loss_rec
             out["loss_rec"] = float(self._all_sum(loss_rec.detach().cpu()) / self.world)
+        if t.pose_weight > 0:                                # P learns the elevations of G's renders
+            terms["pose"] = t.pose_weight * self._pose_loss(i_view, views, out)
         self._update_g(self._g_objective(terms), step)
         out["loss_g"] = float(self._all_sum(loss_adv.detach().cpu()) / self.world)
         return out
@@ -301,9 +332,19 @@ class Trainer:
     def _g_objective(self, terms: Dict[str, torch.Tensor]) -> torch.Tensor:
         """G's (and E's) loss: the sum of its weighted terms, named 'adv2d' (D on rendered views),
         'adv3d' (D3 on volumes), 'rec' (the input view), 'rec3d' (the input image's ground-truth
-        volume) and 'colour_tv' (a prior, when its weight is set). One place that sees every term, so
+        volume), 'pose' (the elevations of G's renders) and 'colour_tv' (a prior, when its weight
+        is set). One place that sees every term, so
         the tests can check which of them reach G."""
         return sum(terms.values())
+
+    def _pose_loss(self, i_view: torch.Tensor, views: torch.Tensor, out: Dict[str, float]) -> torch.Tensor:
+        """mean (P(E(I)) − θ)² over G's renders ``i_view`` (detached) from ``views`` (this process's
+        rows), θ = asin ω_y their elevations in radians: the pose head learns to read the elevation
+        of an upright object's view, and carries it over to the photos. Logs ``loss_pose``."""
+        θ = torch.asin(views[:, 1].to(torch.float64).clamp(-1.0, 1.0)).to(i_view.dtype).to(self.device)
+        loss = F.mse_loss(self.modules["P"](self.modules["E"](i_view.detach())), θ)
+        out["loss_pose"] = float(self._all_sum(loss.detach().cpu()) / self.world)
+        return loss
 
     def _update_g(self, loss: torch.Tensor, step: int) -> None:
         """One Adam step of G (and E) on ``loss``, then the moving average (``train.ema``) follows."""
