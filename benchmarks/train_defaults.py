@@ -36,7 +36,11 @@ from mitsuba_platonic.quickstart import CONFIG
 from mitsuba_platonic.train.data import collection_folder, load_training_data
 from mitsuba_platonic.train.losses import colour_tv
 from mitsuba_platonic.train.trainer import Trainer
-from presets import add_preset_argument, expand
+from presets import PRESETS, add_preset_argument, expand
+
+#: The view-space reconstruction the quickstart used before train.pose: elevation (the paper's); the
+#: variants that only exist there (D's rolls, the 3D-supervised baselines) start from it
+VIEW_SPACE = PRESETS["view_space"]
 
 VARIANTS = {
     "default": [],                                                     # configs/quickstart.yaml as it is
@@ -59,9 +63,9 @@ VARIANTS = {
     "d_batchnorm": [],                                                 # the paper's D (_paper_d)
     "d_kaiming_lrd1e-4_gate08": ["model.critic_init=he", "train.lr_d=1e-4", "train.d_gate=0.8"],
     "d_kaiming_lrd1e-4_dsteps5": ["model.critic_init=he", "train.lr_d=1e-4", "train.d_steps=5"],
-    "roll": ["train.d_roll=uniform"],                                  # D's images turned (train/roll.py)
-    "d_kaiming_lrd1e-4_roll": ["model.critic_init=he", "train.lr_d=1e-4", "train.d_roll=uniform"],
-    "d_kaiming_lrd1e-4_views4_roll": ["model.critic_init=he", "train.lr_d=1e-4", "train.random_views=4",
+    "roll": [*VIEW_SPACE, "train.d_roll=uniform"],                                  # D's images turned (train/roll.py)
+    "d_kaiming_lrd1e-4_roll": [*VIEW_SPACE, "model.critic_init=he", "train.lr_d=1e-4", "train.d_roll=uniform"],
+    "d_kaiming_lrd1e-4_views4_roll": [*VIEW_SPACE, "model.critic_init=he", "train.lr_d=1e-4", "train.random_views=4",
                                       "train.d_roll=uniform"],
     # R1-regularised critics (train.r1_weight = γ) instead of, or besides, the gate
     "d_kaiming_lrd1e-4_r1_1_ungated": ["model.critic_init=he", "train.lr_d=1e-4", "train.r1_weight=1",
@@ -79,16 +83,22 @@ VARIANTS = {
     "ema0.99": ["train.ema=0.99"],
     "ema0.999": ["train.ema=0.999"],
     # the same E and G trained from 3D ground truth (the 3D-GAN's terms): what they can reach
-    "gan3d_volume": ["train.mode=gan3d", "train.rec_target=volume"],
+    "gan3d_volume": [*VIEW_SPACE, "train.mode=gan3d", "train.rec_target=volume"],
     # He's initialisation of E and G (model.init), a wider D (model.critic_width)
     "init_he": ["model.init=he"],
-    "init_he_gan3d_volume": ["model.init=he", "train.mode=gan3d", "train.rec_target=volume"],
+    "init_he_gan3d_volume": [*VIEW_SPACE, "model.init=he", "train.mode=gan3d", "train.rec_target=volume"],
     "critic32": ["model.critic_width=32"],
     "init_he_critic32": ["model.init=he", "model.critic_width=32"],
     "init_he_critic64": ["model.init=he", "model.critic_width=64"],
     # D's reals turned by the tilt a right volume's random view has (train.d_roll, train/roll.py)
-    "roll_matched": ["train.d_roll=matched"],
-    "roll_uniform": ["train.d_roll=uniform"],
+    "roll_matched": [*VIEW_SPACE, "train.d_roll=matched"],
+    "roll_uniform": [*VIEW_SPACE, "train.d_roll=uniform"],
+    # where G's volume stands (train.pose): the paper's view space, or upright and tilted by an
+    # elevation the pose head reads, with and without the term on G's renders (λ_pose)
+    "view_space": VIEW_SPACE,
+    "pose_no_term": ["train.pose_weight=0"],
+    "pose_weight0.3": ["train.pose_weight=0.3"],
+    "pose_weight3": ["train.pose_weight=3"],
 }
 
 
@@ -161,7 +171,18 @@ def volume_scores(model, data, limit: int = 64) -> dict:
             "tilt_error": float(np.abs(β).mean()), "tilt_iou": float(a[:, 11].mean()),
             "tilt_within_10": float((np.abs(β) <= 10.0).mean()), "tilt_undefined": int((~ok).sum()),
             "tilt_vs_elevation": corr, "tilt_minus_elevation": float(np.abs(β - θ0).mean()),
-            "elevation": float(np.abs(a[:, 12]).mean())}
+            "elevation": float(np.abs(a[:, 12]).mean()), **_elevation_scores(model, data, limit)}
+
+
+def _elevation_scores(model, data, limit: int) -> dict:
+    """For a model with a pose head (``train.pose: elevation``): the correlation of its estimated
+    elevations θ̂ with the held-out inputs' θ₀ and the mean |θ̂ − θ₀| (degrees); else nothing."""
+    if model.P is None:
+        return {}
+    θ̂ = model.estimate_elevation(data.held_out[:limit]).cpu().double().numpy()
+    θ0 = np.array([float(to_angles(torch.tensor(r["view"]))[1]) for r in data.held_out_records[:limit]])
+    corr = float(np.corrcoef(θ̂, θ0)[0, 1]) if θ̂.std() > 0 else float("nan")
+    return {"estimate_vs_elevation": corr, "estimate_error": float(np.abs(θ̂ - θ0).mean())}
 
 
 def run(name: str, overrides, steps: int, cache: Path, seed: int = 0) -> dict:
@@ -229,7 +250,9 @@ def main() -> None:
                      f"share within 10° {r['tilt_within_10']:.2f}; undefined for {r['tilt_undefined']}), "
                      f"corr(β, input elevation θ₀) {r['tilt_vs_elevation']:.2f}, |β − θ₀| {r['tilt_minus_elevation']:.1f}° "
                      f"(|θ₀| {r['elevation']:.1f}°), "
-                     f"silhouette area − truth's (px) {np.round(v['held_out']['area'], 1).tolist()}; on training "
+                     + (f"estimated elevation θ̂: corr(θ̂, θ₀) {r['estimate_vs_elevation']:.3f}, |θ̂ − θ₀| "
+                        f"{r['estimate_error']:.1f}°, " if "estimate_error" in r else "")
+                     + f"silhouette area − truth's (px) {np.round(v['held_out']['area'], 1).tolist()}; on training "
                      f"images: mean IoU {v['train']['iou'].mean():.3f}, per view {np.round(v['train']['iou'], 3).tolist()}"
                      + (f"; the trained weights (not the average): novel MAE {r['trained']['novel_view_mae']:.4f}, "
                         f"IoU {r['trained']['novel_view_iou']:.3f}, input MAE {r['trained']['input_view_mae']:.4f}, "
