@@ -18,9 +18,10 @@ PRESETS: Dict[str, List[str]] = {
     # E and G from the DCGAN initialisation, D as wide as they are (the quickstart's before
     # model.init: he and model.critic_width: 32)
     "dcgan_eg": ["model.init=dcgan", "model.critic_width=null"],
-    # the paper's view-space reconstruction: G's volume in the input camera's frame, no pose head
-    # (the quickstart's before train.pose: elevation)
-    "view_space": ["train.pose=input", "train.pose_weight=0"],
+    # the paper's view-space reconstruction: G's volume in the input camera's frame, no pose head,
+    # and the trained weights scored, not their moving average (the quickstart's before
+    # train.pose: elevation and train.ema: 0.99)
+    "view_space": ["train.pose=input", "train.pose_weight=0", "train.ema=null"],
 }
 
 
