@@ -206,7 +206,8 @@ class Model(nn.Module):
     @torch.no_grad()
     def generate(self, n: int, seed: int = 0) -> torch.Tensor:
         """G(z), z ~ N(0, I) drawn by a generator seeded with ``seed`` → ``(n, C, R, R, R)`` (a
-        PrGAN-style model's G gets the code of ring view 0)."""
+        PrGAN-style model's G gets the code of ring view 0; a model with a pose head gives its
+        upright volumes, in their own frame: no input view to tilt them into)."""
         z = torch.randn(n, self.latent, generator=torch.Generator().manual_seed(seed))
         return self._eval(lambda: self.G(self.code(z.to(self.device))))
 
