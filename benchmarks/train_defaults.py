@@ -171,16 +171,16 @@ def volume_scores(model, data, limit: int = 64) -> dict:
             "tilt_error": float(np.abs(β).mean()), "tilt_iou": float(a[:, 11].mean()),
             "tilt_within_10": float((np.abs(β) <= 10.0).mean()), "tilt_undefined": int((~ok).sum()),
             "tilt_vs_elevation": corr, "tilt_minus_elevation": float(np.abs(β - θ0).mean()),
-            "elevation": float(np.abs(a[:, 12]).mean()), **_elevation_scores(model, data, limit)}
+            "elevation": float(np.abs(a[:, 12]).mean()), **_elevation_scores(model, data.held_out[:limit], a[:, 12])}
 
 
-def _elevation_scores(model, data, limit: int) -> dict:
+def _elevation_scores(model, images: torch.Tensor, θ0: np.ndarray) -> dict:
     """For a model with a pose head (``train.pose: elevation``): the correlation of its estimated
-    elevations θ̂ with the held-out inputs' θ₀ and the mean |θ̂ − θ₀| (degrees); else nothing."""
+    elevations θ̂ of ``images`` with their inputs' elevations ``θ0`` and the mean |θ̂ − θ₀|
+    (degrees); else nothing."""
     if model.P is None:
         return {}
-    θ̂ = model.estimate_elevation(data.held_out[:limit]).cpu().double().numpy()
-    θ0 = np.array([float(to_angles(torch.tensor(r["view"]))[1]) for r in data.held_out_records[:limit]])
+    θ̂ = model.estimate_elevation(images).cpu().double().numpy()
     corr = float(np.corrcoef(θ̂, θ0)[0, 1]) if θ̂.std() > 0 else float("nan")
     return {"estimate_vs_elevation": corr, "estimate_error": float(np.abs(θ̂ - θ0).mean())}
 

@@ -202,7 +202,7 @@ def best_tilt(output: ArrayLike, target: ArrayLike, step: float = 5.0,
     Both volumes lie in an input camera's frame (axes d, h, w of ``(N, N, N)``: depth, image row,
     column). β runs over the grid −90°, −90° + ``step``, …, 90° (``step`` must divide 90);
     ``output`` is resampled as seen from a camera raised by β about the frame's horizontal axis,
-    i.e. from the view (0, sin β, cos β) (:func:`mitsuba_platonic.render.closed_form.rotate`,
+    i.e. from the view (0, sin β, cos β) (:func:`mitsuba_platonic.render.closed_form.tilt`,
     trilinear), and scored by :func:`volume_iou`. Of equally good β the one nearest 0 wins; where
     no β gives any overlap (best IoU 0, e.g. an output with no voxel at ``threshold``) the tilt is
     undefined and β is NaN. β = 0 for a reconstruction in the truth's pose. For one that stands
@@ -210,8 +210,7 @@ def best_tilt(output: ArrayLike, target: ArrayLike, step: float = 5.0,
     view-space reconstruction that the paper names (docs/training.md, "The pose of a
     reconstruction").
     """
-    from ..render.closed_form import rotate          # the renderer's resampling (no cycle: it needs no evaluate)
-    from ..views import from_angles
+    from ..render.closed_form import tilt            # the renderer's resampling (no cycle: it needs no evaluate)
 
     o, t = _density_pair(output, target)
     th = _threshold(threshold)
@@ -223,8 +222,8 @@ def best_tilt(output: ArrayLike, target: ArrayLike, step: float = 5.0,
     volume = torch.from_numpy(o)[None, None]
     ious = []
     for β in βs:                                      # one resampling at a time: memory of one volume
-        view = from_angles(torch.zeros(1), torch.tensor([β])).to(torch.float64)
-        ious.append(volume_iou(rotate(volume, view)[0, 0].clamp(0.0, 1.0), t, th))
+        turned = tilt(volume, torch.tensor([math.radians(β)], dtype=torch.float64))
+        ious.append(volume_iou(turned[0, 0].clamp(0.0, 1.0), t, th))
     ious = np.array(ious)
     if ious.max() == 0.0:
         return float("nan"), 0.0

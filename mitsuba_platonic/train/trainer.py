@@ -341,7 +341,7 @@ class Trainer:
         """mean (P(E(I)) − θ)² over G's renders ``i_view`` (detached) from ``views`` (this process's
         rows), θ = asin ω_y their elevations in radians: the pose head learns to read the elevation
         of an upright object's view, and carries it over to the photos. Logs ``loss_pose``."""
-        θ = torch.asin(views[:, 1].to(torch.float64).clamp(-1.0, 1.0)).to(i_view.dtype).to(self.device)
+        θ = to_angles(views, degrees=False)[1].to(self.device, i_view.dtype)
         loss = F.mse_loss(self.modules["P"](self.modules["E"](i_view.detach())), θ)
         out["loss_pose"] = float(self._all_sum(loss.detach().cpu()) / self.world)
         return loss
