@@ -30,7 +30,10 @@ def atomic_write(path: Path, write: Callable[[Path], Any], durable: bool = False
     The temporary file is removed if ``write`` fails (or is interrupted). A failed write (a full
     disk, no permission) raises ``OSError`` naming ``path``, also where the writer reported it
     as its own exception whose message names the OS error (Mitsuba and OpenEXR raise
-    ``RuntimeError``), so that the command line shows it as one line.
+    ``RuntimeError``), so that the command line shows it as one line. A Ctrl-C inside ``write``
+    stays a ``KeyboardInterrupt`` even where the writer's own clean-up then fails on the torn file
+    and raises something else (numpy's ``savez`` closing a zip whose entry is still open raises
+    ``ValueError``), so the command line reports the interrupt, not the clean-up's error.
     """
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
@@ -42,6 +45,9 @@ def atomic_write(path: Path, write: Callable[[Path], Any], durable: bool = False
                 os.fsync(f.fileno())
         os.replace(tmp, path)
     except Exception as e:
+        interrupt = _interrupt_behind(e)
+        if interrupt is not None:                            # the clean-up of a write Ctrl-C tore
+            raise interrupt from None
         failed = _as_os_error(e, path, tmp)
         if failed is None:
             raise
@@ -49,6 +55,17 @@ def atomic_write(path: Path, write: Callable[[Path], Any], durable: bool = False
     finally:
         if tmp.exists():
             tmp.unlink()
+
+
+def _interrupt_behind(e: BaseException) -> Optional[KeyboardInterrupt]:
+    """The ``KeyboardInterrupt`` that ``e`` was raised while handling (its context chain), if any."""
+    seen = set()
+    while e is not None and id(e) not in seen:
+        if isinstance(e, KeyboardInterrupt):
+            return e
+        seen.add(id(e))
+        e = e.__cause__ or e.__context__
+    return None
 
 
 def _as_os_error(e: Exception, path: Path, tmp: Path) -> Optional[OSError]:

@@ -329,6 +329,35 @@ def test_atomic_write_names_the_file_of_a_failed_write(tmp_path):
     assert path.read_bytes() == b"old" and temporaries(tmp_path) == []
 
 
+def test_a_ctrl_c_whose_writer_fails_to_clean_up_is_still_an_interrupt(tmp_path):
+    """numpy's savez, interrupted inside its zip entry, raises ValueError from closing the zip while
+    handling the KeyboardInterrupt: atomic_write raises the interrupt (the CLI's one line, exit 130),
+    keeps the old file and leaves no temporary; a ValueError that no interrupt caused stays one."""
+    import numpy as np
+
+    path = tmp_path / "v.npz"
+    path.write_bytes(b"old")
+
+    def interrupted(tmp):
+        def torn():
+            raise KeyboardInterrupt
+        np.savez_compressed(tmp, volume=np.zeros(4))
+        try:
+            torn()
+        finally:
+            raise ValueError("Can't close the ZIP file while there is an open writing handle on it.")
+
+    with pytest.raises(KeyboardInterrupt):
+        atomic_write(path, interrupted)
+    assert path.read_bytes() == b"old" and temporaries(tmp_path) == []
+
+    def plain(tmp):
+        raise ValueError("not an interrupt")
+
+    with pytest.raises(ValueError, match="not an interrupt"):
+        atomic_write(path, plain)
+
+
 def _tiny_overrides(out: Path, data: Path, *extra):
     return [f"run.out_dir={out}", "run.name=r", "run.steps=2", "run.log_every=1", "run.sample_every=100000",
             "run.checkpoint_every=2", f"data.cache={data}", f"data.shape_class={TINY}", "data.n_shapes=2",
