@@ -209,6 +209,23 @@ def test_platonic_evaluate_on_a_folder_run_writes_the_photo_section(folder_run, 
     assert f"![shapes (platonic, step 2): photo | input view | novel views](figures/{figure.name})" in text
     with Image.open(figure) as im:
         assert im.width > 400 and im.height > 200                          # 8 columns, 4 photos
+    # the judge: every row judged from every band, on the run's held-out photos
+    assert "### Judged from every side: shapes (platonic, step 2)" in text
+    for r in results:
+        j = r["judge"]
+        assert set(j["c2st"]["accuracy"]) == {"input", "near", "side", "back"} and j["c2st"]["photos"] == 4
+        assert all(0.0 <= a <= 1.0 for a in j["c2st"]["accuracy"].values())
+        assert [p["file"] for p in j["photos"]] == [str(f) for f in files]
+    assert results[1]["judge"]["c2st_side"] >= 0.9          # the untrained blob never passes for a photo
+    turntable = out / "figures" / "shapes_platonic_step_2_turntable.png"
+    assert f"](figures/{turntable.name})" in text and turntable.is_file()
+    # --judge-steps 0 skips it; a negative count is refused
+    code, _, err = run_cli(["evaluate", "--run", str(run_dir), "--out", str(tmp_path / "nj"), "--quiet",
+                            "--no-baselines", "--judge-steps", "0"])
+    assert code == 0, err
+    assert "judge" not in json.loads((tmp_path / "nj" / "results.json").read_text())[0]
+    code, _, err = run_cli(["evaluate", "--run", str(run_dir), "--out", str(tmp_path / "nj"), "--judge-steps", "-1"])
+    assert code == 2 and "--judge-steps" in one_line(err, "evaluate")
 
     # a photo folder that moved: one line naming --data-path; then --data-path finds it
     moved = root / "moved"

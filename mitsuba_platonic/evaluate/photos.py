@@ -77,11 +77,12 @@ from ..views import from_angles, front_view
 from ..volume import CHANNELS
 from . import metrics as M
 from .figures import save_image_grid
+from .judge import CRITIC_STEPS, FIGURE_AZIMUTHS, Judgement, judge, judge_table, stats_table
 from .protocol import billboard
 
 __all__ = ["ABOVE", "BESIDE", "CARD_FRACTION", "TARGET_SHARE", "novel_views", "held_out_photos", "card_check",
            "card_summary", "view_depth", "PhotoRow", "score_photos", "photo_table", "write_photo_figure",
-           "PhotoSection", "evaluate_photo_run", "section_markdown", "section_results"]
+           "write_judge_figure", "photo_splits", "PhotoSection", "evaluate_photo_run", "section_markdown", "section_results"]
 
 #: Elevations (degrees) of the views above the input view, and azimuths of the views beside it.
 ABOVE = (10.0, 20.0, 30.0)
@@ -104,13 +105,21 @@ def novel_views() -> Tuple[List[str], torch.Tensor]:
 
 
 def held_out_photos(cfg: Any, data_path: Optional[PathLike] = None) -> Tuple[torch.Tensor, List[Path]]:
-    """The held-out photos of a folder run: ``(M, C, R, R)`` images and their source files.
+    """The held-out photos of a folder run: ``(M, C, R, R)`` images and their source files
+    (:func:`photo_splits` without the training photos)."""
+    _, held, files = photo_splits(cfg, data_path)
+    return held, files
 
-    The same images, in the same order, as ``train/data.py``'s ``_folder`` holds out: the ``val``
-    then the ``test`` split of ``PhotoCollection.load_splits(data.path, resolution, alpha_only,
-    **data.photo_options())``. ``data_path`` replaces ``cfg.data.path`` (a path relative to where
-    training ran). Raises :class:`UserError` when the folder is missing, unusable, or leaves no
-    held-out photo.
+
+def photo_splits(cfg: Any, data_path: Optional[PathLike] = None) -> Tuple[torch.Tensor, torch.Tensor, List[Path]]:
+    """The photos of a folder run: ``(N, C, R, R)`` training photos, ``(M, C, R, R)`` held-out
+    photos and the held-out photos' source files.
+
+    The same images, in the same order, as ``train/data.py``'s ``_folder`` builds: the ``train``
+    split, and the ``val`` then the ``test`` split held out, of ``PhotoCollection.load_splits(data.path,
+    resolution, alpha_only, **data.photo_options())``. ``data_path`` replaces ``cfg.data.path`` (a
+    path relative to where training ran). Raises :class:`UserError` when the folder is missing,
+    unusable, or leaves no held-out photo.
     """
     from ..data.photos import PhotoCollection
 
@@ -131,7 +140,9 @@ def held_out_photos(cfg: Any, data_path: Optional[PathLike] = None) -> Tuple[tor
     if not images:
         raise UserError(f"{str(folder)!r} with data.split {d.split} leaves no held-out photo (val + test are "
                         f"empty: {sets['all'].report.usable} usable photo(s)); evaluation needs at least one")
-    return torch.stack(images), files
+    train = [sets["train"][i] for i in range(len(sets["train"]))]
+    train_images = torch.stack(train) if train else torch.zeros(0, *images[0].shape)
+    return train_images, torch.stack(images), files
 
 
 def _depth(volume: torch.Tensor) -> Optional[float]:
@@ -337,31 +348,44 @@ class PhotoSection:
     settings: RenderSettings
     rows: List[PhotoRow]
     figure: Optional[Path] = None
+    #: (method, :class:`~.judge.Judgement`) per row, when the run's training photos were there to judge with
+    judgements: List[Tuple[str, Judgement]] = field(default_factory=list)
+    judge_figure: Optional[Path] = None
 
 
 def evaluate_photo_run(name: str, base: str, cfg: Any, reconstruct: Callable[[torch.Tensor], torch.Tensor],
                        untrained: Optional[Callable[[], Callable[[torch.Tensor], torch.Tensor]]] = None,
                        limit: Optional[int] = None, seed: int = 0, data_path: Optional[PathLike] = None,
-                       n_examples: int = 8, progress: bool = False) -> PhotoSection:
+                       n_examples: int = 8, progress: bool = False,
+                       judge_steps: int = CRITIC_STEPS) -> PhotoSection:
     """Reconstruct a folder run's held-out photos (:func:`held_out_photos`, at most ``limit``) with
     ``reconstruct`` and score them (:func:`score_photos`) with the run's renderer ``cfg.render``
     into a row named ``name``; with ``untrained`` (a factory of the untrained reconstruct
-    function) also the rows ``<base>: untrained`` and, for EA, ``<base>: billboard``."""
-    photos, files = held_out_photos(cfg, data_path)
+    function) also the rows ``<base>: untrained`` and, for EA, ``<base>: billboard``. Each row is
+    also judged away from the input view (:func:`~.judge.judge`, critics of ``judge_steps`` steps
+    trained on the run's training photos; ``judge_steps=0`` skips the judge)."""
+    train, photos, files = photo_splits(cfg, data_path)
     if limit is not None:
         photos, files = photos[:limit], files[:limit]
     settings = cfg.render
     if progress:
-        print(f"  {name}: {len(photos)} held-out photo(s)", flush=True)
-    rows = [score_photos(name, reconstruct(photos).cpu(), photos, files, settings, seed, n_examples)]
+        print(f"  {name}: {len(photos)} held-out photo(s), {len(train)} training photo(s) for the judge", flush=True)
+    methods: List[Tuple[str, Callable[[torch.Tensor], torch.Tensor]]] = [(name, reconstruct)]
     if untrained is not None:
-        rows.append(score_photos(f"{base}: untrained", untrained()(photos).cpu(), photos, files,
-                                 settings, seed))
+        methods.append((f"{base}: untrained", untrained()))
         if settings.model == "ea":
-            boards = torch.stack([billboard(x) for x in photos])
-            rows.append(score_photos(f"{base}: billboard", boards, photos, files, settings, seed))
+            methods.append((f"{base}: billboard", lambda x: torch.stack([billboard(i) for i in x])))
+    rows = [score_photos(m, fn(photos).cpu(), photos, files, settings, seed, n_examples if i == 0 else 0)
+            for i, (m, fn) in enumerate(methods)]
     folder = str(data_path if data_path is not None else cfg.data.path)
-    return PhotoSection(run=name, folder=folder, settings=settings, rows=rows)
+    section = PhotoSection(run=name, folder=folder, settings=settings, rows=rows)
+    if len(train) and judge_steps:
+        for i, (m, fn) in enumerate(methods):
+            if progress:
+                print(f"  judging {m} ({judge_steps} critic steps)", flush=True)
+            section.judgements.append((m, judge(fn, train, photos, settings, [str(f) for f in files], seed=seed,
+                                                steps=judge_steps, n_examples=n_examples if i == 0 else 0)))
+    return section
 
 
 def section_markdown(section: PhotoSection, figure_link: Optional[str] = None) -> List[str]:
@@ -391,12 +415,52 @@ def section_markdown(section: PhotoSection, figure_link: Optional[str] = None) -
              _per_photo_table(trained, section.folder), ""]
     if figure_link:
         lines += [f"![{section.run}: photo | input view | novel views]({figure_link})", ""]
+    if section.judgements:
+        lines += judge_markdown(section)
     return lines
+
+
+def judge_markdown(section: PhotoSection) -> List[str]:
+    """The report's lines for the judge of one folder run (docs/evaluation.md, :mod:`.judge`)."""
+    j0 = section.judgements[0][1]
+    lines = [f"### Judged from every side: {section.run}", "",
+             f"No ground truth, so a judge: a fresh critic (seeded, {CRITIC_STEPS} steps by default, 3 critics "
+             f"averaged) learns to tell the run's training photos from renders of their reconstructions at random "
+             f"turntable views, then tells the {j0.c2st['photos']} held-out photos from renders of theirs, per band of "
+             f"angle from the input view. Accuracy 0.5: the renders pass for photos; 1: they never do.", "",
+             judge_table(section.judgements), "",
+             "Image statistics of the side (±90°) and back (180°) turntable views, means over the held-out photos: "
+             "roughness = mean |Laplacian| of the render over white on the object, relative to the input-view "
+             "render (speckle, checkerboards: > 1) and, for the input view, to the photo; ΔE (CIE76) of the mean "
+             "L*a*b* colour against the photo's and the sliced Wasserstein distance of the colour distributions; "
+             "coverage relative to the input-view render (near 0: the object vanished).", "",
+             stats_table(section.judgements), ""]
+    if section.judge_figure is not None:
+        turns = ", ".join(f"{a:g}°" for a in FIGURE_AZIMUTHS)
+        lines += [f"![{section.run}: photo | turntable at {turns}](figures/{section.judge_figure.name})", ""]
+    return lines
+
+
+def write_judge_figure(section: PhotoSection, path: PathLike) -> Optional[Path]:
+    """A PNG, one line per example of the trained model's judgement: the photo | its reconstruction on
+    the turntable at :data:`~.judge.FIGURE_AZIMUTHS`; None when there is no example."""
+    if not section.judgements or not section.judgements[0][1].examples:
+        return None
+    method, j = section.judgements[0]
+    titles = ["photo"] + [f"{a:g}°" for a in FIGURE_AZIMUTHS]
+    lines = [[photo] + list(renders) for _, photo, renders in j.examples]
+    labels = [_short(file, section.folder) for file, _, _ in j.examples]
+    section.judge_figure = save_image_grid(lines, titles, path, f"{method}: held-out photos on the turntable",
+                                           cell=(1.2, 1.3), extra_height=0.4, labels=labels)
+    return section.judge_figure
 
 
 def section_results(section: PhotoSection) -> List[Dict[str, Any]]:
     """``results.json`` entries of a folder run: one per row, with ``section: "photos"``, the
     per-photo records under ``pairs`` (as the Table 2 rows), ``means`` and the card check."""
+    judged = {m: j for m, j in section.judgements}
     return [{"method": r.method, "formation": r.formation, "section": "photos", "photo_folder": section.folder,
-             "resolution": r.resolution, "means": r.means(), "card_check": r.summary, "pairs": r.photos}
+             "resolution": r.resolution, "means": r.means(), "card_check": r.summary, "pairs": r.photos,
+             **({"judge": {**judged[r.method].summary(), "c2st": judged[r.method].c2st,
+                           "photos": judged[r.method].photos}} if r.method in judged else {})}
             for r in section.rows]

@@ -42,7 +42,9 @@ from ..render import render
 from ..views import turntable
 from . import metrics as M
 from .figures import save_image_grid
-from .photos import PhotoSection, evaluate_photo_run, section_markdown, section_results, write_photo_figure
+from .judge import CRITIC_STEPS
+from .photos import (PhotoSection, evaluate_photo_run, section_markdown, section_results, write_judge_figure,
+                     write_photo_figure)
 from .protocol import METHODS, N_VIEWS, billboard, evaluate_pair, held_out_truths
 
 __all__ = ["Row", "score_pairs", "write_table", "write_class_table", "write_figure", "write_report", "evaluate_runs",
@@ -227,6 +229,7 @@ def write_report(rows: Sequence[Row], out_dir: PathLike, notes: Sequence[str] = 
             section.figure = write_photo_figure(section.rows[0], out / "figures" / f"{_slug(section.run)}_photos.png",
                                                 section.folder)
             link = f"figures/{section.figure.name}"
+        write_judge_figure(section, out / "figures" / f"{_slug(section.run)}_turntable.png")
         lines += section_markdown(section, link)
     lines += [f"- {n}" for n in notes]
     if figures:
@@ -282,13 +285,15 @@ def evaluate_runs(run_dirs: Sequence[PathLike], out_dir: PathLike, n_views: int 
                   limit: Optional[int] = None, spp: int = 16, max_depth: int = 8, seed: int = 0,
                   baselines: bool = True, vgg_weights: Optional[PathLike] = None,
                   fid_weights: Optional[PathLike] = None, data_cache: Optional[PathLike] = None,
-                  progress: bool = True, data_path: Optional[PathLike] = None) -> Path:
+                  progress: bool = True, data_path: Optional[PathLike] = None,
+                  judge_steps: int = CRITIC_STEPS) -> Path:
     """Score each trained run (and its baselines) on its held-out shapes; write the report. Returns
     the path of ``report.md``. ``limit``: at most this many held-out images per run (all by default).
 
     A folder run (``data.source: folder``) is scored on its held-out photos instead
     (:func:`~.photos.evaluate_photo_run`, its renderer seeded by ``seed``) and gets a "Real
-    photos" section; ``data_path`` replaces such runs' ``data.path``. ``n_views``, ``spp``,
+    photos" section, judged away from the input view by critics of ``judge_steps`` steps
+    (:mod:`.judge`; 0 skips the judge); ``data_path`` replaces such runs' ``data.path``. ``n_views``, ``spp``,
     ``max_depth`` and the VGG/FID networks apply to the ground-truth protocol only."""
     if not run_dirs:
         raise UserError("no run to evaluate: pass at least one --run DIR")
@@ -311,7 +316,8 @@ def evaluate_runs(run_dirs: Sequence[PathLike], out_dir: PathLike, n_views: int 
         if cfg.data.source == "folder":
             name = f"{run_dir.name} ({cfg.train.mode}, step {step})"
             sections.append(evaluate_photo_run(name, run_dir.name, cfg, reconstruct, untrained if baselines else None,
-                                               limit=limit, seed=seed, data_path=data_path, progress=progress))
+                                               limit=limit, seed=seed, data_path=data_path, progress=progress,
+                                               judge_steps=judge_steps))
             notes.append(f"{name}: {len(sections[-1].rows[0].photos)} held-out photos, {cfg.model.resolution}³, "
                          f"rendered with the run's renderer (seed {seed}); no VOL/ISO/VOX re-renders, 3D scores, VGG "
                          f"or FID: there is no ground truth")
@@ -363,6 +369,9 @@ def add_arguments(p: argparse.ArgumentParser) -> argparse.ArgumentParser:
     p.add_argument("--data-path", default=None, metavar="DIR",
                    help="the photo folder of folder runs (data.source: folder) when their data.path, relative to "
                         "where training ran, does not resolve from here")
+    p.add_argument("--judge-steps", type=int, default=CRITIC_STEPS, metavar="N",
+                   help=f"training steps of each two-sample critic that judges photo runs away from the input view "
+                        f"(default {CRITIC_STEPS}; 0 skips the judge)")
     p.add_argument("--quiet", action="store_true", help="no progress lines")
     return p
 
@@ -374,10 +383,12 @@ def run(args: argparse.Namespace) -> int:
             raise UserError(f"{flag} must be a positive int, got {value}")
     if args.seed < 0:
         raise UserError(f"--seed must be a non-negative int, got {args.seed}")
+    if args.judge_steps < 0:
+        raise UserError(f"--judge-steps must be a non-negative int, got {args.judge_steps}")
     report = evaluate_runs(args.run, args.out, n_views=args.views, limit=args.limit, spp=args.spp, seed=args.seed,
                            baselines=not args.no_baselines, vgg_weights=args.vgg_weights,
                            fid_weights=args.fid_weights, data_cache=args.data_cache, progress=not args.quiet,
-                           data_path=args.data_path)
+                           data_path=args.data_path, judge_steps=args.judge_steps)
     print(f"report: {report}")
     return 0
 

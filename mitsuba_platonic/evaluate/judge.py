@@ -1,0 +1,343 @@
+"""A judge of novel views without ground truth: does a reconstruction look like a photo from every side?
+
+A run trained on photos has no 3D truth, and away from the input view nobody photographed the
+object. What the photos do say is what objects of the class look like: the judge asks whether
+renders of the run's reconstructions, seen from the side and the back, are told apart from
+photos, and measures what a person sees in the turntables (speckle, drifted colour, a vanishing
+silhouette). docs/evaluation.md ("Judging novel views without ground truth") explains the use.
+
+**Views.** In the reconstruction's frame (the input camera at ω₀ = (0, 0, 1)) the turntable views
+ω(φ, 0) = (sin φ, 0, cos φ) (:func:`~mitsuba_platonic.views.from_angles`): the camera turned by
+φ about the input camera's vertical axis. The angle from the input view is |φ|, grouped in
+:data:`BANDS`: input (0°), near (15–45°), side (60–120°), back (135–180°), scored at
+:data:`SCORE_AZIMUTHS` (every 15°).
+
+**Classifier two-sample test** (:func:`two_sample_test`). A fresh critic f (:class:`Critic`: three
+or four stride-2 convolutions with LeakyReLU, then a linear logit; no normalisation) is trained
+with a fixed seed and budget (:data:`CRITIC_STEPS` Adam steps on balanced batches, random
+horizontal flips of both classes) to tell the run's *training* photos (label 1) from renders of
+its reconstructions of those photos at uniformly random φ (label 0), by the logistic loss
+softplus(−f(photo)) + softplus(f(render)). It is then scored on *held-out* photos against renders
+of the held-out reconstructions in each band b:
+
+    acc_b = ½ · ( mean_{x held out} [f(x) > 0] + mean_{r in band b} [f(r) ≤ 0] )
+
+0.5: the critic cannot tell renders in that band from photos; 1: it always can. The photo term is
+the same for every band, so bands are comparable. Averaged over :data:`CRITIC_REPEATS` critics
+(seeds ``seed``, ``seed + 1``, …) to lower the critic's own variance. With few held-out photos the
+accuracy moves in steps of 1/(2M); the report says M.
+
+**Image statistics** (:mod:`.image_stats`), per held-out photo x with reconstruction V, renders
+I_φ = R(ω(φ, 0), V) with the run's renderer:
+
+- roughness ratio at the side (mean of φ = ±90°) and the back (φ = 180°):
+  rough(I_φ) / rough(I_0); and the input view's own rough(I_0) / rough(x) (speckle the photo
+  does not have);
+- colour: ΔE (CIE76) of the mean foreground L*a*b* of I_φ against the photo's, and the sliced
+  Wasserstein-1 distance of the two foreground colour distributions;
+- coverage ratio coverage(I_φ) / coverage(I_0): near 0, the object vanished (a card seen edge-on);
+- the front-card check (:func:`~.photos.card_check`) as for every photo run.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from typing import Any, Callable, Dict, List, Optional, Sequence, Tuple
+
+import numpy as np
+import torch
+import torch.nn as nn
+import torch.nn.functional as F
+
+from ..errors import UserError
+from ..render import RenderSettings, render_with
+from ..views import from_angles
+from . import image_stats as S
+
+__all__ = ["BANDS", "SCORE_AZIMUTHS", "STAT_VIEWS", "CRITIC_STEPS", "CRITIC_REPEATS", "TRAIN_VIEWS",
+           "band_of", "Critic", "two_sample_test", "view_statistics", "Judgement", "judge", "judge_table",
+           "stats_table"]
+
+#: (name, lowest |φ|, highest |φ|) in degrees, inclusive.
+BANDS: Tuple[Tuple[str, float, float], ...] = (("input", 0.0, 0.0), ("near", 15.0, 45.0),
+                                               ("side", 60.0, 120.0), ("back", 135.0, 180.0))
+#: The turntable azimuths at which held-out reconstructions are scored (degrees, every 15°).
+SCORE_AZIMUTHS: Tuple[float, ...] = tuple(float(a) for a in range(-165, 181, 15))
+#: Views of the image statistics: name → azimuths averaged.
+STAT_VIEWS: Dict[str, Tuple[float, ...]] = {"side": (-90.0, 90.0), "back": (180.0,)}
+#: Adam steps of each critic, critics averaged, random views per training reconstruction.
+CRITIC_STEPS = 300
+CRITIC_REPEATS = 3
+TRAIN_VIEWS = 8
+
+
+def band_of(azimuth: float) -> Optional[str]:
+    """The band of a turntable azimuth (degrees), by |φ| (wrapped to [0°, 180°]); None between bands."""
+    a = abs((float(azimuth) + 180.0) % 360.0 - 180.0)
+    for name, lo, hi in BANDS:
+        if lo - 1e-6 <= a <= hi + 1e-6:
+            return name
+    return None
+
+
+class Critic(nn.Module):
+    """The two-sample test's classifier: stride-2 4×4 convolutions (``width``, 2·``width``, …) with
+    LeakyReLU(0.2) from ``resolution`` down to 4², then one linear logit."""
+
+    def __init__(self, channels: int, resolution: int, width: int = 16):
+        super().__init__()
+        if resolution < 8 or resolution & (resolution - 1):
+            raise UserError(f"the two-sample critic needs a power-of-two image size ≥ 8, got {resolution}")
+        layers: List[nn.Module] = []
+        c, r, w = channels, resolution, width
+        while r > 4:
+            layers += [nn.Conv2d(c, w, 4, 2, 1), nn.LeakyReLU(0.2)]
+            c, r, w = w, r // 2, w * 2
+        self.features = nn.Sequential(*layers)
+        self.logit = nn.Linear(c * r * r, 1)
+
+    def forward(self, x: torch.Tensor) -> torch.Tensor:
+        return self.logit(self.features(x).flatten(1)).squeeze(1)
+
+
+def _check_images(x: torch.Tensor, name: str) -> torch.Tensor:
+    if not isinstance(x, torch.Tensor) or x.dim() != 4 or x.shape[1] not in (1, 4) or not len(x):
+        shape = tuple(x.shape) if isinstance(x, torch.Tensor) else type(x).__name__
+        raise UserError(f"{name} must be a non-empty (N, C, R, R) tensor with C = 1 or 4, got {shape}")
+    if not torch.isfinite(x).all():
+        raise UserError(f"{name} holds NaN or Inf")
+    return x.detach().float().cpu()
+
+
+def _train_critic(photos: torch.Tensor, renders: torch.Tensor, seed: int, steps: int, batch: int) -> Critic:
+    g = torch.Generator().manual_seed(seed)
+    torch.manual_seed(seed)                                       # the critic's initial weights
+    critic = Critic(photos.shape[1], photos.shape[-1])
+    opt = torch.optim.Adam(critic.parameters(), lr=2e-4, betas=(0.5, 0.999))
+    half = batch // 2
+    for _ in range(steps):
+        xp = photos[torch.randint(len(photos), (half,), generator=g)]
+        xr = renders[torch.randint(len(renders), (half,), generator=g)]
+        x = torch.cat([xp, xr])
+        flip = torch.rand(len(x), generator=g) < 0.5               # a mirrored photo is still a photo
+        x = torch.where(flip[:, None, None, None], x.flip(-1), x)
+        logits = critic(x)
+        loss = F.softplus(-logits[:half]).mean() + F.softplus(logits[half:]).mean()
+        opt.zero_grad(set_to_none=True)
+        loss.backward()
+        opt.step()
+    return critic.eval()
+
+
+def two_sample_test(train_photos: torch.Tensor, train_renders: torch.Tensor, test_photos: torch.Tensor,
+                    test_renders: Dict[str, torch.Tensor], seed: int = 0, steps: int = CRITIC_STEPS,
+                    repeats: int = CRITIC_REPEATS, batch: int = 32) -> Dict[str, Any]:
+    """The classifier two-sample test (module docstring).
+
+    ``train_photos`` ``(N, C, R, R)`` and ``train_renders`` ``(N', C, R, R)`` train ``repeats``
+    critics (seeds ``seed`` …); each is scored on ``test_photos`` against every entry of
+    ``test_renders`` (band name → ``(K, C, R, R)``). Returns ``accuracy`` (band → mean accuracy over
+    the critics), ``spread`` (band → their standard deviation), ``train_accuracy`` (on the training
+    sets, a check that the critic learnt at all), ``photos`` (M) and ``renders`` (band → K)."""
+    train_photos = _check_images(train_photos, "train_photos")
+    train_renders = _check_images(train_renders, "train_renders")
+    test_photos = _check_images(test_photos, "test_photos")
+    if not test_renders:
+        raise UserError("test_renders must hold at least one band of renders")
+    bands = {k: _check_images(v, f"test_renders[{k!r}]") for k, v in test_renders.items()}
+    shape = train_photos.shape[1:]
+    for name, x in [("train_renders", train_renders), ("test_photos", test_photos)] + \
+            [(f"test_renders[{k!r}]", v) for k, v in bands.items()]:
+        if x.shape[1:] != shape:
+            raise UserError(f"{name} has images of shape {tuple(x.shape[1:])}, the training photos {tuple(shape)}")
+    if isinstance(steps, bool) or not isinstance(steps, int) or steps < 1:
+        raise UserError(f"steps must be a positive int, got {steps!r}")
+    if isinstance(repeats, bool) or not isinstance(repeats, int) or repeats < 1:
+        raise UserError(f"repeats must be a positive int, got {repeats!r}")
+    if isinstance(batch, bool) or not isinstance(batch, int) or batch < 2:
+        raise UserError(f"batch must be an int ≥ 2, got {batch!r}")
+    acc: Dict[str, List[float]] = {k: [] for k in bands}
+    train_acc: List[float] = []
+    threads = torch.get_num_threads()
+    # one thread: the critic's convolutions are too small to share (two threads ran 10× slower on a busy 2-core machine)
+    torch.set_num_threads(1)
+    try:
+        with torch.random.fork_rng(devices=[]):                   # the caller's global RNG stays as it was
+            _score_critics(train_photos, train_renders, test_photos, bands, seed, steps, repeats, batch,
+                           acc, train_acc)
+    finally:
+        torch.set_num_threads(threads)
+    return {"accuracy": {k: float(np.mean(v)) for k, v in acc.items()},
+            "spread": {k: float(np.std(v)) for k, v in acc.items()},
+            "train_accuracy": float(np.mean(train_acc)), "photos": len(test_photos),
+            "renders": {k: len(v) for k, v in bands.items()}}
+
+
+def _score_critics(train_photos: torch.Tensor, train_renders: torch.Tensor, test_photos: torch.Tensor,
+                   bands: Dict[str, torch.Tensor], seed: int, steps: int, repeats: int, batch: int,
+                   acc: Dict[str, List[float]], train_acc: List[float]) -> None:
+    """Train ``repeats`` critics and append their accuracies to ``acc`` (per band) and ``train_acc``."""
+    for r in range(repeats):
+        critic = _train_critic(train_photos, train_renders, seed + r, steps, batch)
+        with torch.no_grad():
+            real = float((critic(test_photos) > 0).float().mean())
+            for k, x in bands.items():
+                acc[k].append(0.5 * (real + float((critic(x) <= 0).float().mean())))
+            train_acc.append(0.5 * (float((critic(train_photos) > 0).float().mean())
+                                    + float((critic(train_renders) <= 0).float().mean())))
+
+
+def _turntable(volumes: torch.Tensor, azimuths: Sequence[float], settings: RenderSettings, seed: int,
+               chunk: int = 64) -> torch.Tensor:
+    """``(A, M, C, R, R)``: every volume rendered at every azimuth ω(φ, 0), in chunks of pairs."""
+    m = len(volumes)
+    views = from_angles(torch.tensor(list(azimuths), dtype=torch.float64), 0.0)      # (A, 3)
+    vol_idx = torch.arange(m).repeat(len(azimuths))
+    view_idx = torch.arange(len(azimuths)).repeat_interleave(m)
+    out = []
+    with torch.no_grad():
+        for i in range(0, len(vol_idx), chunk):
+            v, w = vol_idx[i:i + chunk], view_idx[i:i + chunk]
+            out.append(render_with(volumes[v].contiguous(), views[w].contiguous(), settings, seed)
+                       .detach().float().cpu().clamp(0.0, 1.0))
+    return torch.cat(out).reshape(len(azimuths), m, *out[0].shape[1:])
+
+
+def _random_renders(volumes: torch.Tensor, k: int, settings: RenderSettings, seed: int,
+                    chunk: int = 64) -> torch.Tensor:
+    """``(M k, C, R, R)``: each volume at ``k`` uniformly random turntable azimuths (seeded)."""
+    g = torch.Generator().manual_seed(seed)
+    phi = torch.rand(len(volumes) * k, generator=g, dtype=torch.float64) * 360.0 - 180.0
+    views = from_angles(phi, 0.0)
+    idx = torch.arange(len(volumes)).repeat_interleave(k)
+    out = []
+    with torch.no_grad():
+        for i in range(0, len(idx), chunk):
+            out.append(render_with(volumes[idx[i:i + chunk]].contiguous(), views[i:i + chunk].contiguous(),
+                                   settings, seed).detach().float().cpu().clamp(0.0, 1.0))
+    return torch.cat(out)
+
+
+def _mean(values: Sequence[Optional[float]]) -> Optional[float]:
+    vals = [v for v in values if v is not None]
+    return float(np.mean(vals)) if vals else None
+
+
+def view_statistics(photo: torch.Tensor, renders: Dict[float, torch.Tensor]) -> Dict[str, Optional[float]]:
+    """The image statistics of one held-out photo ``(C, R, R)`` and its reconstruction's renders
+    (azimuth → ``(C, R, R)``; 0 and every azimuth of :data:`STAT_VIEWS` must be there). Keys:
+    ``roughness_input`` (rough(I_0) / rough(photo)); per view v in :data:`STAT_VIEWS`:
+    ``roughness_<v>`` (rough(I_v) / rough(I_0)), ``coverage_<v>`` (coverage(I_v) / coverage(I_0)) and,
+    for RGBA, ``delta_e_<v>`` and ``sliced_w1_<v>`` against the photo; None where undefined
+    (nothing covered)."""
+    missing = [a for a in (0.0, *[a for v in STAT_VIEWS.values() for a in v]) if a not in renders]
+    if missing:
+        raise UserError(f"view_statistics needs renders at azimuths {missing}")
+    front = renders[0.0]
+    r0, c0 = S.roughness(front), S.coverage(front)
+    rp = S.roughness(photo)
+    out: Dict[str, Optional[float]] = {"roughness_input": r0 / rp if r0 is not None and rp else None}
+    rgba = photo.shape[0] == 4
+    for name, azimuths in STAT_VIEWS.items():
+        imgs = [renders[a] for a in azimuths]
+        rough = [S.roughness(i) for i in imgs]
+        out[f"roughness_{name}"] = _mean([r / r0 for r in rough if r is not None]) if r0 else None
+        out[f"coverage_{name}"] = _mean([S.coverage(i) / c0 for i in imgs]) if c0 > 0 else None
+        if rgba:
+            dists = [S.colour_distance(i, photo) for i in imgs]
+            out[f"delta_e_{name}"] = _mean([d["delta_e"] for d in dists])
+            out[f"sliced_w1_{name}"] = _mean([d["sliced_w1"] for d in dists])
+    return out
+
+
+@dataclass
+class Judgement:
+    """What :func:`judge` found: ``c2st`` (:func:`two_sample_test`'s result), ``photos`` (one
+    :func:`view_statistics` record per held-out photo, with its ``file``), ``means`` (their means),
+    and ``examples``: up to a few (file, photo, ``(len(FIGURE_AZIMUTHS), C, R, R)`` renders)."""
+
+    c2st: Dict[str, Any]
+    photos: List[Dict[str, Any]] = field(default_factory=list)
+    means: Dict[str, Optional[float]] = field(default_factory=dict)
+    examples: List[Tuple[str, torch.Tensor, torch.Tensor]] = field(default_factory=list)
+
+    def summary(self) -> Dict[str, Any]:
+        """A flat, JSON-ready record: ``c2st_<band>`` accuracies and the statistics' means."""
+        out: Dict[str, Any] = {f"c2st_{k}": v for k, v in self.c2st["accuracy"].items()}
+        out["c2st_train"] = self.c2st["train_accuracy"]
+        out.update(self.means)
+        return out
+
+
+#: The turntable azimuths of the judge's figure.
+FIGURE_AZIMUTHS: Tuple[float, ...] = (0.0, 45.0, 90.0, 135.0, 180.0, -90.0)
+
+
+def judge(reconstruct: Callable[[torch.Tensor], torch.Tensor], train_photos: torch.Tensor,
+          test_photos: torch.Tensor, settings: RenderSettings, files: Optional[Sequence[str]] = None,
+          seed: int = 0, steps: int = CRITIC_STEPS, repeats: int = CRITIC_REPEATS,
+          train_views: int = TRAIN_VIEWS, n_examples: int = 0, batch: int = 32) -> Judgement:
+    """Judge a reconstruction model on photos (module docstring): ``reconstruct`` maps ``(B, C, R, R)``
+    photos to ``(B, C, N, N, N)`` volumes in the input frame; ``settings`` is the run's renderer.
+    ``train_photos`` train the critics (their reconstructions seen from ``train_views`` random
+    azimuths each); ``test_photos`` (with their ``files``) are scored."""
+    train_photos = _check_images(train_photos, "train_photos")
+    test_photos = _check_images(test_photos, "test_photos")
+    files = [str(f) for f in files] if files is not None else [f"#{i}" for i in range(len(test_photos))]
+    if len(files) != len(test_photos):
+        raise UserError(f"{len(files)} file names for {len(test_photos)} test photos")
+
+    def volumes_of(x: torch.Tensor) -> torch.Tensor:
+        with torch.no_grad():
+            return torch.cat([reconstruct(x[i:i + batch]).detach().float().cpu().clamp(0.0, 1.0)
+                              for i in range(0, len(x), batch)])
+
+    train_renders = _random_renders(volumes_of(train_photos), train_views, settings, seed)
+    test_volumes = volumes_of(test_photos)
+    azimuths = sorted(set(SCORE_AZIMUTHS) | set(FIGURE_AZIMUTHS))
+    table = _turntable(test_volumes, azimuths, settings, seed)               # (A, M, C, R, R)
+    at = {a: table[i] for i, a in enumerate(azimuths)}
+    bands = {name: torch.cat([at[a] for a in SCORE_AZIMUTHS if band_of(a) == name]) for name, _, _ in BANDS}
+    result = Judgement(two_sample_test(train_photos, train_renders, test_photos, bands, seed, steps, repeats))
+    for i, (file, photo) in enumerate(zip(files, test_photos)):
+        rec: Dict[str, Any] = {"file": file}
+        rec.update(view_statistics(photo, {a: at[a][i] for a in at}))
+        result.photos.append(rec)
+        if len(result.examples) < n_examples:
+            result.examples.append((file, photo, torch.stack([at[a][i] for a in FIGURE_AZIMUTHS])))
+    keys = [k for k in result.photos[0] if k != "file"]
+    result.means = {k: _mean([p[k] for p in result.photos]) for k in keys}
+    return result
+
+
+def _num(value: Optional[float], digits: int = 3) -> str:
+    return "—" if value is None else f"{value:.{digits}f}"
+
+
+def judge_table(rows: Sequence[Tuple[str, Judgement]]) -> str:
+    """Markdown: per method, the two-sample critic's accuracy per band (0.5: indistinguishable from
+    the held-out photos) and on its own training sets."""
+    names = [b[0] for b in BANDS]
+    head = " | ".join(f"{n} ({lo:g}–{hi:g}°)" if hi > lo else f"{n} ({lo:g}°)" for n, lo, hi in BANDS)
+    lines = [f"| Method | {head} | critic on its training sets | held-out photos |",
+             "|---|" + "---|" * (len(names) + 2)]
+    for method, j in rows:
+        acc = j.c2st["accuracy"]
+        lines.append(f"| {method} | " + " | ".join(_num(acc.get(n)) for n in names) +
+                     f" | {_num(j.c2st['train_accuracy'])} | {j.c2st['photos']} |")
+    return "\n".join(lines)
+
+
+def stats_table(rows: Sequence[Tuple[str, Judgement]]) -> str:
+    """Markdown: per method, the image statistics' means over the held-out photos."""
+    lines = ["| Method | input-view roughness / photo's | side roughness / input view's | back roughness / input "
+             "view's | side ΔE | back ΔE | side SW₁ | back SW₁ | side coverage / input's | back coverage / input's |",
+             "|---|---|---|---|---|---|---|---|---|---|"]
+    for method, j in rows:
+        m = j.means
+        lines.append(f"| {method} | {_num(m.get('roughness_input'), 2)} | {_num(m.get('roughness_side'), 2)} | "
+                     f"{_num(m.get('roughness_back'), 2)} | {_num(m.get('delta_e_side'), 1)} | "
+                     f"{_num(m.get('delta_e_back'), 1)} | {_num(m.get('sliced_w1_side'), 1)} | "
+                     f"{_num(m.get('sliced_w1_back'), 1)} | {_num(m.get('coverage_side'), 2)} | "
+                     f"{_num(m.get('coverage_back'), 2)} |")
+    return "\n".join(lines)
