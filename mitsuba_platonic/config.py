@@ -166,7 +166,9 @@ class TrainConfig:
     (:func:`mitsuba_platonic.train.losses.colour_tv`, docs/training.md); ema: null, or the decay β
     of an exponential moving average of E's and G's weights, which samples, checkpoints' inference
     weights and evaluation then use (:meth:`mitsuba_platonic.train.trainer.Trainer.inference_model`,
-    docs/training.md)."""
+    docs/training.md); d_augment: the differentiable augmentations of every image D sees, real or
+    rendered, in D's and G's updates, from 'flip', 'translation', 'cutout' (none by default; for
+    small photo collections, :mod:`mitsuba_platonic.train.augment`, docs/training.md)."""
 
     task: str = "reconstruction"
     mode: str = "platonic"
@@ -191,6 +193,7 @@ class TrainConfig:
     r1_weight: float = 0.0
     colour_tv: float = 0.0
     ema: Optional[float] = None
+    d_augment: List[str] = field(default_factory=list)
 
 
 @dataclass
@@ -207,6 +210,7 @@ class Config:
     def validate(self) -> "Config":
         """Check value ranges and combinations; raise :class:`ConfigError` naming the key."""
         # the train package imports this module: its choice lists are imported here, not at the top
+        from .train.augment import AUGMENTS
         from .train.data import SOURCES
         from .train.losses import LOSSES
         from .train.roll import ROLLS
@@ -292,6 +296,12 @@ class Config:
             raise ConfigError(f"train.colour_tv: colour needs render.model 'ea', got {self.render.model!r}")
         if self.train.colour_tv > 0 and self.train.mode == "gan3d":
             raise ConfigError("train.colour_tv: the 'gan3d' baseline trains G on volumes alone, without priors")
+        unknown = [a for a in self.train.d_augment if a not in AUGMENTS]
+        if unknown or len(set(self.train.d_augment)) != len(self.train.d_augment):
+            raise ConfigError(f"train.d_augment: expected distinct names from {list(AUGMENTS)}, got "
+                              f"{self.train.d_augment!r}")
+        if self.train.d_augment and self.train.mode == "gan3d":
+            raise ConfigError("train.d_augment: the 'gan3d' baseline has no 2D critic to augment for")
         if self.train.ema is not None and not 0.0 < self.train.ema < 1.0:
             raise ConfigError(f"train.ema: expected null or a decay in (0, 1), e.g. 0.999, got {self.train.ema!r}")
         if self.train.d_gate is not None and not 0.0 < self.train.d_gate <= 1.0:

@@ -91,6 +91,7 @@ from ..model import RING_VIEWS, Model, critic_config
 from ..models import Discriminator, VolumeDiscriminator, init_critic_he, init_he, init_weights
 from ..render.closed_form import rotate, tilt
 from ..views import DEFAULT_ELEVATION, from_angles, front_view, sample_views, to_angles
+from .augment import augment
 from .data import TrainingData
 from .losses import (colour_tv, d_loss, g_loss, gradient_penalty, hard_accuracy_counts, r1_penalty,
                      soft_accuracy_counts)
@@ -302,6 +303,10 @@ class Trainer:
             real_d = roll(real_d, ψ_real.to(self.device))
         if ψ_fake is not None:
             fake_d = roll(i_view, ψ_fake.to(self.device))
+        if t.d_augment:                                      # train/augment.py: the same kind of T on both sides
+            g_aug = torch.Generator()
+            g_aug.manual_seed(int(np.random.SeedSequence([cfg.run.seed, step, 11, self.rank]).generate_state(1)[0]))
+            real_d, fake_d = augment(real_d, t.d_augment, g_aug), augment(fake_d, t.d_augment, g_aug)
         self._critic_update("D", self.opt_d, real_d, fake_d.detach(), eps, t.d_gate, out)
 
         # -- D3 (Platonic3D): ground-truth volumes vs generated ----------------------------------
