@@ -41,7 +41,8 @@ from .errors import UserError
 from .fileio import atomic_write
 
 __all__ = ["RunError", "UnsafeCheckpoint", "CHECKPOINT_VERSION", "Checkpoint", "save_checkpoint",
-           "load_checkpoint", "checkpoint_files", "load_latest_checkpoint", "read_checkpoint", "convert_checkpoint"]
+           "load_checkpoint", "checkpoint_files", "load_latest_checkpoint", "read_checkpoint", "convert_checkpoint",
+           "load_weights", "saved_config", "config_difference", "RESUME_SECTIONS"]
 
 CHECKPOINT_VERSION = 1
 
@@ -239,7 +240,86 @@ def _checked(path: Path, device: torch.device) -> Dict[str, Any]:
         raise ValueError("not a training checkpoint")
     if state.get("version") != CHECKPOINT_VERSION:
         raise ValueError(f"checkpoint format {state.get('version')!r}, this version reads {CHECKPOINT_VERSION}")
+    problem = _contents_problem(state)
+    if problem is not None:
+        raise ValueError(problem)
     return state
+
+
+#: The trainer state's parts every training checkpoint has (``opt_d3`` and ``ema`` only some).
+_TRAINER_PARTS = ("nets", "opt_g", "opt_d")
+
+
+def _contents_problem(state: Dict[str, Any]) -> Optional[str]:
+    """What is wrong with a checkpoint's ``step`` and ``trainer`` (short, for one line), else None."""
+    step = state["step"]
+    if type(step) is not int or step < 0:
+        return f"its step is {step!r}, expected a count of training steps"
+    trainer = state["trainer"]
+    if not isinstance(trainer, dict):
+        return f"its trainer state is a {type(trainer).__name__}, expected a dict of network and optimiser states"
+    for part in _TRAINER_PARTS + tuple(k for k in ("opt_d3", "ema") if k in trainer):
+        if not isinstance(trainer.get(part), dict):
+            got = "missing" if part not in trainer else f"a {type(trainer[part]).__name__}"
+            return f"its trainer state's {part!r} is {got}, expected a dict"
+    for part in ("nets", "ema"):
+        weights = trainer.get(part, {})
+        bad = next((k for k, v in weights.items() if not isinstance(v, torch.Tensor)), None)
+        if bad is not None or (part == "nets" and not weights):
+            return f"its trainer state's {part!r} " + (f"holds a {type(weights[bad]).__name__} at {bad!r}, "
+                                                       f"expected tensors" if bad is not None else "is empty")
+    return None
+
+
+def load_weights(target: Any, state: Dict[str, Any], path: Path, what: str) -> None:
+    """``target.load_state_dict(state)`` (a module, an optimiser, the trainer), with a state that does
+    not fit (a missing key, a size mismatch, another parameter grouping) a :class:`RunError`: one
+    line naming ``path``, ``what`` it was loaded into and the first mismatch."""
+    try:
+        target.load_state_dict(state)
+    except (RuntimeError, KeyError, ValueError, TypeError) as e:
+        raise RunError(f"{path}: its saved state does not fit {what}: {_mismatch(e)}") from None
+
+
+def _mismatch(e: BaseException, limit: int = 240) -> str:
+    """The first mismatch ``load_state_dict`` reported, on one line (``size mismatch for G.fc.weight:
+    ...``), with how many more there were."""
+    text = str(e) if not isinstance(e, KeyError) else f"no {e.args[0]!r}"
+    lines = [line.strip() for line in text.split("\n\t") if line.strip()]
+    detail = lines[1:] or lines or [type(e).__name__]         # torch: 'Error(s) in loading ...:' then one per tab
+    first = " ".join(detail[0].split()).replace("copying a param with shape ", "").rstrip(".")
+    first = first if len(first) <= limit else first[:limit - 1] + "…"
+    return first + (f" (and {len(detail) - 1} more)" if len(detail) > 1 else "")
+
+
+def saved_config(state: Dict[str, Any], path: Path, run_name: Optional[str] = None) -> Config:
+    """The validated config saved in a checkpoint (``run.name`` replaced by ``run_name`` if given);
+    :class:`RunError` naming ``path`` if it is not a mapping of sections or not valid."""
+    if not isinstance(state["config"], dict) or not isinstance(state["config"].get("run") or {}, dict):
+        raise RunError(f"{path}: the config saved in this checkpoint is not a mapping of sections")
+    saved = dict(state["config"])
+    if run_name is not None:
+        saved["run"] = {**(saved.get("run") or {}), "name": run_name}
+    try:
+        return config_from_dict(saved)
+    except ConfigError as e:
+        raise RunError(f"{path}: the config saved in this checkpoint is not valid: {e}") from None
+
+
+#: The config sections a run's networks and exact continuation depend on (only ``run.*`` may change).
+RESUME_SECTIONS = ("data", "model", "render", "train")
+
+
+def config_difference(saved: Config, current: Config, sections: Tuple[str, ...] = RESUME_SECTIONS,
+                      there: str = "saved", here: str = "now") -> Optional[str]:
+    """The first key of ``sections`` whose value differs between two configs, worded for a message
+    (``model.width: 4 saved, 8 now``), else None."""
+    a, b = saved.to_dict(), current.to_dict()
+    for section in sections:
+        for key in list(a[section]) + [k for k in b[section] if k not in a[section]]:
+            if a[section].get(key) != b[section].get(key):
+                return f"{section}.{key}: {a[section].get(key)!r} {there}, {b[section].get(key)!r} {here}"
+    return None
 
 
 def checkpoint_files(folder: Path) -> List[Path]:
@@ -308,14 +388,7 @@ def read_checkpoint(source: Union[str, Path], device: Union[str, torch.device] =
             raise RunError(f"{source} has no checkpoints/last.pt: not a training run, or not started")
         state, path = load_latest_checkpoint(source / "checkpoints", device)
         run_dir = source
-    if not isinstance(state["config"], dict) or not isinstance(state["config"].get("run") or {}, dict):
-        raise RunError(f"{path}: the config saved in this checkpoint is not a mapping of sections")
-    saved = dict(state["config"])
-    saved["run"] = {**(saved.get("run") or {}), "name": run_dir.resolve().name}   # the folder is the run
-    try:
-        cfg = config_from_dict(saved)
-    except ConfigError as e:
-        raise RunError(f"{path}: the config saved in this checkpoint is not valid: {e}") from None
+    cfg = saved_config(state, path, run_name=run_dir.resolve().name)   # the folder is the run
     return Checkpoint(cfg, state, path, int(state["step"]))
 
 

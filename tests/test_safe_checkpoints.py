@@ -1,11 +1,12 @@
-"""Loading a checkpoint runs no code (issue 28).
+"""Loading a checkpoint runs no code (issue 28), and a checkpoint that does not fit is one line (issue 29).
 
 Every command that reads a checkpoint (``train --resume``, ``reconstruct``, ``generate``,
 ``evaluate``, ``Model.from_checkpoint``, ``load_run``) unpickles it with ``weights_only=True``:
 a file whose pickle would run code is refused with one line naming it (exit code 2), the code
 does not run, and no older checkpoint is used in its place. Checkpoints written the way the
 package always wrote them load as they are; a trusted file holding other objects is converted
-knowingly with ``platonic convert-checkpoint``.
+knowingly with ``platonic convert-checkpoint``. Bad contents under the right keys and a network
+whose shapes differ from the saved weights are one line naming the file and what differs.
 """
 
 from __future__ import annotations
@@ -16,8 +17,9 @@ from pathlib import Path
 import numpy as np
 import pytest
 import torch
+import yaml
 
-from mitsuba_platonic.checkpoint import (CHECKPOINT_VERSION, UnsafeCheckpoint, load_checkpoint,
+from mitsuba_platonic.checkpoint import (CHECKPOINT_VERSION, RunError, UnsafeCheckpoint, load_checkpoint,
                                          read_checkpoint, save_checkpoint)
 from mitsuba_platonic.config import load_config
 from mitsuba_platonic.model import Model
@@ -199,3 +201,76 @@ def test_convert_checkpoint_of_a_missing_path_is_one_line(tmp_path):
     code, _, stderr = run_cli(["convert-checkpoint", str(tmp_path / "nothing.pt")])
     assert code == 2
     assert "neither a checkpoint file nor a run folder" in one_line(stderr, "convert-checkpoint", kind="error")
+
+
+# --------------------------------------------------------------------------- contents that do not fit (issue 29)
+
+
+def test_the_right_keys_with_bad_contents_are_one_line_naming_the_file(run_dir, tmp_path):
+    """A training state without ``nets`` (was ``KeyError: 'nets'``): the file and what is missing."""
+    folder = run_dir / "checkpoints"
+    for path in folder.glob("*.pt"):
+        state = load_checkpoint(path)
+        del state["trainer"]["nets"]
+        save_checkpoint(path, state)
+    code, _, stderr = run_cli(["generate", "--run", str(run_dir), "-n", "1", "--out", str(tmp_path / "g")])
+    assert code == 2
+    err = one_line(stderr, "generate", kind="error")
+    assert f"no loadable checkpoint in {folder}" in err and "last.pt" in err, err
+    assert "its trainer state's 'nets' is missing, expected a dict" in err, err
+    with pytest.raises(RunError, match=f"^{folder / 'last.pt'} cannot be loaded: its trainer state's 'nets'"):
+        Model.from_checkpoint(folder / "last.pt")
+
+
+def test_weights_that_do_not_fit_their_saved_config_are_one_line(run_dir, tmp_path):
+    """A weight of another shape than the saved config's network: the file and the tensor."""
+    last = run_dir / "checkpoints" / "last.pt"
+    state = load_checkpoint(last)
+    name = next(k for k in state["trainer"]["nets"] if k.startswith("G.") and k.endswith("weight"))
+    state["trainer"]["nets"][name] = torch.zeros(3, 3)
+    save_checkpoint(last, state)
+    code, _, stderr = run_cli(["generate", "--run", str(run_dir), "-n", "1", "--out", str(tmp_path / "g")])
+    assert code == 2
+    err = one_line(stderr, "generate", kind="error")
+    assert err.startswith(f"platonic generate: error: {last}: its saved state does not fit the networks of the "
+                          f"config saved with it: size mismatch for {name}: torch.Size([3, 3]) from checkpoint"), err
+
+
+def test_resume_after_a_change_of_width_names_the_checkpoint_and_the_key(base_run, run_dir):
+    """config.yaml edited to the new width too (was a ``load_state_dict`` size-mismatch traceback):
+    one line naming the checkpoint and ``model.width``."""
+    config = run_dir / "config.yaml"
+    saved = yaml.safe_load(config.read_text())
+    saved["model"]["width"] = 8
+    config.write_text(yaml.safe_dump(saved, sort_keys=False))
+    argv = ["train", "--resume", "--quiet", *_set(_overrides(run_dir.parent, base_run[1], "model.width=8",
+                                                             "run.steps=6"))]
+    code, _, stderr = run_cli(argv)
+    assert code == 2
+    err = one_line(stderr, "train", kind="error")
+    last = run_dir / "checkpoints" / "last.pt"
+    assert f"--resume: {last} was saved with other settings (model.width: 4 in last.pt, 8 now)" in err, err
+
+
+def test_resume_with_a_changed_setting_names_the_key_of_config_yaml(base_run, run_dir):
+    argv = ["train", "--resume", "--quiet", *_set(_overrides(run_dir.parent, base_run[1], "model.width=8",
+                                                             "run.steps=6"))]
+    code, _, stderr = run_cli(argv)
+    assert code == 2
+    err = one_line(stderr, "train", kind="error")
+    assert (f"the model settings differ from {run_dir}/config.yaml (model.width: 4 there, 8 now)") in err, err
+
+
+def test_resume_into_networks_that_do_not_fit_names_the_checkpoint(base_run, run_dir):
+    """The saved weights do not fit the networks of the (matching) saved config: one line, the file."""
+    last = run_dir / "checkpoints" / "last.pt"
+    state = load_checkpoint(last)
+    name = next(k for k in state["trainer"]["nets"] if k.startswith("D."))
+    state["trainer"]["nets"][name] = torch.zeros(1)
+    save_checkpoint(last, state)
+    code, _, stderr = run_cli(["train", "--resume", "--quiet",
+                               *_set(_overrides(run_dir.parent, base_run[1], "run.steps=6"))])
+    assert code == 2
+    err = one_line(stderr, "train", kind="error")
+    assert (f"--resume: {last}: its saved state does not fit this run's networks and optimisers: "
+            f"size mismatch for {name}") in err, err
