@@ -24,7 +24,10 @@ step, Ctrl-C, ``stop_at``) and only if every tensor of the state is finite. An e
 training saves nothing (the good checkpoints stay as they are; its message says which step
 ``last.pt`` holds), and a state with NaN or Inf ends the run with :class:`RunError`. If
 ``last.pt`` cannot be loaded (truncated, corrupt), ``--resume``, ``reconstruct`` and ``generate``
-use the newest loadable ``step_*.pt`` and warn on stderr.
+use the newest loadable ``step_*.pt`` and warn on stderr. Checkpoints are unpickled safely
+(``weights_only=True``, :mod:`mitsuba_platonic.checkpoint`): one that would run code is an error
+naming it, never a fallback; ``--resume`` refuses a checkpoint saved with other data, model,
+render or train settings, naming the first key.
 
 One run per folder: ``run.lock`` is an exclusive lock (``flock``) that the kernel releases when
 its process ends, so a lock file left by a killed run is simply taken over, while a second
