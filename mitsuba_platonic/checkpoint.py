@@ -129,7 +129,7 @@ def _not_plain(value: Any, name: str = "the payload") -> Optional[str]:
 
 
 #: How torch's weights-only unpickler names an object it refused (torch 2.1 to 2.13).
-_REFUSED = (re.compile(r"GLOBAL (\S+)"), re.compile(r"reduce for unrecognized function ([^\n]+?)(?: which|$)"),
+_REFUSED = (re.compile(r"GLOBAL (\S+)"), re.compile(r"reduce for unrecognized function ([^\n]+?)(?: which|$)", re.M),
             re.compile(r"Can only (?:create new object|build)[^\n]*? but got ([^\n]+)"))
 
 

@@ -191,6 +191,19 @@ def test_a_checkpoint_with_other_objects_is_refused_then_converted_knowingly(run
     assert read_checkpoint(run_dir).step == 4 and read_checkpoint(run_dir).path == last
 
 
+@pytest.mark.parametrize("message, refused", [
+    ("Weights only load failed...\nUnsupported global: GLOBAL posix.system was not an allowed global", "posix.system"),
+    ("Trying to load unsupported GLOBAL subprocess.Popen whose module subprocess is blocked.", "subprocess.Popen"),
+    ("...\nTrying to call reduce for unrecognized function <built-in function exec>\n\nCheck", "<built-in function exec>"),
+    ("Weights only load failed...\nUnsupported operand 95\n\nCheck the documentation", None),
+], ids=["global", "blocked module", "reduce", "garbage"])
+def test_a_refused_object_is_told_from_a_torn_file(message, refused):
+    """What torch's safe unpickler says: an object it refused (an error, no fallback), or a torn file."""
+    from mitsuba_platonic.checkpoint import _refused_object
+
+    assert _refused_object(message) == refused
+
+
 def test_save_checkpoint_refuses_what_the_safe_loader_could_not_read(tmp_path):
     with pytest.raises(TypeError, match=r"the payload\['step'\] \(numpy.int64\) is not plain data"):
         save_checkpoint(tmp_path / "c.pt", {"step": np.int64(3)})
