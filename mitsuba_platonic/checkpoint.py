@@ -11,15 +11,28 @@ A checkpoint (``RUN/checkpoints/last.pt``, ``RUN/checkpoints/step_NNNNNNN.pt``) 
 
 Training writes checkpoints (:mod:`mitsuba_platonic.train.run`); inference reads them
 (:meth:`mitsuba_platonic.model.Model.from_checkpoint`) without the training code.
+
+Loading runs no code: every reader goes through :func:`load_checkpoint`, ``torch.load(...,
+weights_only=True)``, whose unpickler builds tensors and plain data (dicts, lists, tuples,
+strings, numbers) and refuses any other Python object. Everything a checkpoint holds is such
+data (:func:`save_checkpoint` checks it before writing). A file that names another object (a
+crafted ``__reduce__``, or a numpy scalar from hand-made tooling) is refused with
+:class:`UnsafeCheckpoint`, one line naming the file and the object; it is never skipped in favour
+of an older checkpoint, so such a file cannot go unnoticed. A user who trusts the file converts
+it once, knowingly, with ``platonic convert-checkpoint PATH`` (:func:`convert_checkpoint`: the
+only place that unpickles with ``weights_only=False``). Checkpoints written before loading was
+made safe hold the same plain data and load as they are.
 """
 
 from __future__ import annotations
 
+import pickle
 import re
 import sys
+from collections import OrderedDict
 from dataclasses import dataclass
-from pathlib import Path
-from typing import Any, Dict, List, Tuple, Union
+from pathlib import Path, PurePath
+from typing import Any, Dict, List, Optional, Tuple, Union
 
 import torch
 
@@ -27,8 +40,9 @@ from .config import Config, ConfigError, config_from_dict
 from .errors import UserError
 from .fileio import atomic_write
 
-__all__ = ["RunError", "CHECKPOINT_VERSION", "Checkpoint", "save_checkpoint", "load_checkpoint",
-           "checkpoint_files", "load_latest_checkpoint", "read_checkpoint"]
+__all__ = ["RunError", "UnsafeCheckpoint", "CHECKPOINT_VERSION", "Checkpoint", "save_checkpoint",
+           "load_checkpoint", "checkpoint_files", "load_latest_checkpoint", "read_checkpoint", "convert_checkpoint",
+           "load_weights", "saved_config", "config_difference", "RESUME_SECTIONS"]
 
 CHECKPOINT_VERSION = 1
 
@@ -39,12 +53,31 @@ class RunError(UserError):
     """A run folder or checkpoint that cannot be used as asked (exists, missing, incompatible)."""
 
 
+class UnsafeCheckpoint(RunError):
+    """A checkpoint the safe loader refused: it names a Python object (``refused``, e.g.
+    ``'posix.system'``) that unpickling would build or call, which could run any code. Never a
+    reason to fall back to an older checkpoint."""
+
+    def __init__(self, message: str, refused: str):
+        super().__init__(message)
+        self.refused = refused
+
+
+#: What a checkpoint may hold: the types ``torch.load(weights_only=True)`` builds without a global.
+_PLAIN = (str, int, float, bool, type(None))
+
+
 def save_checkpoint(path: Path, payload: Dict[str, Any]) -> None:
     """``torch.save`` to a temporary sibling, fsync, then rename over ``path`` (atomic).
 
     A failed write (a full disk) is the ``OSError`` the file raised, naming ``path``: ``torch.save``
     itself reports it as a ``RuntimeError`` about stream positions.
     """
+    bad = _not_plain(payload)
+    if bad is not None:                  # a bug in the writer: the safe loader would refuse the file
+        raise TypeError(f"checkpoint {path}: {bad} is not plain data (tensors, dicts, lists, tuples, str, "
+                        f"int, float, bool, None); load_checkpoint could not read it back")
+
     def write(tmp: Path) -> None:
         with open(tmp, "wb") as f:
             out = _Recorded(f)
@@ -75,11 +108,129 @@ class _Recorded:
         self.f.flush()
 
 
+def _not_plain(value: Any, name: str = "the payload") -> Optional[str]:
+    """The name and type of the first part of ``value`` that is not plain data, else None."""
+    if type(value) in (torch.Tensor, torch.nn.Parameter) or type(value) in _PLAIN:
+        return None
+    if type(value) in (dict, OrderedDict):
+        items = value.items()
+        bad_key = next((k for k in value if type(k) not in (str, int)), None)
+        if bad_key is not None:
+            return f"{name} key {bad_key!r} ({type(bad_key).__name__})"
+    elif type(value) in (list, tuple):
+        items = enumerate(value)
+    else:
+        return f"{name} ({type(value).__module__}.{type(value).__qualname__})"
+    for k, v in items:
+        bad = _not_plain(v, f"{name}[{k!r}]")
+        if bad is not None:
+            return bad
+    return None
+
+
+#: How torch's weights-only unpickler names an object it refused (torch 2.1 to 2.13).
+_REFUSED = (re.compile(r"GLOBAL (\S+)"), re.compile(r"reduce for unrecognized function ([^\n]+?)(?: which|$)", re.M),
+            re.compile(r"Can only (?:create new object|build)[^\n]*? but got ([^\n]+)"))
+
+
+def _refused_object(message: str) -> Optional[str]:
+    """The object a weights-only ``UnpicklingError`` refused (e.g. ``'posix.system'``), or None when
+    the error is about a torn or corrupt file instead (an unknown opcode, an end of file)."""
+    for pattern in _REFUSED:
+        match = pattern.search(message)
+        if match:
+            return match.group(1).rstrip(".,;")
+    return None
+
+
 def load_checkpoint(path: Path, device: torch.device = torch.device("cpu")) -> Dict[str, Any]:
-    """The raw contents of one checkpoint file (not checked; see :func:`load_latest_checkpoint`)."""
+    """The raw contents of one checkpoint file, unpickled safely (``weights_only=True``: tensors and
+    plain data, no code runs); not checked otherwise (see :func:`load_latest_checkpoint`).
+
+    Raises :class:`RunError` if there is no file, :class:`UnsafeCheckpoint` (one line naming the
+    file, the object and how to convert a trusted file) if it names any other Python object, and
+    torch's own errors for a torn or corrupt file.
+    """
     if not path.is_file():
         raise RunError(f"no checkpoint at {path}")
-    return torch.load(path, map_location=device, weights_only=False)
+    try:
+        return torch.load(path, map_location=device, weights_only=True)
+    except pickle.UnpicklingError as e:
+        what = _refused_object(str(e))
+        if what is None:
+            raise
+        what = what if len(what) <= 80 else what[:79] + "…"
+        raise UnsafeCheckpoint(
+            f"{path} was refused: it holds a Python object ({what}) whose loading could run any code (a "
+            f"checkpoint holds only tensors and plain data); if you trust where the file came from, convert it "
+            f"once with `platonic convert-checkpoint {path}`",
+            what) from None
+
+
+def convert_checkpoint(path: Union[str, Path], out: Union[str, Path, None] = None) -> Optional[str]:
+    """Rewrite a checkpoint that the safe loader refuses as one it reads, for a user who trusts it.
+
+    **This unpickles ``path`` with ``weights_only=False``, which runs any code the file holds**: the
+    one place in the package that does, reached only by ``platonic convert-checkpoint`` (the user
+    asked for it, named the file and was told what it does). A file that already loads safely is
+    never unpickled that way and is left as it is. Numpy arrays become tensors, numpy scalars
+    numbers, paths strings; the result is written atomically to ``out`` (default: over ``path``)
+    and read back with the safe loader. Returns the object the safe loader had refused, or None
+    if the file already loaded safely (nothing written). :class:`RunError` naming the file if it
+    is missing, torn, holds something with no plain equivalent, or is no training checkpoint.
+    """
+    path = Path(path)
+    target = Path(out) if out is not None else path
+    try:
+        load_checkpoint(path)
+        return None
+    except UnsafeCheckpoint as e:
+        refused = e.refused
+    except RunError:
+        raise
+    except Exception as e:                                   # torn or corrupt: nothing to convert
+        raise RunError(f"{path} cannot be loaded: {_one_line(e)}") from None
+    state = torch.load(path, map_location="cpu", weights_only=False)     # the user trusts this file
+    save_checkpoint(target, _to_plain(state, path, "the checkpoint"))
+    try:
+        _checked(target, torch.device("cpu"))
+    except ValueError as e:
+        raise RunError(f"{target}: converted to plain data, but it is not a training checkpoint this "
+                       f"version reads ({_one_line(e)})") from None
+    return refused
+
+
+def _to_plain(value: Any, path: Path, name: str) -> Any:
+    """``value`` with numpy arrays as tensors, numpy scalars as numbers and paths as strings;
+    :class:`RunError` naming ``path`` and the part for anything else that is not plain data."""
+    import numpy as np
+
+    if isinstance(value, torch.Tensor):
+        return value.detach() if isinstance(value, torch.nn.Parameter) else value
+    if isinstance(value, np.ndarray) and value.dtype != object:
+        return torch.from_numpy(np.ascontiguousarray(value))
+    if isinstance(value, np.generic) and not isinstance(value, np.object_):
+        return value.item()
+    if isinstance(value, PurePath):
+        return str(value)
+    if type(value) in _PLAIN:
+        return value
+    for base in (bool, int, float, str):                    # subclasses (an IntEnum): their plain value
+        if isinstance(value, base):
+            return base(value)
+    if isinstance(value, dict):
+        out = OrderedDict() if isinstance(value, OrderedDict) else {}
+        for k, v in value.items():
+            key = _to_plain(k, path, f"{name} key {k!r}")
+            if type(key) not in (str, int):
+                raise RunError(f"{path}: cannot convert {name}: its key {k!r} is a {type(k).__name__}")
+            out[key] = _to_plain(v, path, f"{name}[{k!r}]")
+        return out
+    if isinstance(value, (list, tuple)):
+        items = [_to_plain(v, path, f"{name}[{i}]") for i, v in enumerate(value)]
+        return items if isinstance(value, list) else tuple(items)
+    raise RunError(f"{path}: cannot convert {name}, a {type(value).__module__}.{type(value).__qualname__}, "
+                   f"to plain data (tensors, numbers, strings, lists, dicts)")
 
 
 def _checked(path: Path, device: torch.device) -> Dict[str, Any]:
@@ -89,7 +240,86 @@ def _checked(path: Path, device: torch.device) -> Dict[str, Any]:
         raise ValueError("not a training checkpoint")
     if state.get("version") != CHECKPOINT_VERSION:
         raise ValueError(f"checkpoint format {state.get('version')!r}, this version reads {CHECKPOINT_VERSION}")
+    problem = _contents_problem(state)
+    if problem is not None:
+        raise ValueError(problem)
     return state
+
+
+#: The trainer state's parts every training checkpoint has (``opt_d3`` and ``ema`` only some).
+_TRAINER_PARTS = ("nets", "opt_g", "opt_d")
+
+
+def _contents_problem(state: Dict[str, Any]) -> Optional[str]:
+    """What is wrong with a checkpoint's ``step`` and ``trainer`` (short, for one line), else None."""
+    step = state["step"]
+    if type(step) is not int or step < 0:
+        return f"its step is {step!r}, expected a count of training steps"
+    trainer = state["trainer"]
+    if not isinstance(trainer, dict):
+        return f"its trainer state is a {type(trainer).__name__}, expected a dict of network and optimiser states"
+    for part in _TRAINER_PARTS + tuple(k for k in ("opt_d3", "ema") if k in trainer):
+        if not isinstance(trainer.get(part), dict):
+            got = "missing" if part not in trainer else f"a {type(trainer[part]).__name__}"
+            return f"its trainer state's {part!r} is {got}, expected a dict"
+    for part in ("nets", "ema"):
+        weights = trainer.get(part, {})
+        bad = next((k for k, v in weights.items() if not isinstance(v, torch.Tensor)), None)
+        if bad is not None or (part == "nets" and not weights):
+            return f"its trainer state's {part!r} " + (f"holds a {type(weights[bad]).__name__} at {bad!r}, "
+                                                       f"expected tensors" if bad is not None else "is empty")
+    return None
+
+
+def load_weights(target: Any, state: Dict[str, Any], path: Path, what: str) -> None:
+    """``target.load_state_dict(state)`` (a module, an optimiser, the trainer), with a state that does
+    not fit (a missing key, a size mismatch, another parameter grouping) a :class:`RunError`: one
+    line naming ``path``, ``what`` it was loaded into and the first mismatch."""
+    try:
+        target.load_state_dict(state)
+    except (RuntimeError, KeyError, ValueError, TypeError) as e:
+        raise RunError(f"{path}: its saved state does not fit {what}: {_mismatch(e)}") from None
+
+
+def _mismatch(e: BaseException, limit: int = 240) -> str:
+    """The first mismatch ``load_state_dict`` reported, on one line (``size mismatch for G.fc.weight:
+    ...``), with how many more there were."""
+    text = str(e) if not isinstance(e, KeyError) else f"no {e.args[0]!r}"
+    lines = [line.strip() for line in text.split("\n\t") if line.strip()]
+    detail = lines[1:] or lines or [type(e).__name__]         # torch: 'Error(s) in loading ...:' then one per tab
+    first = " ".join(detail[0].split()).replace("copying a param with shape ", "").rstrip(".")
+    first = first if len(first) <= limit else first[:limit - 1] + "…"
+    return first + (f" (and {len(detail) - 1} more)" if len(detail) > 1 else "")
+
+
+def saved_config(state: Dict[str, Any], path: Path, run_name: Optional[str] = None) -> Config:
+    """The validated config saved in a checkpoint (``run.name`` replaced by ``run_name`` if given);
+    :class:`RunError` naming ``path`` if it is not a mapping of sections or not valid."""
+    if not isinstance(state["config"], dict) or not isinstance(state["config"].get("run") or {}, dict):
+        raise RunError(f"{path}: the config saved in this checkpoint is not a mapping of sections")
+    saved = dict(state["config"])
+    if run_name is not None:
+        saved["run"] = {**(saved.get("run") or {}), "name": run_name}
+    try:
+        return config_from_dict(saved)
+    except ConfigError as e:
+        raise RunError(f"{path}: the config saved in this checkpoint is not valid: {e}") from None
+
+
+#: The config sections a run's networks and exact continuation depend on (only ``run.*`` may change).
+RESUME_SECTIONS = ("data", "model", "render", "train")
+
+
+def config_difference(saved: Config, current: Config, sections: Tuple[str, ...] = RESUME_SECTIONS,
+                      there: str = "saved", here: str = "now") -> Optional[str]:
+    """The first key of ``sections`` whose value differs between two configs, worded for a message
+    (``model.width: 4 saved, 8 now``), else None."""
+    a, b = saved.to_dict(), current.to_dict()
+    for section in sections:
+        for key in list(a[section]) + [k for k in b[section] if k not in a[section]]:
+            if a[section].get(key) != b[section].get(key):
+                return f"{section}.{key}: {a[section].get(key)!r} {there}, {b[section].get(key)!r} {here}"
+    return None
 
 
 def checkpoint_files(folder: Path) -> List[Path]:
@@ -103,14 +333,19 @@ def checkpoint_files(folder: Path) -> List[Path]:
 def load_latest_checkpoint(folder: Path, device: torch.device = torch.device("cpu"),
                            warn: bool = True) -> Tuple[Dict[str, Any], Path]:
     """The newest loadable checkpoint of ``folder`` (``RUN/checkpoints``): ``last.pt``, else the
-    newest ``step_*.pt`` that loads, with a warning on stderr naming the files that did not.
+    newest ``step_*.pt`` that loads, with a warning on stderr naming the files that did not (torn,
+    corrupt, another format, contents that are not a training state).
 
-    Raises :class:`RunError` (one line, naming every file tried) if none loads.
+    Raises :class:`RunError` (one line, naming every file tried) if none loads, and
+    :class:`UnsafeCheckpoint` at the first file the safe loader refuses: a file that would run
+    code is an error naming it, not a reason to use an older one.
     """
     failed: List[Tuple[Path, str]] = []
     for path in checkpoint_files(folder):
         try:
             state = _checked(path, device)
+        except UnsafeCheckpoint:         # not a torn file: falling back would hide a crafted one
+            raise
         except Exception as e:  # torch.load raises RuntimeError, EOFError, UnpicklingError, ... for torn files
             failed.append((path, _one_line(e)))
             continue
@@ -143,6 +378,8 @@ def read_checkpoint(source: Union[str, Path], device: Union[str, torch.device] =
     if source.is_file():
         try:
             state = _checked(source, device)
+        except UnsafeCheckpoint:
+            raise
         except Exception as e:
             raise RunError(f"{source} cannot be loaded: {_one_line(e)}") from None
         path, run_dir = source, source.parent.parent
@@ -151,14 +388,7 @@ def read_checkpoint(source: Union[str, Path], device: Union[str, torch.device] =
             raise RunError(f"{source} has no checkpoints/last.pt: not a training run, or not started")
         state, path = load_latest_checkpoint(source / "checkpoints", device)
         run_dir = source
-    if not isinstance(state["config"], dict) or not isinstance(state["config"].get("run") or {}, dict):
-        raise RunError(f"{path}: the config saved in this checkpoint is not a mapping of sections")
-    saved = dict(state["config"])
-    saved["run"] = {**(saved.get("run") or {}), "name": run_dir.resolve().name}   # the folder is the run
-    try:
-        cfg = config_from_dict(saved)
-    except ConfigError as e:
-        raise RunError(f"{path}: the config saved in this checkpoint is not valid: {e}") from None
+    cfg = saved_config(state, path, run_name=run_dir.resolve().name)   # the folder is the run
     return Checkpoint(cfg, state, path, int(state["step"]))
 
 

@@ -13,6 +13,8 @@ its flags, calls the library function that does the work and prints what it wrot
   few views and report how far apart and how fast they are (:mod:`mitsuba_platonic.compare`).
 - ``bench``: the renderers' speed/accuracy trade: times, memory, image and gradient errors,
   JSON, Markdown and Pareto plots (:mod:`mitsuba_platonic.bench`).
+- ``convert-checkpoint``: :func:`mitsuba_platonic.checkpoint.convert_checkpoint`, for a trusted
+  checkpoint the safe loader refuses (the only command that unpickles with ``weights_only=False``).
 
 Exit codes: 0 on success; 2 on a user error (usage errors, unreadable or invalid files, invalid
 options: :class:`~mitsuba_platonic.errors.UserError`, which ``ConfigError``, ``RunError`` and
@@ -552,12 +554,58 @@ def _add_evaluate(sub: "argparse._SubParsersAction") -> None:
     p.set_defaults(handler=_cmd_evaluate)
 
 
+def _cmd_convert_checkpoint(args: argparse.Namespace) -> int:
+    from .checkpoint import convert_checkpoint
+
+    files = _checkpoints_to_convert([Path(p) for p in args.paths])
+    if args.out is not None and len(files) != 1:
+        raise CLIError(f"--out takes one checkpoint file; {len(files)} were given (or found in a run folder)")
+    for path in files:
+        target = Path(args.out) if args.out is not None else path
+        refused = convert_checkpoint(path, target)
+        if refused is None:
+            print(f"{path}: loads safely already; left as it is")
+        else:
+            print(f"{path}: converted (it held {refused}) → {target}, which loads safely")
+    return 0
+
+
+def _checkpoints_to_convert(paths: Sequence[Path]) -> List[Path]:
+    """Checkpoint files as given, a run folder's ``checkpoints/*.pt`` in its place; :class:`CLIError`
+    for a path that is neither."""
+    from .checkpoint import checkpoint_files
+
+    files: List[Path] = []
+    for path in paths:
+        if path.is_file():
+            files.append(path)
+        elif path.is_dir() and checkpoint_files(path / "checkpoints"):
+            files += [p for p in checkpoint_files(path / "checkpoints") if p.is_file()]
+        else:
+            raise CLIError(f"{path} is neither a checkpoint file nor a run folder with checkpoints/*.pt")
+    return files
+
+
+def _add_convert_checkpoint(sub: "argparse._SubParsersAction") -> None:
+    p = sub.add_parser("convert-checkpoint", help="rewrite a trusted checkpoint that the safe loader refuses",
+                       description="Every command loads checkpoints safely (tensors and plain data only; no "
+                                   "code runs) and refuses a file that holds other Python objects. This command "
+                                   "converts such a file into one that loads safely. WARNING: to do so it "
+                                   "unpickles the file with Python's full pickle, which runs any code the file "
+                                   "holds: use it only on files whose origin you trust. Files that already load "
+                                   "safely are left as they are (never unpickled that way).")
+    p.add_argument("paths", nargs="+", metavar="PATH", help="checkpoint files, or run folders (all their checkpoints)")
+    p.add_argument("--out", default=None, metavar="FILE",
+                   help="write the converted checkpoint here instead of over PATH (one file only)")
+    p.set_defaults(handler=_cmd_convert_checkpoint)
+
+
 # --------------------------------------------------------------------------- entry point
 
 #: Subcommand registrars, in help order. Add ``_add_<command>`` functions here.
 SUBCOMMANDS: Sequence[Callable[["argparse._SubParsersAction"], None]] = (
     _add_quickstart, _add_train, _add_reconstruct, _add_generate, _add_evaluate, _add_make_dataset, _add_compare,
-    _add_bench)
+    _add_bench, _add_convert_checkpoint)
 
 
 def build_parser() -> argparse.ArgumentParser:

@@ -97,8 +97,10 @@ class Model(nn.Module):
     def from_checkpoint(cls, source: Union[str, Path], device: Union[str, torch.device] = "cpu") -> "Model":
         """The model of a run folder (its newest loadable checkpoint) or of one checkpoint file.
 
+        The file is loaded safely (no code runs, :func:`~mitsuba_platonic.checkpoint.load_checkpoint`).
         Raises :class:`~mitsuba_platonic.checkpoint.RunError` (one line naming the file) if there
-        is no loadable checkpoint or its saved config is not valid.
+        is no loadable checkpoint, the safe loader refused one (``UnsafeCheckpoint``), its saved
+        config is not valid or its weights do not fit that config's networks.
         """
         from .checkpoint import read_checkpoint
 
@@ -108,13 +110,16 @@ class Model(nn.Module):
     def from_read(cls, ckpt) -> "Model":
         """The model of a :class:`~mitsuba_platonic.checkpoint.Checkpoint` already read: the moving
         average of E's and G's weights when the run kept one (``train.ema``), else E and G as trained."""
+        from .checkpoint import load_weights
+
         trainer = ckpt.state["trainer"]
         nets = trainer["nets"]
         model = cls.from_config(ckpt.config, init=False)
+        what = "the networks of the config saved with it"           # weights and config from one file
         if "ema" in trainer:
-            model.load_state_dict(trainer["ema"])
+            load_weights(model, trainer["ema"], ckpt.path, what)
         else:
-            model.load_state_dict({k: v for k, v in nets.items() if k.startswith(("E.", "G.", "P."))})
+            load_weights(model, {k: v for k, v in nets.items() if k.startswith(("E.", "G.", "P."))}, ckpt.path, what)
         model.step, model.origin = ckpt.step, ckpt.path
         device = next(iter(nets.values())).device if nets else torch.device("cpu")
         return model.to(device)

@@ -24,7 +24,10 @@ step, Ctrl-C, ``stop_at``) and only if every tensor of the state is finite. An e
 training saves nothing (the good checkpoints stay as they are; its message says which step
 ``last.pt`` holds), and a state with NaN or Inf ends the run with :class:`RunError`. If
 ``last.pt`` cannot be loaded (truncated, corrupt), ``--resume``, ``reconstruct`` and ``generate``
-use the newest loadable ``step_*.pt`` and warn on stderr.
+use the newest loadable ``step_*.pt`` and warn on stderr. Checkpoints are unpickled safely
+(``weights_only=True``, :mod:`mitsuba_platonic.checkpoint`): one that would run code is an error
+naming it, never a fallback; ``--resume`` refuses a checkpoint saved with other data, model,
+render or train settings, naming the first key.
 
 One run per folder: ``run.lock`` is an exclusive lock (``flock``) that the kernel releases when
 its process ends, so a lock file left by a killed run is simply taken over, while a second
@@ -49,8 +52,8 @@ import torch
 import torch.distributed as dist
 import yaml
 
-from ..checkpoint import (CHECKPOINT_VERSION, RunError, checkpoint_files, load_checkpoint, load_latest_checkpoint,
-                          read_checkpoint, save_checkpoint)
+from ..checkpoint import (CHECKPOINT_VERSION, RunError, checkpoint_files, config_difference, load_checkpoint,
+                          load_latest_checkpoint, load_weights, read_checkpoint, save_checkpoint, saved_config)
 from ..config import Config, ConfigError, config_from_dict
 from ..errors import Interrupted, UserError
 from ..fileio import atomic_write, remove_temporaries
@@ -297,13 +300,13 @@ def _train(cfg: Config, run_dir: Path, resume: bool, progress: bool, stop_at: Op
             remove_temporaries(folder)
         if resume:
             try:
-                saved = read_run_config(run_dir / "config.yaml").to_dict()
+                saved = read_run_config(run_dir / "config.yaml")
             except RunError as e:
                 raise RunError(f"--resume: {e}") from None
-            for section in ("data", "model", "render", "train"):
-                if saved[section] != cfg.to_dict()[section]:
-                    raise RunError(f"--resume: the {section} settings differ from {run_dir}/config.yaml; "
-                                   f"an exact continuation needs the same config (only run.* may change)")
+            diff = config_difference(saved, cfg, there="there")
+            if diff is not None:
+                raise RunError(f"--resume: the {diff.split('.')[0]} settings differ from {run_dir}/config.yaml "
+                               f"({diff}); an exact continuation needs the same config (only run.* may change)")
         text = yaml.safe_dump(cfg.to_dict(), sort_keys=False)
         atomic_write(run_dir / "config.yaml", lambda p: p.write_text(text))   # never torn: --resume reads it
     if world > 1:
@@ -326,9 +329,10 @@ def _train(cfg: Config, run_dir: Path, resume: bool, progress: bool, stop_at: Op
     if resume:
         try:
             state, path = load_latest_checkpoint(last.parent, device, warn=rank == 0)
+            _same_settings(state, path, cfg)
+            load_weights(trainer, state["trainer"], path, "this run's networks and optimisers")
         except RunError as e:
             raise RunError(f"--resume: {e}") from None
-        trainer.load_state_dict(state["trainer"])
         start = int(state["step"])
         saved.update(path=path, step=start)
     pool = data.held_out if len(data.held_out) else data.images
@@ -435,6 +439,16 @@ def _train(cfg: Config, run_dir: Path, resume: bool, progress: bool, stop_at: Op
                 dist.barrier()                               # rank 0 has written the last checkpoint
             dist.destroy_process_group()
     return run_dir
+
+
+def _same_settings(state: Dict[str, Any], path: Path, cfg: Config) -> None:
+    """:class:`RunError` naming the checkpoint and the first key unless the config saved in it has
+    the same data, model, render and train settings as ``cfg`` (config.yaml may have been edited,
+    or the checkpoint come from another run: its weights would not fit, or not continue exactly)."""
+    diff = config_difference(saved_config(state, path, run_name=cfg.run.name), cfg, there=f"in {path.name}")
+    if diff is not None:
+        raise RunError(f"{path} was saved with other settings ({diff}); an exact continuation needs the "
+                       f"config it was trained with (only run.* may change)")
 
 
 def read_run_config(path: Path) -> Config:
