@@ -58,19 +58,19 @@ __all__ = ["CollectionSpec", "make_collection", "load_manifest", "FORMATIONS", "
 FORMATIONS = MODELS + ("physical",)   # the renderer's image formations, or path-traced
 RENDERERS = ("closed_form", "mitsuba")
 LIGHTINGS = ("sunsky", "envmap", "mixed")
-SCENES = Path(__file__).resolve().parents[2] / "scenes"
 SUBFOLDERS = ("images", "exr", "volumes")
 RECORDS = ("collection.json", "records.jsonl", "manifest.json")
 _TEMPORARY = re.compile(r"\.\d{5,}(_\d{2,})?\.tmp\d+\.(png|exr|npz|vol)")   # what atomic_write names them
 
 
 def default_envmaps() -> List[str]:
-    """Environment maps in ``scenes/envmaps/`` (``*.exr``): the skies baked from Mitsuba's
-    ``sunsky`` (:func:`mitsuba_platonic.render.sky.baked_envmaps`, baked on first use: no map
-    ships for want of a licence) and any a user dropped there."""
-    from ..render.sky import baked_envmaps
+    """Environment maps in the package's ``scenes/envmaps/`` (``*.exr``: any a user dropped there)
+    and the skies baked from Mitsuba's ``sunsky`` (:func:`mitsuba_platonic.render.sky.baked_envmaps`:
+    carried by the package where they were baked before it was built, else baked on first use;
+    no photographic map ships for want of a licence)."""
+    from ..render.sky import ENVMAPS, baked_envmaps
 
-    return sorted(set(str(p) for p in (SCENES / "envmaps").glob("*.exr")) | set(baked_envmaps()))
+    return sorted(set(str(p) for p in ENVMAPS.glob("*.exr")) | set(baked_envmaps()))
 
 
 _EXR_MAGIC = b"\x76\x2f\x31\x01"
