@@ -393,7 +393,7 @@ def _lock(path: Path) -> Iterator[None]:
 
 
 def _make_collection(out: Path, spec: CollectionSpec, overwrite: bool, progress: bool) -> Path:
-    from tqdm.auto import tqdm
+    from ..progress import progress_bar
 
     spec_file = out / "collection.json"
     if spec_file.exists() and not overwrite:
@@ -425,8 +425,8 @@ def _make_collection(out: Path, spec: CollectionSpec, overwrite: bool, progress:
 
     total = n * K
     finished = sum(done(i, k) for i in range(n) for k in range(K))
-    bar = tqdm(total=total, initial=finished, disable=not progress, unit="img",
-               desc=f"{spec.shape_class} {spec.formation}", dynamic_ncols=True)
+    bar = progress_bar(total, initial=finished, disable=not progress, unit="img",
+                       desc=f"{spec.shape_class} {spec.formation}")
     t0 = time.perf_counter()
     try:
         _render_pending(out, spec, records, records_file, done, bar)
