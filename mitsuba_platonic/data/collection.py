@@ -102,6 +102,32 @@ def check_envmap(path: Union[str, Path], what: str = "environment map") -> None:
     if not ({"R", "G", "B"} <= set(channels) or "Y" in channels):
         raise UserError(f"{what} {str(path)!r} has no colour channels (R, G, B or Y), only "
                         f"{', '.join(channels) or 'none'}; {expected}")
+    problem = _unreadable_pixels(p)
+    if problem:
+        raise UserError(f"{what} {str(path)!r} is truncated or damaged: its pixels cannot be read in full "
+                        f"({problem}); {expected}")
+
+
+#: Files whose pixels :func:`_unreadable_pixels` read in full: (path, size, mtime) → the problem or ''.
+_READ_PIXELS: Dict[Tuple[str, int, int], str] = {}
+
+
+def _unreadable_pixels(path: Path) -> str:
+    """Read every pixel of the EXR ``path`` with Mitsuba's own loader on this thread, where a
+    damaged file raises (when the ``envmap`` emitter reads it while a scene loads, on a worker
+    thread, a truncated file aborts the process). Returns what is wrong, '' if nothing."""
+    from ..render.variant import ensure_variant
+
+    stat = path.stat()
+    key = (str(path.resolve()), stat.st_size, stat.st_mtime_ns)
+    if key not in _READ_PIXELS:
+        mi = ensure_variant()
+        try:
+            mi.Bitmap(str(path))
+            _READ_PIXELS[key] = ""
+        except Exception as e:                               # Mitsuba raises RuntimeError with the reader's words
+            _READ_PIXELS[key] = " ".join(str(e).replace(f'"{path}": ', "").split())
+    return _READ_PIXELS[key]
 
 
 @dataclass

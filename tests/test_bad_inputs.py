@@ -1,0 +1,49 @@
+"""Bad inputs that escaped as crashes or tracebacks (issue 27): each is now one line, exit code 2,
+or (a damaged record the collection can rebuild) a warning naming it."""
+
+from __future__ import annotations
+
+import subprocess
+import sys
+
+import pytest
+
+from mitsuba_platonic.render import sky
+from cli_runner import one_line
+
+# --------------------------------------------------------------------------- a truncated environment map
+
+
+def _first_chunk(data: bytes) -> int:
+    """Where a single-part EXR's pixel data begin: the first entry of the offset table that
+    follows the header (magic, version, then ``name\\0 type\\0 size value`` attributes up to a 0 byte)."""
+    at = 8
+    while data[at] != 0:
+        at = data.index(b"\0", data.index(b"\0", at) + 1) + 1           # past the name and the type
+        at += 4 + int.from_bytes(data[at:at + 4], "little")               # the size, the value
+    return int.from_bytes(data[at + 1:at + 9], "little")
+
+
+@pytest.fixture(scope="module")
+def whole_envmap(tmp_path_factory):
+    return sky.bake_sky(tmp_path_factory.mktemp("envmaps") / "whole.exr", elevation=35.0, turbidity=3.0)
+
+
+@pytest.mark.parametrize("cut", ["11 bytes into the pixels", "1571 bytes"])
+def test_truncated_envmap_is_one_line_not_an_abort(whole_envmap, tmp_path, cut):
+    """Cut 11 bytes into its first chunk, Mitsuba's loader threw EOFException on a worker thread:
+    the process aborted (exit 134) with nothing said; cut later, a RuntimeError traceback (exit 1).
+    Run as a user runs it, in its own process."""
+    data = whole_envmap.read_bytes()
+    truncated = tmp_path / "trunc.exr"
+    truncated.write_bytes(data[:_first_chunk(data) + 11] if cut.startswith("11") else data[:1571])
+    out = tmp_path / "d"
+    done = subprocess.run(
+        [sys.executable, "-m", "mitsuba_platonic.cli", "make-dataset", "--class", "mushroom", "--shapes", "1",
+         "--views", "1", "--resolution", "16", "--formation", "physical", "--spp", "1", "--max-depth", "2",
+         "--lighting", "envmap", "--envmap", str(truncated), "--out", str(out), "--quiet"],
+        capture_output=True, text=True, stdin=subprocess.DEVNULL, timeout=300)
+    assert done.returncode == 2, (done.returncode, done.stderr[-2000:])
+    err = one_line(done.stderr, "make-dataset", kind="error")
+    assert f"--envmap '{truncated}'" in err and "truncated or damaged" in err, err
+    assert not out.exists()
