@@ -3,13 +3,18 @@ or (a damaged record the collection can rebuild) a warning naming it."""
 
 from __future__ import annotations
 
+import json
 import subprocess
 import sys
 
 import pytest
 
 from mitsuba_platonic.render import sky
-from cli_runner import one_line
+from cli_runner import one_line, run_cli
+from tiny_shapes import TINY
+
+pytestmark = pytest.mark.usefixtures("tiny_class")
+
 
 # --------------------------------------------------------------------------- a truncated environment map
 
@@ -47,3 +52,38 @@ def test_truncated_envmap_is_one_line_not_an_abort(whole_envmap, tmp_path, cut):
     err = one_line(done.stderr, "make-dataset", kind="error")
     assert f"--envmap '{truncated}'" in err and "truncated or damaged" in err, err
     assert not out.exists()
+
+
+# --------------------------------------------------------------------------- a manifest of the wrong shape
+
+
+@pytest.mark.parametrize("manifest", ['{"spec": 5, "images": []}', "[1, 2]", '{"spec": {}, "images": 3}',
+                                      '{"spec": {"n_shapes": 1}, "images": [7]}', "not JSON"])
+def test_manifest_of_the_wrong_shape_is_named_and_rebuilt(tmp_path, manifest):
+    args = ["make-dataset", "--class", TINY, "--shapes", "1", "--views", "2", "--resolution", "16",
+            "--out", str(tmp_path), "--quiet"]
+    assert run_cli(args)[0] == 0
+    good = json.loads((tmp_path / "manifest.json").read_text())
+    (tmp_path / "manifest.json").write_text(manifest)
+    code, out, err = run_cli(args)
+    assert code == 0, err
+    warning = one_line(err, "make-dataset", kind="warning")
+    assert f"{tmp_path / 'manifest.json'}" in warning and "rebuilt" in warning, warning
+    rebuilt = json.loads((tmp_path / "manifest.json").read_text())
+    assert {k: v for k, v in rebuilt.items() if k != "seconds"} == {k: v for k, v in good.items() if k != "seconds"}
+
+
+@pytest.mark.parametrize("spec", ["5", "[1, 2]", "{}", "not JSON"])
+def test_collection_json_of_the_wrong_shape_is_one_line(tmp_path, spec):
+    """collection.json records the settings the images were made with: damaged, the collection
+    cannot be resumed, and nothing is deleted."""
+    args = ["make-dataset", "--class", TINY, "--shapes", "1", "--views", "1", "--resolution", "16",
+            "--out", str(tmp_path), "--quiet"]
+    assert run_cli(args)[0] == 0
+    (tmp_path / "collection.json").write_text(spec)
+    (tmp_path / "manifest.json").unlink()
+    code, _, err = run_cli(args)
+    assert code == 2
+    err = one_line(err, "make-dataset", kind="error")
+    assert f"{tmp_path / 'collection.json'}" in err and "damaged" in err, err
+    assert (tmp_path / "images" / "00000_00.png").is_file()
