@@ -9,6 +9,7 @@ import sys
 
 import pytest
 
+from mitsuba_platonic.config import ConfigError, load_config
 from mitsuba_platonic.render import sky
 from cli_runner import one_line, run_cli
 from tiny_shapes import TINY
@@ -87,3 +88,15 @@ def test_collection_json_of_the_wrong_shape_is_one_line(tmp_path, spec):
     err = one_line(err, "make-dataset", kind="error")
     assert f"{tmp_path / 'collection.json'}" in err and "damaged" in err, err
     assert (tmp_path / "images" / "00000_00.png").is_file()
+
+
+# --------------------------------------------------------------------------- lighting the path tracer cannot use
+
+
+@pytest.mark.parametrize("lighting", ["envmap", "mixed"])
+def test_physical_backend_with_envmap_lighting_is_a_config_error(lighting):
+    with pytest.raises(ConfigError, match=r"^render\.lighting: .*'sunsky'"):
+        load_config(None, ["render.backend=physical", f"render.lighting={lighting}"])
+    code, _, err = run_cli(["train", "--set", "render.backend=physical", "--set", f"render.lighting={lighting}"])
+    assert code == 2
+    assert one_line(err, "train", kind="error").startswith("platonic train: error: render.lighting: "), err
