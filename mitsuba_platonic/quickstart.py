@@ -27,7 +27,7 @@ from .config import load_config
 from .evaluate.protocol import held_out_scores
 from .export import export_volume
 from .images import composite, linear_to_srgb, save_png, to_hwc
-from .model import Model
+from .model import Model, check_model_fits
 from .resources import config_path
 
 __all__ = ["quickstart"]
@@ -53,6 +53,7 @@ def quickstart(out: Path = Path("quickstart"), steps: Optional[int] = None, prog
     if steps is not None:
         overrides.append(f"run.steps={steps}")
     cfg = load_config(CONFIG, overrides + extra)
+    check_model_fits(cfg)                               # before rendering the data
     run_dir = Path(cfg.run.out_dir) / cfg.run.name
     resume = (run_dir / "checkpoints" / "last.pt").exists()
     data = load_training_data(cfg, progress=progress)

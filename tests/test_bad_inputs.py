@@ -90,6 +90,32 @@ def test_collection_json_of_the_wrong_shape_is_one_line(tmp_path, spec):
     assert (tmp_path / "images" / "00000_00.png").is_file()
 
 
+# --------------------------------------------------------------------------- sizes that cannot fit
+
+
+def test_a_latent_that_cannot_fit_is_refused_up_front(tmp_path):
+    code, _, err = run_cli(["train", "--set", "model.latent=2000000000", "--set", f"run.out_dir={tmp_path}",
+                            "--set", f"data.cache={tmp_path}/data", "--set", f"data.shape_class={TINY}",
+                            "--set", "model.resolution=16", "--quiet"])
+    assert code == 2
+    err = one_line(err, "train", kind="error")
+    assert err.startswith("platonic train: error: model.latent: 2000000000 ") and "GB" in err, err
+    assert not (tmp_path / "data").exists() and not (tmp_path / "run").exists()
+
+
+def test_quickstart_refuses_a_width_that_cannot_fit_before_rendering(tmp_path):
+    code, _, err = run_cli(["quickstart", "--out", str(tmp_path / "q"), "--set", "model.width=1000000"])
+    assert code == 2
+    err = one_line(err, "quickstart", kind="error")
+    assert "model.width: 1000000 " in err, err
+    assert not (tmp_path / "q").exists()
+
+
+def test_sizes_that_fit_pass():
+    from mitsuba_platonic.model import check_model_fits
+    check_model_fits(load_config("paper"))
+
+
 # --------------------------------------------------------------------------- lighting the path tracer cannot use
 
 

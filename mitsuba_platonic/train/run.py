@@ -224,7 +224,10 @@ def train(cfg: Config, resume: bool = False, progress: bool = True,
     ``stop_at`` ends the loop after that step as if interrupted (a checkpoint is saved): used to
     test exact resume.
     """
+    from ..model import check_model_fits
+
     rank, world, local_rank = _distributed()
+    check_model_fits(cfg, _device(cfg, local_rank))         # before any data or run folder is written
     run_dir = Path(cfg.run.out_dir) / cfg.run.name
     with training_threads(cfg):
         if rank != 0:
