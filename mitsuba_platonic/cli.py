@@ -459,7 +459,9 @@ def _add_train(sub: "argparse._SubParsersAction") -> None:
                                    "config, checkpoints, logs and samples. Ctrl-C saves and exits; "
                                    "--resume continues exactly. Data parallel: torchrun --nproc-per-node N "
                                    "-m mitsuba_platonic.cli train ...")
-    p.add_argument("--config", default=None, help="YAML config (default: the built-in defaults)")
+    p.add_argument("--config", default=None,
+                   help="YAML config: a file, or a packaged config's name (e.g. paper, or configs/paper.yaml "
+                        "where no such file is here) (default: the built-in defaults)")
     p.add_argument("--set", action="append", metavar="KEY=VALUE", help="override a config key (repeatable)")
     p.add_argument("--resume", action="store_true", help="continue the run from its last checkpoint")
     p.add_argument("--quiet", action="store_true", help="no progress bars")
@@ -520,7 +522,7 @@ def _add_generate(sub: "argparse._SubParsersAction") -> None:
 def _cmd_quickstart(args: argparse.Namespace) -> int:
     from .quickstart import quickstart
 
-    report = quickstart(Path(args.out), steps=args.steps, progress=not args.quiet)
+    report = quickstart(Path(args.out), steps=args.steps, progress=not args.quiet, overrides=args.set or ())
     print(report.read_text())
     print(f"report: {report}")
     return 0
@@ -533,6 +535,8 @@ def _add_quickstart(sub: "argparse._SubParsersAction") -> None:
                                    "write turntables, meshes and a report.")
     p.add_argument("--out", default="quickstart", help="output folder (default: %(default)s/)")
     p.add_argument("--steps", type=_positive_int, default=None, help="training steps (default: the config's)")
+    p.add_argument("--set", action="append", metavar="KEY=VALUE",
+                   help="override a key of configs/quickstart.yaml, e.g. model.resolution=16 (repeatable)")
     p.add_argument("--quiet", action="store_true")
     p.set_defaults(handler=_cmd_quickstart)
 

@@ -33,7 +33,7 @@ from .render.settings import RenderSettings as RenderConfig
 from .views import DISTRIBUTIONS
 
 __all__ = ["Config", "RunConfig", "DataConfig", "ModelConfig", "RenderConfig", "TrainConfig",
-           "load_config", "config_from_dict", "apply_overrides", "ConfigError"]
+           "load_config", "config_file", "config_from_dict", "apply_overrides", "ConfigError"]
 
 
 _FLOAT = re.compile(r"[-+]?(\d+\.?\d*|\.\d+)[eE][-+]?\d+")
@@ -469,9 +469,7 @@ def load_config(path: Optional[Union[str, Path]] = None, overrides: Sequence[str
     """Load a YAML config (or the defaults when ``path`` is None), apply overrides, validate."""
     data: Dict[str, Any] = {}
     if path is not None:
-        path = Path(path)
-        if not path.is_file():
-            raise ConfigError(f"config file {str(path)!r} does not exist")
+        path = config_file(path)
         try:
             data = yaml.safe_load(path.read_text()) or {}
         except UnicodeDecodeError:
@@ -482,6 +480,26 @@ def load_config(path: Optional[Union[str, Path]] = None, overrides: Sequence[str
             raise ConfigError(f"{path}: expected a mapping of sections (run, data, model, render, train), "
                               f"got a {type(data).__name__}")
     return config_from_dict(apply_overrides(data, overrides))
+
+
+def config_file(path: Union[str, Path]) -> Path:
+    """The config file ``path`` names: the file itself where it exists, else the packaged config
+    of that name (``paper``, ``paper.yaml`` or ``configs/paper.yaml``: the repository's configs
+    travel inside the package, so they are found from any folder). ConfigError otherwise."""
+    from .resources import config_names, config_path
+
+    p = Path(path)
+    if p.is_file():
+        return p
+    if p.exists():
+        raise ConfigError(f"config file {str(path)!r} is not a file")
+    if p.parent in (Path("."), Path("configs")) and p.suffix in ("", ".yaml"):
+        try:
+            return config_path(p.name)
+        except FileNotFoundError:
+            pass
+    raise ConfigError(f"config file {str(path)!r} does not exist (packaged configs, found by name from any "
+                      f"folder: {', '.join(config_names())})")
 
 
 def yaml_problem(e: yaml.YAMLError) -> str:

@@ -19,7 +19,7 @@ from __future__ import annotations
 import csv
 import time
 from pathlib import Path
-from typing import List, Optional
+from typing import List, Optional, Sequence
 
 import torch
 
@@ -27,26 +27,33 @@ from .config import load_config
 from .evaluate.protocol import held_out_scores
 from .export import export_volume
 from .images import composite, linear_to_srgb, save_png, to_hwc
-from .model import Model
+from .model import Model, check_model_fits
+from .resources import config_path
 
 __all__ = ["quickstart"]
 
-CONFIG = Path(__file__).resolve().parents[1] / "configs" / "quickstart.yaml"
+#: The quickstart's config, carried inside the package (configs/quickstart.yaml).
+CONFIG = config_path("quickstart")
 
 _BACKEND_NAMES = {"closed_form": "closed-form layer", "mitsuba": "Mitsuba ray marcher",
                   "physical": "Mitsuba path tracer"}
 
 
-def quickstart(out: Path = Path("quickstart"), steps: Optional[int] = None, progress: bool = True) -> Path:
-    """Run the quickstart into ``out``; return the path of its report."""
+def quickstart(out: Path = Path("quickstart"), steps: Optional[int] = None, progress: bool = True,
+               overrides: Sequence[str] = ()) -> Path:
+    """Run the quickstart into ``out``; return the path of its report.
+
+    overrides: ``section.key=value`` changes to ``configs/quickstart.yaml`` (``--set``), applied
+    after ``out`` and ``steps``."""
     from .train.data import load_training_data
     from .train.run import train
 
     t0 = time.perf_counter()
-    overrides = [f"run.out_dir={out}", f"data.cache={out / 'data'}"]
+    extra, overrides = list(overrides), [f"run.out_dir={out}", f"data.cache={out / 'data'}"]
     if steps is not None:
         overrides.append(f"run.steps={steps}")
-    cfg = load_config(CONFIG, overrides)
+    cfg = load_config(CONFIG, overrides + extra)
+    check_model_fits(cfg)                               # before rendering the data
     run_dir = Path(cfg.run.out_dir) / cfg.run.name
     resume = (run_dir / "checkpoints" / "last.pt").exists()
     data = load_training_data(cfg, progress=progress)

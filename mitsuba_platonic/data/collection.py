@@ -36,8 +36,9 @@ import json
 import os
 import re
 import time
+import warnings
 from contextlib import contextmanager
-from dataclasses import asdict, dataclass, fields
+from dataclasses import MISSING, asdict, dataclass, fields
 from pathlib import Path
 from typing import Any, Callable, Dict, Iterator, List, Optional, Tuple, Union
 
@@ -58,19 +59,19 @@ __all__ = ["CollectionSpec", "make_collection", "load_manifest", "FORMATIONS", "
 FORMATIONS = MODELS + ("physical",)   # the renderer's image formations, or path-traced
 RENDERERS = ("closed_form", "mitsuba")
 LIGHTINGS = ("sunsky", "envmap", "mixed")
-SCENES = Path(__file__).resolve().parents[2] / "scenes"
 SUBFOLDERS = ("images", "exr", "volumes")
 RECORDS = ("collection.json", "records.jsonl", "manifest.json")
 _TEMPORARY = re.compile(r"\.\d{5,}(_\d{2,})?\.tmp\d+\.(png|exr|npz|vol)")   # what atomic_write names them
 
 
 def default_envmaps() -> List[str]:
-    """Environment maps in ``scenes/envmaps/`` (``*.exr``): the skies baked from Mitsuba's
-    ``sunsky`` (:func:`mitsuba_platonic.render.sky.baked_envmaps`, baked on first use: no map
-    ships for want of a licence) and any a user dropped there."""
-    from ..render.sky import baked_envmaps
+    """Environment maps in the package's ``scenes/envmaps/`` (``*.exr``: any a user dropped there)
+    and the skies baked from Mitsuba's ``sunsky`` (:func:`mitsuba_platonic.render.sky.baked_envmaps`:
+    carried by the package where they were baked before it was built, else baked on first use;
+    no photographic map ships for want of a licence)."""
+    from ..render.sky import ENVMAPS, baked_envmaps
 
-    return sorted(set(str(p) for p in (SCENES / "envmaps").glob("*.exr")) | set(baked_envmaps()))
+    return sorted(set(str(p) for p in ENVMAPS.glob("*.exr")) | set(baked_envmaps()))
 
 
 _EXR_MAGIC = b"\x76\x2f\x31\x01"
@@ -102,6 +103,32 @@ def check_envmap(path: Union[str, Path], what: str = "environment map") -> None:
     if not ({"R", "G", "B"} <= set(channels) or "Y" in channels):
         raise UserError(f"{what} {str(path)!r} has no colour channels (R, G, B or Y), only "
                         f"{', '.join(channels) or 'none'}; {expected}")
+    problem = _unreadable_pixels(p)
+    if problem:
+        raise UserError(f"{what} {str(path)!r} is truncated or damaged: its pixels cannot be read in full "
+                        f"({problem}); {expected}")
+
+
+#: Files whose pixels :func:`_unreadable_pixels` read in full: (path, size, mtime) → the problem or ''.
+_READ_PIXELS: Dict[Tuple[str, int, int], str] = {}
+
+
+def _unreadable_pixels(path: Path) -> str:
+    """Read every pixel of the EXR ``path`` with Mitsuba's own loader on this thread, where a
+    damaged file raises (when the ``envmap`` emitter reads it while a scene loads, on a worker
+    thread, a truncated file aborts the process). Returns what is wrong, '' if nothing."""
+    from ..render.variant import ensure_variant
+
+    stat = path.stat()
+    key = (str(path.resolve()), stat.st_size, stat.st_mtime_ns)
+    if key not in _READ_PIXELS:
+        mi = ensure_variant()
+        try:
+            mi.Bitmap(str(path))
+            _READ_PIXELS[key] = ""
+        except Exception as e:                               # Mitsuba raises RuntimeError with the reader's words
+            _READ_PIXELS[key] = " ".join(str(e).replace(f'"{path}": ', "").split())
+    return _READ_PIXELS[key]
 
 
 @dataclass
@@ -198,6 +225,10 @@ class CollectionSpec:
 
     @classmethod
     def from_dict(cls, d: Dict[str, Any]) -> "CollectionSpec":
+        """The spec a ``collection.json`` (or a manifest's ``spec``) records; UserError if ``d``
+        is no mapping of collection settings."""
+        if not isinstance(d, dict):
+            raise UserError(f"expected a JSON object of collection settings, got {_json_kind(d)}")
         known = {f.name for f in fields(cls)}
         unknown = set(d) - known
         if unknown:
@@ -207,6 +238,10 @@ class CollectionSpec:
         d["envmaps"] = tuple(d.get("envmaps", ()))
         if isinstance(d.get("elevation"), list):
             d["elevation"] = tuple(d["elevation"])
+        missing = sorted(f.name for f in fields(cls)
+                         if f.name not in d and f.default is MISSING and f.default_factory is MISSING)
+        if missing:
+            raise UserError(f"collection setting(s) {missing} missing")
         return cls(**d)
 
     # -- the deterministic plan ------------------------------------------------------------
@@ -225,6 +260,44 @@ class CollectionSpec:
         from ..render.physical import sample_lighting
         rng = np.random.default_rng([self.seed, i, k, 2])
         return sample_lighting(rng, self.lighting, self.envmaps)
+
+
+def _json_kind(value: Any) -> str:
+    """A JSON value's kind, as a message names it: 'a list', 'the number 5', 'null'."""
+    if value is None:
+        return "null"
+    if isinstance(value, (bool, int, float)):
+        return f"the {'boolean' if isinstance(value, bool) else 'number'} {json.dumps(value)}"
+    return {dict: "an object", list: "a list", str: "a string"}.get(type(value), type(value).__name__)
+
+
+def _manifest_problem(m: Any) -> str:
+    """What is wrong with a parsed ``manifest.json`` (wrong shape), '' if it is whole."""
+    if not isinstance(m, dict):
+        return f"expected a JSON object, got {_json_kind(m)}"
+    try:
+        CollectionSpec.from_dict(m.get("spec"))
+    except UserError as e:
+        return f"its 'spec': {e}"
+    images = m.get("images")
+    if not isinstance(images, list):
+        return f"its 'images': expected a list of image records, got {_json_kind(images)}"
+    bad = [r for r in images if not (isinstance(r, dict) and all(isinstance(r.get(k), str) for k in ("image", "exr")))]
+    if bad:
+        return f"its 'images': {len(bad)} record(s) without the 'image' and 'exr' file names"
+    return ""
+
+
+def _read_spec(spec_file: Path) -> "CollectionSpec":
+    """The spec ``collection.json`` records; UserError naming the file if it is damaged (it
+    says what the images on disk were made with: nothing can resume or be deleted without it)."""
+    try:
+        return CollectionSpec.from_dict(json.loads(spec_file.read_text()))
+    except ValueError as e:                                   # not JSON, not UTF-8, not a spec (UserError)
+        why = " ".join(str(e).split())
+        raise UserError(f"{spec_file} is damaged ({why}); it records the settings the collection in "
+                        f"{spec_file.parent} was made with, so the collection cannot be resumed; nothing was "
+                        f"changed: move the folder away or use another one") from None
 
 
 def image_id(i: int, k: int) -> str:
@@ -304,17 +377,29 @@ def make_collection(out: Union[str, Path], spec: CollectionSpec, overwrite: bool
     if overwrite:
         _overwrite_plan(out)                         # refuse before writing anything (again under the lock)
     manifest_file = out / "manifest.json"
-    if not overwrite and manifest_file.exists():
-        try:
-            m = json.loads(manifest_file.read_text())
-            if CollectionSpec.from_dict(m["spec"]) == spec and all((out / r["image"]).exists() and (out / r["exr"]).exists()
-                                                   for r in m["images"]) and not _missing_files(out, spec):
-                return manifest_file                 # finished: read-only, safe for concurrent readers
-        except (ValueError, KeyError):
-            pass
+    if not overwrite and manifest_file.exists() and _finished(manifest_file, spec):
+        return manifest_file                         # finished: read-only, safe for concurrent readers
     out.mkdir(parents=True, exist_ok=True)
     with _lock(out / ".lock"):
         return _make_collection(out, spec, overwrite, progress)
+
+
+def _finished(manifest_file: Path, spec: CollectionSpec) -> bool:
+    """Whether the manifest says the collection ``spec`` is finished and all its files are there.
+    A damaged manifest (not JSON, or JSON of another shape) is named in a warning: the
+    collection is then finished again, which rebuilds it from ``records.jsonl``."""
+    try:
+        m = json.loads(manifest_file.read_text())
+        problem = _manifest_problem(m)
+    except ValueError as e:                                  # not JSON, or not UTF-8
+        problem = f"not JSON: {' '.join(str(e).split())}"
+    if problem:
+        warnings.warn(f"{manifest_file} is damaged ({problem}); it is rebuilt from the collection's records")
+        return False
+    out = manifest_file.parent
+    return (CollectionSpec.from_dict(m["spec"]) == spec
+            and all((out / r["image"]).exists() and (out / r["exr"]).exists() for r in m["images"])
+            and not _missing_files(out, spec))
 
 
 def _overwrite_plan(out: Path) -> List[Path]:
@@ -393,12 +478,12 @@ def _lock(path: Path) -> Iterator[None]:
 
 
 def _make_collection(out: Path, spec: CollectionSpec, overwrite: bool, progress: bool) -> Path:
-    from tqdm.auto import tqdm
+    from ..progress import progress_bar
 
     spec_file = out / "collection.json"
     if spec_file.exists() and not overwrite:
         # read through from_dict: a setting added later takes the value those collections were made with
-        old = CollectionSpec.from_dict(json.loads(spec_file.read_text())).to_dict()
+        old = _read_spec(spec_file).to_dict()
         if old != spec.to_dict():
             diff = [f"{k}: {old.get(k)!r} → {v!r}" for k, v in spec.to_dict().items() if old.get(k) != v]
             raise UserError(f"{out} holds a collection made with other settings ({'; '.join(diff)}); "
@@ -425,8 +510,8 @@ def _make_collection(out: Path, spec: CollectionSpec, overwrite: bool, progress:
 
     total = n * K
     finished = sum(done(i, k) for i in range(n) for k in range(K))
-    bar = tqdm(total=total, initial=finished, disable=not progress, unit="img",
-               desc=f"{spec.shape_class} {spec.formation}", dynamic_ncols=True)
+    bar = progress_bar(total, initial=finished, disable=not progress, unit="img",
+                       desc=f"{spec.shape_class} {spec.formation}")
     t0 = time.perf_counter()
     try:
         _render_pending(out, spec, records, records_file, done, bar)
@@ -491,9 +576,17 @@ def _render_pending(out: Path, spec: CollectionSpec, records: Dict[str, Dict[str
 
 
 def load_manifest(folder: Union[str, Path]) -> Dict[str, Any]:
-    """Read a finished collection's ``manifest.json`` (raises ``FileNotFoundError`` if unfinished)."""
+    """Read a finished collection's ``manifest.json`` (raises ``FileNotFoundError`` if unfinished,
+    :class:`~mitsuba_platonic.errors.UserError` naming it if it is damaged)."""
     path = Path(folder) / "manifest.json"
     if not path.exists():
         raise FileNotFoundError(f"{folder} has no manifest.json: the collection is unfinished "
                                 f"(re-run make-dataset with the same settings to finish it)")
-    return json.loads(path.read_text())
+    try:
+        m = json.loads(path.read_text())
+        problem = _manifest_problem(m)
+    except ValueError as e:
+        problem = f"not JSON: {' '.join(str(e).split())}"
+    if problem:
+        raise UserError(f"{path} is damaged ({problem}); re-run make-dataset with the same settings to rebuild it")
+    return m

@@ -94,8 +94,11 @@ def score_pairs(method: str, model: str, triples: Sequence[Tuple[torch.Tensor, t
     same views). FID (with ``fid_network``) compares the IF re-renders of all references with
     those of all reconstructions.
     """
+    from ..progress import progress_bar
+
     row = Row(method, model.upper())
     if_recon, if_ref = [], []
+    bar = progress_bar(len(triples), unit="pair", desc=f"  {method}", disable=not progress)
     for k, (image, recon, truth) in enumerate(triples):
         res = evaluate_pair(recon, truth, model, n_views=n_views, seed=seed + k, methods=methods, spp=spp,
                             max_depth=max_depth, backend=backend, vgg_network=vgg_network, if_max_depth=if_max_depth)
@@ -105,8 +108,8 @@ def score_pairs(method: str, model: str, triples: Sequence[Tuple[torch.Tensor, t
             if_ref.append(res.images["IF"][1])
         if len(row.examples) < n_examples:
             row.examples.append((image.detach().cpu(), recon.detach().cpu(), truth.detach().cpu()))
-        if progress:
-            print(f"  {method}: pair {k + 1}/{len(triples)}", flush=True)
+        bar.update(1)
+    bar.close()
     if fid_network is not None and if_recon:
         row.extra["fid"] = M.fid(torch.cat(if_ref), torch.cat(if_recon), network=fid_network)
     return row

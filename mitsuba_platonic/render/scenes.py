@@ -24,12 +24,13 @@ import numbers
 from pathlib import Path
 from typing import Any, Dict, Mapping, Optional, Sequence, Union
 
+from ..resources import scenes_folder
 from .variant import ensure_variant
 
 __all__ = ["SCENES", "scene_path", "load_scene", "xml_value", "write_scene_grids"]
 
-#: The scenes folder at the repository root (next to the package).
-SCENES = Path(__file__).resolve().parents[2] / "scenes"
+#: The scene files: the repository's top-level ``scenes/``, carried inside the package (:mod:`..resources`).
+SCENES = scenes_folder()
 
 
 def scene_path(name: Union[str, Path]) -> Path:

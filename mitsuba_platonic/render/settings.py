@@ -96,6 +96,10 @@ class RenderSettings:
             raise ValueError("model: the physical backend renders colour; use 'ea' images")
         if self.backend == "physical" and self.camera != "orthographic":
             raise ValueError("camera: the physical backend renders with the orthographic camera only")
+        if self.backend == "physical" and self.lighting != "sunsky":
+            raise ValueError(f"lighting: the physical backend renders differentiably under 'sunsky' only, got "
+                             f"{self.lighting!r} (environment maps light path-traced collections: make-dataset "
+                             f"--formation physical --lighting {self.lighting})")
         return self
 
     @property

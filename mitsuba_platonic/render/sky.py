@@ -10,8 +10,10 @@ pixel) is integrated separately over the few pixels around it with ``sun_samples
 each, so the map carries the sun's power, not a point sample of it.
 
 :func:`baked_envmaps` bakes the skies in :data:`SKIES` (a few sun elevations and turbidities,
-the sun towards +z) into ``scenes/envmaps/`` on first use (the folder ``platonic make-dataset
---lighting envmap`` reads; ``*.exr`` is git-ignored) and returns their paths. From a shell:
+the sun towards +z) on first use and returns their paths: a package built after they were baked
+carries them in ``scenes/envmaps/`` (the folder ``platonic make-dataset --lighting envmap`` reads;
+``*.exr`` is git-ignored); missing ones are baked into :func:`~mitsuba_platonic.resources.sky_cache`
+(that folder in a checkout, the user's cache folder in an installed package). From a shell:
 ``python -m mitsuba_platonic.render.sky`` (``--help`` for the folder and size).
 """
 
@@ -23,12 +25,13 @@ from typing import List, Optional, Sequence, Tuple, Union
 
 import numpy as np
 
+from ..resources import sky_cache
 from .scenes import SCENES, load_scene
 from .variant import ensure_variant
 
 __all__ = ["SKIES", "ENVMAPS", "sun_direction", "sky_name", "bake_sky", "baked_envmaps", "latlong_direction"]
 
-#: Where baked skies go: the folder the envmap lighting reads by default.
+#: The package's environment maps: the folder the envmap lighting reads by default.
 ENVMAPS = SCENES / "envmaps"
 
 #: The baked skies: (sun elevation in degrees, turbidity).
@@ -125,12 +128,17 @@ def bake_sky(path: Union[str, Path], elevation: float, turbidity: float, azimuth
 
 def baked_envmaps(folder: Union[str, Path, None] = None, skies: Sequence[Tuple[float, float]] = SKIES,
                   width: int = 512, force: bool = False) -> List[str]:
-    """The baked skies ``folder/sunsky_elev*_turb*.exr`` (default ``scenes/envmaps``), baking the
-    missing ones (all with ``force``) first. Returns their paths."""
-    folder = Path(folder) if folder is not None else ENVMAPS
+    """The baked skies ``folder/sunsky_elev*_turb*.exr``, baking the missing ones (all with
+    ``force``) first. Returns their paths.
+
+    By default (``folder`` None) a sky the package carries (:data:`ENVMAPS`) is used as it is and
+    a missing one is baked into :func:`~mitsuba_platonic.resources.sky_cache`."""
     out = []
     for elevation, turbidity in skies:
-        path = folder / sky_name(elevation, turbidity)
+        name = sky_name(elevation, turbidity)
+        path = Path(folder) / name if folder is not None else ENVMAPS / name
+        if folder is None and (force or not path.is_file()):
+            path = sky_cache() / name
         if force or not path.is_file():
             bake_sky(path, elevation, turbidity, width=width)
         out.append(str(path))
@@ -143,7 +151,9 @@ def main(argv: Optional[Sequence[str]] = None) -> None:
 
     parser = argparse.ArgumentParser(prog="python -m mitsuba_platonic.render.sky",
                                      description="Bake lat-long EXR skies from Mitsuba's sunsky for envmap lighting.")
-    parser.add_argument("--out", default=str(ENVMAPS), help="folder (default: scenes/envmaps)")
+    parser.add_argument("--out", default=str(sky_cache()),
+                        help="folder (default: %(default)s: scenes/envmaps in a checkout, where a wheel "
+                             "built afterwards carries them)")
     parser.add_argument("--width", type=int, default=512, help="panorama width in pixels (height = width / 2)")
     parser.add_argument("--force", action="store_true", help="bake again even where a file exists")
     args = parser.parse_args(argv)

@@ -227,7 +227,10 @@ def train(cfg: Config, resume: bool = False, progress: bool = True,
     ``stop_at`` ends the loop after that step as if interrupted (a checkpoint is saved): used to
     test exact resume.
     """
+    from ..model import check_model_fits
+
     rank, world, local_rank = _distributed()
+    check_model_fits(cfg, _device(cfg, local_rank))         # before any data or run folder is written
     run_dir = Path(cfg.run.out_dir) / cfg.run.name
     with training_threads(cfg):
         if rank != 0:
@@ -284,7 +287,7 @@ def training_threads(cfg: Config) -> Iterator[None]:
 
 def _train(cfg: Config, run_dir: Path, resume: bool, progress: bool, stop_at: Optional[int],
            rank: int, world: int, local_rank: int) -> Path:
-    from tqdm.auto import tqdm
+    from ..progress import progress_bar
 
     device = _device(cfg, local_rank)
     last = run_dir / "checkpoints" / "last.pt"
@@ -369,8 +372,7 @@ def _train(cfg: Config, run_dir: Path, resume: bool, progress: bool, stop_at: Op
         previous = signal.signal(signal.SIGINT, lambda *_: stop.update(now=True))
     log = _ScalarLog(run_dir, start) if rank == 0 else None
     end = cfg.run.steps if stop_at is None else min(stop_at, cfg.run.steps)
-    bar = tqdm(total=cfg.run.steps, initial=start, disable=not progress or rank != 0, unit="step",
-               dynamic_ncols=True)
+    bar = progress_bar(cfg.run.steps, initial=start, disable=not progress or rank != 0, unit="step", desc="train")
     images_per_step = cfg.train.batch_size * (cfg.train.random_views + (cfg.train.task == "reconstruction"))
     step, t_last, n_last = start, time.perf_counter(), start
     clean, where = False, f"in step {start + 1}"

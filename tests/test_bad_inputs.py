@@ -1,0 +1,128 @@
+"""Bad inputs that escaped as crashes or tracebacks (issue 27): each is now one line, exit code 2,
+or (a damaged record the collection can rebuild) a warning naming it."""
+
+from __future__ import annotations
+
+import json
+import subprocess
+import sys
+
+import pytest
+
+from mitsuba_platonic.config import ConfigError, load_config
+from mitsuba_platonic.render import sky
+from cli_runner import one_line, run_cli
+from tiny_shapes import TINY
+
+pytestmark = pytest.mark.usefixtures("tiny_class")
+
+
+# --------------------------------------------------------------------------- a truncated environment map
+
+
+def _first_chunk(data: bytes) -> int:
+    """Where a single-part EXR's pixel data begin: the first entry of the offset table that
+    follows the header (magic, version, then ``name\\0 type\\0 size value`` attributes up to a 0 byte)."""
+    at = 8
+    while data[at] != 0:
+        at = data.index(b"\0", data.index(b"\0", at) + 1) + 1           # past the name and the type
+        at += 4 + int.from_bytes(data[at:at + 4], "little")               # the size, the value
+    return int.from_bytes(data[at + 1:at + 9], "little")
+
+
+@pytest.fixture(scope="module")
+def whole_envmap(tmp_path_factory):
+    return sky.bake_sky(tmp_path_factory.mktemp("envmaps") / "whole.exr", elevation=35.0, turbidity=3.0)
+
+
+@pytest.mark.parametrize("cut", ["11 bytes into the pixels", "1571 bytes"])
+def test_truncated_envmap_is_one_line_not_an_abort(whole_envmap, tmp_path, cut):
+    """Cut 11 bytes into its first chunk, Mitsuba's loader threw EOFException on a worker thread:
+    the process aborted (exit 134) with nothing said; cut later, a RuntimeError traceback (exit 1).
+    Run as a user runs it, in its own process."""
+    data = whole_envmap.read_bytes()
+    truncated = tmp_path / "trunc.exr"
+    truncated.write_bytes(data[:_first_chunk(data) + 11] if cut.startswith("11") else data[:1571])
+    out = tmp_path / "d"
+    done = subprocess.run(
+        [sys.executable, "-m", "mitsuba_platonic.cli", "make-dataset", "--class", "mushroom", "--shapes", "1",
+         "--views", "1", "--resolution", "16", "--formation", "physical", "--spp", "1", "--max-depth", "2",
+         "--lighting", "envmap", "--envmap", str(truncated), "--out", str(out), "--quiet"],
+        capture_output=True, text=True, stdin=subprocess.DEVNULL, timeout=300)
+    assert done.returncode == 2, (done.returncode, done.stderr[-2000:])
+    err = one_line(done.stderr, "make-dataset", kind="error")
+    assert f"--envmap '{truncated}'" in err and "truncated or damaged" in err, err
+    assert not out.exists()
+
+
+# --------------------------------------------------------------------------- a manifest of the wrong shape
+
+
+@pytest.mark.parametrize("manifest", ['{"spec": 5, "images": []}', "[1, 2]", '{"spec": {}, "images": 3}',
+                                      '{"spec": {"n_shapes": 1}, "images": [7]}', "not JSON"])
+def test_manifest_of_the_wrong_shape_is_named_and_rebuilt(tmp_path, manifest):
+    args = ["make-dataset", "--class", TINY, "--shapes", "1", "--views", "2", "--resolution", "16",
+            "--out", str(tmp_path), "--quiet"]
+    assert run_cli(args)[0] == 0
+    good = json.loads((tmp_path / "manifest.json").read_text())
+    (tmp_path / "manifest.json").write_text(manifest)
+    code, out, err = run_cli(args)
+    assert code == 0, err
+    warning = one_line(err, "make-dataset", kind="warning")
+    assert f"{tmp_path / 'manifest.json'}" in warning and "rebuilt" in warning, warning
+    rebuilt = json.loads((tmp_path / "manifest.json").read_text())
+    assert {k: v for k, v in rebuilt.items() if k != "seconds"} == {k: v for k, v in good.items() if k != "seconds"}
+
+
+@pytest.mark.parametrize("spec", ["5", "[1, 2]", "{}", "not JSON"])
+def test_collection_json_of_the_wrong_shape_is_one_line(tmp_path, spec):
+    """collection.json records the settings the images were made with: damaged, the collection
+    cannot be resumed, and nothing is deleted."""
+    args = ["make-dataset", "--class", TINY, "--shapes", "1", "--views", "1", "--resolution", "16",
+            "--out", str(tmp_path), "--quiet"]
+    assert run_cli(args)[0] == 0
+    (tmp_path / "collection.json").write_text(spec)
+    (tmp_path / "manifest.json").unlink()
+    code, _, err = run_cli(args)
+    assert code == 2
+    err = one_line(err, "make-dataset", kind="error")
+    assert f"{tmp_path / 'collection.json'}" in err and "damaged" in err, err
+    assert (tmp_path / "images" / "00000_00.png").is_file()
+
+
+# --------------------------------------------------------------------------- sizes that cannot fit
+
+
+def test_a_latent_that_cannot_fit_is_refused_up_front(tmp_path):
+    code, _, err = run_cli(["train", "--set", "model.latent=2000000000", "--set", f"run.out_dir={tmp_path}",
+                            "--set", f"data.cache={tmp_path}/data", "--set", f"data.shape_class={TINY}",
+                            "--set", "model.resolution=16", "--quiet"])
+    assert code == 2
+    err = one_line(err, "train", kind="error")
+    assert err.startswith("platonic train: error: model.latent: 2000000000 ") and "GB" in err, err
+    assert not (tmp_path / "data").exists() and not (tmp_path / "run").exists()
+
+
+def test_quickstart_refuses_a_width_that_cannot_fit_before_rendering(tmp_path):
+    code, _, err = run_cli(["quickstart", "--out", str(tmp_path / "q"), "--set", "model.width=1000000"])
+    assert code == 2
+    err = one_line(err, "quickstart", kind="error")
+    assert "model.width: 1000000 " in err, err
+    assert not (tmp_path / "q").exists()
+
+
+def test_sizes_that_fit_pass():
+    from mitsuba_platonic.model import check_model_fits
+    check_model_fits(load_config("paper"))
+
+
+# --------------------------------------------------------------------------- lighting the path tracer cannot use
+
+
+@pytest.mark.parametrize("lighting", ["envmap", "mixed"])
+def test_physical_backend_with_envmap_lighting_is_a_config_error(lighting):
+    with pytest.raises(ConfigError, match=r"^render\.lighting: .*'sunsky'"):
+        load_config(None, ["render.backend=physical", f"render.lighting={lighting}"])
+    code, _, err = run_cli(["train", "--set", "render.backend=physical", "--set", f"render.lighting={lighting}"])
+    assert code == 2
+    assert one_line(err, "train", kind="error").startswith("platonic train: error: render.lighting: "), err
