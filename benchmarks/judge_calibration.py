@@ -32,7 +32,7 @@ import torch
 from scipy.stats import spearmanr
 
 from mitsuba_platonic.config import load_config
-from mitsuba_platonic.evaluate import held_out_scores, held_out_truths
+from mitsuba_platonic.evaluate import held_out_truths
 from mitsuba_platonic.evaluate import metrics as M
 from mitsuba_platonic.evaluate.judge import judge, judge_table, stats_table
 from mitsuba_platonic.evaluate.protocol import billboard, rerender_views

@@ -520,9 +520,18 @@ def _add_generate(sub: "argparse._SubParsersAction") -> None:
 
 
 def _cmd_quickstart(args: argparse.Namespace) -> int:
+    if args.photos is not None:
+        from .photo_quickstart import photo_quickstart
+
+        report = photo_quickstart(Path(args.photos), Path(args.out or "quickstart-photos"), steps=args.steps,
+                                  progress=not args.quiet, overrides=args.set or ())
+        print(report.read_text())
+        print(f"report: {report}")
+        return 0
     from .quickstart import quickstart
 
-    report = quickstart(Path(args.out), steps=args.steps, progress=not args.quiet, overrides=args.set or ())
+    report = quickstart(Path(args.out or "quickstart"), steps=args.steps, progress=not args.quiet,
+                        overrides=args.set or ())
     print(report.read_text())
     print(f"report: {report}")
     return 0
@@ -533,10 +542,15 @@ def _add_quickstart(sub: "argparse._SubParsersAction") -> None:
                        description="Generate a small procedural collection, train single-image reconstruction "
                                    "at 32³ through the batched Mitsuba ray marcher (EA), reconstruct held-out images and "
                                    "write turntables, meshes and a report.")
-    p.add_argument("--out", default="quickstart", help="output folder (default: %(default)s/)")
+    p.add_argument("--photos", default=None, metavar="DIR",
+                   help="train on your own folder of cut-out photos of one class instead (configs/photos.yaml), and "
+                        "judge the held-out photos' reconstructions from every side")
+    p.add_argument("--out", default=None,
+                   help="output folder (default: quickstart/, or quickstart-photos/ with --photos)")
     p.add_argument("--steps", type=_positive_int, default=None, help="training steps (default: the config's)")
     p.add_argument("--set", action="append", metavar="KEY=VALUE",
-                   help="override a key of configs/quickstart.yaml, e.g. model.resolution=16 (repeatable)")
+                   help="override a key of configs/quickstart.yaml (configs/photos.yaml with --photos), e.g. "
+                        "model.resolution=16 (repeatable)")
     p.add_argument("--quiet", action="store_true")
     p.set_defaults(handler=_cmd_quickstart)
 

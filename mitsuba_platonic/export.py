@@ -166,6 +166,23 @@ def export_volume(volume: torch.Tensor, stem: PathLike, model: str, level: Optio
     return done
 
 
+def export_held_out(model: "Model", images: torch.Tensor, folder: PathLike, n: int = 4) -> List[Path]:
+    """Up to ``n`` of the ``(M, C, R, R)`` held-out ``images``, spread over the set (different shapes
+    or photos), reconstructed by ``model`` and exported with :func:`export_volume` as
+    ``folder/heldout_<i>.*`` beside ``heldout_<i>_input.png`` (the image over white); returns the
+    turntables and meshes written."""
+    from .images import save_png
+
+    written: List[Path] = []
+    picks = torch.linspace(0, len(images) - 1, min(n, len(images))).long().tolist()
+    for i, j in enumerate(picks):
+        stem = Path(folder) / f"heldout_{i}"
+        done = export_volume(model.reconstruct(images[j:j + 1])[0], stem, model.formation)
+        written += [p for p in done.paths if p.suffix in (".gif", ".ply")]
+        save_png(stem.with_name(stem.name + "_input.png"), linear_to_srgb(composite(to_hwc(images[j]), 1.0)))
+    return written
+
+
 def export_reconstructions(model: "Model", images: Sequence[PathLike], out: PathLike, background: Optional[str] = None,
                            crop: str = "image", level: float = 0.5) -> Iterator[Tuple[Path, Exported]]:
     """``platonic reconstruct``: each image file → its volume → :func:`export_volume` as

@@ -19,14 +19,13 @@ from __future__ import annotations
 import csv
 import time
 from pathlib import Path
-from typing import List, Optional, Sequence
+from typing import Optional, Sequence
 
 import torch
 
 from .config import load_config
 from .evaluate.protocol import held_out_scores
-from .export import export_volume
-from .images import composite, linear_to_srgb, save_png, to_hwc
+from .export import export_held_out
 from .model import Model, check_model_fits
 from .resources import config_path
 
@@ -67,13 +66,7 @@ def quickstart(out: Path = Path("quickstart"), steps: Optional[int] = None, prog
     trained = held_out_scores(model, data)
 
     recon_dir = out / "reconstructions"
-    written: List[str] = []
-    picks = torch.linspace(0, len(data.held_out) - 1, min(4, len(data.held_out))).long().tolist()
-    for i, j in enumerate(picks):                       # spread over the held-out set: different shapes
-        stem = recon_dir / f"heldout_{i}"
-        done = export_volume(model.reconstruct(data.held_out[j:j + 1])[0], stem, model.formation)
-        written += [str(p) for p in done.paths if p.suffix in (".gif", ".ply")]
-        save_png(stem.with_name(stem.name + "_input.png"), linear_to_srgb(composite(to_hwc(data.held_out[j]), 1.0)))
+    written = [str(p) for p in export_held_out(model, data.held_out, recon_dir)]
 
     with open(run_dir / "scalars.csv") as f:
         rows = list(csv.DictReader(f))
