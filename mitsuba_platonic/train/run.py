@@ -58,10 +58,11 @@ from ..images import composite, linear_to_srgb, save_grid, to_hwc
 from ..model import Model
 from ..views import front_view, turntable
 from .data import load_training_data
+from .folder import RUN_MARKER, claim_run_folder
 from .trainer import Trainer
 
 __all__ = ["train", "load_run", "RunError", "save_checkpoint", "load_checkpoint", "load_latest_checkpoint",
-           "run_lock", "SAMPLE_VIEWS", "read_run_config", "DEVICES", "write_samples"]
+           "run_lock", "SAMPLE_VIEWS", "read_run_config", "DEVICES", "write_samples", "RUN_MARKER"]
 
 #: run.device: 'auto' picks CUDA when available.
 DEVICES = ("auto", "cpu", "cuda")
@@ -218,19 +219,24 @@ def _distributed() -> Tuple[int, int, int]:
 
 
 def train(cfg: Config, resume: bool = False, progress: bool = True,
-          stop_at: Optional[int] = None) -> Path:
+          stop_at: Optional[int] = None, config_file: Optional[Path] = None) -> Path:
     """Run (or continue) training; return the run folder.
 
-    ``stop_at`` ends the loop after that step as if interrupted (a checkpoint is saved): used to
-    test exact resume.
+    The run folder (``run.out_dir/run.name``) must be new, empty or a run folder
+    (:func:`~mitsuba_platonic.train.folder.claim_run_folder`); any other folder is refused with
+    nothing in it changed. ``config_file``: the file ``cfg`` was read from (``--config``), which is
+    never written, also where it is the run's own ``config.yaml``. ``stop_at`` ends the loop after
+    that step as if finished (a checkpoint is saved): used to test exact resume. Ctrl-C finishes
+    the current step, saves a checkpoint and raises :class:`~mitsuba_platonic.errors.Interrupted`.
     """
     rank, world, local_rank = _distributed()
     run_dir = Path(cfg.run.out_dir) / cfg.run.name
     with training_threads(cfg):
         if rank != 0:
-            return _train(cfg, run_dir, resume, progress, stop_at, rank, world, local_rank)
+            return _train(cfg, run_dir, resume, progress, stop_at, rank, world, local_rank, config_file)
+        claim_run_folder(run_dir)                            # before the lock: a user's folder stays untouched
         with run_lock(run_dir):                              # one run at a time in a run folder
-            return _train(cfg, run_dir, resume, progress, stop_at, rank, world, local_rank)
+            return _train(cfg, run_dir, resume, progress, stop_at, rank, world, local_rank, config_file)
 
 
 #: 'auto' runs the marcher's launches on the training thread up to this resolution (docs/training.md, "Threads").
@@ -279,8 +285,15 @@ def training_threads(cfg: Config) -> Iterator[None]:
             dr.set_thread_count(before)
 
 
+def _same_file(a: Optional[Path], b: Path) -> bool:
+    try:
+        return a is not None and os.path.samefile(a, b)
+    except OSError:
+        return False
+
+
 def _train(cfg: Config, run_dir: Path, resume: bool, progress: bool, stop_at: Optional[int],
-           rank: int, world: int, local_rank: int) -> Path:
+           rank: int, world: int, local_rank: int, config_file: Optional[Path] = None) -> Path:
     from tqdm.auto import tqdm
 
     device = _device(cfg, local_rank)
@@ -304,8 +317,9 @@ def _train(cfg: Config, run_dir: Path, resume: bool, progress: bool, stop_at: Op
                 if saved[section] != cfg.to_dict()[section]:
                     raise RunError(f"--resume: the {section} settings differ from {run_dir}/config.yaml; "
                                    f"an exact continuation needs the same config (only run.* may change)")
-        text = yaml.safe_dump(cfg.to_dict(), sort_keys=False)
-        atomic_write(run_dir / "config.yaml", lambda p: p.write_text(text))   # never torn: --resume reads it
+        if not _same_file(config_file, run_dir / "config.yaml"):   # --config is the user's: never written
+            text = yaml.safe_dump(cfg.to_dict(), sort_keys=False)
+            atomic_write(run_dir / "config.yaml", lambda p: p.write_text(text))   # never torn: --resume reads it
     if world > 1:
         dist.barrier()                                       # rank 0 checked the folder first
     if rank == 0:
