@@ -28,13 +28,13 @@ import os
 import sys
 import warnings
 from pathlib import Path
-from typing import Callable, List, Optional, Sequence
-
-import numpy as np
-import torch
+from typing import TYPE_CHECKING, Callable, List, Optional, Sequence
 
 from .backend import BackendError
 from .errors import Interrupted, UserError
+
+if TYPE_CHECKING:                       # numpy and torch load inside main(), where a Ctrl-C is caught
+    import torch
 
 __all__ = ["main", "build_parser", "load_volume", "parse_models"]
 
@@ -51,6 +51,9 @@ class CLIError(UserError):
 
 def _load_npz(path: Path) -> torch.Tensor:
     """Read and validate the array ``volume`` of a ``.npz`` file → ``(1, C, N, N, N)`` float32."""
+    import numpy as np
+    import torch
+
     name = str(path)
     if not path.exists():
         raise CLIError(f"volume file {name!r} does not exist")
@@ -455,7 +458,9 @@ def _add_train(sub: "argparse._SubParsersAction") -> None:
     p = sub.add_parser("train", help="train PlatonicGAN from a config",
                        description="Train with a YAML config (configs/*.yaml); every key can be overridden "
                                    "with --set section.key=value. Writes a run folder with the resolved "
-                                   "config, checkpoints, logs and samples. Ctrl-C saves and exits; "
+                                   "config, checkpoints, logs and samples (only into a new or empty folder or one of "
+                                   "its own runs; the --config file is never written). Ctrl-C saves a checkpoint "
+                                   "and exits with code 130; "
                                    "--resume continues exactly. Data parallel: torchrun --nproc-per-node N "
                                    "-m mitsuba_platonic.cli train ...")
     p.add_argument("--config", default=None, help="YAML config (default: the built-in defaults)")
@@ -593,12 +598,61 @@ SUBCOMMANDS: Sequence[Callable[["argparse._SubParsersAction"], None]] = (
 
 def build_parser() -> argparse.ArgumentParser:
     """The ``platonic`` parser with one subparser per subcommand."""
+    from . import __version__
+
     parser = argparse.ArgumentParser(
         prog=PROG, description="PlatonicGAN with closed-form and Mitsuba 3 rendering layers.")
+    parser.add_argument("--version", action="version", version=f"{PROG} {__version__}")
     sub = parser.add_subparsers(dest="command", metavar="COMMAND", required=True)
     for add in SUBCOMMANDS:
         add(sub)
     return parser
+
+
+#: What a Ctrl-C leaves, per command, where the command itself said nothing more precise.
+_INTERRUPTED = {
+    None: "while starting; nothing was written",
+    "quickstart": "nothing was written beyond what the folder held; run the same command again to continue",
+    "train": "no training step was saved beyond the run's last checkpoint, which is as it was; run the same "
+             "command again (with --resume if the run has a checkpoint)",
+    "reconstruct": "nothing was written; run the same command again",
+    "generate": "nothing was written; run the same command again",
+    "evaluate": "no report was written (report.md, results.json and the figures come at the end); run the same "
+                "command again",
+    "make-dataset": "the images already written are kept (each file whole); run the same command again to resume",
+    "compare": "the files already in --out are whole, compare.json (written last) is missing; run the same "
+               "command again",
+    "bench": "nothing was written (the results are written at the end); run the same command again",
+}
+
+
+def _interrupt_message(command: Optional[str], e: BaseException) -> str:
+    """The one line of a Ctrl-C: the command's own account (an :class:`Interrupted`), else :data:`_INTERRUPTED`."""
+    where = f"{PROG} {command}" if command else PROG
+    detail = str(e) if isinstance(e, Interrupted) and str(e) else _INTERRUPTED.get(command, _INTERRUPTED[None])
+    return f"{where}: interrupted: {_one_line(detail)}"
+
+
+def _one_line(text: str) -> str:
+    return " ".join(part.strip() for part in str(text).splitlines() if part.strip())
+
+
+def _interrupt_behind(e: BaseException) -> Optional[KeyboardInterrupt]:
+    """The ``KeyboardInterrupt`` ``e`` is or was raised from (Dr.Jit re-raises a Ctrl-C in its
+    callbacks as its own error, the interrupt only in the chain), if any."""
+    from .fileio import _interrupt_behind as behind
+    return behind(e)
+
+
+def _printable_streams() -> None:
+    """Make stdout and stderr print any text (help and messages hold ³, →, …): characters the
+    terminal's encoding lacks (PYTHONIOENCODING=ascii) are escaped instead of raising."""
+    for stream in (sys.stdout, sys.stderr):
+        if hasattr(stream, "reconfigure"):
+            try:
+                stream.reconfigure(errors="backslashreplace")
+            except (ValueError, OSError):
+                pass
 
 
 def main(argv: Optional[Sequence[str]] = None) -> int:
@@ -606,31 +660,44 @@ def main(argv: Optional[Sequence[str]] = None) -> int:
 
     Usage errors (argparse) and user errors (:class:`~mitsuba_platonic.errors.UserError`,
     ``BackendError``, and ``OSError``: a missing file, no permission, a full disk) print a
-    one-line message on stderr and return 2; Ctrl-C prints one line (what was saved, for an
-    :class:`~mitsuba_platonic.errors.Interrupted`) and returns 130; ``--help`` returns 0. Any
-    other exception is a bug: it propagates with its traceback. A warning (a skipped photo, a
-    checkpoint fallen back from) is one line, ``platonic <command>: warning: …``, not Python's
-    file-and-source-line format.
+    one-line message on stderr and return 2; Ctrl-C, at any moment (numpy and torch load in
+    here, where it is caught), prints one line on stderr saying what was saved and how to go on
+    and returns 130; ``--help`` and ``--version`` return 0. Any other exception is a bug: it
+    propagates with its traceback. A warning (a skipped photo, a checkpoint fallen back from) is
+    one line, ``platonic <command>: warning: …``, not Python's file-and-source-line format.
     """
-    parser = build_parser()
+    _printable_streams()
+    command: Optional[str] = None
     try:
-        args = parser.parse_args(argv)
-    except SystemExit as e:  # argparse has printed usage / help already
-        return int(e.code) if isinstance(e.code, int) else 2
+        parser = build_parser()
+        try:
+            args = parser.parse_args(argv)
+        except SystemExit as e:  # argparse has printed usage / help already
+            return int(e.code) if isinstance(e.code, int) else 2
+        command = args.command
+        return _run(args)
+    except KeyboardInterrupt as e:
+        print(_interrupt_message(command, e), file=sys.stderr)
+        return 130
+    except (UserError, BackendError, OSError) as e:
+        print(f"{PROG} {command}: error: {_one_line(e)}", file=sys.stderr)
+        return 2
+    except Exception as e:
+        interrupt = _interrupt_behind(e)
+        if interrupt is None:
+            raise
+        print(_interrupt_message(command, interrupt), file=sys.stderr)
+        return 130
+
+
+def _run(args: argparse.Namespace) -> int:
+    """Call ``args.handler`` with warnings shown as one line each."""
     def one_line_warning(message, category, filename, lineno, file=None, line=None) -> None:
         print(f"{PROG} {args.command}: warning: {message}", file=sys.stderr if file is None else file)
 
-    try:
-        with warnings.catch_warnings():                      # restores Python's own display afterwards
-            warnings.showwarning = one_line_warning
-            return int(args.handler(args))
-    except (UserError, BackendError, OSError) as e:
-        print(f"{PROG} {args.command}: error: {e}", file=sys.stderr)
-        return 2
-    except KeyboardInterrupt as e:
-        detail = f": {e}" if isinstance(e, Interrupted) and str(e) else ""
-        print(f"{PROG} {args.command}: interrupted{detail}", file=sys.stderr)
-        return 130
+    with warnings.catch_warnings():                          # restores Python's own display afterwards
+        warnings.showwarning = one_line_warning
+        return int(args.handler(args))
 
 
 if __name__ == "__main__":

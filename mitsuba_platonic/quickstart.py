@@ -19,11 +19,12 @@ from __future__ import annotations
 import csv
 import time
 from pathlib import Path
-from typing import List, Optional
+from typing import Dict, List, Optional
 
 import torch
 
 from .config import load_config
+from .errors import Interrupted
 from .evaluate.protocol import held_out_scores
 from .export import export_volume
 from .images import composite, linear_to_srgb, save_png, to_hwc
@@ -38,7 +39,26 @@ _BACKEND_NAMES = {"closed_form": "closed-form layer", "mitsuba": "Mitsuba ray ma
 
 
 def quickstart(out: Path = Path("quickstart"), steps: Optional[int] = None, progress: bool = True) -> Path:
-    """Run the quickstart into ``out``; return the path of its report."""
+    """Run the quickstart into ``out``; return the path of its report.
+
+    Ctrl-C stops it at any stage (a half-trained model is never evaluated): raises
+    :class:`~mitsuba_platonic.errors.Interrupted` saying what is kept (the cached data, the
+    checkpoint training saved) and that running it again continues from there.
+    """
+    stage = {"now": "preparing the data"}
+    try:
+        return _quickstart(Path(out), steps, progress, stage)
+    except KeyboardInterrupt as e:
+        saved = getattr(e, "saved", None)
+        kept = f"{saved}; " if saved else ""
+        again = f"platonic quickstart --out {out}" + (f" --steps {steps}" if steps is not None else "")
+        raise Interrupted(f"while {stage['now']}: {kept}no report was written; run `{again}` again to continue "
+                          f"(the data stays cached and training resumes from its last checkpoint)",
+                          saved=saved) from None
+
+
+def _quickstart(out: Path, steps: Optional[int], progress: bool, stage: Dict[str, str]) -> Path:
+    """:func:`quickstart`, telling ``stage["now"]`` what it is doing."""
     from .train.data import load_training_data
     from .train.run import train
 
@@ -51,9 +71,12 @@ def quickstart(out: Path = Path("quickstart"), steps: Optional[int] = None, prog
     resume = (run_dir / "checkpoints" / "last.pt").exists()
     data = load_training_data(cfg, progress=progress)
     t_data = time.perf_counter() - t0
+    stage["now"] = "scoring the untrained model"
     torch.manual_seed(cfg.run.seed)
     untrained = held_out_scores(Model.from_config(cfg), data)          # a fresh model, drawn from the run's seed
+    stage["now"] = "training"
     train(cfg, resume=resume, progress=progress)
+    stage["now"] = "scoring and exporting the trained model"
     t_train = time.perf_counter() - t0 - t_data
     model = Model.from_checkpoint(run_dir)
     step = model.step

@@ -17,7 +17,8 @@ loses no row); a full disk ends the run with one line naming the file, the good 
 as they were. ``resume=True`` continues from ``last.pt``;
 because every random draw of a step derives from (seed, step), the continued run matches an
 uninterrupted one step for step (on CPU). Ctrl-C (SIGINT) finishes the current step, saves a
-checkpoint and returns cleanly.
+checkpoint and raises :class:`~mitsuba_platonic.errors.Interrupted` saying which step it holds
+(the command line: one line on stderr, exit code 130), so that ``train && evaluate`` stops.
 
 What is saved: a checkpoint is written only on a clean stop (a periodic checkpoint, the last
 step, Ctrl-C, ``stop_at``) and only if every tensor of the state is finite. An exception during
@@ -383,7 +384,7 @@ def _train(cfg: Config, run_dir: Path, resume: bool, progress: bool, stop_at: Op
                dynamic_ncols=True)
     images_per_step = cfg.train.batch_size * (cfg.train.random_views + (cfg.train.task == "reconstruction"))
     step, t_last, n_last = start, time.perf_counter(), start
-    clean, where = False, f"in step {start + 1}"
+    clean, interrupted, where = False, False, f"in step {start + 1}"
     try:
         while step < end:
             where = f"in step {step + 1}"
@@ -408,7 +409,7 @@ def _train(cfg: Config, run_dir: Path, resume: bool, progress: bool, stop_at: Op
             if world > 1:
                 dist.all_reduce(flag)                       # stop together
             if flag.item() > 0:
-                print(f"\ninterrupted: saving a checkpoint at step {step} (resume with --resume)")
+                interrupted = True
                 break
         clean = True
     except BaseException as e:                               # a failing step: save nothing, say so
@@ -448,6 +449,10 @@ def _train(cfg: Config, run_dir: Path, resume: bool, progress: bool, stop_at: Op
             if clean:
                 dist.barrier()                               # rank 0 has written the last checkpoint
             dist.destroy_process_group()
+    if interrupted and step < cfg.run.steps:                 # saved: now say so, and that it did not finish
+        raise Interrupted(f"after step {step} of {cfg.run.steps}: {saved['path']} holds step {saved['step']}; "
+                          f"continue with the same command and --resume",
+                          saved=f"{saved['path']} holds step {saved['step']}")
     return run_dir
 
 
