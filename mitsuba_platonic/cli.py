@@ -164,6 +164,7 @@ def _number_type(convert: Callable[[str], float], minimum: float, what: str) -> 
 
 _positive_int = _number_type(int, 1, "a positive integer")
 _non_negative_int = _number_type(int, 0, "a non-negative integer")
+_resolution = _number_type(int, 2, "an integer resolution of at least 2")
 _positive_float = _number_type(float, float.fromhex("0x1p-1074"), "a positive finite number")
 
 
@@ -240,8 +241,8 @@ def _add_compare(sub: "argparse._SubParsersAction") -> None:
                    help="builtin:figure | builtin:cloud | a .npz file with an array 'volume' of shape "
                         "(C,N,N,N) or (1,C,N,N,N), C = 4 [r,g,b,density] or 1 [density], values in "
                         "[0,1] (default: %(default)s)")
-    p.add_argument("--resolution", type=_positive_int, default=None,
-                   help="N for built-in volumes (default 32); must match a file's N if given")
+    p.add_argument("--resolution", type=_resolution, default=None,
+                   help="N ≥ 2 for built-in volumes (default 32); must match a file's N if given")
     p.add_argument("--models", default="vh,ao,ea", help="comma-separated models (default: %(default)s)")
     p.add_argument("--views", type=_positive_int, default=4,
                    help="number of views: the front view, then random views (default: %(default)s)")
@@ -352,6 +353,25 @@ def _elevation(text: str):
     raise argparse.ArgumentTypeError(f"expected a number or 'low,high' in degrees, got {text!r}")
 
 
+#: make-dataset's flags of the physical formation alone, and their defaults (None: not given).
+_PHYSICAL_FLAGS = {"lighting": ("--lighting", "sunsky"), "spp": ("--spp", 32), "max_depth": ("--max-depth", 8)}
+
+
+def _check_dataset_flags(args: argparse.Namespace) -> None:
+    """Refuse the flags the chosen formation or view distribution would ignore; fill in the defaults."""
+    given = [flag for key, (flag, _) in _PHYSICAL_FLAGS.items() if getattr(args, key) is not None]
+    if given and args.formation != "physical":
+        raise CLIError(f"{', '.join(given)}: only --formation physical reads {'them' if len(given) > 1 else 'it'}, "
+                       f"and --formation {args.formation} would ignore {'them' if len(given) > 1 else 'it'}; "
+                       f"drop {'them' if len(given) > 1 else 'it'} or use --formation physical")
+    for key, (_, default) in _PHYSICAL_FLAGS.items():
+        if getattr(args, key) is None:
+            setattr(args, key, default)
+    if args.elevation is not None and args.view_dist == "sphere":
+        raise CLIError("--elevation: --view-dist sphere covers every elevation and would ignore it; drop it, or "
+                       "use --view-dist band (low,high) or ring (one number)")
+
+
 def _cmd_make_dataset(args: argparse.Namespace) -> int:
     from .data import shapes
     from .data.collection import CollectionSpec, check_envmap, default_envmaps, make_collection
@@ -362,6 +382,7 @@ def _cmd_make_dataset(args: argparse.Namespace) -> int:
     for c in classes:
         if c not in known:
             raise CLIError(f"unknown shape class {c!r}; known: {', '.join(known)} (or 'all')")
+    _check_dataset_flags(args)
     out = Path(args.out)
     if args.preview:
         for c in classes:
@@ -413,13 +434,14 @@ def _add_make_dataset(sub: "argparse._SubParsersAction") -> None:
     p.add_argument("--elevation", type=_elevation, default=None,
                    help="'low,high' degrees for band (default {:g},{:g}); one number for ring (default {:g})"
                    .format(*DEFAULT_ELEVATION["band"], DEFAULT_ELEVATION["ring"]))
-    p.add_argument("--lighting", choices=("sunsky", "envmap", "mixed"), default="sunsky",
-                   help="physical formation: random sky, environment map, or either (default: %(default)s)")
+    p.add_argument("--lighting", choices=("sunsky", "envmap", "mixed"), default=None,
+                   help="physical formation only: random sky, environment map, or either (default: sunsky)")
     p.add_argument("--envmap", action="append", default=None,
                    help="an environment map .exr (repeatable; default: scenes/envmaps/*.exr)")
-    p.add_argument("--spp", type=_positive_int, default=32, help="physical: samples per pixel (default: %(default)s)")
-    p.add_argument("--max-depth", type=_positive_int, default=8,
-                   help="physical: longest path (default: %(default)s)")
+    p.add_argument("--spp", type=_positive_int, default=None,
+                   help="physical formation only: samples per pixel (default: 32)")
+    p.add_argument("--max-depth", type=_positive_int, default=None,
+                   help="physical formation only: longest path (default: 8)")
     p.add_argument("--camera", choices=("orthographic", "perspective"), default="orthographic",
                    help="vh/ao/ea images: the camera (default: %(default)s)")
     p.add_argument("--fov", type=_positive_float, default=RenderSettings.fov,

@@ -252,6 +252,8 @@ class Config:
             self.render.validate()                           # the renderer's settings check themselves
         except ValueError as e:
             raise ConfigError(f"render.{e}") from None
+        for section in ("data", "train"):
+            _check_elevation(section, getattr(self, section).view_distribution, getattr(self, section).elevation)
         _choice("train.task", self.train.task, TASKS)
         _choice("train.mode", self.train.mode, MODES)
         _choice("train.view_distribution", self.train.view_distribution, DISTRIBUTIONS)
@@ -453,6 +455,25 @@ def apply_overrides(data: Dict[str, Any], overrides: Sequence[str]) -> Dict[str,
             raise ConfigError(f"{parts[0]}: expected a mapping")
         data[parts[0]][parts[1]] = value
     return data
+
+
+def _check_elevation(section: str, distribution: str, elevation: Any) -> None:
+    """``<section>.elevation`` fits ``<section>.view_distribution`` (the views' own check, naming the keys)."""
+    from .views import DISTRIBUTIONS, sample_views
+
+    if distribution not in DISTRIBUTIONS:
+        return                                               # its own check names it
+    if distribution == "sphere":
+        if elevation is not None:
+            raise ConfigError(f"{section}.elevation: {section}.view_distribution 'sphere' covers every elevation "
+                              f"and ignores it; set it to null, or use 'band' or 'ring', got {elevation!r}")
+        return
+    if elevation is None:
+        return                                               # the distribution's default
+    try:
+        sample_views(1, distribution, seed=0, elevation=tuple(elevation) if isinstance(elevation, list) else elevation)
+    except (UserError, TypeError) as e:
+        raise ConfigError(f"{section}.elevation: {e} (with {section}.view_distribution {distribution!r})") from None
 
 
 def load_config(path: Optional[Union[str, Path]] = None, overrides: Sequence[str] = ()) -> Config:

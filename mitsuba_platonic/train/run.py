@@ -286,6 +286,24 @@ def training_threads(cfg: Config) -> Iterator[None]:
             dr.set_thread_count(before)
 
 
+#: The render settings only the Mitsuba marcher reads.
+_MARCHER_SETTINGS = ("step", "spp", "jitter", "termination")
+
+
+def _warn_ignored_render_settings(cfg: Config) -> None:
+    """Warn (naming the keys) where the config sets marcher settings that ``render.backend``
+    'closed_form' ignores."""
+    if cfg.render.backend != "closed_form":
+        return
+    defaults = type(cfg.render)()
+    ignored = [f"render.{k}" for k in _MARCHER_SETTINGS if getattr(cfg.render, k) != getattr(defaults, k)]
+    if ignored:
+        import warnings
+        warnings.warn(f"{', '.join(ignored)}: only the Mitsuba marcher (render.backend: mitsuba) reads "
+                      f"{'these' if len(ignored) > 1 else 'this'}; render.backend 'closed_form' ignores "
+                      f"{'them' if len(ignored) > 1 else 'it'}", stacklevel=2)
+
+
 def _same_file(a: Optional[Path], b: Path) -> bool:
     try:
         return a is not None and os.path.samefile(a, b)
@@ -300,6 +318,7 @@ def _train(cfg: Config, run_dir: Path, resume: bool, progress: bool, stop_at: Op
     device = _device(cfg, local_rank)
     last = run_dir / "checkpoints" / "last.pt"
     if rank == 0:
+        _warn_ignored_render_settings(cfg)
         existing = checkpoint_files(last.parent)
         if resume and not existing:
             raise RunError(f"--resume: {run_dir} has no checkpoint to continue from")
@@ -315,8 +334,12 @@ def _train(cfg: Config, run_dir: Path, resume: bool, progress: bool, stop_at: Op
             except RunError as e:
                 raise RunError(f"--resume: {e}") from None
             for section in ("data", "model", "render", "train"):
-                if saved[section] != cfg.to_dict()[section]:
-                    raise RunError(f"--resume: the {section} settings differ from {run_dir}/config.yaml; "
+                now = cfg.to_dict()[section]
+                if saved[section] != now:
+                    keys = sorted(set(saved[section]) | set(now))
+                    diff = "; ".join(f"{section}.{k}: {saved[section].get(k)!r} there, {now.get(k)!r} now"
+                                     for k in keys if saved[section].get(k) != now.get(k))
+                    raise RunError(f"--resume: the {section} settings differ from {run_dir}/config.yaml ({diff}); "
                                    f"an exact continuation needs the same config (only run.* may change)")
         if not _same_file(config_file, run_dir / "config.yaml"):   # --config is the user's: never written
             text = yaml.safe_dump(cfg.to_dict(), sort_keys=False)
