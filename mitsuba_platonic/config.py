@@ -463,13 +463,8 @@ def _check_elevation(section: str, distribution: str, elevation: Any) -> None:
 
     if distribution not in DISTRIBUTIONS:
         return                                               # its own check names it
-    if distribution == "sphere":
-        if elevation is not None:
-            raise ConfigError(f"{section}.elevation: {section}.view_distribution 'sphere' covers every elevation "
-                              f"and ignores it; set it to null, or use 'band' or 'ring', got {elevation!r}")
-        return
-    if elevation is None:
-        return                                               # the distribution's default
+    if distribution == "sphere" or elevation is None:
+        return                                               # sphere ignores it (train warns), None: the default
     try:
         sample_views(1, distribution, seed=0, elevation=tuple(elevation) if isinstance(elevation, list) else elevation)
     except (UserError, TypeError) as e:

@@ -74,7 +74,6 @@ def test_fixes_are_worded_as_the_command_line_flags():
 @pytest.mark.parametrize("overrides, key", [
     (["data.view_distribution=band", "data.elevation=[10]"], "data.elevation"),
     (["data.view_distribution=ring", "data.elevation=[10, 20]"], "data.elevation"),
-    (["data.elevation=10"], "data.elevation"),                        # sphere would ignore it
     (["train.view_distribution=band", "train.elevation=[40, 10]"], "train.elevation"),
 ])
 def test_elevation_errors_name_their_config_key(overrides, key):
@@ -105,10 +104,11 @@ def test_resume_names_the_settings_that_differ(tmp_path, tiny_class):
     assert "data.n_shapes: 2 there, 3 now" in err, err
 
 
-def test_marcher_settings_with_the_closed_form_are_warned_about(tmp_path, tiny_class):
-    code, _, stderr = run_cli(["train", "--quiet", *_tiny(tmp_path, "render.step=0.5")])
+def test_settings_the_run_ignores_are_warned_about(tmp_path, tiny_class):
+    code, _, stderr = run_cli(["train", "--quiet", *_tiny(tmp_path, "render.step=0.5", "data.elevation=10")])
     assert code == 0, stderr
     assert "platonic train: warning: render.step: only the Mitsuba marcher" in stderr, stderr
+    assert "platonic train: warning: data.elevation: data.view_distribution 'sphere'" in stderr, stderr
 
 
 @pytest.mark.parametrize("flags, named", [

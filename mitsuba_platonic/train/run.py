@@ -2,6 +2,8 @@
 
 A run folder (``run.out_dir/run.name``) holds::
 
+    run.json                 written first: marks the folder as a run (:mod:`.folder`; train writes
+                             only into a new or empty folder or a run folder, never its --config file)
     config.yaml              the resolved config (every key, defaults included)
     checkpoints/last.pt      the newest checkpoint (atomically replaced)
     checkpoints/step_NNNNNNN.pt   the last ``keep_checkpoints`` periodic checkpoints
@@ -290,15 +292,21 @@ def training_threads(cfg: Config) -> Iterator[None]:
 _MARCHER_SETTINGS = ("step", "spp", "jitter", "termination")
 
 
-def _warn_ignored_render_settings(cfg: Config) -> None:
-    """Warn (naming the keys) where the config sets marcher settings that ``render.backend``
-    'closed_form' ignores."""
+def _warn_ignored_settings(cfg: Config) -> None:
+    """Warn (naming the keys) where the config sets what the run ignores: marcher settings with
+    ``render.backend`` 'closed_form', an elevation with view distribution 'sphere'."""
+    import warnings
+
+    for section in ("data", "train"):
+        part = getattr(cfg, section)
+        if part.view_distribution == "sphere" and part.elevation is not None:
+            warnings.warn(f"{section}.elevation: {section}.view_distribution 'sphere' covers every elevation and "
+                          f"ignores it; set it to null, or use 'band' or 'ring'", stacklevel=2)
     if cfg.render.backend != "closed_form":
         return
     defaults = type(cfg.render)()
     ignored = [f"render.{k}" for k in _MARCHER_SETTINGS if getattr(cfg.render, k) != getattr(defaults, k)]
     if ignored:
-        import warnings
         warnings.warn(f"{', '.join(ignored)}: only the Mitsuba marcher (render.backend: mitsuba) reads "
                       f"{'these' if len(ignored) > 1 else 'this'}; render.backend 'closed_form' ignores "
                       f"{'them' if len(ignored) > 1 else 'it'}", stacklevel=2)
@@ -318,7 +326,7 @@ def _train(cfg: Config, run_dir: Path, resume: bool, progress: bool, stop_at: Op
     device = _device(cfg, local_rank)
     last = run_dir / "checkpoints" / "last.pt"
     if rank == 0:
-        _warn_ignored_render_settings(cfg)
+        _warn_ignored_settings(cfg)
         existing = checkpoint_files(last.parent)
         if resume and not existing:
             raise RunError(f"--resume: {run_dir} has no checkpoint to continue from")
@@ -473,9 +481,9 @@ def _train(cfg: Config, run_dir: Path, resume: bool, progress: bool, stop_at: Op
                 dist.barrier()                               # rank 0 has written the last checkpoint
             dist.destroy_process_group()
     if interrupted and step < cfg.run.steps:                 # saved: now say so, and that it did not finish
-        raise Interrupted(f"after step {step} of {cfg.run.steps}: {saved['path']} holds step {saved['step']}; "
-                          f"continue with the same command and --resume",
-                          saved=f"{saved['path']} holds step {saved['step']}")
+        held = f"{saved['path']} holds step {saved['step']}" if rank == 0 else "rank 0 saved the checkpoint"
+        raise Interrupted(f"after step {step} of {cfg.run.steps}: {held}; continue with the same command and "
+                          f"--resume", saved=held)
     return run_dir
 
 
