@@ -3,16 +3,58 @@
 Data flow: ``views`` → ``volume`` → ``render`` (closed form | Mitsuba) → images →
 networks → training → evaluation/export.
 
-Importing the package checks that Dr.Jit has a working backend (see :mod:`.backend`) and
-raises :class:`~mitsuba_platonic.backend.BackendError` with install instructions if not.
+Importing the package is cheap and needs no Dr.Jit: ``render``, ``render_with``,
+``RenderSettings``, ``views`` and ``volume`` are imported on first use, so that ``platonic
+--help`` answers at once and a Ctrl-C while torch loads reaches the command line's handler.
+Where Dr.Jit is needed (a Mitsuba render, the first read of ``BACKEND``) its backend is checked
+(:func:`~mitsuba_platonic.backend.check_backend`), raising
+:class:`~mitsuba_platonic.backend.BackendError` with install instructions if it has none; the
+closed-form layers, photo loading and ``--help`` work without a usable LLVM.
 """
 
-from .backend import BackendError, check_backend
+from __future__ import annotations
 
-BACKEND = check_backend()
+import sys
+import types
+from typing import Any
 
-from . import views, volume  # noqa: E402
-from .render import RenderSettings, render, render_with  # noqa: E402
+from .backend import BackendError, check_backend, preselect_libllvm
 
 __version__ = "0.1.0"
 __all__ = ["render", "render_with", "RenderSettings", "views", "volume", "BackendError", "BACKEND", "__version__"]
+
+preselect_libllvm()              # before anything imports drjit: the newest LLVM >= 16, where none is chosen
+
+#: Names imported on first use: (the module that holds each, its name there; None: the module itself).
+_LAZY = {"render": (".render", "render"), "render_with": (".render", "render_with"),
+         "RenderSettings": (".render", "RenderSettings"), "views": (".views", None), "volume": (".volume", None)}
+
+
+def __getattr__(name: str) -> Any:
+    """``BACKEND`` (checked once, on first read) and the lazily imported names of :data:`_LAZY`."""
+    import importlib
+
+    if name == "BACKEND":
+        backend = check_backend()                # raises BackendError; a failure is not remembered
+        globals()["BACKEND"] = backend
+        return backend
+    if name in _LAZY:
+        where, attribute = _LAZY[name]
+        module = importlib.import_module(where, __name__)
+        value = module if attribute is None else getattr(module, attribute)
+        globals()[name] = value
+        return value
+    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
+
+
+class _Package(types.ModuleType):
+    """The package module: its ``render`` stays the function (as it always was), also after the
+    import system binds the just-loaded ``render`` subpackage to that name."""
+
+    def __setattr__(self, name: str, value: Any) -> None:
+        if name == "render" and isinstance(value, types.ModuleType):
+            value = value.render
+        super().__setattr__(name, value)
+
+
+sys.modules[__name__].__class__ = _Package

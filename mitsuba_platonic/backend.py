@@ -15,19 +15,15 @@ NN ≥ 16 found in the usual library folders is chosen, so a machine with both L
 from __future__ import annotations
 
 import glob
-import hashlib
-import json
 import os
 import re
-import subprocess
 import sys
-from importlib import metadata
-from pathlib import Path
-from typing import Dict, List, Optional
+from typing import TYPE_CHECKING, Dict, List, Optional
 
-from .fileio import atomic_write
+if TYPE_CHECKING:           # the rest loads in check_backend: `import mitsuba_platonic` stays quick
+    from pathlib import Path
 
-__all__ = ["BackendError", "check_backend", "find_libllvm", "INSTALL_HINT"]
+__all__ = ["BackendError", "check_backend", "find_libllvm", "preselect_libllvm", "INSTALL_HINT"]
 
 #: LLVM major versions Dr.Jit 1.5 works with here (14 rejected, 15 aborts).
 MIN_LLVM = 16
@@ -69,7 +65,8 @@ print("PROBE" + json.dumps(out))
 
 
 class BackendError(ImportError):
-    """Dr.Jit has no working backend on this machine; the message says what to install."""
+    """Dr.Jit has no working backend on this machine; the message says what to install (its first
+    line what is wrong, the following lines how to fix it)."""
 
 
 def _version_of(path: str) -> int:
@@ -89,11 +86,27 @@ def find_libllvm() -> Optional[str]:
     return good[0] if good else None
 
 
-def _cache_dir() -> Path:
+def preselect_libllvm() -> None:
+    """Set ``DRJIT_LIBLLVM_PATH`` to :func:`find_libllvm` where it is unset and Dr.Jit is not yet
+    imported (no Dr.Jit import, no probe: cheap enough for ``import mitsuba_platonic``)."""
+    if os.environ.get("MITSUBA_PLATONIC_SKIP_BACKEND_CHECK") == "1":
+        return
+    if "DRJIT_LIBLLVM_PATH" not in os.environ and "drjit" not in sys.modules:
+        lib = find_libllvm()
+        if lib:
+            os.environ["DRJIT_LIBLLVM_PATH"] = lib
+
+
+def _cache_dir() -> "Path":
+    from pathlib import Path
+
     return Path(os.environ.get("MITSUBA_PLATONIC_CACHE", Path.home() / ".cache" / "mitsuba_platonic"))
 
 
 def _key(libllvm: Optional[str]) -> str:
+    import hashlib
+    from importlib import metadata
+
     try:
         drjit_version = metadata.version("drjit")
     except metadata.PackageNotFoundError:
@@ -107,6 +120,9 @@ def _key(libllvm: Optional[str]) -> str:
 
 
 def _probe(env: Dict[str, str]) -> Dict[str, object]:
+    import json
+    import subprocess
+
     try:
         r = subprocess.run([sys.executable, "-c", _PROBE], env=env, capture_output=True, text=True,
                            timeout=300)
@@ -127,12 +143,13 @@ def check_backend() -> Dict[str, object]:
     :class:`BackendError` with install instructions when neither LLVM nor CUDA works.
     Set ``MITSUBA_PLATONIC_SKIP_BACKEND_CHECK=1`` to skip the check entirely.
     """
+    import json
+
+    from .fileio import atomic_write
+
     if os.environ.get("MITSUBA_PLATONIC_SKIP_BACKEND_CHECK") == "1":
         return {"llvm": True, "cuda": False, "libllvm": os.environ.get("DRJIT_LIBLLVM_PATH")}
-    if "DRJIT_LIBLLVM_PATH" not in os.environ and "drjit" not in sys.modules:
-        lib = find_libllvm()
-        if lib:
-            os.environ["DRJIT_LIBLLVM_PATH"] = lib
+    preselect_libllvm()
     libllvm = os.environ.get("DRJIT_LIBLLVM_PATH")
     cache = _cache_dir() / f"backend-{_key(libllvm)}.json"
     result = None

@@ -30,13 +30,13 @@ import os
 import sys
 import warnings
 from pathlib import Path
-from typing import Callable, List, Optional, Sequence
-
-import numpy as np
-import torch
+from typing import TYPE_CHECKING, Callable, List, Optional, Sequence
 
 from .backend import BackendError
 from .errors import Interrupted, UserError
+
+if TYPE_CHECKING:                       # numpy and torch load inside main(), where a Ctrl-C is caught
+    import torch
 
 __all__ = ["main", "build_parser", "load_volume", "parse_models"]
 
@@ -53,6 +53,9 @@ class CLIError(UserError):
 
 def _load_npz(path: Path) -> torch.Tensor:
     """Read and validate the array ``volume`` of a ``.npz`` file → ``(1, C, N, N, N)`` float32."""
+    import numpy as np
+    import torch
+
     name = str(path)
     if not path.exists():
         raise CLIError(f"volume file {name!r} does not exist")
@@ -163,6 +166,7 @@ def _number_type(convert: Callable[[str], float], minimum: float, what: str) -> 
 
 _positive_int = _number_type(int, 1, "a positive integer")
 _non_negative_int = _number_type(int, 0, "a non-negative integer")
+_resolution = _number_type(int, 2, "an integer resolution of at least 2")
 _positive_float = _number_type(float, float.fromhex("0x1p-1074"), "a positive finite number")
 
 
@@ -239,8 +243,8 @@ def _add_compare(sub: "argparse._SubParsersAction") -> None:
                    help="builtin:figure | builtin:cloud | a .npz file with an array 'volume' of shape "
                         "(C,N,N,N) or (1,C,N,N,N), C = 4 [r,g,b,density] or 1 [density], values in "
                         "[0,1] (default: %(default)s)")
-    p.add_argument("--resolution", type=_positive_int, default=None,
-                   help="N for built-in volumes (default 32); must match a file's N if given")
+    p.add_argument("--resolution", type=_resolution, default=None,
+                   help="N ≥ 2 for built-in volumes (default 32); must match a file's N if given")
     p.add_argument("--models", default="vh,ao,ea", help="comma-separated models (default: %(default)s)")
     p.add_argument("--views", type=_positive_int, default=4,
                    help="number of views: the front view, then random views (default: %(default)s)")
@@ -351,6 +355,25 @@ def _elevation(text: str):
     raise argparse.ArgumentTypeError(f"expected a number or 'low,high' in degrees, got {text!r}")
 
 
+#: make-dataset's flags of the physical formation alone, and their defaults (None: not given).
+_PHYSICAL_FLAGS = {"lighting": ("--lighting", "sunsky"), "spp": ("--spp", 32), "max_depth": ("--max-depth", 8)}
+
+
+def _check_dataset_flags(args: argparse.Namespace) -> None:
+    """Refuse the flags the chosen formation or view distribution would ignore; fill in the defaults."""
+    given = [flag for key, (flag, _) in _PHYSICAL_FLAGS.items() if getattr(args, key) is not None]
+    if given and args.formation != "physical":
+        raise CLIError(f"{', '.join(given)}: only --formation physical reads {'them' if len(given) > 1 else 'it'}, "
+                       f"and --formation {args.formation} would ignore {'them' if len(given) > 1 else 'it'}; "
+                       f"drop {'them' if len(given) > 1 else 'it'} or use --formation physical")
+    for key, (_, default) in _PHYSICAL_FLAGS.items():
+        if getattr(args, key) is None:
+            setattr(args, key, default)
+    if args.elevation is not None and args.view_dist == "sphere":
+        raise CLIError("--elevation: --view-dist sphere covers every elevation and would ignore it; drop it, or "
+                       "use --view-dist band (low,high) or ring (one number)")
+
+
 def _cmd_make_dataset(args: argparse.Namespace) -> int:
     from .data import shapes
     from .data.collection import CollectionSpec, check_envmap, default_envmaps, make_collection
@@ -361,6 +384,7 @@ def _cmd_make_dataset(args: argparse.Namespace) -> int:
     for c in classes:
         if c not in known:
             raise CLIError(f"unknown shape class {c!r}; known: {', '.join(known)} (or 'all')")
+    _check_dataset_flags(args)
     out = Path(args.out)
     if args.preview:
         for c in classes:
@@ -412,13 +436,14 @@ def _add_make_dataset(sub: "argparse._SubParsersAction") -> None:
     p.add_argument("--elevation", type=_elevation, default=None,
                    help="'low,high' degrees for band (default {:g},{:g}); one number for ring (default {:g})"
                    .format(*DEFAULT_ELEVATION["band"], DEFAULT_ELEVATION["ring"]))
-    p.add_argument("--lighting", choices=("sunsky", "envmap", "mixed"), default="sunsky",
-                   help="physical formation: random sky, environment map, or either (default: %(default)s)")
+    p.add_argument("--lighting", choices=("sunsky", "envmap", "mixed"), default=None,
+                   help="physical formation only: random sky, environment map, or either (default: sunsky)")
     p.add_argument("--envmap", action="append", default=None,
                    help="an environment map .exr (repeatable; default: scenes/envmaps/*.exr)")
-    p.add_argument("--spp", type=_positive_int, default=32, help="physical: samples per pixel (default: %(default)s)")
-    p.add_argument("--max-depth", type=_positive_int, default=8,
-                   help="physical: longest path (default: %(default)s)")
+    p.add_argument("--spp", type=_positive_int, default=None,
+                   help="physical formation only: samples per pixel (default: 32)")
+    p.add_argument("--max-depth", type=_positive_int, default=None,
+                   help="physical formation only: longest path (default: 8)")
     p.add_argument("--camera", choices=("orthographic", "perspective"), default="orthographic",
                    help="vh/ao/ea images: the camera (default: %(default)s)")
     p.add_argument("--fov", type=_positive_float, default=RenderSettings.fov,
@@ -446,7 +471,8 @@ def _cmd_train(args: argparse.Namespace) -> int:
     from .train import train
 
     cfg = load_config(args.config, args.set or ())
-    run_dir = train(cfg, resume=args.resume, progress=not args.quiet)
+    config_file = Path(args.config) if args.config else None
+    run_dir = train(cfg, resume=args.resume, progress=not args.quiet, config_file=config_file)
     if int(os.environ.get("RANK", "0")) == 0:             # one line, not one per torchrun process
         print(f"run: {run_dir}")
     return 0
@@ -456,7 +482,9 @@ def _add_train(sub: "argparse._SubParsersAction") -> None:
     p = sub.add_parser("train", help="train PlatonicGAN from a config",
                        description="Train with a YAML config (configs/*.yaml); every key can be overridden "
                                    "with --set section.key=value. Writes a run folder with the resolved "
-                                   "config, checkpoints, logs and samples. Ctrl-C saves and exits; "
+                                   "config, checkpoints, logs and samples (only into a new or empty folder or one of "
+                                   "its own runs; the --config file is never written). Ctrl-C saves a checkpoint "
+                                   "and exits with code 130; "
                                    "--resume continues exactly. Data parallel: torchrun --nproc-per-node N "
                                    "-m mitsuba_platonic.cli train ...")
     p.add_argument("--config", default=None,
@@ -468,17 +496,31 @@ def _add_train(sub: "argparse._SubParsersAction") -> None:
     p.set_defaults(handler=_cmd_train)
 
 
+def _interrupted_export(command: str, written: List[Path], out: Path, detail: str) -> Interrupted:
+    """The one line of a Ctrl-C in reconstruct/generate: how many files are on disk, and how to go on."""
+    return Interrupted(f"{len(written)} complete file(s) written to {out} ({detail}); each file is whole; "
+                       f"run the command again with --overwrite (or another --out) to redo them",
+                       saved=f"{len(written)} file(s) in {out}")
+
+
 def _cmd_reconstruct(args: argparse.Namespace) -> int:
     from .export import export_reconstructions
     from .model import Model
 
     model = Model.from_checkpoint(args.run)
     out = Path(args.out) if args.out else Path(args.run) / "reconstructions"
-    for path, done in export_reconstructions(model, args.images, out, background=args.background, crop=args.crop,
-                                             level=args.level):
-        if done.no_mesh:
-            print(f"{path}: no mesh: {done.no_mesh}", file=sys.stderr)
-        print(f"{path} → " + ", ".join(str(p) for p in done.paths))
+    written: List[Path] = []
+    done_inputs = 0
+    try:
+        for path, done in export_reconstructions(model, args.images, out, background=args.background, crop=args.crop,
+                                                 level=args.level, overwrite=args.overwrite, written=written):
+            done_inputs += 1
+            if done.no_mesh:
+                print(f"{path}: no mesh: {done.no_mesh}", file=sys.stderr)
+            print(f"{path} → " + ", ".join(str(p) for p in done.paths))
+    except KeyboardInterrupt:
+        raise _interrupted_export("reconstruct", written, out,
+                                  f"{done_inputs} of {len(args.images)} input(s) finished") from None
     return 0
 
 
@@ -487,13 +529,20 @@ def _add_reconstruct(sub: "argparse._SubParsersAction") -> None:
 
     p = sub.add_parser("reconstruct", help="single-image 3D reconstruction with a trained run",
                        description="Encode each image, generate its volume, and write the volume (.npz, "
-                                   ".vol), a turntable GIF and a marching-cubes mesh with vertex colours (.ply).")
+                                   ".vol), a turntable GIF and a marching-cubes mesh with vertex colours (.ply) "
+                                   "into --out. Names: each input's file name without its last extension "
+                                   "(shot.v1.png → shot.v1.*), characters other than letters, digits and . _ + - "
+                                   "as _, a leading dot as _; a name an earlier input took gets _2, _3, … "
+                                   "(a/x.png b/x.png → x.*, x_2.*). Files of those names already in --out are "
+                                   "refused unless --overwrite.")
     p.add_argument("--run", required=True, help="a run folder (with checkpoints/last.pt)")
     p.add_argument("images", nargs="+", help="input images (RGBA PNG, or RGB on white with --background white)")
     p.add_argument("--out", default=None, help="output folder (default: RUN/reconstructions)")
     p.add_argument("--background", choices=("white",), default=None, help="mask RGB photos on white")
     p.add_argument("--crop", choices=CROPS, default="image")
     p.add_argument("--level", type=float, default=0.5, help="iso-level of the mesh (default: %(default)s)")
+    p.add_argument("--overwrite", action="store_true",
+                   help="replace the files of the same names an earlier call wrote into --out")
     p.set_defaults(handler=_cmd_reconstruct)
 
 
@@ -503,19 +552,28 @@ def _cmd_generate(args: argparse.Namespace) -> int:
 
     model = Model.from_checkpoint(args.run)
     out = Path(args.out) if args.out else Path(args.run) / "generated"
-    export_samples(model, args.n, out, seed=args.seed)
+    written: List[Path] = []
+    try:
+        export_samples(model, args.n, out, seed=args.seed, overwrite=args.overwrite, written=written)
+    except KeyboardInterrupt:
+        samples = len({p.stem for p in written if p.name.startswith("sample_")})
+        raise _interrupted_export("generate", written, out, f"{samples} of {args.n} sample(s) begun, "
+                                                              f"samples.png not written") from None
     print(f"{args.n} volumes (step {model.step}) → {out} (samples.png: one row per sample, 4 views)")
     return 0
 
 
 def _add_generate(sub: "argparse._SubParsersAction") -> None:
     p = sub.add_parser("generate", help="sample volumes from a trained generator",
-                       description="Draw z ~ N(0, I), generate volumes, write .npz/.vol, turntable GIFs and a "
-                                   "samples.png overview.")
+                       description="Draw z ~ N(0, I), generate volumes, write sample_000.npz/.vol/.gif, … and a "
+                                   "samples.png overview into --out. A folder holding an earlier call's samples "
+                                   "is refused unless --overwrite, which deletes them first.")
     p.add_argument("--run", required=True, help="a run folder")
     p.add_argument("-n", type=_positive_int, default=16, help="number of samples (default: %(default)s)")
     p.add_argument("--seed", type=_non_negative_int, default=0)
     p.add_argument("--out", default=None, help="output folder (default: RUN/generated)")
+    p.add_argument("--overwrite", action="store_true",
+                   help="delete an earlier call's sample_* files and samples.png in --out first")
     p.set_defaults(handler=_cmd_generate)
 
 
@@ -525,23 +583,24 @@ def _cmd_quickstart(args: argparse.Namespace) -> int:
 
         report = photo_quickstart(Path(args.photos), Path(args.out or "quickstart-photos"), steps=args.steps,
                                   progress=not args.quiet, overrides=args.set or ())
-        print(report.read_text())
-        print(f"report: {report}")
-        return 0
-    from .quickstart import quickstart
+    else:
+        from .quickstart import quickstart
 
-    report = quickstart(Path(args.out or "quickstart"), steps=args.steps, progress=not args.quiet,
-                        overrides=args.set or ())
+        report = quickstart(Path(args.out or "quickstart"), steps=args.steps, progress=not args.quiet,
+                            overrides=args.set or ())
     print(report.read_text())
     print(f"report: {report}")
     return 0
 
 
 def _add_quickstart(sub: "argparse._SubParsersAction") -> None:
-    p = sub.add_parser("quickstart", help="the whole pipeline on a small procedural collection (CPU, minutes)",
+    p = sub.add_parser("quickstart", help="the whole pipeline on a small procedural collection, or on your photos "
+                                          "(--photos DIR) (CPU, minutes)",
                        description="Generate a small procedural collection, train single-image reconstruction "
                                    "at 32³ through the batched Mitsuba ray marcher (EA), reconstruct held-out images and "
-                                   "write turntables, meshes and a report.")
+                                   "write turntables, meshes and a report. With --photos DIR: train on your folder of "
+                                   "cut-out photos instead and judge the held-out photos' reconstructions from every "
+                                   "side.")
     p.add_argument("--photos", default=None, metavar="DIR",
                    help="train on your own folder of cut-out photos of one class instead (configs/photos.yaml), and "
                         "judge the held-out photos' reconstructions from every side")
@@ -628,12 +687,61 @@ SUBCOMMANDS: Sequence[Callable[["argparse._SubParsersAction"], None]] = (
 
 def build_parser() -> argparse.ArgumentParser:
     """The ``platonic`` parser with one subparser per subcommand."""
+    from . import __version__
+
     parser = argparse.ArgumentParser(
         prog=PROG, description="PlatonicGAN with closed-form and Mitsuba 3 rendering layers.")
+    parser.add_argument("--version", action="version", version=f"{PROG} {__version__}")
     sub = parser.add_subparsers(dest="command", metavar="COMMAND", required=True)
     for add in SUBCOMMANDS:
         add(sub)
     return parser
+
+
+#: What a Ctrl-C leaves, per command, where the command itself said nothing more precise.
+_INTERRUPTED = {
+    None: "while starting; nothing was written",
+    "quickstart": "nothing was written beyond what the folder held; run the same command again to continue",
+    "train": "no training step was saved beyond the run's last checkpoint, which is as it was; run the same "
+             "command again (with --resume if the run has a checkpoint)",
+    "reconstruct": "nothing was written; run the same command again",
+    "generate": "nothing was written; run the same command again",
+    "evaluate": "no report was written (report.md, results.json and the figures come at the end); run the same "
+                "command again",
+    "make-dataset": "the images already written are kept (each file whole); run the same command again to resume",
+    "compare": "the files already in --out are whole, compare.json (written last) is missing; run the same "
+               "command again",
+    "bench": "nothing was written (the results are written at the end); run the same command again",
+}
+
+
+def _interrupt_message(command: Optional[str], e: BaseException) -> str:
+    """The one line of a Ctrl-C: the command's own account (an :class:`Interrupted`), else :data:`_INTERRUPTED`."""
+    where = f"{PROG} {command}" if command else PROG
+    detail = str(e) if isinstance(e, Interrupted) and str(e) else _INTERRUPTED.get(command, _INTERRUPTED[None])
+    return f"{where}: interrupted: {_one_line(detail)}"
+
+
+def _one_line(text: str) -> str:
+    return " ".join(part.strip() for part in str(text).splitlines() if part.strip())
+
+
+def _interrupt_behind(e: BaseException) -> Optional[KeyboardInterrupt]:
+    """The ``KeyboardInterrupt`` ``e`` is or was raised from (Dr.Jit re-raises a Ctrl-C in its
+    callbacks as its own error, the interrupt only in the chain), if any."""
+    from .fileio import _interrupt_behind as behind
+    return behind(e)
+
+
+def _printable_streams() -> None:
+    """Make stdout and stderr print any text (help and messages hold ³, →, …): characters the
+    terminal's encoding lacks (PYTHONIOENCODING=ascii) are escaped instead of raising."""
+    for stream in (sys.stdout, sys.stderr):
+        if hasattr(stream, "reconfigure"):
+            try:
+                stream.reconfigure(errors="backslashreplace")
+            except (ValueError, OSError):
+                pass
 
 
 def main(argv: Optional[Sequence[str]] = None) -> int:
@@ -641,31 +749,44 @@ def main(argv: Optional[Sequence[str]] = None) -> int:
 
     Usage errors (argparse) and user errors (:class:`~mitsuba_platonic.errors.UserError`,
     ``BackendError``, and ``OSError``: a missing file, no permission, a full disk) print a
-    one-line message on stderr and return 2; Ctrl-C prints one line (what was saved, for an
-    :class:`~mitsuba_platonic.errors.Interrupted`) and returns 130; ``--help`` returns 0. Any
-    other exception is a bug: it propagates with its traceback. A warning (a skipped photo, a
-    checkpoint fallen back from) is one line, ``platonic <command>: warning: …``, not Python's
-    file-and-source-line format.
+    one-line message on stderr and return 2; Ctrl-C, at any moment (numpy and torch load in
+    here, where it is caught), prints one line on stderr saying what was saved and how to go on
+    and returns 130; ``--help`` and ``--version`` return 0. Any other exception is a bug: it
+    propagates with its traceback. A warning (a skipped photo, a checkpoint fallen back from) is
+    one line, ``platonic <command>: warning: …``, not Python's file-and-source-line format.
     """
-    parser = build_parser()
+    _printable_streams()
+    command: Optional[str] = None
     try:
-        args = parser.parse_args(argv)
-    except SystemExit as e:  # argparse has printed usage / help already
-        return int(e.code) if isinstance(e.code, int) else 2
+        parser = build_parser()
+        try:
+            args = parser.parse_args(argv)
+        except SystemExit as e:  # argparse has printed usage / help already
+            return int(e.code) if isinstance(e.code, int) else 2
+        command = args.command
+        return _run(args)
+    except KeyboardInterrupt as e:
+        print(_interrupt_message(command, e), file=sys.stderr)
+        return 130
+    except (UserError, BackendError, OSError) as e:
+        print(f"{PROG} {command}: error: {_one_line(e)}", file=sys.stderr)
+        return 2
+    except Exception as e:
+        interrupt = _interrupt_behind(e)
+        if interrupt is None:
+            raise
+        print(_interrupt_message(command, interrupt), file=sys.stderr)
+        return 130
+
+
+def _run(args: argparse.Namespace) -> int:
+    """Call ``args.handler`` with warnings shown as one line each."""
     def one_line_warning(message, category, filename, lineno, file=None, line=None) -> None:
         print(f"{PROG} {args.command}: warning: {message}", file=sys.stderr if file is None else file)
 
-    try:
-        with warnings.catch_warnings():                      # restores Python's own display afterwards
-            warnings.showwarning = one_line_warning
-            return int(args.handler(args))
-    except (UserError, BackendError, OSError) as e:
-        print(f"{PROG} {args.command}: error: {e}", file=sys.stderr)
-        return 2
-    except KeyboardInterrupt as e:
-        detail = f": {e}" if isinstance(e, Interrupted) and str(e) else ""
-        print(f"{PROG} {args.command}: interrupted{detail}", file=sys.stderr)
-        return 130
+    with warnings.catch_warnings():                          # restores Python's own display afterwards
+        warnings.showwarning = one_line_warning
+        return int(args.handler(args))
 
 
 if __name__ == "__main__":

@@ -96,10 +96,25 @@ def check_memory(n: int, views: int, builtin: bool = False, what: Optional[str] 
         return
     per_voxel = need / int(n) ** 3
     largest = (max(have, 0) / per_voxel) ** (1.0 / 3.0)
-    raise UserError(f"{what or f'a {n}³ volume'}: comparing {views} view(s) at {n}³ needs about "
-                    f"{need / 1e9:.3g} GB of memory (an estimate: ~{per_voxel:.0f} bytes per voxel), more than "
-                    f"the {max(have, 0) / 1e9:.1f} GB available ({source}); the largest resolution that fits is "
-                    f"about {int(largest)}")
+    fit_views = _most_views(n, views, builtin, have)
+    fewer = (f"at most {fit_views} view(s) fit at {n}³ (--views), or " if fit_views else
+             f"not even one view fits at {n}³; ")
+    raise UserError(f"{what or f'a {n}³ volume'} with --views {views}: comparing {views} view(s) at {n}³ needs "
+                    f"about {need / 1e9:.3g} GB of memory (an estimate), more than the {max(have, 0) / 1e9:.1f} GB "
+                    f"available ({source}); {fewer}the largest resolution that fits {views} view(s) is about "
+                    f"{int(largest)}")
+
+
+def _most_views(n: int, views: int, builtin: bool, have: float) -> int:
+    """The most views (< ``views``) whose :func:`memory_estimate` at ``n`` fits in ``have`` bytes; 0 if none."""
+    lo, hi = 0, views - 1
+    while lo < hi:
+        mid = (lo + hi + 1) // 2
+        if memory_estimate(n, mid, builtin) <= have:
+            lo = mid
+        else:
+            hi = mid - 1
+    return lo
 
 
 def _sync() -> None:

@@ -256,6 +256,8 @@ class Config:
             self.render.validate()                           # the renderer's settings check themselves
         except ValueError as e:
             raise ConfigError(f"render.{e}") from None
+        for section in ("data", "train"):
+            _check_elevation(section, getattr(self, section).view_distribution, getattr(self, section).elevation)
         _choice("train.task", self.train.task, TASKS)
         _choice("train.mode", self.train.mode, MODES)
         _choice("train.view_distribution", self.train.view_distribution, DISTRIBUTIONS)
@@ -463,6 +465,20 @@ def apply_overrides(data: Dict[str, Any], overrides: Sequence[str]) -> Dict[str,
             raise ConfigError(f"{parts[0]}: expected a mapping")
         data[parts[0]][parts[1]] = value
     return data
+
+
+def _check_elevation(section: str, distribution: str, elevation: Any) -> None:
+    """``<section>.elevation`` fits ``<section>.view_distribution`` (the views' own check, naming the keys)."""
+    from .views import DISTRIBUTIONS, sample_views
+
+    if distribution not in DISTRIBUTIONS:
+        return                                               # its own check names it
+    if distribution == "sphere" or elevation is None:
+        return                                               # sphere ignores it (train warns), None: the default
+    try:
+        sample_views(1, distribution, seed=0, elevation=tuple(elevation) if isinstance(elevation, list) else elevation)
+    except (UserError, TypeError) as e:
+        raise ConfigError(f"{section}.elevation: {e} (with {section}.view_distribution {distribution!r})") from None
 
 
 def load_config(path: Optional[Union[str, Path]] = None, overrides: Sequence[str] = ()) -> Config:

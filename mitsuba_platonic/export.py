@@ -13,6 +13,7 @@ sampled trilinearly at the vertices, sRGB-encoded to 8 bits (PLY viewers display
 
 from __future__ import annotations
 
+import re
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import TYPE_CHECKING, Iterator, List, Optional, Sequence, Tuple, Union
@@ -21,6 +22,8 @@ import numpy as np
 import torch
 import torch.nn.functional as F
 
+from .errors import UserError
+from .fileio import atomic_write
 from .images import composite, linear_to_srgb, save_grid, to_hwc
 from .render import render
 from .views import turntable
@@ -30,7 +33,8 @@ if TYPE_CHECKING:
     from .model import Model
 
 __all__ = ["save_volume", "write_vol", "display_frames", "turntable_frames", "save_gif", "extract_mesh",
-           "save_ply", "Mesh", "Exported", "export_volume", "export_reconstructions", "export_samples"]
+           "save_ply", "Mesh", "Exported", "export_volume", "export_reconstructions", "export_samples", "output_names",
+           "EXPORT_EXTENSIONS"]
 
 PathLike = Union[str, Path]
 
@@ -46,13 +50,21 @@ def write_vol(volume: torch.Tensor, path: PathLike) -> Path:
     return Path(path)
 
 
+def _with_ext(stem: Path, ext: str) -> Path:
+    """``stem`` + ``ext`` (``shot.v1`` → ``shot.v1.npz``; ``Path.with_suffix`` would give ``shot.npz``)."""
+    return stem.with_name(stem.name + ext)
+
+
 def save_volume(volume: torch.Tensor, stem: PathLike) -> List[Path]:
-    """Write a ``(C, N, N, N)`` volume as ``stem.npz`` (array ``volume``) and ``stem.vol`` (Mitsuba)."""
+    """Write a ``(C, N, N, N)`` volume as ``stem.npz`` (array ``volume``) and ``stem.vol`` (Mitsuba),
+    each whole or not at all (:func:`~mitsuba_platonic.fileio.atomic_write`)."""
     stem = Path(stem)
     stem.parent.mkdir(parents=True, exist_ok=True)
-    npz = stem.with_suffix(".npz")
-    np.savez_compressed(npz, volume=volume.detach().float().cpu().numpy())
-    return [npz, write_vol(volume, stem.with_suffix(".vol"))]
+    npz, vol = _with_ext(stem, ".npz"), _with_ext(stem, ".vol")
+    array = volume.detach().float().cpu().numpy()
+    atomic_write(npz, lambda tmp: np.savez_compressed(tmp, volume=array))
+    atomic_write(vol, lambda tmp: write_vol(volume, tmp))
+    return [npz, vol]
 
 
 def display_frames(volume: torch.Tensor, model: str, views: torch.Tensor, filter: str = "trilinear",
@@ -79,7 +91,8 @@ def save_gif(frames: Sequence[np.ndarray], path: PathLike, scale: int = 4, durat
     path.parent.mkdir(parents=True, exist_ok=True)
     pil = [Image.fromarray((np.clip(f, 0, 1) * 255 + 0.5).astype(np.uint8)) for f in frames]
     pil = [p.resize((p.width * scale, p.height * scale), Image.NEAREST) for p in pil]
-    pil[0].save(path, save_all=True, append_images=pil[1:], duration=duration_ms, loop=0)
+    atomic_write(path, lambda tmp: pil[0].save(tmp, format="GIF", save_all=True, append_images=pil[1:],
+                                               duration=duration_ms, loop=0))
     return path
 
 
@@ -129,10 +142,13 @@ def save_ply(mesh: Mesh, path: PathLike) -> Path:
     vertex["p"], vertex["c"] = mesh.vertices, mesh.colours
     face = np.empty(len(mesh.faces), dtype=[("n", "u1"), ("i", "<i4", 3)])
     face["n"], face["i"] = 3, mesh.faces
-    with open(path, "wb") as f:
-        f.write(header.encode("ascii"))
-        f.write(vertex.tobytes())
-        f.write(face.tobytes())
+    def write(tmp: Path) -> None:
+        with open(tmp, "wb") as f:
+            f.write(header.encode("ascii"))
+            f.write(vertex.tobytes())
+            f.write(face.tobytes())
+
+    atomic_write(path, write)
     return path
 
 
@@ -148,21 +164,29 @@ class Exported:
 
 
 def export_volume(volume: torch.Tensor, stem: PathLike, model: str, level: Optional[float] = 0.5,
-                  frames: int = 36) -> Exported:
+                  frames: int = 36, written: Optional[List[Path]] = None) -> Exported:
     """One ``(C, N, N, N)`` volume → ``stem.npz``, ``stem.vol``, a turntable ``stem.gif`` of
     ``frames`` closed-form ``model`` renders and, unless ``level`` is None, a marching-cubes
-    mesh ``stem.ply`` at that iso-level (none where the density never crosses it: ``no_mesh`` says so)."""
+    mesh ``stem.ply`` at that iso-level (none where the density never crosses it: ``no_mesh`` says so).
+    Each file is whole or absent; ``written`` (if given) is appended each path as it is complete."""
     stem = Path(stem)
     volume = volume.detach().float().cpu()
-    done = Exported(save_volume(volume, stem))
-    done.paths.append(save_gif(turntable_frames(volume, model, frames=frames), stem.with_suffix(".gif")))
+    done = Exported()
+    written = [] if written is None else written
+
+    def wrote(*paths: Path) -> None:
+        done.paths.extend(paths)
+        written.extend(paths)
+
+    wrote(*save_volume(volume, stem))
+    wrote(save_gif(turntable_frames(volume, model, frames=frames), _with_ext(stem, ".gif")))
     if level is not None:
         try:
             mesh = extract_mesh(volume, level=level)
         except ValueError as e:                          # the density never crosses the level: no surface
             done.no_mesh = str(e)
         else:
-            done.paths.append(save_ply(mesh, stem.with_suffix(".ply")))
+            wrote(save_ply(mesh, _with_ext(stem, ".ply")))
     return done
 
 
@@ -183,25 +207,82 @@ def export_held_out(model: "Model", images: torch.Tensor, folder: PathLike, n: i
     return written
 
 
-def export_reconstructions(model: "Model", images: Sequence[PathLike], out: PathLike, background: Optional[str] = None,
-                           crop: str = "image", level: float = 0.5) -> Iterator[Tuple[Path, Exported]]:
-    """``platonic reconstruct``: each image file → its volume → :func:`export_volume` as
-    ``out/<image stem>.*``; yields (image path, what was written) as each one is done."""
+#: The files :func:`export_volume` writes per name (``.ply`` only for reconstructions).
+EXPORT_EXTENSIONS = (".npz", ".vol", ".gif", ".ply")
+
+_UNSAFE = re.compile(r"[^A-Za-z0-9._+-]")
+
+
+def output_names(images: Sequence[PathLike]) -> List[str]:
+    """One distinct output name per input image, all inside the output folder.
+
+    The name is the image's file name without its last extension (``shot.v1.png`` → ``shot.v1``),
+    with characters other than letters, digits and ``. _ + -`` replaced by ``_`` and leading dots by
+    ``_`` (``..png`` → ``_``: never ``.``, ``..`` or a hidden file). A name an earlier input (in
+    command-line order) already took, compared without regard to case, gets ``_2``, ``_3``, …
+    (``a/x.png b/x.png`` → ``x``, ``x_2``).
+    """
+    names: List[str] = []
+    taken = set()
     for image in images:
+        base = _UNSAFE.sub("_", Path(image).stem)
+        if base.startswith(".") or not base:
+            base = "_" + base.lstrip(".")
+        name, k = base, 1
+        while name.lower() in taken:
+            k += 1
+            name = f"{base}_{k}"
+        taken.add(name.lower())
+        names.append(name)
+    return names
+
+
+def _refuse_earlier(out: Path, found: List[Path]) -> None:
+    """Raise :class:`UserError` naming what an earlier call left in ``out`` that this one would replace."""
+    if found:
+        shown = ", ".join(p.name for p in found[:4]) + (f" and {len(found) - 4} more" if len(found) > 4 else "")
+        raise UserError(f"--out {out} already holds {shown} from an earlier call, which this call would "
+                        f"replace; choose another --out, or pass --overwrite to replace them")
+
+
+def export_reconstructions(model: "Model", images: Sequence[PathLike], out: PathLike, background: Optional[str] = None,
+                           crop: str = "image", level: float = 0.5, overwrite: bool = False,
+                           written: Optional[List[Path]] = None) -> Iterator[Tuple[Path, Exported]]:
+    """``platonic reconstruct``: each image file → its volume → :func:`export_volume` as
+    ``out/<name>.*`` (:func:`output_names`: one name per input); yields (image path, what was
+    written) as each one is done. Unless ``overwrite``, refuses (:class:`UserError`, before any
+    work) where a file it would write exists already. ``written`` collects every complete file."""
+    out = Path(out)
+    names = output_names(images)
+    if not overwrite:
+        _refuse_earlier(out, [out / (n + e) for n in names for e in EXPORT_EXTENSIONS if (out / (n + e)).exists()])
+    for image, name in zip(images, names):
         path = Path(image)
         vol = model.reconstruct(model.load_image(path, background=background, crop=crop))[0]
-        yield path, export_volume(vol, Path(out) / path.stem, model.formation, level=level)
+        yield path, export_volume(vol, out / name, model.formation, level=level, written=written)
 
 
-def export_samples(model: "Model", n: int, out: PathLike, seed: int = 0) -> List[Path]:
+_SAMPLE = re.compile(r"sample_\d{3,}\.(npz|vol|gif|ply)|samples\.png")
+
+
+def export_samples(model: "Model", n: int, out: PathLike, seed: int = 0, overwrite: bool = False,
+                   written: Optional[List[Path]] = None) -> List[Path]:
     """``platonic generate``: ``n`` volumes of ``model.generate(n, seed)`` → ``out/sample_NNN``
     .npz/.vol/.gif (24-frame turntables) and ``out/samples.png`` (one row per sample, 4 views
-    90° apart); returns every path written, the overview last."""
+    90° apart); returns every path written, the overview last.
+
+    A folder holding an earlier call's samples is refused (:class:`UserError`, before any work),
+    so that no old ``sample_NNN`` is left beside new ones; ``overwrite`` deletes them first."""
     out = Path(out)
-    written: List[Path] = []
+    earlier = sorted(p for p in out.iterdir() if _SAMPLE.fullmatch(p.name)) if out.is_dir() else []
+    if not overwrite:
+        _refuse_earlier(out, earlier)
+    for p in earlier:
+        p.unlink()
+    written = [] if written is None else written
     rows = []
     for i, vol in enumerate(model.generate(n, seed).cpu()):
-        written += export_volume(vol, out / f"sample_{i:03d}", model.formation, level=None, frames=24).paths
+        export_volume(vol, out / f"sample_{i:03d}", model.formation, level=None, frames=24, written=written)
         rows.append(display_frames(vol, model.formation, turntable(4, elevation=20.0)))
     written.append(save_grid(out / "samples.png", rows))
     return written

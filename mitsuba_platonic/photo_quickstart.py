@@ -22,6 +22,7 @@ from .errors import UserError
 from .evaluate.judge import BANDS
 from .evaluate.photos import photo_splits
 from .export import export_held_out
+from .quickstart import stopped
 from .resources import config_path
 
 __all__ = ["photo_quickstart", "PHOTO_CONFIG"]
@@ -47,12 +48,23 @@ def _judge_lines(results: List[Dict]) -> List[str]:
 def photo_quickstart(photos: Path, out: Path = Path("quickstart-photos"), steps: Optional[int] = None,
                      progress: bool = True, overrides: Sequence[str] = ()) -> Path:
     """Train on the photo folder ``photos`` into ``out``, judge and export; return ``out/report.md``.
-    ``overrides``: ``KEY=VALUE`` changes to ``configs/photos.yaml`` (e.g. ``model.resolution=16``)."""
+    ``overrides``: ``KEY=VALUE`` changes to ``configs/photos.yaml`` (e.g. ``model.resolution=16``).
+    Ctrl-C stops it at any stage (a half-trained model is never evaluated) with an
+    :class:`~mitsuba_platonic.errors.Interrupted` that says what was kept and how to continue."""
+    stage = {"now": "loading the photos"}
+    try:
+        return _photo_quickstart(Path(photos), Path(out), steps, progress, overrides, stage)
+    except KeyboardInterrupt as e:
+        raise stopped(e, stage, f"platonic quickstart --photos {photos} --out {out}", steps, overrides) from None
+
+
+def _photo_quickstart(photos: Path, out: Path, steps: Optional[int], progress: bool, overrides: Sequence[str],
+                      stage: Dict[str, str]) -> Path:
+    """:func:`photo_quickstart`, telling ``stage["now"]`` what it is doing."""
     from .evaluate.report import evaluate_runs
     from .model import Model, check_model_fits
     from .train.run import train
 
-    photos = Path(photos)
     if not photos.is_dir():
         raise UserError(f"--photos {str(photos)!r} is not a folder")
     t0 = time.perf_counter()
@@ -65,8 +77,10 @@ def photo_quickstart(photos: Path, out: Path = Path("quickstart-photos"), steps:
     train_photos, held, files = photo_splits(cfg)                 # a folder that cannot train fails here
     run_dir = Path(cfg.run.out_dir) / cfg.run.name
     resume = (run_dir / "checkpoints" / "last.pt").exists()
+    stage["now"] = "training"
     train(cfg, resume=resume, progress=progress)
     t_train = time.perf_counter() - t0
+    stage["now"] = "judging and exporting the trained model"
     evaluation = evaluate_runs([run_dir], out / "evaluation", progress=progress)
     results = json.loads((evaluation.parent / "results.json").read_text())
     model = Model.from_checkpoint(run_dir)

@@ -19,17 +19,18 @@ from __future__ import annotations
 import csv
 import time
 from pathlib import Path
-from typing import Optional, Sequence
+from typing import Dict, Optional, Sequence
 
 import torch
 
 from .config import load_config
+from .errors import Interrupted
 from .evaluate.protocol import held_out_scores
 from .export import export_held_out
 from .model import Model, check_model_fits
 from .resources import config_path
 
-__all__ = ["quickstart"]
+__all__ = ["quickstart", "stopped"]
 
 #: The quickstart's config, carried inside the package (configs/quickstart.yaml).
 CONFIG = config_path("quickstart")
@@ -43,7 +44,32 @@ def quickstart(out: Path = Path("quickstart"), steps: Optional[int] = None, prog
     """Run the quickstart into ``out``; return the path of its report.
 
     overrides: ``section.key=value`` changes to ``configs/quickstart.yaml`` (``--set``), applied
-    after ``out`` and ``steps``."""
+    after ``out`` and ``steps``. Ctrl-C stops it at any stage (a half-trained model is never
+    evaluated): raises :class:`~mitsuba_platonic.errors.Interrupted` saying what is kept (the cached
+    data, the checkpoint training saved) and that running it again continues from there.
+    """
+    stage = {"now": "preparing the data"}
+    try:
+        return _quickstart(Path(out), steps, progress, stage, overrides)
+    except KeyboardInterrupt as e:
+        raise stopped(e, stage, f"platonic quickstart --out {out}", steps, overrides) from None
+
+
+def stopped(e: KeyboardInterrupt, stage: Dict[str, str], command: str, steps: Optional[int],
+            overrides: Sequence[str]) -> Interrupted:
+    """The :class:`~mitsuba_platonic.errors.Interrupted` of a quickstart stopped by Ctrl-C in
+    ``stage["now"]``: what was kept (the checkpoint training saved) and the ``command`` (with its
+    ``--steps`` and ``--set`` flags) that continues it."""
+    saved = getattr(e, "saved", None)
+    kept = f"{saved}; " if saved else ""
+    again = command + (f" --steps {steps}" if steps is not None else "") + "".join(f" --set {o}" for o in overrides)
+    return Interrupted(f"while {stage['now']}: {kept}no report was written; run `{again}` again to continue "
+                       f"(the data stays cached and training resumes from its last checkpoint)", saved=saved)
+
+
+def _quickstart(out: Path, steps: Optional[int], progress: bool, stage: Dict[str, str],
+                overrides: Sequence[str] = ()) -> Path:
+    """:func:`quickstart`, telling ``stage["now"]`` what it is doing."""
     from .train.data import load_training_data
     from .train.run import train
 
@@ -57,9 +83,12 @@ def quickstart(out: Path = Path("quickstart"), steps: Optional[int] = None, prog
     resume = (run_dir / "checkpoints" / "last.pt").exists()
     data = load_training_data(cfg, progress=progress)
     t_data = time.perf_counter() - t0
+    stage["now"] = "scoring the untrained model"
     torch.manual_seed(cfg.run.seed)
     untrained = held_out_scores(Model.from_config(cfg), data)          # a fresh model, drawn from the run's seed
+    stage["now"] = "training"
     train(cfg, resume=resume, progress=progress)
+    stage["now"] = "scoring and exporting the trained model"
     t_train = time.perf_counter() - t0 - t_data
     model = Model.from_checkpoint(run_dir)
     step = model.step

@@ -229,6 +229,10 @@ def lens(camera: str = "orthographic", fov: float = 40.0,
         raise UserError(f"fov: expected a field of view in degrees in (0, 180), got {fov!r}")
     t = math.tan(math.radians(fov) / 2.0)
     if distance is None:
+        if not 1.0 / t > 1.0:                             # the fov's fault, not a distance anyone gave
+            raise UserError(f"fov: {fov!r}° is too wide for the default camera distance 1/tan(fov/2) = "
+                            f"{1.0 / t:.3g}, which must be > 1 (outside the cube); use a fov below 90, or "
+                            f"give a distance > 1")
         distance = 1.0 / t
     if isinstance(distance, bool) or not isinstance(distance, (int, float)) or not math.isfinite(distance) \
             or not distance > 1.0:

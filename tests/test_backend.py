@@ -46,3 +46,47 @@ def test_find_libllvm_prefers_a_working_version():
     lib = find_libllvm()
     assert lib is None or _version_of(lib) >= MIN_LLVM
     assert "apt-get install libllvm19" in INSTALL_HINT
+
+
+# --------------------------------------------------------------------------- issue 29: only where Dr.Jit is needed
+
+
+def _cli_in_child(tmp_path, *argv, env=None, code=None):
+    e = dict(os.environ, MITSUBA_PLATONIC_CACHE=str(tmp_path), DRJIT_LIBLLVM_PATH=str(tmp_path / "libLLVM-19.so"),
+             **(env or {}))
+    e.pop("MITSUBA_PLATONIC_SKIP_BACKEND_CHECK", None)
+    command = [sys.executable, "-c", code] if code else [sys.executable, "-m", "mitsuba_platonic.cli", *argv]
+    return subprocess.run(command, env=e, capture_output=True, text=True, timeout=600, stdin=subprocess.DEVNULL)
+
+
+def test_help_and_version_need_no_llvm(tmp_path):
+    for argv in (["--help"], ["--version"], ["train", "--help"]):
+        r = _cli_in_child(tmp_path, *argv)
+        assert r.returncode == 0 and r.stderr == "", (argv, r.stderr)
+
+
+def test_closed_form_rendering_and_photo_loading_need_no_llvm(tmp_path):
+    from PIL import Image
+    photo = tmp_path / "p.png"
+    Image.new("RGBA", (24, 24), (200, 30, 30, 255)).save(photo)
+    code = ("import sys\n"
+            "import mitsuba_platonic as mp\n"
+            "from mitsuba_platonic.views import front_view\n"
+            "from mitsuba_platonic.volume import test_volume\n"
+            "from mitsuba_platonic.data.photos import decode_image\n"
+            "img = mp.render(test_volume(8), front_view(1), 'ea', 'closed_form')\n"
+            f"photo = decode_image({str(photo)!r})\n"
+            "print('OK', tuple(img.shape), 'drjit' in sys.modules)\n")
+    r = _cli_in_child(tmp_path, code=code)
+    assert r.returncode == 0, r.stderr
+    assert "OK (1, 4, 8, 8) False" in r.stdout
+
+
+def test_a_command_that_needs_drjit_says_so_in_one_line(tmp_path):
+    r = _cli_in_child(tmp_path, "compare", "--resolution", "8", "--views", "1", "--repeats", "1", "--models", "vh",
+                      "--out", str(tmp_path / "out"))
+    assert r.returncode == 2, r.stderr
+    err = r.stderr.strip()
+    assert "\n" not in err and "Traceback" not in err, err
+    assert err.startswith("platonic compare: error: Dr.Jit has no working backend"), err
+    assert "DRJIT_LIBLLVM_PATH" in err and "libllvm19" in err, err

@@ -196,6 +196,7 @@ def test_a_stale_lock_of_a_dead_process_is_taken_over(tmp_path):
     dead.wait()
     run_dir = tmp_path / "runs" / "r"
     run_dir.mkdir(parents=True)
+    (run_dir / R.RUN_MARKER).write_text("{}\n")                          # a run killed before its first step
     (run_dir / "run.lock").write_text(f"{dead.pid}\n")
     assert R.train(_cfg(tmp_path, "run.steps=2"), progress=False) == run_dir
     assert R.load_checkpoint(run_dir / "checkpoints" / "last.pt")["step"] == 2

@@ -37,3 +37,29 @@ def test_quickstart_refuses_a_photo_folder_that_is_not_there(tmp_path):
     code, _, err = run_cli(["quickstart", "--photos", str(tmp_path / "nowhere"), "--out", str(tmp_path / "q")])
     assert code == 2 and "--photos" in one_line(err, "quickstart")
     assert not (tmp_path / "q").exists()
+
+
+def test_quickstart_on_photos_stops_when_training_is_interrupted(tmp_path, monkeypatch):
+    from mitsuba_platonic.errors import Interrupted
+    from mitsuba_platonic.evaluate import report as E
+    from mitsuba_platonic.train import run as R
+
+    photos = tmp_path / "photos"
+    photos.mkdir()
+    for i in range(6):
+        _photo(i).save(photos / f"p{i}.png")
+    judged = []
+    monkeypatch.setattr(E, "evaluate_runs", lambda *a, **k: judged.append(a))
+
+    def train(cfg, resume=False, progress=True):
+        raise Interrupted("after step 3 of 2000", saved="quickstart-photos/run/checkpoints/last.pt holds step 3")
+
+    monkeypatch.setattr(R, "train", train)
+    out = tmp_path / "qp"
+    code, stdout, stderr = run_cli(["quickstart", "--photos", str(photos), "--out", str(out), "--quiet",
+                                    "--set", "model.resolution=16"])
+    assert code == 130, stderr
+    err = stderr.strip()
+    assert "\n" not in err and "while training" in err and "holds step 3" in err, err
+    assert f"platonic quickstart --photos {photos} --out {out} --set model.resolution=16" in err
+    assert judged == [] and not (out / "report.md").exists() and stdout == ""

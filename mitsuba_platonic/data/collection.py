@@ -61,7 +61,11 @@ RENDERERS = ("closed_form", "mitsuba")
 LIGHTINGS = ("sunsky", "envmap", "mixed")
 SUBFOLDERS = ("images", "exr", "volumes")
 RECORDS = ("collection.json", "records.jsonl", "manifest.json")
-_TEMPORARY = re.compile(r"\.\d{5,}(_\d{2,})?\.tmp\d+\.(png|exr|npz|vol)")   # what atomic_write names them
+#: What atomic_write names the temporaries of a collection's files: ``.00000_00.tmp<pid>.png``, and
+#: ``..00000_00.tmp<pid>.tmp<pid>.png`` where a writer that is atomic itself (save_png) writes the temporary.
+_TEMPORARY = re.compile(r"\.{1,2}\d{5,}(_\d{2,})?(\.tmp\d+){1,2}\.(png|exr|npz|vol)")
+#: ... and of its records (collection.json, records.jsonl, manifest.json) in the folder itself.
+_RECORD_TEMPORARY = re.compile(r"\.(collection|records|manifest)\.tmp\d+\.(json|jsonl)")
 
 
 def default_envmaps() -> List[str]:
@@ -378,6 +382,9 @@ def make_collection(out: Union[str, Path], spec: CollectionSpec, overwrite: bool
         _overwrite_plan(out)                         # refuse before writing anything (again under the lock)
     manifest_file = out / "manifest.json"
     if not overwrite and manifest_file.exists() and _finished(manifest_file, spec):
+        if _temporaries(out):                        # a killed writer's leftovers: removed under the lock
+            with _lock(out / ".lock"):
+                _remove_temporaries(out)
         return manifest_file                         # finished: read-only, safe for concurrent readers
     out.mkdir(parents=True, exist_ok=True)
     with _lock(out / ".lock"):
@@ -465,6 +472,21 @@ def _overwrite_plan(out: Path) -> List[Path]:
     return remove
 
 
+def _temporaries(out: Path) -> List[Path]:
+    """The temporaries a killed run left in ``out`` and its subfolders."""
+    found: List[Path] = []
+    for folder, pattern in [(out, _RECORD_TEMPORARY)] + [(out / sub, _TEMPORARY) for sub in SUBFOLDERS]:
+        if folder.is_dir():
+            found += [p for p in folder.iterdir() if pattern.fullmatch(p.name) and p.is_file()]
+    return found
+
+
+def _remove_temporaries(out: Path) -> None:
+    """Delete :func:`_temporaries` (call it holding the collection's lock)."""
+    for stray in _temporaries(out):
+        stray.unlink(missing_ok=True)
+
+
 @contextmanager
 def _lock(path: Path) -> Iterator[None]:
     """An exclusive advisory lock: one writer per collection folder (others wait)."""
@@ -492,11 +514,7 @@ def _make_collection(out: Path, spec: CollectionSpec, overwrite: bool, progress:
         for f in _overwrite_plan(out):               # the collection's own files only
             f.unlink()
     out.mkdir(parents=True, exist_ok=True)
-    for sub in SUBFOLDERS:                           # temporaries a killed run left behind
-        if (out / sub).is_dir():
-            for stray in (out / sub).iterdir():
-                if _TEMPORARY.fullmatch(stray.name) and stray.is_file():
-                    stray.unlink()
+    _remove_temporaries(out)
     _write_json(spec_file, spec.to_dict())
 
     records_file = out / "records.jsonl"

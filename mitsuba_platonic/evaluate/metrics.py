@@ -310,10 +310,10 @@ def chamfer_distance(output: ArrayLike, target: ArrayLike, threshold: float = IO
 
 _NO_WEIGHTS = ("no installed package ships pretrained {what} weights, so this metric needs a file from you: "
                "{hint}")
-_VGG_HINT = ("pass weights=PATH to torchvision's VGG16 weights (vgg16-397923af.pth, a state dict whose "
+_VGG_HINT = ("pass --vgg-weights FILE (platonic evaluate; weights=PATH in Python) with torchvision's VGG16 weights (vgg16-397923af.pth, a state dict whose "
              "'features.N.weight' keys define the convolution stack) or to a TorchScript file mapping "
              "(B, 3, H, W) images to a feature map or a list of feature maps")
-_FID_HINT = ("pass weights=PATH to a TorchScript feature extractor (for the standard FID: an Inception-v3 "
+_FID_HINT = ("pass --fid-weights FILE (platonic evaluate; weights=PATH in Python) with a TorchScript feature extractor (for the standard FID: an Inception-v3 "
              "pool3 network saved with torch.jit.save) mapping (B, 3, H, W) images in [0, 1] to features, "
              "or to a VGG16 state dict as for vgg_distance")
 

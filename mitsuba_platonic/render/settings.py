@@ -127,11 +127,28 @@ def render_with(volume: torch.Tensor, views: torch.Tensor, settings: RenderSetti
         from .closed_form import render_closed_form
         return render_closed_form(volume, views.to(volume.device), settings.model, settings.filter, settings.lens)
     if settings.backend == "mitsuba":
+        check_lanes(volume.shape[0], volume.shape[-1], settings.spp)   # before Dr.Jit: say why, up front
         from .marcher import march
         return march(volume, views, settings, seed)
     from .physical import render_physical_ad
     return render_physical_ad(volume, views, lighting=settings.lighting, spp=settings.physical_spp,
                               max_depth=settings.max_depth, seed=seed, filter=settings.filter)
+
+
+#: The most lanes (rays) one Dr.Jit launch holds: its indices are 32-bit.
+MAX_LANES = 2 ** 32 - 1
+
+
+def check_lanes(batch: int, n: int, spp: int) -> None:
+    """Refuse a marcher call of more rays (``batch · n² · spp``) than one Dr.Jit launch holds
+    (:data:`MAX_LANES`), naming ``spp`` and the largest that fits, before any work."""
+    from ..errors import UserError
+
+    lanes = batch * n * n * spp
+    if lanes > MAX_LANES:
+        fits = MAX_LANES // (batch * n * n)
+        raise UserError(f"spp: {spp} samples per pixel × {n}² pixels × {batch} view(s) = {lanes:,} rays, more than "
+                        f"the 2³² lanes one Dr.Jit launch holds; use spp ≤ {fits:,} here, or fewer views per call")
 
 
 def _choice(name: str, value: Any, choices: tuple) -> None:

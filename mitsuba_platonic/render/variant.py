@@ -41,12 +41,13 @@ def _pick() -> str:
 def ensure_variant() -> Any:
     """Import Mitsuba, set the project's variant (once) and return the ``mitsuba`` module.
 
-    Raises :class:`~mitsuba_platonic.errors.UserError` if ``MITSUBA_PLATONIC_VARIANT`` names a
+    Raises :class:`~mitsuba_platonic.backend.BackendError` (before Mitsuba or Dr.Jit is imported)
+    where Dr.Jit has no working backend, and :class:`~mitsuba_platonic.errors.UserError` if ``MITSUBA_PLATONIC_VARIANT`` names a
     variant this machine cannot run (nothing is remembered then: fix the variable and call again).
     """
     global _chosen
+    chosen = _chosen if _chosen is not None else _pick()    # the backend check first: no Dr.Jit without LLVM
     import mitsuba as mi
-    chosen = _chosen if _chosen is not None else _pick()
     if mi.variant() != chosen:
         try:
             mi.set_variant(chosen)

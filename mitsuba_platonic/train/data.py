@@ -19,6 +19,7 @@ import numpy as np
 import torch
 
 from ..config import Config
+from ..errors import UserError
 from ..volume import CHANNELS
 
 __all__ = ["TrainingData", "load_training_data", "collection_folder", "SOURCES"]
@@ -57,6 +58,24 @@ def collection_folder(cfg: Config) -> Path:
     return Path(d.cache) / name
 
 
+#: The config key of each collection setting a procedural run derives from its config.
+_SPEC_KEYS = {"shape_class": "data.shape_class", "n_shapes": "data.n_shapes", "views_per_shape": "data.views_per_shape",
+              "resolution": "model.resolution", "formation": "data.formation", "views": "data.view_distribution",
+              "lighting": "render.lighting", "camera": "render.camera", "seed": "data.seed"}
+
+
+def _validate_spec(spec: Any) -> None:
+    """``spec.validate()``, its error naming the config key to change (``data.shape_class``, not ``shape_class``)."""
+    from ..config import ConfigError
+
+    try:
+        spec.validate()
+    except UserError as e:
+        text = str(e)
+        field = next((f for f in _SPEC_KEYS if text.startswith((f + " ", f + ":"))), None)
+        raise ConfigError(_SPEC_KEYS[field] + text[len(field):] if field else f"data: {text}") from None
+
+
 def _procedural(cfg: Config, progress: bool) -> TrainingData:
     from ..data.collection import CollectionSpec, make_collection, load_manifest
     from .trainer import MODES_3D
@@ -71,6 +90,7 @@ def _procedural(cfg: Config, progress: bool) -> TrainingData:
                           lighting=cfg.render.lighting if d.formation == "physical" else "sunsky",
                           camera=cfg.render.camera, fov=cfg.render.fov, distance=cfg.render.distance,
                           seed=d.seed)
+    _validate_spec(spec)
     folder = collection_folder(cfg)
     make_collection(folder, spec, progress=progress)
     records = load_manifest(folder)["images"]

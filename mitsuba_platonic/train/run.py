@@ -2,6 +2,8 @@
 
 A run folder (``run.out_dir/run.name``) holds::
 
+    run.json                 written first: marks the folder as a run (:mod:`.folder`; train writes
+                             only into a new or empty folder or a run folder, never its --config file)
     config.yaml              the resolved config (every key, defaults included)
     checkpoints/last.pt      the newest checkpoint (atomically replaced)
     checkpoints/step_NNNNNNN.pt   the last ``keep_checkpoints`` periodic checkpoints
@@ -17,7 +19,8 @@ loses no row); a full disk ends the run with one line naming the file, the good 
 as they were. ``resume=True`` continues from ``last.pt``;
 because every random draw of a step derives from (seed, step), the continued run matches an
 uninterrupted one step for step (on CPU). Ctrl-C (SIGINT) finishes the current step, saves a
-checkpoint and returns cleanly.
+checkpoint and raises :class:`~mitsuba_platonic.errors.Interrupted` saying which step it holds
+(the command line: one line on stderr, exit code 130), so that ``train && evaluate`` stops.
 
 What is saved: a checkpoint is written only on a clean stop (a periodic checkpoint, the last
 step, Ctrl-C, ``stop_at``) and only if every tensor of the state is finite. An exception during
@@ -61,10 +64,11 @@ from ..images import composite, linear_to_srgb, save_grid, to_hwc
 from ..model import Model
 from ..views import front_view, turntable
 from .data import load_training_data
+from .folder import RUN_MARKER, claim_run_folder
 from .trainer import Trainer
 
 __all__ = ["train", "load_run", "RunError", "save_checkpoint", "load_checkpoint", "load_latest_checkpoint",
-           "run_lock", "SAMPLE_VIEWS", "read_run_config", "DEVICES", "write_samples"]
+           "run_lock", "SAMPLE_VIEWS", "read_run_config", "DEVICES", "write_samples", "RUN_MARKER"]
 
 #: run.device: 'auto' picks CUDA when available.
 DEVICES = ("auto", "cpu", "cuda")
@@ -221,11 +225,15 @@ def _distributed() -> Tuple[int, int, int]:
 
 
 def train(cfg: Config, resume: bool = False, progress: bool = True,
-          stop_at: Optional[int] = None) -> Path:
+          stop_at: Optional[int] = None, config_file: Optional[Path] = None) -> Path:
     """Run (or continue) training; return the run folder.
 
-    ``stop_at`` ends the loop after that step as if interrupted (a checkpoint is saved): used to
-    test exact resume.
+    The run folder (``run.out_dir/run.name``) must be new, empty or a run folder
+    (:func:`~mitsuba_platonic.train.folder.claim_run_folder`); any other folder is refused with
+    nothing in it changed. ``config_file``: the file ``cfg`` was read from (``--config``), which is
+    never written, also where it is the run's own ``config.yaml``. ``stop_at`` ends the loop after
+    that step as if finished (a checkpoint is saved): used to test exact resume. Ctrl-C finishes
+    the current step, saves a checkpoint and raises :class:`~mitsuba_platonic.errors.Interrupted`.
     """
     from ..model import check_model_fits
 
@@ -234,9 +242,10 @@ def train(cfg: Config, resume: bool = False, progress: bool = True,
     run_dir = Path(cfg.run.out_dir) / cfg.run.name
     with training_threads(cfg):
         if rank != 0:
-            return _train(cfg, run_dir, resume, progress, stop_at, rank, world, local_rank)
+            return _train(cfg, run_dir, resume, progress, stop_at, rank, world, local_rank, config_file)
+        claim_run_folder(run_dir)                            # before the lock: a user's folder stays untouched
         with run_lock(run_dir):                              # one run at a time in a run folder
-            return _train(cfg, run_dir, resume, progress, stop_at, rank, world, local_rank)
+            return _train(cfg, run_dir, resume, progress, stop_at, rank, world, local_rank, config_file)
 
 
 #: 'auto' runs the marcher's launches on the training thread up to this resolution (docs/training.md, "Threads").
@@ -285,13 +294,45 @@ def training_threads(cfg: Config) -> Iterator[None]:
             dr.set_thread_count(before)
 
 
+#: The render settings only the Mitsuba marcher reads.
+_MARCHER_SETTINGS = ("step", "spp", "jitter", "termination")
+
+
+def _warn_ignored_settings(cfg: Config) -> None:
+    """Warn (naming the keys) where the config sets what the run ignores: marcher settings with
+    ``render.backend`` 'closed_form', an elevation with view distribution 'sphere'."""
+    import warnings
+
+    for section in ("data", "train"):
+        part = getattr(cfg, section)
+        if part.view_distribution == "sphere" and part.elevation is not None:
+            warnings.warn(f"{section}.elevation: {section}.view_distribution 'sphere' covers every elevation and "
+                          f"ignores it; set it to null, or use 'band' or 'ring'", stacklevel=2)
+    if cfg.render.backend != "closed_form":
+        return
+    defaults = type(cfg.render)()
+    ignored = [f"render.{k}" for k in _MARCHER_SETTINGS if getattr(cfg.render, k) != getattr(defaults, k)]
+    if ignored:
+        warnings.warn(f"{', '.join(ignored)}: only the Mitsuba marcher (render.backend: mitsuba) reads "
+                      f"{'these' if len(ignored) > 1 else 'this'}; render.backend 'closed_form' ignores "
+                      f"{'them' if len(ignored) > 1 else 'it'}", stacklevel=2)
+
+
+def _same_file(a: Optional[Path], b: Path) -> bool:
+    try:
+        return a is not None and os.path.samefile(a, b)
+    except OSError:
+        return False
+
+
 def _train(cfg: Config, run_dir: Path, resume: bool, progress: bool, stop_at: Optional[int],
-           rank: int, world: int, local_rank: int) -> Path:
+           rank: int, world: int, local_rank: int, config_file: Optional[Path] = None) -> Path:
     from ..progress import progress_bar
 
     device = _device(cfg, local_rank)
     last = run_dir / "checkpoints" / "last.pt"
     if rank == 0:
+        _warn_ignored_settings(cfg)
         existing = checkpoint_files(last.parent)
         if resume and not existing:
             raise RunError(f"--resume: {run_dir} has no checkpoint to continue from")
@@ -310,8 +351,9 @@ def _train(cfg: Config, run_dir: Path, resume: bool, progress: bool, stop_at: Op
             if diff is not None:
                 raise RunError(f"--resume: the {diff.split('.')[0]} settings differ from {run_dir}/config.yaml "
                                f"({diff}); an exact continuation needs the same config (only run.* may change)")
-        text = yaml.safe_dump(cfg.to_dict(), sort_keys=False)
-        atomic_write(run_dir / "config.yaml", lambda p: p.write_text(text))   # never torn: --resume reads it
+        if not _same_file(config_file, run_dir / "config.yaml"):   # --config is the user's: never written
+            text = yaml.safe_dump(cfg.to_dict(), sort_keys=False)
+            atomic_write(run_dir / "config.yaml", lambda p: p.write_text(text))   # never torn: --resume reads it
     if world > 1:
         dist.barrier()                                       # rank 0 checked the folder first
     if rank == 0:
@@ -375,7 +417,7 @@ def _train(cfg: Config, run_dir: Path, resume: bool, progress: bool, stop_at: Op
     bar = progress_bar(cfg.run.steps, initial=start, disable=not progress or rank != 0, unit="step", desc="train")
     images_per_step = cfg.train.batch_size * (cfg.train.random_views + (cfg.train.task == "reconstruction"))
     step, t_last, n_last = start, time.perf_counter(), start
-    clean, where = False, f"in step {start + 1}"
+    clean, interrupted, where = False, False, f"in step {start + 1}"
     try:
         while step < end:
             where = f"in step {step + 1}"
@@ -400,7 +442,7 @@ def _train(cfg: Config, run_dir: Path, resume: bool, progress: bool, stop_at: Op
             if world > 1:
                 dist.all_reduce(flag)                       # stop together
             if flag.item() > 0:
-                print(f"\ninterrupted: saving a checkpoint at step {step} (resume with --resume)")
+                interrupted = True
                 break
         clean = True
     except BaseException as e:                               # a failing step: save nothing, say so
@@ -440,6 +482,10 @@ def _train(cfg: Config, run_dir: Path, resume: bool, progress: bool, stop_at: Op
             if clean:
                 dist.barrier()                               # rank 0 has written the last checkpoint
             dist.destroy_process_group()
+    if interrupted and step < cfg.run.steps:                 # saved: now say so, and that it did not finish
+        held = f"{saved['path']} holds step {saved['step']}" if rank == 0 else "rank 0 saved the checkpoint"
+        raise Interrupted(f"after step {step} of {cfg.run.steps}: {held}; continue with the same command and "
+                          f"--resume", saved=held)
     return run_dir
 
 

@@ -18,6 +18,7 @@ palette with ``tRNS``, grey, grey + alpha, RGB, RGBA, 8 or 16 bits), JPEG and We
 from __future__ import annotations
 
 import io
+import warnings
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Optional, Tuple, Union
@@ -228,7 +229,9 @@ def decode_image(source: Union[PathLike, bytes], name: Optional[str] = None) -> 
     if not data:
         raise ImageRejected(_suffix_reason(label), f"{label}: the file is empty (0 bytes)")
     try:
-        im = Image.open(io.BytesIO(data))
+        with warnings.catch_warnings():          # 89-179 Mpx: Pillow only warns, naming no file; refuse
+            warnings.simplefilter("error", Image.DecompressionBombWarning)
+            im = Image.open(io.BytesIO(data))
     except UnidentifiedImageError:
         reason = _suffix_reason(label)
         what = {"corrupt": f"named like an image ({Path(label).suffix}) but its content is "
@@ -237,7 +240,7 @@ def decode_image(source: Union[PathLike, bytes], name: Optional[str] = None) -> 
                                       f"(supported: {', '.join(SUPPORTED_FORMATS)})",
                 "not_an_image": "not an image (its content is no known image format)"}[reason]
         raise ImageRejected(reason, f"{label}: {what}") from None
-    except Image.DecompressionBombError as err:
+    except (Image.DecompressionBombError, Image.DecompressionBombWarning) as err:
         raise ImageRejected("too_large", f"{label}: {err}") from None
     except Exception as err:  # noqa: BLE001 - a header Pillow cannot parse
         raise ImageRejected("corrupt", f"{label}: corrupt image header "
@@ -255,10 +258,12 @@ def decode_image(source: Union[PathLike, bytes], name: Optional[str] = None) -> 
     if im.width < 1 or im.height < 1:
         raise ImageRejected("corrupt", f"{label}: image has no pixels ({im.width}×{im.height})")
     try:
-        codes, has_alpha, bits, mode = _decode_pixels(im, data)
+        with warnings.catch_warnings():
+            warnings.simplefilter("error", Image.DecompressionBombWarning)
+            codes, has_alpha, bits, mode = _decode_pixels(im, data)
     except ImageRejected as err:
         raise ImageRejected(err.reason, f"{label}: {err.message}") from None
-    except Image.DecompressionBombError as err:
+    except (Image.DecompressionBombError, Image.DecompressionBombWarning) as err:
         raise ImageRejected("too_large", f"{label}: {err}") from None
     except Exception as err:  # noqa: BLE001 - truncated data, bad CRC, zlib errors, ...
         raise ImageRejected("corrupt", f"{label}: cannot decode the {fmt} data, the file is "

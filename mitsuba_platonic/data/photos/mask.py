@@ -193,7 +193,8 @@ def premultiplied_linear(decoded: DecodedImage, *, background: Optional[str] = N
         if not alpha.any():
             raise ImageRejected("fully_transparent",
                                 f"{name}: nothing is left of the alpha mask after cleaning "
-                                f"(frame lines and specks only); pass clean=False to keep them")
+                                f"(frame lines and specks only); turn the cleaning off to keep them "
+                                f"(data.clean: false in a config, clean=False in Python)")
         rgb = table[codes[..., :3]]
         rgb *= alpha[..., None]
     elif background == "white":
