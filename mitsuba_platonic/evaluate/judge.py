@@ -276,11 +276,13 @@ FIGURE_AZIMUTHS: Tuple[float, ...] = (0.0, 45.0, 90.0, 135.0, 180.0, -90.0)
 def judge(reconstruct: Callable[[torch.Tensor], torch.Tensor], train_photos: torch.Tensor,
           test_photos: torch.Tensor, settings: RenderSettings, files: Optional[Sequence[str]] = None,
           seed: int = 0, steps: int = CRITIC_STEPS, repeats: int = CRITIC_REPEATS,
-          train_views: int = TRAIN_VIEWS, n_examples: int = 0, batch: int = 32) -> Judgement:
+          train_views: int = TRAIN_VIEWS, n_examples: int = 0, batch: int = 32,
+          test_volumes: Optional[torch.Tensor] = None) -> Judgement:
     """Judge a reconstruction model on photos (module docstring): ``reconstruct`` maps ``(B, C, R, R)``
     photos to ``(B, C, N, N, N)`` volumes in the input frame; ``settings`` is the run's renderer.
     ``train_photos`` train the critics (their reconstructions seen from ``train_views`` random
-    azimuths each); ``test_photos`` (with their ``files``) are scored."""
+    azimuths each); ``test_photos`` (with their ``files``) are scored, through ``test_volumes``
+    where the caller has reconstructed them already."""
     train_photos = _check_images(train_photos, "train_photos")
     test_photos = _check_images(test_photos, "test_photos")
     files = [str(f) for f in files] if files is not None else [f"#{i}" for i in range(len(test_photos))]
@@ -293,7 +295,12 @@ def judge(reconstruct: Callable[[torch.Tensor], torch.Tensor], train_photos: tor
                               for i in range(0, len(x), batch)])
 
     train_renders = _random_renders(volumes_of(train_photos), train_views, settings, seed)
-    test_volumes = volumes_of(test_photos)
+    if test_volumes is None:
+        test_volumes = volumes_of(test_photos)
+    elif test_volumes.dim() != 5 or len(test_volumes) != len(test_photos):
+        raise UserError(f"test_volumes must be (M, C, N, N, N) with M = {len(test_photos)} test photos, got "
+                        f"{tuple(test_volumes.shape)}")
+    test_volumes = test_volumes.detach().float().cpu().clamp(0.0, 1.0)
     azimuths = sorted(set(SCORE_AZIMUTHS) | set(FIGURE_AZIMUTHS))
     table = _turntable(test_volumes, azimuths, settings, seed)               # (A, M, C, R, R)
     at = {a: table[i] for i, a in enumerate(azimuths)}

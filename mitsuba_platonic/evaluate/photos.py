@@ -375,16 +375,18 @@ def evaluate_photo_run(name: str, base: str, cfg: Any, reconstruct: Callable[[to
         methods.append((f"{base}: untrained", untrained()))
         if settings.model == "ea":
             methods.append((f"{base}: billboard", lambda x: torch.stack([billboard(i) for i in x])))
-    rows = [score_photos(m, fn(photos).cpu(), photos, files, settings, seed, n_examples if i == 0 else 0)
-            for i, (m, fn) in enumerate(methods)]
+    volumes = [fn(photos).detach().cpu() for _, fn in methods]
+    rows = [score_photos(m, v, photos, files, settings, seed, n_examples if i == 0 else 0)
+            for i, ((m, _), v) in enumerate(zip(methods, volumes))]
     folder = str(data_path if data_path is not None else cfg.data.path)
     section = PhotoSection(run=name, folder=folder, settings=settings, rows=rows)
     if len(train) and judge_steps:
-        for i, (m, fn) in enumerate(methods):
+        for i, ((m, fn), v) in enumerate(zip(methods, volumes)):
             if progress:
                 print(f"  judging {m} ({judge_steps} critic steps)", flush=True)
             section.judgements.append((m, judge(fn, train, photos, settings, [str(f) for f in files], seed=seed,
-                                                steps=judge_steps, n_examples=n_examples if i == 0 else 0)))
+                                                steps=judge_steps, n_examples=n_examples if i == 0 else 0,
+                                                test_volumes=v)))
     return section
 
 
