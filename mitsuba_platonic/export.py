@@ -26,6 +26,7 @@ from .errors import UserError
 from .fileio import atomic_write
 from .images import composite, linear_to_srgb, save_grid, to_hwc
 from .render import render
+from .render.grids import write_vol
 from .views import turntable
 from .volume import voxel_size, world_to_grid
 
@@ -37,17 +38,6 @@ __all__ = ["save_volume", "write_vol", "display_frames", "turntable_frames", "sa
            "EXPORT_EXTENSIONS"]
 
 PathLike = Union[str, Path]
-
-
-def write_vol(volume: torch.Tensor, path: PathLike) -> Path:
-    """Write a ``(C, N, N, N)`` volume in Mitsuba's ``.vol`` format (grid layout ``[Z, Y, X, C]``)."""
-    from .render.mitsuba_renderer import to_mitsuba_grid
-    from .render.variant import ensure_variant
-
-    mi = ensure_variant()
-    grid = to_mitsuba_grid(volume.detach().float().cpu()).contiguous().numpy()
-    mi.VolumeGrid(grid).write(str(path))
-    return Path(path)
 
 
 def _with_ext(stem: Path, ext: str) -> Path:

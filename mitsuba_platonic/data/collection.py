@@ -313,7 +313,7 @@ def _write_json(path: Path, data: Any) -> None:
 
 
 def _write_volume(folder: Path, i: int, spec: CollectionSpec, vol: torch.Tensor) -> None:
-    from ..export import write_vol
+    from ..render.grids import write_vol
     npz = folder / f"{i:05d}.npz"
     vol_file = folder / f"{i:05d}.vol"
     if not npz.exists():

@@ -1,8 +1,9 @@
-"""Renderers: one entry point, two backends (closed form | Mitsuba) that agree.
+"""Renderers: one entry point, two backends (closed form | Mitsuba) that agree, and the one dispatcher.
 
 ``render(volume, views, model, backend, **options)`` → ``(B, C, H, W)``, differentiable
 w.r.t. ``volume``. See :mod:`.closed_form` and :mod:`.marcher` (the batched Mitsuba/Dr.Jit ray
-marcher: one launch per call) for the maths.
+marcher: one launch per call) for the maths. :func:`render_with` (settings already checked) is
+the one place that dispatches to a backend; the backends import nothing of this module.
 """
 
 from __future__ import annotations
@@ -14,7 +15,8 @@ import torch
 from ..errors import UserError
 from ..views import validate_views
 from ..volume import validate_volume
-from .settings import BACKENDS, MODELS, RenderSettings, render_with
+from .closed_form import render_closed_form
+from .settings import BACKENDS, MODELS, RenderSettings, check_lanes
 
 __all__ = ["render", "render_with", "RenderSettings", "BACKENDS", "MODELS"]
 
@@ -57,3 +59,18 @@ def render(volume: torch.Tensor, views: torch.Tensor, model: str = "ea",
         raise UserError(f"seed: expected a non-negative int, got {seed!r}")
     return render_with(volume, views, settings, seed)
 
+
+def render_with(volume: torch.Tensor, views: torch.Tensor, settings: RenderSettings, seed: int = 0) -> torch.Tensor:
+    """Render ``(B, C, N, N, N)`` volumes from ``(B, 3)`` views with ``settings`` (inputs assumed valid).
+
+    ``seed`` drives the marcher's jitter and the path tracer's skies and samples.
+    """
+    if settings.backend == "closed_form":
+        return render_closed_form(volume, views.to(volume.device), settings.model, settings.filter, settings.lens)
+    if settings.backend == "mitsuba":
+        check_lanes(volume.shape[0], volume.shape[-1], settings.spp)   # before Dr.Jit: say why, up front
+        from .marcher import march       # imports Dr.Jit and sets Mitsuba's variant: on the first Mitsuba render
+        return march(volume, views, settings, seed)
+    from .physical import render_physical_ad    # the path tracer (its scene files, Mitsuba): on first use
+    return render_physical_ad(volume, views, lighting=settings.lighting, spp=settings.physical_spp,
+                              max_depth=settings.max_depth, seed=seed, filter=settings.filter)

@@ -25,15 +25,12 @@ import torch
 
 from ..views import camera_frames
 from ..volume import CHANNELS, voxel_size
+from .grids import to_mitsuba_grid
+from .scenes import load_scene
 from .settings import RenderSettings
 from .variant import ensure_variant, variant_device
 
 __all__ = ["to_mitsuba_grid", "render_mitsuba", "build_scene", "sensor_dict"]
-
-
-def to_mitsuba_grid(v: torch.Tensor) -> torch.Tensor:
-    """``(C, D, H, W)`` torch volume → ``(N, N, N, C)`` Mitsuba grid ``[Z, Y, X, C]`` (one copy)."""
-    return v.permute(1, 2, 3, 0).flip(0, 1)                   # [d, h, w, c] → [Z, Y, X, C]
 
 
 @dataclass
@@ -66,7 +63,6 @@ def build_scene(n: int, model: str, options: RenderSettings) -> Any:
     (VH, AO) or ``scenes/raymarch_ea.xml`` (EA) with empty grids of the right size."""
     mi = ensure_variant()
     import drjit as dr
-    from .scenes import load_scene
 
     grids = {"density": dr.zeros(mi.TensorXf, (n, n, n, 1))}
     if model == "ea":                                         # VH and AO carry no colour grid

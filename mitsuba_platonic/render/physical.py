@@ -52,18 +52,18 @@ from typing import Any, Dict, List, Optional, Sequence, Tuple
 import numpy as np
 import torch
 
-from ..views import camera_frames
-from ..volume import voxel_size
-from .mitsuba_renderer import to_mitsuba_grid
+from ..errors import UserError
+from ..views import camera_frames, validate_views
+from ..volume import validate_volume, voxel_size
+from .grids import V_MAX_PHYSICAL, extinction, to_mitsuba_grid
+from .mitsuba_renderer import _sensor_transform, differentiable_render
 from .scenes import load_scene
+from .settings import RenderSettings, check_lanes
 from .variant import ensure_variant, variant_device
 
 __all__ = ["Lighting", "sample_lighting", "render_physical", "render_physical_ad", "extinction",
            "V_MAX_PHYSICAL", "luminance", "auto_exposure", "sky_mean_luminance", "metered_exposure",
            "EXPOSURES"]
-
-#: Density cap of the physically based medium (σ_t Δ ≤ ln 1000).
-V_MAX_PHYSICAL = 1.0 - 1e-3
 
 #: Target of the auto-exposure: the 95th percentile luminance of covered pixels maps here.
 EXPOSURE_TARGET = 0.8
@@ -181,9 +181,21 @@ def metered_exposure(lighting: Lighting) -> float:
     return 1.0 / sky_mean_luminance(lighting)
 
 
-def extinction(density: torch.Tensor) -> torch.Tensor:
-    """σ_t = −ln(1 − min(v, v_max)) / Δ of a density volume ``(…, N, N, N)`` (differentiable)."""
-    return -torch.log1p(-density.clamp(0.0, V_MAX_PHYSICAL)) / voxel_size(density.shape[-1])
+def _alpha(density: torch.Tensor, views: torch.Tensor, filter: str) -> torch.Tensor:
+    """The alpha pass: the ray marcher's AO image of the (capped) ``density``, its inputs checked
+    as :func:`~mitsuba_platonic.render.render` checks them (this backend calls the marcher itself,
+    not the package's dispatcher, which dispatches to it)."""
+    try:
+        settings = RenderSettings.for_call("mitsuba", "ao", filter=filter)
+    except UserError:
+        raise
+    except ValueError as e:
+        raise UserError(str(e)) from None
+    validate_volume(density, "ao")
+    validate_views(views, batch=density.shape[0])
+    check_lanes(density.shape[0], density.shape[-1], settings.spp)   # before Dr.Jit: say why, up front
+    from .marcher import march       # imports Dr.Jit and sets Mitsuba's variant: on the first alpha pass
+    return march(density, views, settings, 0)
 
 
 def _medium_grids(v: torch.Tensor) -> Tuple[np.ndarray, np.ndarray]:
@@ -212,7 +224,6 @@ def render_physical(volume: torch.Tensor, views: torch.Tensor, lighting: Sequenc
     (times the exposure factor) plus alpha, and the exposure factor of each image: ``exposure``
     is one of :data:`EXPOSURES` (module docstring). Forward only (no gradients).
     """
-    from . import render  # the validating entry point, for the alpha pass
     if volume.dim() != 5 or volume.shape[1] != 4:
         raise ValueError(f"physically based rendering needs RGBA volumes (B, 4, N, N, N), "
                          f"got {tuple(volume.shape)}")
@@ -224,7 +235,7 @@ def render_physical(volume: torch.Tensor, views: torch.Tensor, lighting: Sequenc
         raise ValueError(f"exposure: expected one of {list(EXPOSURES)}, got {exposure!r}")
     mi = ensure_variant()
     volume = volume.detach().float().cpu()
-    alpha = render(volume[:, 3:].clamp(max=V_MAX_PHYSICAL), views, "ao", "mitsuba", filter=filter)
+    alpha = _alpha(volume[:, 3:].clamp(max=V_MAX_PHYSICAL), views, filter)
     images, exposures = [], []
     for b in range(volume.shape[0]):
         scene = _scene(mi, volume[b], views[b], lighting[b], spp, max_depth, filter)
@@ -275,9 +286,6 @@ def render_physical_ad(volume: torch.Tensor, views: torch.Tensor, lighting: str 
     collections are: it depends on the light only, so it is a true constant of the gradient). Returns ``(B, 4, N, N)`` premultiplied RGB + alpha; gradients flow to
     ``volume`` through σ_t, the albedo and the alpha. Only ``lighting='sunsky'`` is supported.
     """
-    from . import render
-    from .mitsuba_renderer import differentiable_render, _sensor_transform
-
     if lighting != "sunsky":
         raise ValueError(f"differentiable physical rendering supports lighting 'sunsky' only, got {lighting!r}")
     if volume.dim() != 5 or volume.shape[1] != 4:
@@ -287,7 +295,7 @@ def render_physical_ad(volume: torch.Tensor, views: torch.Tensor, lighting: str 
     n = volume.shape[-1]
     scene, params = _ad_scene(n, spp, max_depth, filter)
     σ = extinction(volume[:, 3:])
-    alpha = render(volume[:, 3:].clamp(0.0, V_MAX_PHYSICAL), views, "ao", "mitsuba", filter=filter)
+    alpha = _alpha(volume[:, 3:].clamp(0.0, V_MAX_PHYSICAL), views, filter)
     right, up, w = camera_frames(views)
     rng = np.random.default_rng(seed)
     images = []

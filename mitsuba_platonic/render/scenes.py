@@ -25,6 +25,7 @@ from pathlib import Path
 from typing import Any, Dict, Mapping, Optional, Sequence, Union
 
 from ..resources import scenes_folder
+from .grids import extinction, write_vol
 from .variant import ensure_variant
 
 __all__ = ["SCENES", "scene_path", "load_scene", "xml_value", "write_scene_grids"]
@@ -110,12 +111,9 @@ def write_scene_grids(volume: Any, folder: Union[str, Path]) -> Dict[str, Path]:
 
     ``density.vol`` (the density, raymarch*.xml), ``albedo.vol`` (the colour, EA volumes only) and
     ``sigma_t.vol`` (the path tracer's extinction, physical.xml; RGBA volumes only), each with
-    :func:`mitsuba_platonic.export.write_vol`. Returns ``{parameter: path}``.
+    :func:`mitsuba_platonic.render.grids.write_vol`. Returns ``{parameter: path}``.
     """
     import torch
-
-    from ..export import write_vol
-    from .physical import extinction
 
     v = torch.as_tensor(volume).detach().float().cpu()
     if v.dim() != 4 or v.shape[0] not in (1, 4):

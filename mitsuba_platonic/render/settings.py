@@ -1,9 +1,9 @@
-"""Renderer settings: one object for every backend, and the one place that dispatches to them.
+"""Renderer settings: one object for every backend (the dispatcher, ``render_with``, is the package's).
 
 :class:`RenderSettings` is what ``render()`` builds from its keyword options and what a
 config's ``render:`` section *is* (``mitsuba_platonic.config.RenderConfig``): backend, image
 formation, lookup filter, the ray marcher's speed/accuracy options and the path tracer's.
-:func:`render_with` renders a batch with it. A per-call ``seed`` (jittered sub-samples, random
+:func:`~mitsuba_platonic.render.render_with` renders a batch with it. A per-call ``seed`` (jittered sub-samples, random
 skies) is an argument of the call, not a setting: training draws a new one every step.
 """
 
@@ -15,11 +15,12 @@ from typing import Any, Dict, Optional, Tuple
 
 import torch
 
+from ..errors import UserError
 from ..views import CAMERAS, lens
 from ..volume import MODELS
 from .closed_form import FILTERS as GRID_SAMPLE_MODES
 
-__all__ = ["RenderSettings", "render_with", "BACKENDS", "MODELS", "FILTERS", "LIGHTINGS", "CAMERAS", "OPTIONS_OF"]
+__all__ = ["RenderSettings", "BACKENDS", "MODELS", "FILTERS", "LIGHTINGS", "CAMERAS", "OPTIONS_OF"]
 
 #: Backends: the paper's closed-form layers (reference), the batched Dr.Jit ray marcher, and
 #: Mitsuba's differentiable volumetric path tracer under natural light.
@@ -118,23 +119,6 @@ class RenderSettings:
         return cls(backend=backend, model=model, **options).validate()
 
 
-def render_with(volume: torch.Tensor, views: torch.Tensor, settings: RenderSettings, seed: int = 0) -> torch.Tensor:
-    """Render ``(B, C, N, N, N)`` volumes from ``(B, 3)`` views with ``settings`` (inputs assumed valid).
-
-    ``seed`` drives the marcher's jitter and the path tracer's skies and samples.
-    """
-    if settings.backend == "closed_form":
-        from .closed_form import render_closed_form
-        return render_closed_form(volume, views.to(volume.device), settings.model, settings.filter, settings.lens)
-    if settings.backend == "mitsuba":
-        check_lanes(volume.shape[0], volume.shape[-1], settings.spp)   # before Dr.Jit: say why, up front
-        from .marcher import march
-        return march(volume, views, settings, seed)
-    from .physical import render_physical_ad
-    return render_physical_ad(volume, views, lighting=settings.lighting, spp=settings.physical_spp,
-                              max_depth=settings.max_depth, seed=seed, filter=settings.filter)
-
-
 #: The most lanes (rays) one Dr.Jit launch holds: its indices are 32-bit.
 MAX_LANES = 2 ** 32 - 1
 
@@ -142,8 +126,6 @@ MAX_LANES = 2 ** 32 - 1
 def check_lanes(batch: int, n: int, spp: int) -> None:
     """Refuse a marcher call of more rays (``batch · n² · spp``) than one Dr.Jit launch holds
     (:data:`MAX_LANES`), naming ``spp`` and the largest that fits, before any work."""
-    from ..errors import UserError
-
     lanes = batch * n * n * spp
     if lanes > MAX_LANES:
         fits = MAX_LANES // (batch * n * n)

@@ -11,6 +11,7 @@ from __future__ import annotations
 import os
 from typing import Any, Optional
 
+from ..backend import check_backend
 from ..errors import UserError
 
 __all__ = ["VARIANTS", "ensure_variant", "variant_device"]
@@ -25,7 +26,7 @@ _NO_CUDA = ("unset {env} (or set it to llvm_ad_rgb) to render on the CPU, or run
 
 def _pick() -> str:
     forced = os.environ.get(ENV)
-    from .. import BACKEND
+    BACKEND = check_backend()        # the package's check (its verdict is cached on disk), not the package
     if forced:
         if forced not in VARIANTS:
             raise UserError(f"{ENV} must be one of {', '.join(VARIANTS)} (or unset: the best one here), "
