@@ -25,12 +25,16 @@ import pydantic
 import yaml
 from pydantic_core import SchemaValidator, core_schema
 
-from .data.collection import FORMATIONS
 from .data.photos import BACKGROUNDS, CROPS, PhotoOptions
 from .errors import UserError
 from .models import INITS, NORMS, RESOLUTIONS, UPSAMPLES
+from .render.settings import FORMATIONS
 from .render.settings import RenderSettings as RenderConfig
-from .views import DISTRIBUTIONS
+from .train.augment import AUGMENTS
+from .train.losses import LOSSES
+from .train.roll import ROLLS
+from .train.settings import DEVICES, MODES, MODES_3D, POSES, REC_TARGETS, SOURCES, TASKS
+from .views import DEFAULT_ELEVATION, DISTRIBUTIONS
 
 __all__ = ["Config", "RunConfig", "DataConfig", "ModelConfig", "RenderConfig", "TrainConfig",
            "load_config", "config_file", "config_from_dict", "apply_overrides", "ConfigError"]
@@ -209,14 +213,6 @@ class Config:
 
     def validate(self) -> "Config":
         """Check value ranges and combinations; raise :class:`ConfigError` naming the key."""
-        # the train package imports this module: its choice lists are imported here, not at the top
-        from .train.augment import AUGMENTS
-        from .train.data import SOURCES
-        from .train.losses import LOSSES
-        from .train.roll import ROLLS
-        from .train.run import DEVICES
-        from .train.trainer import MODES, MODES_3D, POSES, REC_TARGETS, TASKS
-        from .views import DEFAULT_ELEVATION
         _typed(self.to_dict())                               # a config built in code: its types, finite numbers
         _folder_name("run.name", self.run.name)
         _choice("run.device", self.run.device, DEVICES)

@@ -238,7 +238,7 @@ def parameter_count(cfg: Config) -> int:
     """Parameters of every network training ``cfg`` builds (E, G, the pose head, D and D3), counted
     on PyTorch's meta device: nothing is allocated, so a size that cannot fit is counted too."""
     from .models import Discriminator, VolumeDiscriminator
-    from .train.trainer import MODES_3D
+    from .train.settings import MODES_3D
 
     with torch.device("meta"):
         nets = [Model.from_config(cfg, init=False), Discriminator(critic_config(cfg))]

@@ -50,15 +50,14 @@ from ..errors import Interrupted, UserError
 from ..fileio import atomic_write
 from ..images import save_exr, save_png, to_hwc, to_png_rgba
 from ..render import RenderSettings, render
-from ..volume import CHANNELS, MODELS
+from ..render.settings import FORMATIONS, LIGHTINGS
+from ..volume import CHANNELS
 from . import shapes
 
 __all__ = ["CollectionSpec", "make_collection", "load_manifest", "FORMATIONS", "RENDERERS",
            "default_envmaps", "check_envmap"]
 
-FORMATIONS = MODELS + ("physical",)   # the renderer's image formations, or path-traced
 RENDERERS = ("closed_form", "mitsuba")
-LIGHTINGS = ("sunsky", "envmap", "mixed")
 SUBFOLDERS = ("images", "exr", "volumes")
 RECORDS = ("collection.json", "records.jsonl", "manifest.json")
 #: What atomic_write names the temporaries of a collection's files: ``.00000_00.tmp<pid>.png``, and

@@ -20,13 +20,15 @@ from ..views import CAMERAS, lens
 from ..volume import MODELS
 from .closed_form import FILTERS as GRID_SAMPLE_MODES
 
-__all__ = ["RenderSettings", "BACKENDS", "MODELS", "FILTERS", "LIGHTINGS", "CAMERAS", "OPTIONS_OF"]
+__all__ = ["RenderSettings", "BACKENDS", "MODELS", "FILTERS", "LIGHTINGS", "FORMATIONS", "CAMERAS", "OPTIONS_OF"]
 
 #: Backends: the paper's closed-form layers (reference), the batched Dr.Jit ray marcher, and
 #: Mitsuba's differentiable volumetric path tracer under natural light.
 BACKENDS = ("closed_form", "mitsuba", "physical")
 FILTERS = tuple(GRID_SAMPLE_MODES)                          # trilinear, nearest
 LIGHTINGS = ("sunsky", "envmap", "mixed")
+#: How a collection's images are formed: the renderer's image formations, or path-traced (make-dataset).
+FORMATIONS = MODELS + ("physical",)
 
 #: Which settings each backend reads (besides backend and model); any other is an error in ``render``.
 OPTIONS_OF: Dict[str, tuple] = {

@@ -21,11 +21,9 @@ import torch
 from ..config import Config
 from ..errors import UserError
 from ..volume import CHANNELS
+from .settings import MODES_3D, SOURCES  # noqa: F401  (SOURCES: the choice list, also named here)
 
 __all__ = ["TrainingData", "load_training_data", "collection_folder", "SOURCES"]
-
-#: data.source: a procedural collection rendered by make-dataset, or a folder of photos.
-SOURCES = ("procedural", "folder")
 
 
 @dataclass
@@ -78,7 +76,6 @@ def _validate_spec(spec: Any) -> None:
 
 def _procedural(cfg: Config, progress: bool) -> TrainingData:
     from ..data.collection import CollectionSpec, make_collection, load_manifest
-    from .trainer import MODES_3D
     from ..data.photos import decode_image, prepare_image
 
     d = cfg.data

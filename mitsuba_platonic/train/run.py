@@ -65,13 +65,11 @@ from ..model import Model
 from ..views import front_view, turntable
 from .data import load_training_data
 from .folder import RUN_MARKER, claim_run_folder
+from .settings import DEVICES  # noqa: F401  (the choice list, also named here)
 from .trainer import Trainer
 
 __all__ = ["train", "load_run", "RunError", "save_checkpoint", "load_checkpoint", "load_latest_checkpoint",
            "run_lock", "SAMPLE_VIEWS", "read_run_config", "DEVICES", "write_samples", "RUN_MARKER"]
-
-#: run.device: 'auto' picks CUDA when available.
-DEVICES = ("auto", "cpu", "cuda")
 
 
 def _device(cfg: Config, local_rank: int) -> torch.device:

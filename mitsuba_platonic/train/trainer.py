@@ -97,20 +97,9 @@ from .losses import (colour_tv, d_loss, g_loss, gradient_penalty, hard_accuracy_
                      soft_accuracy_counts)
 from .renderer import make_renderer
 from .roll import input_frame_roll, roll
+from .settings import MODES, MODES_3D, POSES, REC_TARGETS, TASKS  # noqa: F401  (the choice lists, also named here)
 
 __all__ = ["Trainer", "TASKS", "MODES", "MODES_3D", "REC_TARGETS", "POSES", "ring_views"]
-
-#: What E/G learn: reconstruct the input image, or generate from z ~ N(0, I).
-TASKS = ("reconstruction", "generation")
-#: Which critics train G (module docstring).
-MODES = ("platonic", "platonic3d", "gan3d", "prgan")
-#: Modes that learn from ground-truth volumes (a 3D critic D3).
-MODES_3D = ("platonic3d", "gan3d")
-#: train.rec_target: the reconstruction term compares the input image with v's render at the
-#: input view, or v with the input image's ground-truth volume (3D modes)
-REC_TARGETS = ("image", "volume")
-#: train.pose: G's volume in the input camera's frame, or upright and tilted by an elevation E reads
-POSES = ("input", "elevation")
 
 
 def _in_frames(volumes: torch.Tensor, views: torch.Tensor) -> torch.Tensor:
