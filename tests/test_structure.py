@@ -1,0 +1,140 @@
+"""The package's imports flow one way (issue 26): no import cycle, read from the source.
+
+Every ``import`` and ``from ... import`` in ``mitsuba_platonic/`` is parsed with :mod:`ast`, those
+inside functions too (a function-level import that closes a loop is a cycle all the same: it only
+hides it until the function runs). An edge A → B means A imports B; ``from .pkg import name`` is an
+edge to ``pkg.name`` where that is a module, else to ``pkg``. A package's ``__init__`` imported by
+its own children is not counted (the children of a package that re-exports them are no loop of design),
+as in ``/work/shared/tools/import_cycles.py``. Static, so nothing is imported.
+"""
+
+from __future__ import annotations
+
+import ast
+from pathlib import Path
+from typing import Dict, List, NamedTuple, Set
+
+PACKAGE = Path(__file__).resolve().parents[1] / "mitsuba_platonic"
+
+
+class Import(NamedTuple):
+    source: str            # the importing module
+    target: str            # the imported module
+    line: int
+    lazy: bool             # inside a function
+
+
+def modules(root: Path = PACKAGE) -> Dict[str, Path]:
+    """``{dotted module name: file}`` of every module under ``root`` (a package is its ``__init__``)."""
+    out = {}
+    for f in sorted(root.rglob("*.py")):
+        parts = list(f.relative_to(root.parent).with_suffix("").parts)
+        if parts[-1] == "__init__":
+            parts = parts[:-1]
+        out[".".join(parts)] = f
+    return out
+
+
+def imports(mods: Dict[str, Path]) -> List[Import]:
+    """Every import of one module of ``mods`` by another, with its line and whether it is in a function."""
+    found: List[Import] = []
+    for name, path in mods.items():
+        is_package = path.name == "__init__.py"
+        tree = ast.parse(path.read_text(), str(path))
+        lazy_nodes: Set[int] = set()
+        for fn in ast.walk(tree):
+            if isinstance(fn, (ast.FunctionDef, ast.AsyncFunctionDef, ast.Lambda)):
+                lazy_nodes.update(id(n) for n in ast.walk(fn) if n is not fn)
+        for node in ast.walk(tree):
+            targets: List[str] = []
+            if isinstance(node, ast.ImportFrom):
+                if node.level:
+                    base = name.split(".") if is_package else name.split(".")[:-1]
+                    base = base[:len(base) - (node.level - 1)]
+                    where = ".".join(base + ([node.module] if node.module else []))
+                else:
+                    where = node.module or ""
+                for alias in node.names:
+                    full = f"{where}.{alias.name}"
+                    targets.append(full if full in mods else where)
+            elif isinstance(node, ast.Import):
+                targets = [a.name for a in node.names]
+            for target in targets:
+                edge = Import(name, target, node.lineno, id(node) in lazy_nodes)
+                if target in mods and target != name and not name.startswith(target + ".") and edge not in found:
+                    found.append(edge)
+    return found
+
+
+def cycles(edges: List[Import]) -> List[List[str]]:
+    """The strongly connected sets of two or more modules (Tarjan), each sorted."""
+    graph: Dict[str, Set[str]] = {}
+    for e in edges:
+        graph.setdefault(e.source, set()).add(e.target)
+        graph.setdefault(e.target, set())
+    index: Dict[str, int] = {}
+    low: Dict[str, int] = {}
+    stack: List[str] = []
+    on_stack: Set[str] = set()
+    found: List[List[str]] = []
+
+    def strong(v: str) -> None:
+        index[v] = low[v] = len(index)
+        stack.append(v)
+        on_stack.add(v)
+        for w in sorted(graph[v]):
+            if w not in index:
+                strong(w)
+                low[v] = min(low[v], low[w])
+            elif w in on_stack:
+                low[v] = min(low[v], index[w])
+        if low[v] == index[v]:
+            component = []
+            while True:
+                w = stack.pop()
+                on_stack.discard(w)
+                component.append(w)
+                if w == v:
+                    break
+            if len(component) > 1:
+                found.append(sorted(component))
+
+    for v in sorted(graph):
+        if v not in index:
+            strong(v)
+    return found
+
+
+def describe(component: List[str], edges: List[Import]) -> str:
+    """A cycle's modules and the imports that bind them, ``a.py:12 → b`` (``(in a function)`` where lazy)."""
+    inside = set(component)
+    lines = [f"import cycle of {len(component)} modules: {', '.join(component)}"]
+    for e in sorted(edges, key=lambda e: (e.source, e.line)):
+        if e.source in inside and e.target in inside:
+            path = modules()[e.source].relative_to(PACKAGE.parent)
+            lines.append(f"  {path}:{e.line} → {e.target}" + ("  (in a function)" if e.lazy else ""))
+    return "\n".join(lines)
+
+
+def test_the_package_has_no_import_cycle():
+    edges = imports(modules())
+    found = cycles(edges)
+    report = "\n".join(describe(c, edges) for c in found)
+    print(report)
+    assert not found, "\n" + report
+
+
+def test_a_cycle_is_found_and_named(tmp_path):
+    """The check itself: a module importing, inside a function, one that imports it is a cycle,
+    named with the file and line of each import."""
+    pkg = tmp_path / "pkg"
+    (pkg / "sub").mkdir(parents=True)
+    (pkg / "__init__.py").write_text("")
+    (pkg / "sub" / "__init__.py").write_text("from .low import x\n")
+    (pkg / "sub" / "low.py").write_text("x = 1\n\ndef f():\n    from ..high import y\n    return y\n")
+    (pkg / "high.py").write_text("from .sub.low import x\ny = x\n")
+    edges = imports(modules(pkg))
+    assert Import("pkg.high", "pkg.sub.low", 1, False) in edges
+    assert Import("pkg.sub.low", "pkg.high", 4, True) in edges
+    assert cycles(edges) == [["pkg.high", "pkg.sub.low"]]
+    assert cycles([e for e in edges if not e.lazy]) == []
