@@ -5,12 +5,15 @@ A checkpoint (``RUN/checkpoints/last.pt``, ``RUN/checkpoints/step_NNNNNNN.pt``) 
 
     version   CHECKPOINT_VERSION (a file of another version is refused with one line)
     step      training steps done
-    config    the run's resolved config (``Config.to_dict()``)
+    config    the run's resolved config (``Config.to_dict()``: a plain mapping of sections)
     trainer   the trainer's state: ``nets`` (E, G, D and D3 in one state dict, keys ``E.*``,
               ``G.*``, ...) and the optimisers' states
 
 Training writes checkpoints (:mod:`mitsuba_platonic.train.run`); inference reads them
-(:meth:`mitsuba_platonic.model.Model.from_checkpoint`) without the training code.
+(:meth:`mitsuba_platonic.model.Model.from_checkpoint`) without the training code. This module is
+the file format alone: it stores and returns plain data and imports no config; the config saved
+in a checkpoint becomes a :class:`~mitsuba_platonic.config.Config`, and its weights a model, in
+:mod:`mitsuba_platonic.loading`, above the config and the model.
 
 Loading runs no code: every reader goes through :func:`load_checkpoint`, ``torch.load(...,
 weights_only=True)``, whose unpickler builds tensors and plain data (dicts, lists, tuples,
@@ -36,13 +39,12 @@ from typing import Any, Dict, List, Optional, Tuple, Union
 
 import torch
 
-from .config import Config, ConfigError, config_from_dict
 from .errors import UserError
 from .fileio import atomic_write
 
 __all__ = ["RunError", "UnsafeCheckpoint", "CHECKPOINT_VERSION", "Checkpoint", "save_checkpoint",
            "load_checkpoint", "checkpoint_files", "load_latest_checkpoint", "read_checkpoint", "convert_checkpoint",
-           "load_weights", "saved_config", "config_difference", "RESUME_SECTIONS"]
+           "load_weights", "saved_config_dict"]
 
 CHECKPOINT_VERSION = 1
 
@@ -292,34 +294,17 @@ def _mismatch(e: BaseException, limit: int = 240) -> str:
     return first + (f" (and {len(detail) - 1} more)" if len(detail) > 1 else "")
 
 
-def saved_config(state: Dict[str, Any], path: Path, run_name: Optional[str] = None) -> Config:
-    """The validated config saved in a checkpoint (``run.name`` replaced by ``run_name`` if given);
-    :class:`RunError` naming ``path`` if it is not a mapping of sections or not valid."""
+def saved_config_dict(state: Dict[str, Any], path: Path, run_name: Optional[str] = None) -> Dict[str, Any]:
+    """The config saved in a checkpoint as the plain mapping it is stored as (``run.name`` replaced
+    by ``run_name`` if given; not validated: :func:`mitsuba_platonic.loading.saved_config` builds the
+    :class:`~mitsuba_platonic.config.Config`); :class:`RunError` naming ``path`` if it is not a
+    mapping of sections."""
     if not isinstance(state["config"], dict) or not isinstance(state["config"].get("run") or {}, dict):
         raise RunError(f"{path}: the config saved in this checkpoint is not a mapping of sections")
     saved = dict(state["config"])
     if run_name is not None:
         saved["run"] = {**(saved.get("run") or {}), "name": run_name}
-    try:
-        return config_from_dict(saved)
-    except ConfigError as e:
-        raise RunError(f"{path}: the config saved in this checkpoint is not valid: {e}") from None
-
-
-#: The config sections a run's networks and exact continuation depend on (only ``run.*`` may change).
-RESUME_SECTIONS = ("data", "model", "render", "train")
-
-
-def config_difference(saved: Config, current: Config, sections: Tuple[str, ...] = RESUME_SECTIONS,
-                      there: str = "saved", here: str = "now") -> Optional[str]:
-    """The first key of ``sections`` whose value differs between two configs, worded for a message
-    (``model.width: 4 saved, 8 now``), else None."""
-    a, b = saved.to_dict(), current.to_dict()
-    for section in sections:
-        for key in list(a[section]) + [k for k in b[section] if k not in a[section]]:
-            if a[section].get(key) != b[section].get(key):
-                return f"{section}.{key}: {a[section].get(key)!r} {there}, {b[section].get(key)!r} {here}"
-    return None
+    return saved
 
 
 def checkpoint_files(folder: Path) -> List[Path]:
@@ -360,9 +345,11 @@ def load_latest_checkpoint(folder: Path, device: torch.device = torch.device("cp
 
 @dataclass
 class Checkpoint:
-    """A read checkpoint: its validated config, its raw state, the file and the step."""
+    """A read checkpoint: its saved config (the plain mapping, ``run.name`` set to the run folder's
+    name; :func:`mitsuba_platonic.loading.checkpoint_config` validates it), its raw state, the file
+    and the step."""
 
-    config: Config
+    config: Dict[str, Any]
     state: Dict[str, Any]
     path: Path
     step: int
@@ -371,8 +358,9 @@ class Checkpoint:
 def read_checkpoint(source: Union[str, Path], device: Union[str, torch.device] = "cpu") -> Checkpoint:
     """A run folder (its newest loadable checkpoint) or one checkpoint file → :class:`Checkpoint`.
 
-    The config is the one saved in the checkpoint (``config.yaml`` is not read), with
-    ``run.name`` set to the run folder's name; a bad one is a :class:`RunError` naming the file.
+    The config is the one saved in the checkpoint (``config.yaml`` is not read), as a plain
+    mapping with ``run.name`` set to the run folder's name (one that is no mapping of sections is a
+    :class:`RunError` naming the file; :func:`mitsuba_platonic.loading.checkpoint_config` validates it).
     """
     source, device = Path(source), torch.device(device)
     if source.is_file():
@@ -388,7 +376,7 @@ def read_checkpoint(source: Union[str, Path], device: Union[str, torch.device] =
             raise RunError(f"{source} has no checkpoints/last.pt: not a training run, or not started")
         state, path = load_latest_checkpoint(source / "checkpoints", device)
         run_dir = source
-    cfg = saved_config(state, path, run_name=run_dir.resolve().name)   # the folder is the run
+    cfg = saved_config_dict(state, path, run_name=run_dir.resolve().name)   # the folder is the run
     return Checkpoint(cfg, state, path, int(state["step"]))
 
 

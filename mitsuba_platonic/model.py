@@ -7,6 +7,11 @@ learnt. It is built from a config (a fresh model, which the trainer trains) or r
 checkpoint (:meth:`Model.from_checkpoint`, no training code involved), and it turns images into
 volumes (:meth:`Model.reconstruct`) or draws volumes from the prior (:meth:`Model.generate`).
 
+This module sits below the config and the checkpoint reader: a ``cfg`` argument is a
+:class:`~mitsuba_platonic.config.Config`, read by its sections' attributes, never imported here;
+reading a checkpoint is :mod:`mitsuba_platonic.loading`'s, and whether a config's networks fit
+in memory :mod:`mitsuba_platonic.train.fits`'.
+
 A PrGAN-style model (``train.mode: prgan``) takes the view as part of its latent: G's input is
 z followed by a one-hot code of one of :data:`RING_VIEWS` views on a ring (:meth:`Model.code`).
 Its volumes are in the frame of ring view 0, which is the input view ω₀ for reconstruction, so
@@ -26,31 +31,30 @@ from __future__ import annotations
 
 import dataclasses
 from pathlib import Path
-from typing import Optional, Tuple, Union
+from typing import Any, Optional, Union
 
 import torch
 import torch.nn.functional as F
 from torch import nn
 
-from .config import Config
 from .errors import UserError
 from .models import Encoder, Generator, NetConfig, PoseHead, init_weights
 from .render.closed_form import tilt
 from .render.settings import RenderSettings
 from .volume import CHANNELS
 
-__all__ = ["Model", "net_config", "critic_config", "RING_VIEWS", "view_codes", "parameter_count", "check_model_fits"]
+__all__ = ["Model", "net_config", "critic_config", "RING_VIEWS", "view_codes"]
 
 #: Views of the PrGAN-style baseline: azimuths k · 360°/8 on one elevation ring (Gadelha et al.).
 RING_VIEWS = 8
 
 
-def view_codes(cfg: Config) -> int:
+def view_codes(cfg: Any) -> int:
     """Length of the view code G gets next to z: :data:`RING_VIEWS` for ``train.mode: prgan``, else 0."""
     return RING_VIEWS if cfg.train.mode == "prgan" else 0
 
 
-def net_config(cfg: Config) -> NetConfig:
+def net_config(cfg: Any) -> NetConfig:
     """The networks' shapes for a config: its model section, channels from its image formation."""
     channels = CHANNELS[cfg.render.model]
     return NetConfig(resolution=cfg.model.resolution, volume_channels=channels, image_channels=channels,
@@ -59,7 +63,7 @@ def net_config(cfg: Config) -> NetConfig:
                      view_codes=view_codes(cfg), pose=cfg.train.pose == "elevation").validate()
 
 
-def critic_config(cfg: Config) -> NetConfig:
+def critic_config(cfg: Any) -> NetConfig:
     """The critics' (D's, D3's) shapes: :func:`net_config` at ``model.critic_width`` when it is set."""
     return dataclasses.replace(net_config(cfg), width=cfg.model.critic_width or cfg.model.width)
 
@@ -89,7 +93,7 @@ class Model(nn.Module):
     # -- building ---------------------------------------------------------------------------
 
     @classmethod
-    def from_config(cls, cfg: Config, init: bool = True) -> "Model":
+    def from_config(cls, cfg: Any, init: bool = True) -> "Model":
         """A fresh model for ``cfg`` (initialised from torch's global generator unless ``init=False``)."""
         return cls(net_config(cfg), cfg.render, cfg.train.task, init=init)
 
@@ -101,28 +105,16 @@ class Model(nn.Module):
         Raises :class:`~mitsuba_platonic.checkpoint.RunError` (one line naming the file) if there
         is no loadable checkpoint, the safe loader refused one (``UnsafeCheckpoint``), its saved
         config is not valid or its weights do not fit that config's networks.
+
+        The moving average of E's and G's weights is loaded when the run kept one (``train.ema``).
+        Reading is :func:`mitsuba_platonic.loading.load_model`'s (it validates the saved config, so
+        it sits above the config and this module); this is its entry point on the class.
         """
-        from .checkpoint import read_checkpoint
+        # loading sits above the model (the config it builds does): imported when a checkpoint is
+        # read, and handed this class, so it imports no model and there is no cycle
+        from .loading import load_model
 
-        return cls.from_read(read_checkpoint(source, device))
-
-    @classmethod
-    def from_read(cls, ckpt) -> "Model":
-        """The model of a :class:`~mitsuba_platonic.checkpoint.Checkpoint` already read: the moving
-        average of E's and G's weights when the run kept one (``train.ema``), else E and G as trained."""
-        from .checkpoint import load_weights
-
-        trainer = ckpt.state["trainer"]
-        nets = trainer["nets"]
-        model = cls.from_config(ckpt.config, init=False)
-        what = "the networks of the config saved with it"           # weights and config from one file
-        if "ema" in trainer:
-            load_weights(model, trainer["ema"], ckpt.path, what)
-        else:
-            load_weights(model, {k: v for k, v in nets.items() if k.startswith(("E.", "G.", "P."))}, ckpt.path, what)
-        model.step, model.origin = ckpt.step, ckpt.path
-        device = next(iter(nets.values())).device if nets else torch.device("cpu")
-        return model.to(device)
+        return load_model(cls, source, device)
 
     # -- what inference needs ---------------------------------------------------------------
 
@@ -223,70 +215,3 @@ class Model(nn.Module):
             return fn()
         finally:
             self.train(was)
-
-
-# --------------------------------------------------------------------------- sizes that cannot fit
-
-#: Bytes each parameter takes while training, at least: fp32 weights, gradients and Adam's two moments.
-TRAINING_BYTES_PER_PARAMETER = 16
-
-#: The model keys that size the networks, which a refusal names (resolution is a short choice list).
-SIZE_KEYS = ("latent", "width", "critic_width", "encoder_hidden")
-
-
-def parameter_count(cfg: Config) -> int:
-    """Parameters of every network training ``cfg`` builds (E, G, the pose head, D and D3), counted
-    on PyTorch's meta device: nothing is allocated, so a size that cannot fit is counted too."""
-    from .models import Discriminator, VolumeDiscriminator
-    from .train.settings import MODES_3D
-
-    with torch.device("meta"):
-        nets = [Model.from_config(cfg, init=False), Discriminator(critic_config(cfg))]
-        if cfg.train.mode in MODES_3D:
-            nets.append(VolumeDiscriminator(critic_config(cfg)))
-    return sum(p.numel() for net in nets for p in net.parameters())
-
-
-def _largest_size_key(cfg: Config) -> str:
-    """The size key of ``cfg.model`` whose default would shrink the networks most."""
-    from .config import ModelConfig
-
-    count, best = parameter_count(cfg), ("resolution", 0)
-    for key in SIZE_KEYS:
-        default = getattr(ModelConfig(), key)
-        if getattr(cfg.model, key) != default:
-            smaller = dataclasses.replace(cfg, model=dataclasses.replace(cfg.model, **{key: default}))
-            saved = count - parameter_count(smaller)
-            if saved > best[1]:
-                best = (key, saved)
-    return best[0]
-
-
-def _available(device: torch.device) -> Tuple[Optional[int], str]:
-    """(free bytes on ``device``, where the number comes from)."""
-    if device.type == "cuda":
-        return torch.cuda.mem_get_info(device)[0], f"free memory of {device}"
-    from .compare import available_memory
-    return available_memory()
-
-
-def check_model_fits(cfg: Config, device: Union[str, torch.device, None] = None) -> None:
-    """Raise :class:`~mitsuba_platonic.config.ConfigError` naming the model key to lower if the
-    networks of ``cfg`` cannot be trained in the memory free on ``device`` (default: the one
-    ``run.device`` picks): their parameters alone, at :data:`TRAINING_BYTES_PER_PARAMETER` bytes
-    each, exceed it (a lower bound of the need)."""
-    from .config import ConfigError
-
-    if device is None:
-        cuda = cfg.run.device == "cuda" or (cfg.run.device == "auto" and torch.cuda.is_available())
-        device = "cuda" if cuda and torch.cuda.is_available() else "cpu"
-    count = parameter_count(cfg)
-    need = count * TRAINING_BYTES_PER_PARAMETER
-    have, source = _available(torch.device(device))
-    if have is None or need <= have:
-        return
-    key = _largest_size_key(cfg)
-    raise ConfigError(f"model.{key}: {getattr(cfg.model, key)} makes networks of {count:.3g} parameters, "
-                      f"which need at least {need / 1e9:.3g} GB to train ({TRAINING_BYTES_PER_PARAMETER} bytes each: "
-                      f"weights, gradients, Adam's moments), more than the {max(have, 0) / 1e9:.1f} GB available "
-                      f"({source}); lower model.{key}")

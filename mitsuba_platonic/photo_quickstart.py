@@ -62,7 +62,8 @@ def _photo_quickstart(photos: Path, out: Path, steps: Optional[int], progress: b
                       stage: Dict[str, str]) -> Path:
     """:func:`photo_quickstart`, telling ``stage["now"]`` what it is doing."""
     from .evaluate.report import evaluate_runs
-    from .model import Model, check_model_fits
+    from .model import Model
+    from .train.fits import check_model_fits
     from .train.run import train
 
     if not photos.is_dir():

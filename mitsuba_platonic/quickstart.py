@@ -27,8 +27,9 @@ from .config import load_config
 from .errors import Interrupted
 from .evaluate.protocol import held_out_scores
 from .export import export_held_out
-from .model import Model, check_model_fits
+from .model import Model
 from .resources import config_path
+from .train.fits import check_model_fits
 
 __all__ = ["quickstart", "stopped"]
 

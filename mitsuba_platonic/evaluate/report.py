@@ -37,7 +37,10 @@ from typing import Any, Callable, Dict, List, Optional, Sequence, Tuple, Union
 import numpy as np
 import torch
 
+from ..checkpoint import read_checkpoint
 from ..errors import UserError
+from ..loading import checkpoint_config, model_from_checkpoint
+from ..model import Model
 from ..render import render
 from ..views import turntable
 from . import metrics as M
@@ -252,17 +255,15 @@ def write_report(rows: Sequence[Row], out_dir: PathLike, notes: Sequence[str] = 
 def _load(run_dir: Path) -> Tuple[Any, Callable[[torch.Tensor], torch.Tensor], Callable[[], Callable], int]:
     """A trained run: (config, reconstruct(images) → volumes, a factory of the untrained
     reconstruct function, step), through :class:`mitsuba_platonic.model.Model`."""
-    from ..checkpoint import read_checkpoint
-    from ..model import Model
-
     ckpt = read_checkpoint(run_dir)
-    model = Model.from_read(ckpt)
+    cfg = checkpoint_config(ckpt)
+    model = model_from_checkpoint(Model, ckpt, cfg)
 
     def untrained_model():
-        torch.manual_seed(ckpt.config.run.seed)            # the run's seed, fresh initialisation
-        return Model.from_config(ckpt.config).reconstruct
+        torch.manual_seed(cfg.run.seed)                    # the run's seed, fresh initialisation
+        return Model.from_config(cfg).reconstruct
 
-    return ckpt.config, model.reconstruct, untrained_model, ckpt.step
+    return cfg, model.reconstruct, untrained_model, ckpt.step
 
 
 def _held_out(cfg, run_dir: Path, data_cache: Optional[PathLike], progress: bool):

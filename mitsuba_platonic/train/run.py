@@ -55,15 +55,17 @@ import torch
 import torch.distributed as dist
 import yaml
 
-from ..checkpoint import (CHECKPOINT_VERSION, RunError, checkpoint_files, config_difference, load_checkpoint,
-                          load_latest_checkpoint, load_weights, read_checkpoint, save_checkpoint, saved_config)
+from ..checkpoint import (CHECKPOINT_VERSION, RunError, checkpoint_files, load_checkpoint, load_latest_checkpoint,
+                          load_weights, read_checkpoint, save_checkpoint)
 from ..config import Config, ConfigError, config_from_dict
 from ..errors import Interrupted, UserError
 from ..fileio import atomic_write, remove_temporaries
 from ..images import composite, linear_to_srgb, save_grid, to_hwc
+from ..loading import checkpoint_config, config_difference, model_from_checkpoint, saved_config
 from ..model import Model
 from ..views import front_view, turntable
 from .data import load_training_data
+from .fits import check_model_fits
 from .folder import RUN_MARKER, claim_run_folder
 from .settings import DEVICES  # noqa: F401  (the choice list, also named here)
 from .trainer import Trainer
@@ -233,8 +235,6 @@ def train(cfg: Config, resume: bool = False, progress: bool = True,
     that step as if finished (a checkpoint is saved): used to test exact resume. Ctrl-C finishes
     the current step, saves a checkpoint and raises :class:`~mitsuba_platonic.errors.Interrupted`.
     """
-    from ..model import check_model_fits
-
     rank, world, local_rank = _distributed()
     check_model_fits(cfg, _device(cfg, local_rank))         # before any data or run folder is written
     run_dir = Path(cfg.run.out_dir) / cfg.run.name
@@ -530,4 +530,5 @@ def load_run(run_dir: Path, device: str = "cpu") -> Tuple[Config, Model, int]:
     """A trained run's config, :class:`~mitsuba_platonic.model.Model` and step (no training data
     is loaded): :func:`~mitsuba_platonic.checkpoint.read_checkpoint` of the run folder."""
     ckpt = read_checkpoint(Path(run_dir), device)
-    return ckpt.config, Model.from_read(ckpt), ckpt.step
+    cfg = checkpoint_config(ckpt)
+    return cfg, model_from_checkpoint(Model, ckpt, cfg), ckpt.step
