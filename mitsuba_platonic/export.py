@@ -24,8 +24,8 @@ import torch.nn.functional as F
 
 from .errors import UserError
 from .fileio import atomic_write
+from .frames import display_frames, save_gif, turntable_frames
 from .images import composite, linear_to_srgb, save_grid, to_hwc
-from .render import render
 from .render.grids import write_vol
 from .views import turntable
 from .volume import voxel_size, world_to_grid
@@ -55,35 +55,6 @@ def save_volume(volume: torch.Tensor, stem: PathLike) -> List[Path]:
     atomic_write(npz, lambda tmp: np.savez_compressed(tmp, volume=array))
     atomic_write(vol, lambda tmp: write_vol(volume, tmp))
     return [npz, vol]
-
-
-def display_frames(volume: torch.Tensor, model: str, views: torch.Tensor, filter: str = "trilinear",
-                   background: float = 1.0) -> List[np.ndarray]:
-    """Closed-form renders of ``(C, N, N, N)`` from ``views`` → sRGB ``(H, W, 3)`` images over ``background``."""
-    n = len(views)
-    with torch.no_grad():
-        images = render(volume.detach().float().cpu()[None].expand(n, -1, -1, -1, -1).contiguous(),
-                        views, model, "closed_form", filter=filter)
-    return [linear_to_srgb(composite(to_hwc(i), background=background)) for i in images]
-
-
-def turntable_frames(volume: torch.Tensor, model: str, frames: int = 36, elevation: float = 20.0,
-                     background: float = 1.0) -> List[np.ndarray]:
-    """:func:`display_frames` from ``frames`` azimuths around +y at ``elevation`` degrees."""
-    return display_frames(volume, model, turntable(frames, elevation=elevation), background=background)
-
-
-def save_gif(frames: Sequence[np.ndarray], path: PathLike, scale: int = 4, duration_ms: int = 60) -> Path:
-    """Frames (float sRGB in [0, 1]) → an endlessly looping GIF, upscaled ``scale``× (nearest)."""
-    from PIL import Image
-
-    path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    pil = [Image.fromarray((np.clip(f, 0, 1) * 255 + 0.5).astype(np.uint8)) for f in frames]
-    pil = [p.resize((p.width * scale, p.height * scale), Image.NEAREST) for p in pil]
-    atomic_write(path, lambda tmp: pil[0].save(tmp, format="GIF", save_all=True, append_images=pil[1:],
-                                               duration=duration_ms, loop=0))
-    return path
 
 
 class Mesh:

@@ -60,6 +60,7 @@ from ..checkpoint import (CHECKPOINT_VERSION, RunError, checkpoint_files, load_c
 from ..config import Config, ConfigError, config_from_dict
 from ..errors import Interrupted, UserError
 from ..fileio import atomic_write, remove_temporaries
+from ..frames import display_frames, save_gif, turntable_frames
 from ..images import composite, linear_to_srgb, save_grid, to_hwc
 from ..loading import checkpoint_config, config_difference, model_from_checkpoint, saved_config
 from ..model import Model
@@ -155,8 +156,6 @@ SAMPLE_VIEWS = torch.cat([front_view(1), turntable(3, elevation=25.0, start=60.0
 def write_samples(model: Model, inputs: torch.Tensor, folder: Path, step: int, seed: int) -> Tuple[Path, Path]:
     """PNG grid (input | reconstruction from the sample views; for generation, samples of a
     generator seeded with ``seed``) and a turntable GIF of the first volume."""
-    from ..export import display_frames, save_gif, turntable_frames
-
     if model.task == "reconstruction":
         vols = model.reconstruct(inputs).cpu()
         first = [[linear_to_srgb(composite(to_hwc(x), background=1.0))] for x in inputs]
