@@ -14,6 +14,8 @@ import ast
 from pathlib import Path
 from typing import Dict, List, NamedTuple, Set
 
+import pytest
+
 PACKAGE = Path(__file__).resolve().parents[1] / "mitsuba_platonic"
 
 
@@ -122,6 +124,59 @@ def test_the_package_has_no_import_cycle():
     report = "\n".join(describe(c, edges) for c in found)
     print(report)
     assert not found, "\n" + report
+
+
+#: The data flow, lowest first (README, "Layout"): a module imports its own layer and those below,
+#: never one above. Names are module prefixes under ``mitsuba_platonic``; the package itself (its
+#: face, which re-exports the renderer) sits on top.
+LAYERS = [
+    ("foundation", ["errors", "fileio", "backend", "resources", "progress", "_data"]),
+    ("conventions: views, volume, images", ["views", "volume", "images"]),
+    ("renderer", ["render", "compare", "frames"]),
+    ("data: collections, photos", ["data"]),
+    ("networks and the model", ["models", "model"]),
+    ("training: settings, config, checkpoints, trainer, runs", ["train", "config", "checkpoint", "loading"]),
+    ("evaluation and export", ["evaluate", "export", "bench"]),
+    ("command line", ["quickstart", "photo_quickstart", "cli", "__main__"]),
+]
+
+#: Imports that go up a layer on purpose, and why (none closes a cycle: the test above says so).
+UPWARD = {
+    ("mitsuba_platonic.model", "mitsuba_platonic.loading"):
+        "Model.from_checkpoint, the public entry point of checkpoint loading, which is handed the class",
+}
+
+
+def layer(module: str) -> int:
+    """The index into :data:`LAYERS` of a module (the package itself: above every layer)."""
+    rel = module.split(".", 1)[1] if "." in module else None
+    if rel is None:
+        return len(LAYERS)
+    for i, (_, prefixes) in enumerate(LAYERS):
+        if any(rel == p or rel.startswith(p + ".") for p in prefixes):
+            return i
+    raise KeyError(f"{module} is in no layer of LAYERS: add it to the one it belongs to")
+
+
+def test_every_module_has_a_layer():
+    for name in modules():
+        layer(name)
+
+
+def test_no_module_imports_a_layer_above_its_own():
+    upward = []
+    for e in imports(modules()):
+        if layer(e.target) > layer(e.source) and (e.source, e.target) not in UPWARD:
+            upward.append(f"  {modules()[e.source].relative_to(PACKAGE.parent)}:{e.line} → {e.target}: "
+                          f"{LAYERS[layer(e.source)][0]} → {LAYERS[layer(e.target)][0]}")
+    assert not upward, "imports up the data flow:\n" + "\n".join(upward)
+
+
+@pytest.mark.parametrize("pair", sorted(UPWARD))
+def test_each_allowed_upward_import_exists_and_is_lazy(pair):
+    """An entry of :data:`UPWARD` that no longer exists is removed; each one is function-level."""
+    found = [e for e in imports(modules()) if (e.source, e.target) == pair]
+    assert found and all(e.lazy for e in found), pair
 
 
 def test_a_cycle_is_found_and_named(tmp_path):
