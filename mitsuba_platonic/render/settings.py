@@ -13,8 +13,6 @@ import math
 from dataclasses import dataclass
 from typing import Any, Dict, Optional, Tuple
 
-import torch
-
 from ..errors import UserError
 from ..views import CAMERAS, lens
 from ..volume import MODELS
