@@ -1,0 +1,212 @@
+"""``platonic bench``'s driver: every renderer row of every resolution and image formation model,
+measured against its reference (:func:`run_bench`; the rows are described in :mod:`mitsuba_platonic.bench`)."""
+
+from __future__ import annotations
+
+import math
+import os
+import platform
+import time
+from dataclasses import asdict
+from datetime import datetime, timezone
+from typing import Any, Callable, Dict, List, Optional, Tuple
+
+import torch
+
+from ..render import render
+from ..render.variant import ensure_variant
+from ..views import sample_views
+from ..volume import CHANNELS, test_volume
+from .layers import (AUTHORS_DENSITY_FACTOR, AUTHORS_DEPTH_SAMPLES, authors_ea, gradient_error, image_error,
+                     loss_weights, plain_ea)
+from .settings import REFERENCE_OPTIONS, BenchSettings, _physical_spps, marcher_configs
+from .timing import RenderFn, _available_bytes, _forward_backward, _measure, _release_memory, _traffic_bytes, \
+    measure_bandwidth
+from .train import _bench_train
+
+__all__ = ["run_bench"]
+
+
+# --------------------------------------------------------------------------- the bench
+
+
+def _marcher(model: str, options: Dict[str, Any]) -> RenderFn:
+    return lambda v, w: render(v, w, model, "mitsuba", **options)
+
+
+def _closed_form(model: str) -> RenderFn:
+    return lambda v, w: render(v, w, model, "closed_form", filter="trilinear")
+
+
+def _physical(spp: int, max_depth: int, seed: int) -> RenderFn:
+    return lambda v, w: render(v, w, "ea", "physical", seed=seed, physical_spp=spp, max_depth=max_depth,
+                               lighting="sunsky")
+
+
+def _reference(fn: RenderFn, volume: torch.Tensor, views: torch.Tensor,
+               weights: torch.Tensor) -> Tuple[torch.Tensor, torch.Tensor]:
+    """Image and gradient of L of a (slow) reference renderer, one pair at a time (bounded memory)."""
+    images, grads = [], []
+    for i in range(volume.shape[0]):
+        img, g = _forward_backward(fn, volume[i:i + 1], views[i:i + 1], weights[i:i + 1])
+        images.append(img)
+        grads.append(g)
+        _release_memory()
+    return torch.cat(images), torch.cat(grads)
+
+
+def _clean(value: Any) -> Any:
+    """JSON-safe: non-finite floats → None."""
+    if isinstance(value, float) and not math.isfinite(value):
+        return None
+    if isinstance(value, dict):
+        return {k: _clean(v) for k, v in value.items()}
+    if isinstance(value, (list, tuple)):
+        return [_clean(v) for v in value]
+    return value
+
+
+def _row(n: int, b: int, model: str, renderer: str, config: str, options: Dict[str, Any], *, default: bool = False,
+         formation: str = "ours", reference: str = "marcher step 0.25 spp 16") -> Dict[str, Any]:
+    return {"resolution": n, "batch": b, "model": model, "renderer": renderer, "config": config,
+            "options": dict(options), "default": default, "formation": formation, "reference": reference,
+            "skipped": None}
+
+
+def _fill(row: Dict[str, Any], m: Dict[str, Any], ref_image: torch.Tensor, ref_grad: torch.Tensor,
+          closed: Optional[torch.Tensor], traffic: Tuple[int, int], bandwidth: float) -> None:
+    row.update({k: m[k] for k in ("fwd_ms", "fwd_bwd_ms", "mem_fwd_mb", "mem_fwd_bwd_mb")})
+    row["rmse"], row["max_abs"] = image_error(m["image"], ref_image)
+    row.update(gradient_error(m["grad"], ref_grad))
+    if closed is not None:
+        row["rmse_vs_closed_form"], row["max_abs_vs_closed_form"] = image_error(m["image"], closed)
+    else:
+        row["rmse_vs_closed_form"] = row["max_abs_vs_closed_form"] = None
+    b = row["batch"]
+    f, bw = traffic
+    row["bytes_fwd"], row["bytes_bwd"] = f // b, bw // b
+    row["bound_fwd_ms"] = f / b / bandwidth * 1e3
+    row["bound_fwd_bwd_ms"] = (f + bw) / b / bandwidth * 1e3
+    row["fwd_over_bound"] = row["fwd_ms"] / row["bound_fwd_ms"]
+    row["fwd_bwd_over_bound"] = row["fwd_bwd_ms"] / row["bound_fwd_bwd_ms"]
+
+
+def _authors_bytes_estimate(b: int, n: int) -> int:
+    """Rough peak of :func:`authors_ea`'s forward + backward (its depth-sampled tensors dominate)."""
+    return 24 * b * AUTHORS_DEPTH_SAMPLES * n * n * 4
+
+
+def run_bench(settings: BenchSettings, log: Callable[[str], None] = print) -> Dict[str, Any]:
+    """Measure every row (see the module docstring); returns the result dictionary (JSON-ready)."""
+    s = settings.validate()
+    mi = ensure_variant()
+    import drjit as dr               # after the variant is set (ensure_variant): Dr.Jit only where the bench runs
+
+    old_threads = (torch.get_num_threads(), dr.thread_count())
+    if s.threads:
+        torch.set_num_threads(s.threads)
+        dr.set_thread_count(s.threads)
+    t_start = time.perf_counter()
+    try:
+        resolutions = [min(s.resolutions)] if s.quick else list(s.resolutions)
+        repeats = 1 if s.quick else s.repeats
+        ref_spp = min(s.physical_ref_spp, 4) if s.quick else s.physical_ref_spp
+        bandwidth = measure_bandwidth(32 if s.quick else 256)
+        log(f"bandwidth (tensor copy): {bandwidth / 1e9:.2f} GB/s; threads: torch {torch.get_num_threads()}, "
+            f"Dr.Jit {dr.thread_count()}; variant {mi.variant()}")
+        result: Dict[str, Any] = {
+            "meta": {
+                "started": datetime.now(timezone.utc).isoformat(timespec="seconds"),
+                "machine": platform.processor() or platform.machine(), "platform": platform.platform(),
+                "cpu_count": os.cpu_count(), "torch": torch.__version__, "mitsuba": mi.__version__,
+                "drjit": dr.__version__, "variant": mi.variant(),
+                "torch_threads": torch.get_num_threads(), "drjit_threads": dr.thread_count(),
+                "bandwidth_gb_s": bandwidth / 1e9, "settings": asdict(s), "repeats_used": repeats,
+                "resolutions_used": resolutions, "physical_ref_spp_used": ref_spp,
+                "reference": dict(REFERENCE_OPTIONS), "loss": "L = sum(W * image), W = loss_weights(shape, seed)",
+            },
+            "views": {}, "rows": [], "train": [],
+        }
+        for n in resolutions:
+            views = sample_views(s.batch, seed=s.seed)
+            result["views"][str(n)] = views.tolist()
+            for model in s.models:
+                result["rows"].extend(_bench_model(s, n, model, views, repeats, ref_spp, bandwidth, log))
+        if s.train:
+            if s.quick:
+                result["train"] = _bench_train(min(s.resolutions), s.train_width, s.batch, 1, 1, log)
+            else:
+                result["train"] = _bench_train(s.train_resolution, s.train_width, s.train_batch, s.train_steps,
+                                               s.train_warmup, log)
+        result["meta"]["duration_s"] = time.perf_counter() - t_start
+        return _clean(result)
+    finally:
+        torch.set_num_threads(old_threads[0])
+        dr.set_thread_count(old_threads[1])
+
+
+def _bench_model(s: BenchSettings, n: int, model: str, views: torch.Tensor, repeats: int, ref_spp: int,
+                 bandwidth: float, log: Callable[[str], None]) -> List[Dict[str, Any]]:
+    b = s.batch
+    volume = test_volume(n, s.volume, model).expand(b, -1, -1, -1, -1).contiguous()
+    c_img = 4 if model == "ea" else 1
+    weights = loss_weights((b, c_img, n, n), s.seed)
+    traffic = _traffic_bytes(b, CHANNELS[model], c_img, n)
+    t0 = time.perf_counter()
+    ref_image, ref_grad = _reference(_marcher(model, REFERENCE_OPTIONS), volume, views, weights)
+    with torch.no_grad():
+        closed = _closed_form(model)(volume, views)
+    log(f"{n}³ {model}: reference (marcher step 0.25, spp 16) in {time.perf_counter() - t0:.1f} s")
+
+    rows: List[Dict[str, Any]] = []
+
+    def add(row: Dict[str, Any], fn: RenderFn, ref: Tuple[torch.Tensor, torch.Tensor],
+            vs_closed: bool = True) -> None:
+        try:
+            m = _measure(fn, volume, views, weights, repeats)
+        except (ValueError, RuntimeError, MemoryError) as e:   # e.g. the marcher's record limit
+            row["skipped"] = f"{type(e).__name__}: {e}"
+            log(f"{n}³ {model}: {row['config']}: skipped ({row['skipped']})")
+            rows.append(row)
+            return
+        _fill(row, m, ref[0], ref[1], closed if vs_closed else None, traffic, bandwidth)
+        del m
+        _release_memory()
+        rows.append(row)
+        log(f"{n}³ {model}: {row['config']:<28} fwd {row['fwd_ms']:8.3f} ms  f+b {row['fwd_bwd_ms']:8.3f} ms  "
+            f"mem {row['mem_fwd_bwd_mb']:7.1f} MB  rmse {row['rmse']:.2e}  grad cos {row['grad_cosine'] or 0:.4f}")
+
+    ref = (ref_image, ref_grad)
+    add(_row(n, b, model, "closed_form", "closed form", {"filter": "trilinear"}), _closed_form(model), ref)
+    for label, options in marcher_configs(s.quick):
+        full = {"step": 1.0, "spp": 1, "jitter": False, "filter": "trilinear", "termination": 0.0, **options}
+        add(_row(n, b, model, "mitsuba", label, full, default=not options), _marcher(model, options), ref)
+    if model != "ea":
+        return rows
+
+    add(_row(n, b, model, "plain", "plain layer (affine_grid)", {}), plain_ea, ref)
+    row = _row(n, b, model, "authors", "authors' EA (1024 samples)",
+               {"depth_samples": AUTHORS_DEPTH_SAMPLES, "density_factor": AUTHORS_DENSITY_FACTOR},
+               formation="authors", reference="ours: marcher step 0.25 spp 16 (a different image formation)")
+    need, avail = _authors_bytes_estimate(b, n), _available_bytes()
+    if avail is not None and need > 0.6 * avail:
+        row["skipped"] = (f"needs about {need / 2**30:.1f} GiB, {avail / 2**30:.1f} GiB available; "
+                          f"use a smaller batch")
+        log(f"{n}³ ea: {row['config']}: skipped ({row['skipped']})")
+        rows.append(row)
+    else:
+        add(row, authors_ea, ref)
+
+    if not s.physical or n > s.physical_max_resolution:
+        return rows
+    t0 = time.perf_counter()
+    # one call for the whole batch: the path tracer draws pair b's sky as the b-th draw from the seed
+    phys_ref = _forward_backward(_physical(ref_spp, s.physical_max_depth, s.seed), volume, views, weights)
+    _release_memory()
+    log(f"{n}³ ea: path-traced reference (spp {ref_spp}) in {time.perf_counter() - t0:.1f} s")
+    for spp in _physical_spps(s.quick):
+        add(_row(n, b, model, "physical", f"path tracer spp {spp}",
+                 {"physical_spp": spp, "max_depth": s.physical_max_depth, "lighting": "sunsky", "seed": s.seed},
+                 formation="physical", reference=f"path tracer spp {ref_spp}, same scene, views and sky"),
+            _physical(spp, s.physical_max_depth, s.seed), phys_ref, vs_closed=False)
+    return rows
