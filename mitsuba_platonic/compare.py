@@ -33,7 +33,7 @@ from .errors import UserError
 from .images import composite, heatmap, save_exr, to_hwc
 from .render import MODELS, render
 from .render.settings import OPTIONS_OF, RenderSettings
-from .views import to_angles, validate_views
+from .views import front_view, sample_views, to_angles, validate_views
 from .volume import CHANNELS
 
 __all__ = ["compare", "format_table", "time_render", "best_of", "kernel_time", "best_kernel_ms", "DISPLAY_BACKGROUND", "HEATMAP_CMAP",
@@ -337,7 +337,6 @@ def compare(volume: torch.Tensor, views: torch.Tensor, models: Sequence[str] = M
 
 def comparison_views(n: int, seed: int = 0) -> torch.Tensor:
     """The views ``platonic compare`` renders from: the front view, then ``n − 1`` random views (``seed``)."""
-    from .views import front_view, sample_views
 
     return torch.cat([front_view(1), sample_views(n - 1, seed=seed)])
 

@@ -30,11 +30,12 @@ from .errors import UserError
 from .models import INITS, NORMS, RESOLUTIONS, UPSAMPLES
 from .render.settings import FORMATIONS
 from .render.settings import RenderSettings as RenderConfig
+from .resources import config_names, config_path
 from .train.augment import AUGMENTS
 from .train.losses import LOSSES
 from .train.roll import ROLLS
 from .train.settings import DEVICES, MODES, MODES_3D, POSES, REC_TARGETS, SOURCES, TASKS
-from .views import DEFAULT_ELEVATION, DISTRIBUTIONS
+from .views import DEFAULT_ELEVATION, DISTRIBUTIONS, sample_views
 
 __all__ = ["Config", "RunConfig", "DataConfig", "ModelConfig", "RenderConfig", "TrainConfig",
            "load_config", "config_file", "config_from_dict", "apply_overrides", "ConfigError"]
@@ -465,8 +466,6 @@ def apply_overrides(data: Dict[str, Any], overrides: Sequence[str]) -> Dict[str,
 
 def _check_elevation(section: str, distribution: str, elevation: Any) -> None:
     """``<section>.elevation`` fits ``<section>.view_distribution`` (the views' own check, naming the keys)."""
-    from .views import DISTRIBUTIONS, sample_views
-
     if distribution not in DISTRIBUTIONS:
         return                                               # its own check names it
     if distribution == "sphere" or elevation is None:
@@ -498,7 +497,6 @@ def config_file(path: Union[str, Path]) -> Path:
     """The config file ``path`` names: the file itself where it exists, else the packaged config
     of that name (``paper``, ``paper.yaml`` or ``configs/paper.yaml``: the repository's configs
     travel inside the package, so they are found from any folder). ConfigError otherwise."""
-    from .resources import config_names, config_path
 
     p = Path(path)
     if p.is_file():

@@ -25,7 +25,7 @@ import torch.nn.functional as F
 from .errors import UserError
 from .fileio import atomic_write
 from .frames import display_frames, save_gif, turntable_frames
-from .images import composite, linear_to_srgb, save_grid, to_hwc
+from .images import composite, linear_to_srgb, save_grid, save_png, to_hwc
 from .render.grids import write_vol
 from .views import turntable
 from .volume import voxel_size, world_to_grid
@@ -156,7 +156,6 @@ def export_held_out(model: "Model", images: torch.Tensor, folder: PathLike, n: i
     or photos), reconstructed by ``model`` and exported with :func:`export_volume` as
     ``folder/heldout_<i>.*`` beside ``heldout_<i>_input.png`` (the image over white); returns the
     turntables and meshes written."""
-    from .images import save_png
 
     written: List[Path] = []
     picks = torch.linspace(0, len(images) - 1, min(n, len(images))).long().tolist()

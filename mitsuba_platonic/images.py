@@ -24,6 +24,8 @@ from typing import Optional, Sequence, Tuple, Union
 
 import numpy as np
 
+from .fileio import atomic_write
+
 __all__ = [
     "to_hwc",
     "to_uint8",
@@ -100,7 +102,6 @@ def save_png(path: PathLike, img: np.ndarray) -> Path:
     """
     from PIL import Image
 
-    from .fileio import atomic_write
 
     arr = to_uint8(_as_image(img, channels=(1, 3, 4)))
     path = Path(path)

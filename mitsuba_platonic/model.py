@@ -37,6 +37,7 @@ import torch
 import torch.nn.functional as F
 from torch import nn
 
+from .data.photos import decode_image, prepare_image
 from .errors import UserError
 from .models import Encoder, Generator, NetConfig, PoseHead, init_weights
 from .render.closed_form import tilt
@@ -159,7 +160,6 @@ class Model(nn.Module):
     def load_image(self, path: Union[str, Path], background: Optional[str] = None, crop: str = "image") -> torch.Tensor:
         """An image file → ``(1, C, R, R)`` input for :meth:`reconstruct` (the photo loader's
         preparation at this model's resolution; alpha only for a one-channel model)."""
-        from .data.photos import decode_image, prepare_image
 
         path = Path(path)
         x = prepare_image(decode_image(path), self.resolution, background=background, crop=crop, name=str(path))

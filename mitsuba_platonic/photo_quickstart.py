@@ -21,9 +21,13 @@ from .config import load_config
 from .errors import UserError
 from .evaluate.judge import BANDS
 from .evaluate.photos import photo_splits
+from .evaluate import report as evaluation_report
 from .export import export_held_out
+from .model import Model
 from .quickstart import stopped
 from .resources import config_path
+from .train.fits import check_model_fits
+from .train import run as training_run
 
 __all__ = ["photo_quickstart", "PHOTO_CONFIG"]
 
@@ -61,10 +65,6 @@ def photo_quickstart(photos: Path, out: Path = Path("quickstart-photos"), steps:
 def _photo_quickstart(photos: Path, out: Path, steps: Optional[int], progress: bool, overrides: Sequence[str],
                       stage: Dict[str, str]) -> Path:
     """:func:`photo_quickstart`, telling ``stage["now"]`` what it is doing."""
-    from .evaluate.report import evaluate_runs
-    from .model import Model
-    from .train.fits import check_model_fits
-    from .train.run import train
 
     if not photos.is_dir():
         raise UserError(f"--photos {str(photos)!r} is not a folder")
@@ -79,10 +79,11 @@ def _photo_quickstart(photos: Path, out: Path, steps: Optional[int], progress: b
     run_dir = Path(cfg.run.out_dir) / cfg.run.name
     resume = (run_dir / "checkpoints" / "last.pt").exists()
     stage["now"] = "training"
-    train(cfg, resume=resume, progress=progress)
+    training_run.train(cfg, resume=resume, progress=progress)          # looked up when called (tests replace it)
     t_train = time.perf_counter() - t0
     stage["now"] = "judging and exporting the trained model"
-    evaluation = evaluate_runs([run_dir], out / "evaluation", progress=progress)
+    # looked up when called (tests replace it)
+    evaluation = evaluation_report.evaluate_runs([run_dir], out / "evaluation", progress=progress)
     results = json.loads((evaluation.parent / "results.json").read_text())
     model = Model.from_checkpoint(run_dir)
 

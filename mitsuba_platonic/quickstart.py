@@ -29,6 +29,8 @@ from .evaluate.protocol import held_out_scores
 from .export import export_held_out
 from .model import Model
 from .resources import config_path
+from .train import data as training_data
+from .train import run as training_run
 from .train.fits import check_model_fits
 
 __all__ = ["quickstart", "stopped"]
@@ -71,8 +73,6 @@ def stopped(e: KeyboardInterrupt, stage: Dict[str, str], command: str, steps: Op
 def _quickstart(out: Path, steps: Optional[int], progress: bool, stage: Dict[str, str],
                 overrides: Sequence[str] = ()) -> Path:
     """:func:`quickstart`, telling ``stage["now"]`` what it is doing."""
-    from .train.data import load_training_data
-    from .train.run import train
 
     t0 = time.perf_counter()
     extra, overrides = list(overrides), [f"run.out_dir={out}", f"data.cache={out / 'data'}"]
@@ -82,13 +82,13 @@ def _quickstart(out: Path, steps: Optional[int], progress: bool, stage: Dict[str
     check_model_fits(cfg)                               # before rendering the data
     run_dir = Path(cfg.run.out_dir) / cfg.run.name
     resume = (run_dir / "checkpoints" / "last.pt").exists()
-    data = load_training_data(cfg, progress=progress)
+    data = training_data.load_training_data(cfg, progress=progress)   # looked up when called (tests replace it)
     t_data = time.perf_counter() - t0
     stage["now"] = "scoring the untrained model"
     torch.manual_seed(cfg.run.seed)
     untrained = held_out_scores(Model.from_config(cfg), data)          # a fresh model, drawn from the run's seed
     stage["now"] = "training"
-    train(cfg, resume=resume, progress=progress)
+    training_run.train(cfg, resume=resume, progress=progress)          # looked up when called (tests replace it)
     stage["now"] = "scoring and exporting the trained model"
     t_train = time.perf_counter() - t0 - t_data
     model = Model.from_checkpoint(run_dir)

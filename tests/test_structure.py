@@ -179,6 +179,32 @@ def test_each_allowed_upward_import_exists_and_is_lazy(pair):
     assert found and all(e.lazy for e in found), pair
 
 
+#: Modules whose function-level imports of the package are lazy by design, and why.
+LAZY_BY_DESIGN = {
+    "mitsuba_platonic.cli": "each command imports what it runs when it runs: --help and a wrong flag answer "
+                            "without importing torch, Mitsuba or the trainer",
+}
+
+
+def test_each_function_level_import_of_the_package_says_why():
+    """A function-level import of a package module hides nothing: it has a comment saying why (on its
+    line or the comment lines right above it), or its module is lazy by design (:data:`LAZY_BY_DESIGN`).
+    Optional heavy third-party imports (Dr.Jit, Mitsuba, matplotlib, scipy) are not this test's."""
+    silent = []
+    for e in imports(modules()):
+        if not e.lazy or e.source in LAZY_BY_DESIGN:
+            continue
+        lines = modules()[e.source].read_text().split("\n")
+        above, k = [], e.line - 2
+        while k >= 0 and lines[k].strip().startswith("#"):
+            above.append(lines[k])
+            k -= 1
+        if "#" not in lines[e.line - 1] and not above:
+            silent.append(f"  {modules()[e.source].relative_to(PACKAGE.parent)}:{e.line} → {e.target}")
+    assert not silent, ("function-level imports that do not say why (import at the top, or comment why "
+                        "not):\n" + "\n".join(silent))
+
+
 def test_a_cycle_is_found_and_named(tmp_path):
     """The check itself: a module importing, inside a function, one that imports it is a cycle,
     named with the file and line of each import."""

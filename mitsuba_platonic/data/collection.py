@@ -48,9 +48,14 @@ import torch
 from .. import views as V
 from ..errors import Interrupted, UserError
 from ..fileio import atomic_write
-from ..images import save_exr, save_png, to_hwc, to_png_rgba
+from ..images import exr_channel_names, save_exr, save_png, to_hwc, to_png_rgba
+from ..progress import progress_bar
 from ..render import RenderSettings, render
+from ..render.grids import write_vol
+from ..render.physical import render_physical, sample_lighting
 from ..render.settings import FORMATIONS, LIGHTINGS
+from ..render.sky import ENVMAPS, baked_envmaps
+from ..render.variant import ensure_variant
 from ..volume import CHANNELS
 from . import shapes
 
@@ -72,7 +77,6 @@ def default_envmaps() -> List[str]:
     and the skies baked from Mitsuba's ``sunsky`` (:func:`mitsuba_platonic.render.sky.baked_envmaps`:
     carried by the package where they were baked before it was built, else baked on first use;
     no photographic map ships for want of a licence)."""
-    from ..render.sky import ENVMAPS, baked_envmaps
 
     return sorted(set(str(p) for p in ENVMAPS.glob("*.exr")) | set(baked_envmaps()))
 
@@ -83,7 +87,6 @@ _EXR_MAGIC = b"\x76\x2f\x31\x01"
 def check_envmap(path: Union[str, Path], what: str = "environment map") -> None:
     """Raise :class:`~mitsuba_platonic.errors.UserError` naming ``path`` unless it is an existing,
     readable OpenEXR file with colour channels (R, G, B or Y): what Mitsuba's ``envmap`` is given."""
-    from ..images import exr_channel_names
 
     p = Path(path)
     if not p.is_file():
@@ -120,7 +123,6 @@ def _unreadable_pixels(path: Path) -> str:
     """Read every pixel of the EXR ``path`` with Mitsuba's own loader on this thread, where a
     damaged file raises (when the ``envmap`` emitter reads it while a scene loads, on a worker
     thread, a truncated file aborts the process). Returns what is wrong, '' if nothing."""
-    from ..render.variant import ensure_variant
 
     stat = path.stat()
     key = (str(path.resolve()), stat.st_size, stat.st_mtime_ns)
@@ -260,7 +262,6 @@ class CollectionSpec:
         return V.sample_views(1, self.views, seed=g, **self._view_kwargs())[0]
 
     def lighting_of(self, i: int, k: int):
-        from ..render.physical import sample_lighting
         rng = np.random.default_rng([self.seed, i, k, 2])
         return sample_lighting(rng, self.lighting, self.envmaps)
 
@@ -312,7 +313,6 @@ def _write_json(path: Path, data: Any) -> None:
 
 
 def _write_volume(folder: Path, i: int, spec: CollectionSpec, vol: torch.Tensor) -> None:
-    from ..render.grids import write_vol
     npz = folder / f"{i:05d}.npz"
     vol_file = folder / f"{i:05d}.vol"
     if not npz.exists():
@@ -338,7 +338,6 @@ def _render_shape(spec: CollectionSpec, vol: torch.Tensor, views: torch.Tensor,
                   lights: Optional[list]) -> Tuple[torch.Tensor, List[float]]:
     """Render one shape from several views → ``(K, C, N, N)`` linear premultiplied, exposures."""
     if spec.formation == "physical":
-        from ..render.physical import render_physical
         batch = vol[None].expand(len(views), -1, -1, -1, -1)
         return render_physical(batch, views, lights, spp=spec.spp, max_depth=spec.max_depth,
                                seed=spec.seed, filter=spec.filter, exposure=spec.exposure)
@@ -499,8 +498,6 @@ def _lock(path: Path) -> Iterator[None]:
 
 
 def _make_collection(out: Path, spec: CollectionSpec, overwrite: bool, progress: bool) -> Path:
-    from ..progress import progress_bar
-
     spec_file = out / "collection.json"
     if spec_file.exists() and not overwrite:
         # read through from_dict: a setting added later takes the value those collections were made with

@@ -11,6 +11,7 @@ from .. import views as V
 from ..images import composite, linear_to_srgb, to_hwc
 from ..render import render
 from . import shapes
+from .collection import CollectionSpec
 
 __all__ = ["contact_sheet"]
 
@@ -25,7 +26,6 @@ def contact_sheet(shape_class: str, path: Union[str, Path], n_shapes: int = 4, n
     default matches :class:`~mitsuba_platonic.data.collection.CollectionSpec` with ``seed``).
     """
     from matplotlib.figure import Figure
-    from .collection import CollectionSpec
 
     if shape_seed is None:
         spec = CollectionSpec(shape_class, seed=seed)

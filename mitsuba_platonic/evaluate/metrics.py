@@ -37,6 +37,7 @@ import torch
 import torch.nn as nn
 
 from ..errors import UserError
+from ..images import composite, linear_to_srgb
 from ..volume import voxel_size
 
 __all__ = ["dssim", "display_image", "image_rmse", "silhouette_iou", "volume_rmse", "volume_iou",
@@ -125,7 +126,6 @@ def display_image(img: ArrayLike, background: float = 1.0) -> np.ndarray:
     clipped to [0, 1] and sRGB-encoded, C' = 3 — the picture a viewer sees. C = 1 (an opacity
     image of VH/AO): the opacity itself, C' = 1.
     """
-    from ..images import composite, linear_to_srgb
 
     x = _array(img, "image")
     if x.ndim != 3 or x.shape[0] not in (1, 4):

@@ -71,9 +71,11 @@ from typing import Any, Callable, Dict, List, Optional, Sequence, Tuple, Union
 import numpy as np
 import torch
 
+from ..data.photos import PhotoCollection
 from ..errors import UserError
 from ..render import RenderSettings, render_with
-from ..views import from_angles, front_view
+from ..render.closed_form import rotate
+from ..views import from_angles, front_view, to_angles
 from ..volume import CHANNELS
 from . import metrics as M
 from .figures import save_image_grid
@@ -121,7 +123,6 @@ def photo_splits(cfg: Any, data_path: Optional[PathLike] = None) -> Tuple[torch.
     path relative to where training ran). Raises :class:`UserError` when the folder is missing,
     unusable, or leaves no held-out photo.
     """
-    from ..data.photos import PhotoCollection
 
     d = cfg.data
     if d.source != "folder":
@@ -178,7 +179,6 @@ def view_depth(volume: torch.Tensor, view: torch.Tensor) -> Optional[float]:
     """The half-opacity depth (voxels) of a ``(C, N, N, N)`` volume seen from ``view`` ``(3,)``: its
     density resampled into the frame of an orthographic camera at ``view`` (trilinear, the closed
     form's ``rotate``) and measured by :func:`~.metrics.half_opacity_depth`; None when no ray is covered."""
-    from ..render.closed_form import rotate
 
     density = volume.detach().float().cpu()[-1:][None]
     return _depth(rotate(density, view.reshape(1, 3).float())[0].clamp(0.0, 1.0))
@@ -294,7 +294,6 @@ def photo_table(rows: Sequence[PhotoRow]) -> str:
 
 def _novel_table(row: PhotoRow) -> str:
     names, views = novel_views()
-    from ..views import to_angles
 
     az, el = to_angles(views)
     lines = ["| view | azimuth | elevation | coverage | coverage / input-view coverage | half-opacity depth (voxels) |",

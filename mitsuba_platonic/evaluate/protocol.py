@@ -36,8 +36,13 @@ import numpy as np
 import torch
 
 from ..errors import UserError
+from ..export import extract_mesh
+from ..images import srgb_to_linear
 from ..render import render
+from ..render.closed_form import rotate
+from ..render.mitsuba_renderer import sensor_dict
 from ..render.physical import Lighting, auto_exposure, render_physical, sample_lighting
+from ..render.variant import ensure_variant
 from ..views import camera_frames, from_angles, front_view, sample_views, turntable
 from ..volume import CHANNELS, MODELS
 from . import metrics as M
@@ -101,8 +106,6 @@ def iso_mesh(volume: torch.Tensor, level: float = ISO_LEVEL) -> Mesh:
 
     An empty mesh when the density never crosses ``level``.
     """
-    from ..export import extract_mesh
-    from ..images import srgb_to_linear
 
     v = as_rgba(volume)
     d = v[3]
@@ -180,8 +183,6 @@ def render_mesh(mesh: Mesh, views: torch.Tensor, lighting: Sequence[Lighting], r
     Returns ``(V, 4, R, R)``: premultiplied linear radiance over black and the coverage alpha.
     An empty mesh renders as zeros.
     """
-    from ..render.mitsuba_renderer import sensor_dict
-    from ..render.variant import ensure_variant
 
     if len(lighting) != len(views):
         raise UserError(f"one lighting per view expected: {len(lighting)} for {len(views)} views")
@@ -311,7 +312,6 @@ def truth_in_input_frame(volume: torch.Tensor, view: Sequence[float], model: str
     """A ground-truth ``(4, N, N, N)`` RGBA volume resampled into the frame of the camera at ``view``
     (where a reconstruction from that image lives; the closed form's rotation), with the channels
     of ``model``; clamped to [0, 1] (trilinear round-off)."""
-    from ..render.closed_form import rotate
 
     v = volume.detach().float()
     if CHANNELS[model] == 1:

@@ -41,7 +41,9 @@ from ..checkpoint import read_checkpoint
 from ..errors import UserError
 from ..loading import checkpoint_config, model_from_checkpoint
 from ..model import Model
+from ..progress import progress_bar
 from ..render import render
+from ..train.data import collection_folder, load_training_data
 from ..views import turntable
 from . import metrics as M
 from .figures import save_image_grid
@@ -97,7 +99,6 @@ def score_pairs(method: str, model: str, triples: Sequence[Tuple[torch.Tensor, t
     same views). FID (with ``fid_network``) compares the IF re-renders of all references with
     those of all reconstructions.
     """
-    from ..progress import progress_bar
 
     row = Row(method, model.upper())
     if_recon, if_ref = [], []
@@ -267,8 +268,6 @@ def _load(run_dir: Path) -> Tuple[Any, Callable[[torch.Tensor], torch.Tensor], C
 
 
 def _held_out(cfg, run_dir: Path, data_cache: Optional[PathLike], progress: bool):
-    from ..train.data import collection_folder, load_training_data
-
     if cfg.data.source != "procedural":
         raise UserError(f"{run_dir} was trained on data.source {cfg.data.source!r}: the ground-truth evaluation "
                         f"needs a procedural collection ('folder' runs get the real-photo section)")

@@ -25,6 +25,7 @@ from typing import List, Optional, Sequence, Tuple, Union
 
 import numpy as np
 
+from ..fileio import atomic_write
 from ..resources import sky_cache
 from .scenes import SCENES, load_scene
 from .variant import ensure_variant
@@ -93,7 +94,6 @@ def bake_sky(path: Union[str, Path], elevation: float, turbidity: float, azimuth
 
     ``sun_samples``: sub-pixel directions per side around the sun; by default enough that 16 fit
     across the disk (its power then comes out within about 1 %)."""
-    from ..fileio import atomic_write
 
     if width < 8 or width % 2:
         raise ValueError(f"width must be an even number >= 8, got {width}")

@@ -18,7 +18,9 @@ from typing import Any, Dict, List, Optional
 import numpy as np
 import torch
 
-from ..config import Config
+from ..config import Config, ConfigError
+from ..data.collection import CollectionSpec, load_manifest, make_collection
+from ..data.photos import PhotoCollection, decode_image, prepare_image
 from ..errors import UserError
 from ..volume import CHANNELS
 from .settings import MODES_3D, SOURCES  # noqa: F401  (SOURCES: the choice list, also named here)
@@ -64,8 +66,6 @@ _SPEC_KEYS = {"shape_class": "data.shape_class", "n_shapes": "data.n_shapes", "v
 
 def _validate_spec(spec: Any) -> None:
     """``spec.validate()``, its error naming the config key to change (``data.shape_class``, not ``shape_class``)."""
-    from ..config import ConfigError
-
     try:
         spec.validate()
     except UserError as e:
@@ -75,9 +75,6 @@ def _validate_spec(spec: Any) -> None:
 
 
 def _procedural(cfg: Config, progress: bool) -> TrainingData:
-    from ..data.collection import CollectionSpec, make_collection, load_manifest
-    from ..data.photos import decode_image, prepare_image
-
     d = cfg.data
     spec = CollectionSpec(shape_class=d.shape_class, n_shapes=d.n_shapes, views_per_shape=d.views_per_shape,
                           resolution=cfg.model.resolution, formation=d.formation,
@@ -117,8 +114,6 @@ def _procedural(cfg: Config, progress: bool) -> TrainingData:
 
 
 def _folder(cfg: Config) -> TrainingData:
-    from ..data.photos import PhotoCollection
-
     d = cfg.data
     sets = PhotoCollection.load_splits(d.path, resolution=cfg.model.resolution,
                                        alpha_only=CHANNELS[cfg.render.model] == 1, **d.photo_options())

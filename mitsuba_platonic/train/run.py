@@ -64,6 +64,8 @@ from ..frames import display_frames, save_gif, turntable_frames
 from ..images import composite, linear_to_srgb, save_grid, to_hwc
 from ..loading import checkpoint_config, config_difference, model_from_checkpoint, saved_config
 from ..model import Model
+from ..progress import progress_bar
+from ..render.variant import ensure_variant
 from ..views import front_view, turntable
 from .data import load_training_data
 from .fits import check_model_fits
@@ -263,7 +265,6 @@ def drjit_threads(cfg: Config) -> Optional[int]:
         return None
     if cfg.run.drjit_threads != "auto":
         return int(cfg.run.drjit_threads)
-    from ..render.variant import ensure_variant
     if (cfg.render.backend == "mitsuba" and ensure_variant().variant().startswith("llvm")
             and cfg.model.resolution <= SERIAL_MARCHER_MAX_RESOLUTION):
         return 1
@@ -324,7 +325,6 @@ def _same_file(a: Optional[Path], b: Path) -> bool:
 
 def _train(cfg: Config, run_dir: Path, resume: bool, progress: bool, stop_at: Optional[int],
            rank: int, world: int, local_rank: int, config_file: Optional[Path] = None) -> Path:
-    from ..progress import progress_bar
 
     device = _device(cfg, local_rank)
     last = run_dir / "checkpoints" / "last.pt"

@@ -21,6 +21,7 @@ import numpy as np
 import torch
 
 from ...errors import UserError
+from .sdf import Part, composite
 
 __all__ = ["register", "unregister", "registered", "generate", "list_classes", "get_class",
            "MIN_RESOLUTION", "MAX_RESOLUTION"]
@@ -127,7 +128,6 @@ def generate(name: str, seed: int, n: int = 64) -> torch.Tensor:
         raise UserError(f"n must be in [{MIN_RESOLUTION}, {MAX_RESOLUTION}], got {n}")
     out = fn(_rng(name, int(seed)), n)
     if not isinstance(out, torch.Tensor):
-        from .sdf import Part, composite
         if isinstance(out, (list, tuple)) and out and all(isinstance(p, Part) for p in out):
             out = composite(out, n)
         else:
