@@ -135,7 +135,10 @@ LAYERS = [
     ("renderer", ["render", "compare", "frames"]),
     ("data: collections, photos", ["data"]),
     ("networks and the model", ["models", "model"]),
-    ("training: settings, config, checkpoints, trainer, runs", ["train", "config", "checkpoint", "loading"]),
+    ("training's own settings and the checkpoint file format",
+     ["train.settings", "train.augment", "train.losses", "train.roll", "checkpoint"]),
+    ("the config, composing every component's settings", ["config"]),
+    ("training: loading what runs saved, data, trainer, runs", ["loading", "train"]),
     ("evaluation and export", ["evaluate", "export", "bench"]),
     ("command line", ["quickstart", "photo_quickstart", "cli", "__main__"]),
 ]
