@@ -23,13 +23,14 @@ import torch
 from mitsuba_platonic.checkpoint import read_checkpoint
 from mitsuba_platonic.evaluate.judge import _random_renders
 from mitsuba_platonic.evaluate.photos import photo_splits
+from mitsuba_platonic.loading import checkpoint_config, model_from_checkpoint
 from mitsuba_platonic.model import Model, critic_config
 from mitsuba_platonic.models import Discriminator
 
 
-def critic_of(ckpt) -> Discriminator:
-    """The run's trained D, from a read checkpoint."""
-    d = Discriminator(critic_config(ckpt.config))
+def critic_of(ckpt, cfg) -> Discriminator:
+    """The run's trained D, from a read checkpoint and its config."""
+    d = Discriminator(critic_config(cfg))
     nets = ckpt.state["trainer"]["nets"]
     d.load_state_dict({k[2:]: v for k, v in nets.items() if k.startswith("D.")})
     return d.eval()
@@ -44,11 +45,12 @@ def main() -> None:
           "held-out gap |\n|---|---|---|---|---|---|---|")
     for run in args.runs:
         ckpt = read_checkpoint(run)
-        train, held, _ = photo_splits(ckpt.config, args.data_path)
-        model = Model.from_read(ckpt)
-        d = critic_of(ckpt)
+        cfg = checkpoint_config(ckpt)
+        train, held, _ = photo_splits(cfg, args.data_path)
+        model = model_from_checkpoint(Model, ckpt, cfg)
+        d = critic_of(ckpt, cfg)
         with torch.no_grad():
-            renders = _random_renders(model.reconstruct(held).clamp(0, 1), 8, ckpt.config.render, seed=0)
+            renders = _random_renders(model.reconstruct(held).clamp(0, 1), 8, cfg.render, seed=0)
             lt, lh, lr = (float(d(x).mean()) for x in (train, held, renders))
         print(f"| {run.name} | {ckpt.step} | {lt:+.2f} | {lh:+.2f} | {lr:+.2f} | {lt - lh:+.2f} | {lh - lr:+.2f} |",
               flush=True)
