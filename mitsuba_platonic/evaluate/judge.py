@@ -187,35 +187,32 @@ def _score_critics(train_photos: torch.Tensor, train_renders: torch.Tensor, test
                                     + float((critic(train_renders) <= 0).float().mean())))
 
 
-def _turntable(volumes: torch.Tensor, azimuths: Sequence[float], settings: RenderSettings, seed: int,
-               chunk: int = 64) -> torch.Tensor:
-    """``(A, M, C, R, R)``: every volume rendered at every azimuth ω(φ, 0), in chunks of pairs."""
-    m = len(volumes)
-    views = from_angles(torch.tensor(list(azimuths), dtype=torch.float64), 0.0)      # (A, 3)
-    vol_idx = torch.arange(m).repeat(len(azimuths))
-    view_idx = torch.arange(len(azimuths)).repeat_interleave(m)
+def _render_pairs(volumes: torch.Tensor, index: torch.Tensor, views: torch.Tensor, settings: RenderSettings,
+                  seed: int, chunk: int = 64) -> torch.Tensor:
+    """``(P, C, R, R)``: volume ``index[p]`` rendered from ``views[p]`` for every pair p, in chunks of
+    pairs, clipped to [0, 1]."""
     out = []
     with torch.no_grad():
-        for i in range(0, len(vol_idx), chunk):
-            v, w = vol_idx[i:i + chunk], view_idx[i:i + chunk]
-            out.append(render_with(volumes[v].contiguous(), views[w].contiguous(), settings, seed)
-                       .detach().float().cpu().clamp(0.0, 1.0))
-    return torch.cat(out).reshape(len(azimuths), m, *out[0].shape[1:])
+        for i in range(0, len(index), chunk):
+            out.append(render_with(volumes[index[i:i + chunk]].contiguous(), views[i:i + chunk].contiguous(),
+                                   settings, seed).detach().float().cpu().clamp(0.0, 1.0))
+    return torch.cat(out)
 
 
-def _random_renders(volumes: torch.Tensor, k: int, settings: RenderSettings, seed: int,
-                    chunk: int = 64) -> torch.Tensor:
+def _turntable(volumes: torch.Tensor, azimuths: Sequence[float], settings: RenderSettings, seed: int) -> torch.Tensor:
+    """``(A, M, C, R, R)``: every volume rendered at every azimuth ω(φ, 0)."""
+    m = len(volumes)
+    views = from_angles(torch.tensor(list(azimuths), dtype=torch.float64), 0.0)      # (A, 3)
+    out = _render_pairs(volumes, torch.arange(m).repeat(len(azimuths)), views.repeat_interleave(m, 0), settings, seed)
+    return out.reshape(len(azimuths), m, *out.shape[1:])
+
+
+def _random_renders(volumes: torch.Tensor, k: int, settings: RenderSettings, seed: int) -> torch.Tensor:
     """``(M k, C, R, R)``: each volume at ``k`` uniformly random turntable azimuths (seeded)."""
     g = torch.Generator().manual_seed(seed)
     phi = torch.rand(len(volumes) * k, generator=g, dtype=torch.float64) * 360.0 - 180.0
-    views = from_angles(phi, 0.0)
-    idx = torch.arange(len(volumes)).repeat_interleave(k)
-    out = []
-    with torch.no_grad():
-        for i in range(0, len(idx), chunk):
-            out.append(render_with(volumes[idx[i:i + chunk]].contiguous(), views[i:i + chunk].contiguous(),
-                                   settings, seed).detach().float().cpu().clamp(0.0, 1.0))
-    return torch.cat(out)
+    return _render_pairs(volumes, torch.arange(len(volumes)).repeat_interleave(k), from_angles(phi, 0.0),
+                         settings, seed)
 
 
 def _mean(values: Sequence[Optional[float]]) -> Optional[float]:
