@@ -15,7 +15,7 @@ from __future__ import annotations
 import os
 from importlib import resources
 from pathlib import Path
-from typing import List, Union
+from typing import List
 
 __all__ = ["scenes_folder", "configs_folder", "config_names", "config_path", "sky_cache", "from_checkout"]
 

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import contextlib
 import io
-from typing import Optional, Sequence, Tuple
+from typing import List, Optional, Sequence, Tuple
 
 from mitsuba_platonic.cli import main
 
@@ -25,3 +25,8 @@ def one_line(stderr: str, command: str, kind: Optional[str] = None) -> str:
     prefix = f"platonic {command}: " + (f"{kind}: " if kind else "")
     assert err.startswith(prefix), err
     return err
+
+
+def set_flags(overrides: Sequence[str]) -> List[str]:
+    """``--set KEY=VALUE`` for each override, as the command line takes them."""
+    return [arg for o in overrides for arg in ("--set", o)]

@@ -41,7 +41,7 @@ from mitsuba_platonic.fileio import atomic_write
 from mitsuba_platonic.images import load_exr
 from mitsuba_platonic.train import run as R
 from mitsuba_platonic.train.data import load_training_data
-from cli_runner import one_line, run_cli
+from cli_runner import one_line, run_cli, set_flags
 from tiny_shapes import TINY
 
 SEED = 10                                   # issue 10
@@ -57,8 +57,7 @@ def temporaries(folder: Path):
     return sorted(p for p in folder.rglob(".*") if ".tmp" in p.name)
 
 
-def _set(overrides):
-    return sum((["--set", o] for o in overrides), [])
+_set = set_flags
 
 
 # --------------------------------------------------------------------------- subprocesses and kills

@@ -5,7 +5,6 @@ reconstruct and generate say how many files they wrote."""
 
 from __future__ import annotations
 
-import os
 import subprocess
 import sys
 from pathlib import Path

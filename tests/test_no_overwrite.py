@@ -9,14 +9,12 @@ from __future__ import annotations
 import shutil
 from pathlib import Path
 
-import numpy as np
 import pytest
 import yaml
-from PIL import Image
 
 from mitsuba_platonic.config import load_config
 from mitsuba_platonic.train import run as R
-from cli_runner import one_line, run_cli
+from cli_runner import one_line, run_cli, set_flags
 from tiny_shapes import TINY
 
 N = 16
@@ -29,8 +27,7 @@ def _overrides(out: Path, data: Path, *extra):
             "train.batch_size=2", *extra]
 
 
-def _set(overrides):
-    return sum((["--set", o] for o in overrides), [])
+_set = set_flags
 
 
 @pytest.fixture(scope="module")

@@ -26,7 +26,7 @@ from mitsuba_platonic.model import Model
 from mitsuba_platonic.train import run as R
 from mitsuba_platonic.train.data import load_training_data
 from mitsuba_platonic.train.trainer import Trainer
-from cli_runner import one_line, run_cli
+from cli_runner import one_line, run_cli, set_flags
 from tiny_shapes import TINY
 
 
@@ -37,8 +37,7 @@ def _overrides(out: Path, data: Path, *extra: str):
             "train.batch_size=2", *extra]
 
 
-def _set(overrides):
-    return sum((["--set", o] for o in overrides), [])
+_set = set_flags
 
 
 @pytest.fixture(scope="module")
