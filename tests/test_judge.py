@@ -200,6 +200,7 @@ def test_view_statistics_of_a_reconstruction_that_looks_the_same_from_everywhere
     photo = rgba(rng.uniform(0, 1, (3, 8, 8)), np.ones((8, 8)))
     stats = J.view_statistics(photo, {a: photo for a in (0.0, 90.0, -90.0, 180.0)})
     assert stats["roughness_input"] == pytest.approx(1.0)
+    assert stats["delta_e_input"] == pytest.approx(0.0, abs=1e-6)
     for v in J.STAT_VIEWS:
         assert stats[f"roughness_{v}"] == pytest.approx(1.0)
         assert stats[f"coverage_{v}"] == 1.0

@@ -34,7 +34,8 @@ I_φ = R(ω(φ, 0), V) with the run's renderer:
   rough(I_φ) / rough(I_0); and the input view's own rough(I_0) / rough(x) (speckle the photo
   does not have);
 - colour: ΔE (CIE76) of the mean foreground L*a*b* of I_φ against the photo's, and the sliced
-  Wasserstein-1 distance of the two foreground colour distributions;
+  Wasserstein-1 distance of the two foreground colour distributions; the same ΔE for I_0 says how
+  much of it the input view already has (E's colour, not the unseen side's);
 - coverage ratio coverage(I_φ) / coverage(I_0): near 0, the object vanished (a card seen edge-on);
 - the front-card check (:func:`~.photos.card_check`) as for every photo run.
 """
@@ -223,7 +224,9 @@ def _mean(values: Sequence[Optional[float]]) -> Optional[float]:
 def view_statistics(photo: torch.Tensor, renders: Dict[float, torch.Tensor]) -> Dict[str, Optional[float]]:
     """The image statistics of one held-out photo ``(C, R, R)`` and its reconstruction's renders
     (azimuth → ``(C, R, R)``; 0 and every azimuth of :data:`STAT_VIEWS` must be there). Keys:
-    ``roughness_input`` (rough(I_0) / rough(photo)); per view v in :data:`STAT_VIEWS`:
+    ``roughness_input`` (rough(I_0) / rough(photo)), for RGBA ``delta_e_input`` (I_0's mean colour
+    against the photo's: how much of a side view's ΔE the input view already has); per view v in
+    :data:`STAT_VIEWS`:
     ``roughness_<v>`` (rough(I_v) / rough(I_0)), ``coverage_<v>`` (coverage(I_v) / coverage(I_0)) and,
     for RGBA, ``delta_e_<v>`` and ``sliced_w1_<v>`` against the photo; None where undefined
     (nothing covered)."""
@@ -235,6 +238,8 @@ def view_statistics(photo: torch.Tensor, renders: Dict[float, torch.Tensor]) -> 
     rp = S.roughness(photo)
     out: Dict[str, Optional[float]] = {"roughness_input": r0 / rp if r0 is not None and rp else None}
     rgba = photo.shape[0] == 4
+    if rgba:
+        out["delta_e_input"] = S.colour_distance(front, photo)["delta_e"]
     for name, azimuths in STAT_VIEWS.items():
         imgs = [renders[a] for a in azimuths]
         rough = [S.roughness(i) for i in imgs]
@@ -335,12 +340,14 @@ def judge_table(rows: Sequence[Tuple[str, Judgement]]) -> str:
 def stats_table(rows: Sequence[Tuple[str, Judgement]]) -> str:
     """Markdown: per method, the image statistics' means over the held-out photos."""
     lines = ["| Method | input-view roughness / photo's | side roughness / input view's | back roughness / input "
-             "view's | side ΔE | back ΔE | side SW₁ | back SW₁ | side coverage / input's | back coverage / input's |",
-             "|---|---|---|---|---|---|---|---|---|---|"]
+             "view's | input-view ΔE | side ΔE | back ΔE | side SW₁ | back SW₁ | side coverage / input's | "
+             "back coverage / input's |",
+             "|---|---|---|---|---|---|---|---|---|---|---|"]
     for method, j in rows:
         m = j.means
         lines.append(f"| {method} | {_num(m.get('roughness_input'), 2)} | {_num(m.get('roughness_side'), 2)} | "
-                     f"{_num(m.get('roughness_back'), 2)} | {_num(m.get('delta_e_side'), 1)} | "
+                     f"{_num(m.get('roughness_back'), 2)} | {_num(m.get('delta_e_input'), 1)} | "
+                     f"{_num(m.get('delta_e_side'), 1)} | "
                      f"{_num(m.get('delta_e_back'), 1)} | {_num(m.get('sliced_w1_side'), 1)} | "
                      f"{_num(m.get('sliced_w1_back'), 1)} | {_num(m.get('coverage_side'), 2)} | "
                      f"{_num(m.get('coverage_back'), 2)} |")
