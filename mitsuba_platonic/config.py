@@ -31,7 +31,7 @@ from .models import INITS, NORMS, RESOLUTIONS, UPSAMPLES
 from .render.settings import FORMATIONS
 from .render.settings import RenderSettings as RenderConfig
 from .resources import config_names, config_path
-from .train.augment import AUGMENTS
+from .train.augment import AUGMENTS, PHOTO_AUGMENTS
 from .train.losses import LOSSES
 from .train.roll import ROLLS
 from .train.settings import DEVICES, MODES, MODES_3D, POSES, REC_TARGETS, SOURCES, TASKS
@@ -173,7 +173,11 @@ class TrainConfig:
     weights and evaluation then use (:meth:`mitsuba_platonic.train.trainer.Trainer.inference_model`,
     docs/training.md); d_augment: the differentiable augmentations of every image D sees, real or
     rendered, in D's and G's updates, from 'flip', 'translation', 'cutout' (none by default; for
-    small photo collections, :mod:`mitsuba_platonic.train.augment`, docs/training.md)."""
+    small photo collections, :mod:`mitsuba_platonic.train.augment`, docs/training.md); photo_augment:
+    transforms of each step's photos before E, the reconstruction target and D read them, from
+    'flip', 'colour' (none by default; modes 'platonic' and 'prgan', image targets; 'colour' needs
+    EA), so that E reads colour from a photo instead of memorising a few dozen photos
+    (:func:`mitsuba_platonic.train.augment.augment_photos`, docs/training.md, "Real photos")."""
 
     task: str = "reconstruction"
     mode: str = "platonic"
@@ -199,6 +203,7 @@ class TrainConfig:
     colour_tv: float = 0.0
     ema: Optional[float] = None
     d_augment: List[str] = field(default_factory=list)
+    photo_augment: List[str] = field(default_factory=list)
 
 
 @dataclass
@@ -301,6 +306,16 @@ class Config:
                               f"{self.train.d_augment!r}")
         if self.train.d_augment and self.train.mode == "gan3d":
             raise ConfigError("train.d_augment: the 'gan3d' baseline has no 2D critic to augment for")
+        unknown = [a for a in self.train.photo_augment if a not in PHOTO_AUGMENTS]
+        if unknown or len(set(self.train.photo_augment)) != len(self.train.photo_augment):
+            raise ConfigError(f"train.photo_augment: expected distinct names from {list(PHOTO_AUGMENTS)}, got "
+                              f"{self.train.photo_augment!r}")
+        if self.train.photo_augment and (self.train.mode not in ("platonic", "prgan") or self.train.rec_target != "image"):
+            raise ConfigError("train.photo_augment: new photos have no matching ground-truth volumes; expected "
+                              f"train.mode 'platonic' or 'prgan' with rec_target 'image', got mode "
+                              f"{self.train.mode!r}, rec_target {self.train.rec_target!r}")
+        if "colour" in self.train.photo_augment and self.render.model != "ea":
+            raise ConfigError(f"train.photo_augment: 'colour' needs colour, render.model 'ea'; got {self.render.model!r}")
         if self.train.ema is not None and not 0.0 < self.train.ema < 1.0:
             raise ConfigError(f"train.ema: expected null or a decay in (0, 1), e.g. 0.999, got {self.train.ema!r}")
         if self.train.d_gate is not None and not 0.0 < self.train.d_gate <= 1.0:

@@ -91,7 +91,7 @@ from ..model import RING_VIEWS, Model, critic_config
 from ..models import Discriminator, VolumeDiscriminator, init_critic_he, init_he, init_weights
 from ..render.closed_form import rotate, tilt
 from ..views import DEFAULT_ELEVATION, from_angles, front_view, sample_views, to_angles
-from .augment import augment
+from .augment import augment, augment_photos
 from .data import TrainingData
 from .losses import (colour_tv, d_loss, g_loss, gradient_penalty, hard_accuracy_counts, r1_penalty,
                      soft_accuracy_counts)
@@ -248,6 +248,10 @@ class Trainer:
         B, K = t.batch_size, t.random_views
         idx = torch.randint(len(self.images), (B,), generator=g)
         x = self._shard(self.images[idx.to(self.device)])
+        if t.photo_augment:                                  # train/augment.py: new photos for E, the target and D
+            g_photo = torch.Generator()
+            g_photo.manual_seed(int(np.random.SeedSequence([cfg.run.seed, step, 13, self.rank]).generate_state(1)[0]))
+            x = augment_photos(x, t.photo_augment, g_photo)
         z_prior = torch.randn(B, cfg.model.latent, generator=g)
         ring_k = None
         if t.mode == "prgan":                                # one of the 8 ring views per random view
