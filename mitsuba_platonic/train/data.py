@@ -21,9 +21,10 @@ import torch
 from ..config import Config, ConfigError
 from ..data.collection import CollectionSpec, load_manifest, make_collection
 from ..data.photos import PhotoCollection, decode_image, prepare_image
+from ..data.settings import SOURCES  # noqa: F401  (the choice list, also named here)
 from ..errors import UserError
 from ..volume import CHANNELS
-from .settings import MODES_3D, SOURCES  # noqa: F401  (SOURCES: the choice list, also named here)
+from .settings import MODES_3D
 
 __all__ = ["TrainingData", "load_training_data", "collection_folder", "SOURCES"]
 

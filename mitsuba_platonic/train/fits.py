@@ -13,8 +13,9 @@ from typing import Optional, Tuple, Union
 import torch
 
 from ..compare import available_memory
-from ..config import Config, ConfigError, ModelConfig
+from ..config import Config, ConfigError
 from ..model import Model, critic_config
+from ..model_settings import ModelConfig
 from ..models import Discriminator, VolumeDiscriminator
 from .settings import MODES_3D
 

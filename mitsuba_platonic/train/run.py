@@ -70,7 +70,7 @@ from ..views import front_view, turntable
 from .data import load_training_data
 from .fits import check_model_fits
 from .folder import RUN_MARKER, claim_run_folder
-from .settings import DEVICES  # noqa: F401  (the choice list, also named here)
+from .run_settings import DEVICES  # noqa: F401  (the choice list, also named here)
 from .trainer import Trainer
 
 __all__ = ["train", "load_run", "RunError", "save_checkpoint", "load_checkpoint", "load_latest_checkpoint",

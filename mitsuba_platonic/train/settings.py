@@ -1,21 +1,28 @@
-"""The training components' choice lists: a leaf, so that the config validates against them
-without importing the trainer, the run or the data loader (which import the config).
+"""The train section of a config (``train:``) and the training components' choice lists.
 
-Each list stays importable from the module that uses it (``train.trainer.MODES``,
-``train.run.DEVICES``, ``train.data.SOURCES``); the losses', rolls' and augmentations' lists live
-beside their code (``train.losses.LOSSES``, ``train.roll.ROLLS``, ``train.augment.AUGMENTS``),
-whose modules import no config either.
+:class:`TrainConfig` is the section's dataclass, with the checks that concern it alone
+(:meth:`TrainConfig.validate`); the config composes it and checks it against the other sections.
+A leaf of the training package: it imports no config, no trainer, no run and no data loader
+(which import the config), only the choice lists beside their code (``train.losses.LOSSES``,
+``train.roll.ROLLS``, ``train.augment.AUGMENTS``), whose modules import no config either.
+
+Each list stays importable from the module that uses it (``train.trainer.MODES``); the data
+source's and the device's lists are their sections' (``data.settings.SOURCES``,
+``train.run_settings.DEVICES``).
 """
 
 from __future__ import annotations
 
-__all__ = ["SOURCES", "DEVICES", "TASKS", "MODES", "MODES_3D", "REC_TARGETS", "POSES"]
+from dataclasses import dataclass, field
+from typing import List, Optional, Union
 
-#: data.source: a procedural collection rendered by make-dataset, or a folder of photos.
-SOURCES = ("procedural", "folder")
+from ..settings_checks import ConfigError, check_elevation, choice, non_negative, positive
+from ..views import DISTRIBUTIONS
+from .augment import AUGMENTS, PHOTO_AUGMENTS
+from .losses import LOSSES
+from .roll import ROLLS
 
-#: run.device: 'auto' picks CUDA when available.
-DEVICES = ("auto", "cpu", "cuda")
+__all__ = ["TrainConfig", "TASKS", "MODES", "MODES_3D", "REC_TARGETS", "POSES", "PRGAN"]
 
 #: What E/G learn: reconstruct the input image, or generate from z ~ N(0, I).
 TASKS = ("reconstruction", "generation")
@@ -28,3 +35,164 @@ MODES_3D = ("platonic3d", "gan3d")
 REC_TARGETS = ("image", "volume")
 #: train.pose: G's volume in the input camera's frame, or upright and tilted by an elevation E reads
 POSES = ("input", "elevation")
+#: How messages name ``train.mode: prgan``.
+PRGAN = "the PrGAN-style baseline ('prgan')"
+
+
+@dataclass
+class TrainConfig:
+    """task: 'reconstruction' (E encodes the input image; L2 at the input view) or 'generation'
+    (z ~ N(0, I)); mode: 'platonic' (2D discriminator only), 'platonic3d' (+ a 3D discriminator on
+    ground-truth volumes; G learns from both), 'gan3d' (the 3D-GAN baseline: WGAN-GP on volumes,
+    no rendering) or 'prgan' (the PrGAN-style baseline: VH only, views from 8 azimuths on the ring
+    at ``elevation`` (0° by default; reconstruction: 0°, the input view's), G(z, one-hot view)).
+    batch_size: global batch (split across processes); random_views: random views per volume per step;
+    view_distribution / elevation: p_view; loss: 'nonsaturating' | 'wgan-gp'; gp_weight: WGAN-GP λ;
+    rec_weight: λ of the reconstruction term; rec_target: what that term compares, 'image' (the
+    input image with the render of v at the input view: PlatonicGAN's, 2D data only) or 'volume'
+    (v with the input image's ground-truth volume in its camera's frame: 3D supervision, the 3D
+    modes only; the 3D-GAN baseline's, which renders nothing); weight_3d: weight of the 3D adversarial term;
+    lr_g, lr_e, lr_d: Adam learning rates (lr_d 2e-5, not the authors' 1e-5: measured in
+    docs/training.md); betas: Adam betas; d_gate: update D only while its *soft* accuracy
+    ½(mean σ(l_real) + 1 − mean σ(l_fake)) ≤ this (0.6, the authors' gate; null: always). It never
+    triggers at lr_d 2e-5 in the quickstart, and keeps a faster D (lr_d 1e-4) from collapsing G,
+    which it does ungated (docs/training.md); d_steps: D (or D3) updates per G update, each on a
+    fresh loss, in every mode; d_roll: 'none' | 'uniform': D sees every real and rendered image
+    turned in-plane by its own random angle, so that the tilt of views drawn in the input camera's
+    frame cannot give fakes away; 'matched' (reconstruction): the reals turned by the tilt a right
+    volume's view would have, for an input elevation drawn from the collection's view distribution
+    (procedural data; for photos the train section's) (:mod:`mitsuba_platonic.train.roll`,
+    docs/training.md); pose: where G's volume stands, 'input' (in the input camera's frame, the
+    paper's view-space reconstruction) | 'elevation' (reconstruction, mode 'platonic'): G builds the
+    object upright in its own frame, a pose head reads the input camera's elevation θ̂ from E's
+    code, the input-view term renders the volume tilted by θ̂ and the random views are drawn
+    around the upright object, as the photos' cameras were; pose_weight: λ of the term that
+    teaches the head the elevations of G's own renders from those random views (0: none; only
+    with 'elevation') (:mod:`mitsuba_platonic.train.trainer`, docs/training.md, "An elevation read
+    from the photo");
+    r1_weight: γ of the R1 penalty γ/2 · E‖∇ₓD(x)‖² on real images (Mescheder et al. 2018),
+    added to every critic's non-saturating loss (0: none; WGAN-GP has its own penalty)
+    (:func:`mitsuba_platonic.train.losses.r1_penalty`, docs/training.md); colour_tv: weight of
+    G's density-weighted colour total variation (EA, not 'gan3d'; 0: none)
+    (:func:`mitsuba_platonic.train.losses.colour_tv`, docs/training.md); ema: null, or the decay β
+    of an exponential moving average of E's and G's weights, which samples, checkpoints' inference
+    weights and evaluation then use (:meth:`mitsuba_platonic.train.trainer.Trainer.inference_model`,
+    docs/training.md); d_augment: the differentiable augmentations of every image D sees, real or
+    rendered, in D's and G's updates, from 'flip', 'translation', 'cutout' (none by default; for
+    small photo collections, :mod:`mitsuba_platonic.train.augment`, docs/training.md); photo_augment:
+    transforms of each step's photos before E, the reconstruction target and D read them, from
+    'flip', 'colour' (none by default; modes 'platonic' and 'prgan', image targets; 'colour' needs
+    EA), so that E reads colour from a photo instead of memorising a few dozen photos
+    (:func:`mitsuba_platonic.train.augment.augment_photos`, docs/training.md, "Real photos")."""
+
+    task: str = "reconstruction"
+    mode: str = "platonic"
+    batch_size: int = 8
+    random_views: int = 1
+    view_distribution: str = "sphere"
+    elevation: Optional[Union[float, List[float]]] = None
+    loss: str = "nonsaturating"
+    gp_weight: float = 10.0
+    rec_weight: float = 5.0
+    rec_target: str = "image"
+    weight_3d: float = 1.0
+    lr_g: float = 1e-3
+    lr_e: float = 1e-3
+    lr_d: float = 2e-5
+    betas: List[float] = field(default_factory=lambda: [0.5, 0.9])
+    d_gate: Optional[float] = 0.6
+    d_steps: int = 1
+    d_roll: str = "none"
+    pose: str = "input"
+    pose_weight: float = 0.0
+    r1_weight: float = 0.0
+    colour_tv: float = 0.0
+    ema: Optional[float] = None
+    d_augment: List[str] = field(default_factory=list)
+    photo_augment: List[str] = field(default_factory=list)
+
+    @property
+    def ring_elevation(self) -> Union[float, List[float]]:
+        """The elevation of the PrGAN-style baseline's ring: ``elevation``, null meaning 0."""
+        return 0.0 if self.elevation is None else self.elevation
+
+    def validate(self) -> "TrainConfig":
+        """Check this section's values and combinations; raise
+        :class:`~mitsuba_platonic.settings_checks.ConfigError` naming the key (``train.mode: ...``).
+        Checks against other sections (the renderer's image formation, the data's source) are the config's."""
+        check_elevation("train", self.view_distribution, self.elevation)
+        choice("train.task", self.task, TASKS)
+        choice("train.mode", self.mode, MODES)
+        choice("train.view_distribution", self.view_distribution, DISTRIBUTIONS)
+        choice("train.loss", self.loss, LOSSES)
+        positive("train.batch_size", self.batch_size)
+        positive("train.random_views", self.random_views)
+        positive("train.d_steps", self.d_steps)
+        choice("train.d_roll", self.d_roll, ROLLS)
+        if self.d_roll == "matched" and (self.task != "reconstruction" or self.mode == "gan3d"):
+            raise ConfigError("train.d_roll: 'matched' turns the photos by the tilt of views drawn in an input "
+                              "camera's frame, so it needs train.task 'reconstruction' and a 2D critic "
+                              f"(not mode 'gan3d'), got task {self.task!r}, mode {self.mode!r}")
+        choice("train.pose", self.pose, POSES)
+        non_negative("train.pose_weight", self.pose_weight)
+        if self.pose == "elevation":
+            if self.task != "reconstruction" or self.mode != "platonic":
+                raise ConfigError("train.pose: 'elevation' reads the input camera's elevation from the photo, so it "
+                                  "needs train.task 'reconstruction' and train.mode 'platonic', got task "
+                                  f"{self.task!r}, mode {self.mode!r}")
+            if self.d_roll != "none":
+                raise ConfigError("train.d_roll: with train.pose 'elevation' the random views are drawn around the "
+                                  "upright object, as the photos' cameras were, so nothing is to be turned; "
+                                  f"expected 'none', got {self.d_roll!r}")
+        elif self.pose_weight > 0:
+            raise ConfigError("train.pose_weight: the pose term trains the elevation head of train.pose "
+                              f"'elevation'; with pose {self.pose!r} expected 0, got {self.pose_weight!r}")
+        for key in ("lr_g", "lr_e", "lr_d"):
+            if not getattr(self, key) > 0:
+                raise ConfigError(f"train.{key}: expected a positive learning rate, got {getattr(self, key)!r}")
+        if len(self.betas) != 2 or not all(0.0 <= b < 1.0 for b in self.betas):
+            raise ConfigError(f"train.betas: expected two numbers in [0, 1), got {self.betas!r}")
+        non_negative("train.r1_weight", self.r1_weight)
+        if self.r1_weight > 0 and self.loss != "nonsaturating":
+            raise ConfigError("train.r1_weight: the R1 penalty is for the non-saturating loss; "
+                              f"train.loss {self.loss!r} has its own (train.gp_weight)")
+        non_negative("train.colour_tv", self.colour_tv)
+        if self.colour_tv > 0 and self.mode == "gan3d":
+            raise ConfigError("train.colour_tv: the 'gan3d' baseline trains G on volumes alone, without priors")
+        unknown = [a for a in self.d_augment if a not in AUGMENTS]
+        if unknown or len(set(self.d_augment)) != len(self.d_augment):
+            raise ConfigError(f"train.d_augment: expected distinct names from {list(AUGMENTS)}, got "
+                              f"{self.d_augment!r}")
+        if self.d_augment and self.mode == "gan3d":
+            raise ConfigError("train.d_augment: the 'gan3d' baseline has no 2D critic to augment for")
+        unknown = [a for a in self.photo_augment if a not in PHOTO_AUGMENTS]
+        if unknown or len(set(self.photo_augment)) != len(self.photo_augment):
+            raise ConfigError(f"train.photo_augment: expected distinct names from {list(PHOTO_AUGMENTS)}, got "
+                              f"{self.photo_augment!r}")
+        if self.photo_augment and (self.mode not in ("platonic", "prgan") or self.rec_target != "image"):
+            raise ConfigError("train.photo_augment: new photos have no matching ground-truth volumes; expected "
+                              f"train.mode 'platonic' or 'prgan' with rec_target 'image', got mode "
+                              f"{self.mode!r}, rec_target {self.rec_target!r}")
+        if self.ema is not None and not 0.0 < self.ema < 1.0:
+            raise ConfigError(f"train.ema: expected null or a decay in (0, 1), e.g. 0.999, got {self.ema!r}")
+        if self.d_gate is not None and not 0.0 < self.d_gate <= 1.0:
+            raise ConfigError(f"train.d_gate: expected null or a number in (0, 1], got {self.d_gate!r}")
+        choice("train.rec_target", self.rec_target, REC_TARGETS)
+        if self.rec_target == "volume" and self.mode not in MODES_3D:
+            raise ConfigError(f"train.rec_target: 'volume' needs 3D ground truth, i.e. train.mode one of "
+                              f"{list(MODES_3D)}, got {self.mode!r}")
+        if self.mode == "gan3d" and self.task == "reconstruction" and self.rec_target != "volume":
+            raise ConfigError("train.rec_target: the 3D-GAN baseline ('gan3d') renders nothing, so its reconstruction "
+                              "term compares volumes; expected 'volume', got 'image'")
+        if self.mode == "prgan":                             # the PrGAN-style baseline: 8 views on one ring
+            if self.view_distribution != "ring":
+                raise ConfigError(f"train.view_distribution: {PRGAN} draws its views from 8 azimuths on one "
+                                  f"ring; expected 'ring', got {self.view_distribution!r}")
+            ring = self.ring_elevation
+            if isinstance(ring, list) or not -90.0 <= ring <= 90.0:
+                raise ConfigError(f"train.elevation: {PRGAN} needs one ring elevation in [-90, 90] degrees "
+                                  f"(null: 0), got {self.elevation!r}")
+            if self.task == "reconstruction" and ring != 0.0:
+                raise ConfigError(f"train.elevation: {PRGAN} reconstructs in the input camera's frame, whose "
+                                  f"view (ring view 0) is at elevation 0; expected 0 or null, got {ring!r}")
+        return self

@@ -25,7 +25,7 @@ __all__ = ["PhotoOptions", "ImageOptions", "prepare_image"]
 @dataclass
 class PhotoOptions:
     """How a collection turns each photo into a training image; the one owner of these settings:
-    the data config's section (``mitsuba_platonic.config.DataConfig``) inherits them.
+    the data config's section (``mitsuba_platonic.data.settings.DataConfig``) inherits them.
 
     background: null | 'white' (RGB photos on white are masked by their near-white pixels);
     threshold: how near to white, in [0, 1); crop: 'image' | 'bbox'; margin: a transparent border,

@@ -1,0 +1,60 @@
+"""The run section of a config (``run:``): where a run's folder is, its seed, device, length and cadence.
+
+:class:`RunConfig` is the section's dataclass and :data:`DEVICES` its choice of device, beside
+the run layer that reads them (:mod:`mitsuba_platonic.train.run`); a leaf that imports no config
+(the config composes it), no trainer and no run.
+"""
+
+from __future__ import annotations
+
+import os
+from dataclasses import dataclass
+from typing import Literal, Union
+
+from ..settings_checks import ConfigError, choice, non_negative, positive
+
+__all__ = ["RunConfig", "DEVICES"]
+
+#: run.device: 'auto' picks CUDA when available.
+DEVICES = ("auto", "cpu", "cuda")
+
+
+@dataclass
+class RunConfig:
+    """name: run folder name under ``out_dir`` (one folder name: no '/', no '..'); seed: master seed;
+    device: 'auto' | 'cpu' | 'cuda'; steps: training steps; log_every / sample_every / checkpoint_every: in steps;
+    threads: torch and Dr.Jit CPU threads (0 = all cores); drjit_threads: Dr.Jit's worker threads
+    while training, 'auto' or a count (1: its launches run on the training thread alone; 'auto' picks
+    1 for the marcher at N ≤ 32 on a CPU, docs/training.md "Threads"); keep_checkpoints: how many to keep."""
+
+    name: str = "run"
+    out_dir: str = "runs"
+    seed: int = 0
+    device: str = "auto"
+    steps: int = 2000
+    log_every: int = 10
+    sample_every: int = 250
+    checkpoint_every: int = 250
+    threads: int = 0
+    drjit_threads: Union[Literal["auto"], int] = "auto"
+    keep_checkpoints: int = 3
+
+    def validate(self) -> "RunConfig":
+        """Check this section's values; raise :class:`~mitsuba_platonic.settings_checks.ConfigError`
+        naming the key (``run.steps: ...``)."""
+        _folder_name("run.name", self.name)
+        choice("run.device", self.device, DEVICES)
+        for key in ("steps", "log_every", "sample_every", "checkpoint_every", "keep_checkpoints"):
+            positive(f"run.{key}", getattr(self, key))
+        non_negative("run.threads", self.threads)
+        if self.drjit_threads != "auto":
+            positive("run.drjit_threads", self.drjit_threads)
+        non_negative("run.seed", self.seed)
+        return self
+
+
+def _folder_name(key: str, value: str) -> None:
+    """One path component: no separator, not '.' or '..', not empty (so the run stays in out_dir)."""
+    seps = {"/", "\\"} | ({os.sep, os.altsep} - {None})
+    if not value or value in (".", "..") or any(sep in value for sep in seps) or "\0" in value:
+        raise ConfigError(f"{key}: expected a single folder name (no '/', '..' or absolute path), got {value!r}")
