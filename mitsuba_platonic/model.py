@@ -29,7 +29,6 @@ holds E, G (and P) under the same names, next to the critics D and D3 that only 
 
 from __future__ import annotations
 
-import dataclasses
 from pathlib import Path
 from typing import Any, Optional, Union
 
@@ -56,17 +55,16 @@ def view_codes(cfg: Any) -> int:
 
 
 def net_config(cfg: Any) -> NetConfig:
-    """The networks' shapes for a config: its model section, channels from its image formation."""
-    channels = CHANNELS[cfg.render.model]
-    return NetConfig(resolution=cfg.model.resolution, volume_channels=channels, image_channels=channels,
-                     latent=cfg.model.latent, width=cfg.model.width, norm=cfg.model.norm,
-                     encoder_hidden=cfg.model.encoder_hidden, upsample=cfg.model.upsample,
-                     view_codes=view_codes(cfg), pose=cfg.train.pose == "elevation").validate()
+    """The networks' shapes for a config: its model section's
+    (:meth:`~mitsuba_platonic.model_settings.ModelConfig.net_config`), with the channels of its
+    image formation, the PrGAN view code and the pose head its train section asks for."""
+    return cfg.model.net_config(CHANNELS[cfg.render.model], view_codes=view_codes(cfg),
+                                pose=cfg.train.pose == "elevation")
 
 
 def critic_config(cfg: Any) -> NetConfig:
     """The critics' (D's, D3's) shapes: :func:`net_config` at ``model.critic_width`` when it is set."""
-    return dataclasses.replace(net_config(cfg), width=cfg.model.critic_width or cfg.model.width)
+    return cfg.model.critic_config(net_config(cfg))
 
 
 class Model(nn.Module):

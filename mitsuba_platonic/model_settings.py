@@ -1,18 +1,27 @@
 """The model section of a config (``model:``): the networks' sizes and how they start.
 
 :class:`ModelConfig` is the section's dataclass, beside the networks it configures
-(:mod:`mitsuba_platonic.models`). Imports no config: the config composes it.
+(:mod:`mitsuba_platonic.models`). Six of its keys (:data:`NET_KEYS`) are the networks' own shape
+settings, :class:`~mitsuba_platonic.models.NetConfig`'s fields of the same names;
+:meth:`ModelConfig.net_config` hands them over, with what the other sections decide (the
+image formation's channels, the PrGAN view code, the pose head), so the two never disagree.
+The other three (``init``, ``critic_init``, ``critic_width``) are training's: how the networks
+start, and the critics' width. Imports no config: the config composes it.
 """
 
 from __future__ import annotations
 
+import dataclasses
 from dataclasses import dataclass
 from typing import Optional
 
-from .models import INITS, NORMS, RESOLUTIONS, UPSAMPLES
+from .models import INITS, NORMS, RESOLUTIONS, UPSAMPLES, NetConfig
 from .settings_checks import choice, non_negative, positive
 
-__all__ = ["ModelConfig"]
+__all__ = ["ModelConfig", "NET_KEYS"]
+
+#: The model keys that :class:`~mitsuba_platonic.models.NetConfig` takes as they are.
+NET_KEYS = ("resolution", "latent", "width", "norm", "encoder_hidden", "upsample")
 
 
 @dataclass
@@ -61,3 +70,14 @@ class ModelConfig:
             positive("model.critic_width", self.critic_width)
         non_negative("model.encoder_hidden", self.encoder_hidden)
         return self
+
+    def net_config(self, channels: int, view_codes: int = 0, pose: bool = False) -> NetConfig:
+        """E's and G's shapes: this section's :data:`NET_KEYS`, with ``channels`` for the volumes
+        and images (1 or 4: the image formation's), ``view_codes`` (the length of the view code
+        appended to z, 0: none) and ``pose`` (a pose head), which the config's other sections decide."""
+        return NetConfig(**{key: getattr(self, key) for key in NET_KEYS}, volume_channels=channels,
+                         image_channels=channels, view_codes=view_codes, pose=pose).validate()
+
+    def critic_config(self, net: NetConfig) -> NetConfig:
+        """The critics' (D's, D3's) shapes: ``net`` (:meth:`net_config`'s) at ``critic_width`` when it is set."""
+        return dataclasses.replace(net, width=self.critic_width or self.width)

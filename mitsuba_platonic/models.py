@@ -55,7 +55,8 @@ class NetConfig:
     PrGAN-style baseline, ``train.mode: prgan``: a one-hot of one of 8 ring views; 0: none, G
     sees z only); upsample: how G's stages double the resolution (:data:`UPSAMPLES`); pose:
     whether a :class:`PoseHead` reads the input camera's elevation from z (``train.pose:
-    elevation``)."""
+    elevation``). A config's model section builds it
+    (:meth:`~mitsuba_platonic.model_settings.ModelConfig.net_config`, its six keys of the same names)."""
 
     resolution: int = 32
     volume_channels: int = 4
