@@ -2,7 +2,7 @@
 
 import pytest
 
-from mitsuba_platonic.config import Config, ConfigError, TrainConfig, config_from_dict, load_config
+from mitsuba_platonic.config import Config, ConfigError, RenderConfig, TrainConfig, config_from_dict, load_config
 
 
 def _error(*overrides: str) -> str:
@@ -94,3 +94,53 @@ def test_drjit_threads_is_auto_or_a_count(value, ok):
     else:
         with pytest.raises(ConfigError, match="run.drjit_threads"):
             config_from_dict({"run": {"drjit_threads": value}})
+
+
+# -- each section owns its settings and checks itself (issue 26) ------------------------------
+
+def test_each_section_checks_itself_with_the_configs_messages():
+    """A section's validate() raises what the whole config's does, without a Config around it."""
+    from mitsuba_platonic.data.settings import DataConfig
+    from mitsuba_platonic.model_settings import ModelConfig
+    from mitsuba_platonic.train.run_settings import RunConfig
+    from mitsuba_platonic.train.settings import TrainConfig as OwnTrainConfig
+
+    assert OwnTrainConfig is TrainConfig                    # config.py re-exports the owner's class
+    for section, key, bad in [(RunConfig(steps=0), "run.steps", "run.steps=0"),
+                              (DataConfig(split=0.0), "data.split", "data.split=0"),
+                              (ModelConfig(resolution=24), "model.resolution", "model.resolution=24"),
+                              (TrainConfig(batch_size=0), "train.batch_size", "train.batch_size=0")]:
+        with pytest.raises(ConfigError) as info:
+            section.validate()
+        assert str(info.value).startswith(key + ":") and str(info.value) == _error(bad)
+        assert type(section)().validate() == type(section)()
+
+
+def test_cross_section_checks_stay_with_the_config():
+    """colour needs the EA formation: a check of two sections, which the train section alone passes."""
+    cfg = Config(render=RenderConfig(model="vh"))
+    cfg.train.colour_tv, cfg.data.formation = 0.1, "vh"
+    assert cfg.train.validate() is cfg.train
+    with pytest.raises(ConfigError, match=r"^train\.colour_tv: colour needs render\.model 'ea', got 'vh'$"):
+        cfg.validate()
+
+
+def test_the_model_section_builds_the_networks_config():
+    """The keys ModelConfig shares with NetConfig are handed over as they are; the rest come from
+    the other sections (channels, view codes, pose) or are the critics' (critic_width)."""
+    import dataclasses
+
+    from mitsuba_platonic.model import critic_config, net_config
+    from mitsuba_platonic.model_settings import NET_KEYS, ModelConfig
+    from mitsuba_platonic.models import NetConfig
+
+    shared = {f.name for f in dataclasses.fields(NetConfig)} & {f.name for f in dataclasses.fields(ModelConfig)}
+    assert set(NET_KEYS) == shared
+    cfg = load_config(None, ["model.width=8", "model.latent=16", "model.critic_width=24", "model.norm=instance",
+                             "model.upsample=resize", "model.encoder_hidden=32", "render.model=vh",
+                             "data.formation=vh"])
+    net = net_config(cfg)
+    assert net == NetConfig(resolution=32, volume_channels=1, image_channels=1, latent=16, width=8, norm="instance",
+                            encoder_hidden=32, upsample="resize", view_codes=0, pose=False)
+    assert critic_config(cfg) == dataclasses.replace(net, width=24)
+    assert critic_config(load_config(None, ["model.width=8"])).width == 8
