@@ -1,6 +1,6 @@
 """Data: procedural shape classes with 3D ground truth (:mod:`.shapes`), rendered collections
-(:mod:`.collection`, ``platonic make-dataset``), contact sheets (:mod:`.preview`) and the
-photo-collection loader (:mod:`.photos`)."""
+(:mod:`.collection`, ``platonic make-dataset``), contact sheets (:mod:`.preview`), the
+photo-collection loader (:mod:`.photos`) and the config's ``data:`` section (:mod:`.settings`)."""
 
 from . import shapes
 from .photos import (CollectionReport, ImageRejected, PhotoCollection, PhotoCollectionWarning, PhotoEntry,
