@@ -30,104 +30,21 @@ import os
 import sys
 import warnings
 from pathlib import Path
-from typing import TYPE_CHECKING, Callable, List, Optional, Sequence
+from typing import Callable, List, Optional, Sequence
 
 from .backend import BackendError
 from .errors import Interrupted, UserError
 
-if TYPE_CHECKING:                       # numpy and torch load inside main(), where a Ctrl-C is caught
-    import torch
-
-__all__ = ["main", "build_parser", "load_volume", "parse_models"]
+__all__ = ["main", "build_parser", "parse_models"]
 
 PROG = "platonic"
-BUILTIN_PREFIX = "builtin:"
 
 
 class CLIError(UserError):
     """A user error: reported as ``platonic <command>: error: <message>``, exit code 2."""
 
 
-# --------------------------------------------------------------------------- volume input
-
-
-def _load_npz(path: Path) -> torch.Tensor:
-    """Read and validate the array ``volume`` of a ``.npz`` file → ``(1, C, N, N, N)`` float32."""
-    import numpy as np
-    import torch
-
-    name = str(path)
-    if not path.exists():
-        raise CLIError(f"volume file {name!r} does not exist")
-    if not path.is_file():
-        raise CLIError(f"volume file {name!r} is not a file")
-    try:
-        archive = np.load(path, allow_pickle=False)
-    except Exception as e:  # numpy raises several types for non-npz content
-        raise CLIError(f"could not read {name!r} as a .npz archive: {e}") from None
-    if not isinstance(archive, np.lib.npyio.NpzFile):
-        raise CLIError(f"{name!r} is a single .npy array, not a .npz archive; save it with "
-                       f"numpy.savez({name!r}, volume=array)")
-    with archive:
-        if "volume" not in archive.files:
-            found = ", ".join(archive.files) or "no arrays"
-            raise CLIError(f"{name!r} has no array named 'volume' (found: {found}); save it with "
-                           f"numpy.savez(path, volume=array)")
-        try:
-            v = archive["volume"]
-        except Exception as e:
-            raise CLIError(f"could not read array 'volume' from {name!r}: {e}") from None
-    expected = ("must have shape (C, N, N, N) or (1, C, N, N, N) with C = 4 [r, g, b, density] "
-                "or C = 1 [density]")
-    if v.ndim == 5:
-        if v.shape[0] != 1:
-            raise CLIError(f"{name!r}: array 'volume' {expected}, got shape {v.shape} (batch {v.shape[0]} ≠ 1)")
-        v = v[0]
-    if v.ndim != 4:
-        raise CLIError(f"{name!r}: array 'volume' {expected}, got shape {v.shape}")
-    if v.shape[0] not in (1, 4):
-        raise CLIError(f"{name!r}: array 'volume' {expected}, got shape {v.shape} with C = {v.shape[0]}")
-    if not v.shape[1] == v.shape[2] == v.shape[3]:
-        raise CLIError(f"{name!r}: array 'volume' must be cubic (N, N, N), got spatial shape {v.shape[1:]}")
-    if v.shape[1] < 2:
-        raise CLIError(f"{name!r}: array 'volume' needs a resolution N of at least 2, got {v.shape[1]}")
-    if not (np.issubdtype(v.dtype, np.floating) or np.issubdtype(v.dtype, np.integer) or v.dtype == bool):
-        raise CLIError(f"{name!r}: array 'volume' must hold numbers, got dtype {v.dtype}")
-    v = v.astype(np.float32)
-    if not np.isfinite(v).all():
-        raise CLIError(f"{name!r}: array 'volume' contains NaN or Inf")
-    lo, hi = float(v.min()), float(v.max())
-    if lo < 0.0 or hi > 1.0:
-        bad = np.argwhere((v < 0.0) | (v > 1.0))
-        raise CLIError(f"{name!r}: array 'volume' values must lie in [0, 1], got range [{lo:.6g}, {hi:.6g}] "
-                       f"({len(bad)} value(s) outside, the first at index {tuple(int(i) for i in bad[0])}, "
-                       f"channel first)")
-    return torch.from_numpy(np.ascontiguousarray(v))[None]
-
-
-def load_volume(spec: str, resolution: Optional[int] = None) -> torch.Tensor:
-    """``builtin:<kind>`` (a :func:`~mitsuba_platonic.volume.test_volume` at ``resolution``, default
-    32) or a path to a ``.npz`` file holding ``volume`` → ``(1, C, N, N, N)``, C = 4 or 1.
-
-    For a file, ``resolution`` (if given) must match the file's N.
-    """
-    from .volume import TEST_VOLUMES, test_volume
-
-    if spec.startswith(BUILTIN_PREFIX):
-        kind = spec[len(BUILTIN_PREFIX):]
-        if kind not in TEST_VOLUMES:
-            choices = ", ".join(BUILTIN_PREFIX + k for k in TEST_VOLUMES)
-            raise CLIError(f"unknown built-in volume {spec!r}; expected one of {choices} or a .npz file")
-        n = 32 if resolution is None else resolution
-        return test_volume(n, kind, "ea")
-    path = Path(spec)
-    if path.suffix.lower() != ".npz":
-        raise CLIError(f"--volume must be builtin:figure, builtin:cloud or a .npz file, got {spec!r}")
-    v = _load_npz(path)
-    if resolution is not None and resolution != v.shape[-1]:
-        raise CLIError(f"--resolution {resolution} does not match {spec!r}, whose volume is "
-                       f"{v.shape[-1]}³ (leave --resolution out for files)")
-    return v
+# --------------------------------------------------------------------------- models
 
 
 def parse_models(text: str) -> List[str]:
@@ -193,6 +110,7 @@ def _check_compare_settings(args: argparse.Namespace) -> None:
 
 def _cmd_compare(args: argparse.Namespace) -> int:
     from .compare import check_memory, compare, comparison_views, format_table, write_summary
+    from .volume_io import BUILTIN_PREFIX, load_volume
 
     _check_compare_settings(args)
     if args.volume.startswith(BUILTIN_PREFIX):              # before building it: refuse what cannot fit

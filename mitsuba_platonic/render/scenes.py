@@ -25,7 +25,8 @@ from pathlib import Path
 from typing import Any, Dict, Mapping, Optional, Sequence, Union
 
 from ..resources import scenes_folder
-from .grids import extinction, write_vol
+from ..volume_io import read_npz, write_vol
+from .grids import extinction
 from .variant import ensure_variant
 
 __all__ = ["SCENES", "scene_path", "load_scene", "xml_value", "write_scene_grids"]
@@ -111,7 +112,7 @@ def write_scene_grids(volume: Any, folder: Union[str, Path]) -> Dict[str, Path]:
 
     ``density.vol`` (the density, raymarch*.xml), ``albedo.vol`` (the colour, EA volumes only) and
     ``sigma_t.vol`` (the path tracer's extinction, physical.xml; RGBA volumes only), each with
-    :func:`mitsuba_platonic.render.grids.write_vol`. Returns ``{parameter: path}``.
+    :func:`mitsuba_platonic.volume_io.write_vol`. Returns ``{parameter: path}``.
     """
     import torch
 
@@ -131,16 +132,13 @@ def main(argv: Optional[Sequence[str]] = None) -> None:
     """``python -m mitsuba_platonic.render.scenes VOLUME.npz OUT``: write OUT/{density,albedo,sigma_t}.vol."""
     import argparse
 
-    import numpy as np
-
     parser = argparse.ArgumentParser(prog="python -m mitsuba_platonic.render.scenes",
                                      description="Write the .vol grids the scenes/*.xml files read for a "
                                                  "volume saved as .npz (array 'volume', (C, N, N, N)).")
     parser.add_argument("volume", help="an .npz written by platonic generate/reconstruct")
     parser.add_argument("out", help="folder for density.vol, albedo.vol, sigma_t.vol")
     args = parser.parse_args(argv)
-    with np.load(args.volume) as f:
-        volume = f["volume"]
+    volume = read_npz(Path(args.volume))[0]
     for key, path in write_scene_grids(volume, args.out).items():
         print(f"{key}={path}")
 
