@@ -56,7 +56,7 @@ class Mesh:
 
 def extract_mesh(volume: torch.Tensor, level: float = 0.5) -> Mesh:
     """Marching cubes on the density (last channel) of ``(C, N, N, N)`` at ``level``."""
-    from skimage.measure import marching_cubes
+    from skimage.measure import marching_cubes  # lazy: scikit-image, only for meshes
 
     v = volume.detach().float().cpu()
     density = v[-1].numpy()

@@ -213,6 +213,38 @@ def test_each_function_level_import_of_the_package_says_why():
                         "not):\n" + "\n".join(silent))
 
 
+def _says_why(lines: List[str], first: int) -> bool:
+    """Whether the import starting on line ``first`` (1-based) has a comment: on its own line, on the
+    comment lines right above it, or on the first import of the block of imports it ends."""
+    if "#" in lines[first - 1]:
+        return True
+    k = first - 2
+    while k >= 0 and lines[k].strip().startswith(("import ", "from ")) and "#" not in lines[k]:
+        k -= 1
+    return k >= 0 and "#" in lines[k] and lines[k].strip().startswith(("#", "import ", "from "))
+
+
+def test_each_function_level_import_says_why():
+    """Third-party imports too (issue 26): an import inside a function says why it is not at the top
+    (an optional or slow dependency: ``# lazy: matplotlib is slow to import``), outside the modules
+    that are lazy by design."""
+    silent = []
+    for name, path in modules().items():
+        if lazy_by_design(name):
+            continue
+        text = path.read_text()
+        lines = text.split("\n")
+        for fn in ast.walk(ast.parse(text)):
+            if not isinstance(fn, (ast.FunctionDef, ast.AsyncFunctionDef)):
+                continue
+            for node in ast.walk(fn):
+                if isinstance(node, (ast.Import, ast.ImportFrom)) and not _says_why(lines, node.lineno):
+                    where = f"{path.relative_to(PACKAGE.parent)}:{node.lineno}"
+                    silent.append(f"  {where}: {lines[node.lineno - 1].strip()}")
+    assert not silent, ("function-level imports that do not say why (import at the top, or comment why "
+                        "not):\n" + "\n".join(sorted(set(silent))))
+
+
 def test_a_cycle_is_found_and_named(tmp_path):
     """The check itself: a module importing, inside a function, one that imports it is a cycle,
     named with the file and line of each import."""

@@ -488,7 +488,7 @@ def _remove_temporaries(out: Path) -> None:
 @contextmanager
 def _lock(path: Path) -> Iterator[None]:
     """An exclusive advisory lock: one writer per collection folder (others wait)."""
-    import fcntl
+    import fcntl  # lazy: POSIX only, where a collection is locked
     with open(path, "w") as f:
         fcntl.flock(f, fcntl.LOCK_EX)
         try:

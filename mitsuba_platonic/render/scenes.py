@@ -19,10 +19,13 @@ scene structure is written twice.
 
 from __future__ import annotations
 
+import argparse
 import math
 import numbers
 from pathlib import Path
 from typing import Any, Dict, Mapping, Optional, Sequence, Union
+
+import torch
 
 from ..resources import scenes_folder
 from ..volume_io import read_npz, write_vol
@@ -114,8 +117,6 @@ def write_scene_grids(volume: Any, folder: Union[str, Path]) -> Dict[str, Path]:
     ``sigma_t.vol`` (the path tracer's extinction, physical.xml; RGBA volumes only), each with
     :func:`mitsuba_platonic.volume_io.write_vol`. Returns ``{parameter: path}``.
     """
-    import torch
-
     v = torch.as_tensor(volume).detach().float().cpu()
     if v.dim() != 4 or v.shape[0] not in (1, 4):
         raise ValueError(f"expected a (1 or 4, N, N, N) volume, got {tuple(v.shape)}")
@@ -130,8 +131,6 @@ def write_scene_grids(volume: Any, folder: Union[str, Path]) -> Dict[str, Path]:
 
 def main(argv: Optional[Sequence[str]] = None) -> None:
     """``python -m mitsuba_platonic.render.scenes VOLUME.npz OUT``: write OUT/{density,albedo,sigma_t}.vol."""
-    import argparse
-
     parser = argparse.ArgumentParser(prog="python -m mitsuba_platonic.render.scenes",
                                      description="Write the .vol grids the scenes/*.xml files read for a "
                                                  "volume saved as .npz (array 'volume', (C, N, N, N)).")
