@@ -1,9 +1,10 @@
 """Export: a volume's files (.npz, Mitsuba .vol), turntable GIFs, and meshes (PLY with vertex colours).
 
 :func:`export_volume` writes all of them for one volume (the volume files through
-:func:`~mitsuba_platonic.volume_io.save_volume`, which owns their formats); :func:`export_reconstructions` and
-:func:`export_samples` are the ``reconstruct`` and ``generate`` pipelines (a model's volumes,
-then :func:`export_volume`), which the command line and the quickstart call.
+:func:`~mitsuba_platonic.volume_io.save_volume`, which owns their formats);
+:func:`export_reconstructions` and :func:`export_samples` are the ``reconstruct`` and ``generate``
+pipelines (a model's volumes, then :func:`export_volume`), which the command line and the
+quickstart call.
 
 Mesh extraction: marching cubes on the density channel at iso-level ``level`` (scikit-image),
 in voxel-index space ``(d, h, w)``, mapped to the world by the volume convention
