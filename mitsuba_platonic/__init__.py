@@ -14,6 +14,7 @@ closed-form layers, photo loading and ``--help`` work without a usable LLVM.
 
 from __future__ import annotations
 
+import importlib
 import sys
 import types
 from typing import Any
@@ -32,8 +33,6 @@ _LAZY = {"render": (".render", "render"), "render_with": (".render", "render_wit
 
 def __getattr__(name: str) -> Any:
     """``BACKEND`` (checked once, on first read) and the lazily imported names of :data:`_LAZY`."""
-    import importlib
-
     if name == "BACKEND":
         backend = check_backend()                # raises BackendError; a failure is not remembered
         globals()["BACKEND"] = backend

@@ -98,13 +98,13 @@ def preselect_libllvm() -> None:
 
 
 def _cache_dir() -> "Path":
-    from pathlib import Path
+    from pathlib import Path  # lazy: the check's alone; `import mitsuba_platonic` stays quick (issue 29)
 
     return Path(os.environ.get("MITSUBA_PLATONIC_CACHE", Path.home() / ".cache" / "mitsuba_platonic"))
 
 
 def _key(libllvm: Optional[str]) -> str:
-    import hashlib
+    import hashlib  # lazy: the check's alone; `import mitsuba_platonic` stays quick (issue 29)
     from importlib import metadata
 
     try:
@@ -120,7 +120,7 @@ def _key(libllvm: Optional[str]) -> str:
 
 
 def _probe(env: Dict[str, str]) -> Dict[str, object]:
-    import json
+    import json  # lazy: the check's alone; `import mitsuba_platonic` stays quick (issue 29)
     import subprocess
 
     try:
@@ -143,7 +143,7 @@ def check_backend() -> Dict[str, object]:
     :class:`BackendError` with install instructions when neither LLVM nor CUDA works.
     Set ``MITSUBA_PLATONIC_SKIP_BACKEND_CHECK=1`` to skip the check entirely.
     """
-    import json
+    import json  # lazy: the check's alone; `import mitsuba_platonic` stays quick (issue 29)
 
     from .fileio import atomic_write        # here, not at the top: importing the package stays cheap (issue 29)
 

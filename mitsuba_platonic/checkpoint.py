@@ -37,6 +37,7 @@ from dataclasses import dataclass
 from pathlib import Path, PurePath
 from typing import Any, Dict, List, Optional, Tuple, Union
 
+import numpy as np
 import torch
 
 from .errors import UserError
@@ -205,8 +206,6 @@ def convert_checkpoint(path: Union[str, Path], out: Union[str, Path, None] = Non
 def _to_plain(value: Any, path: Path, name: str) -> Any:
     """``value`` with numpy arrays as tensors, numpy scalars as numbers and paths as strings;
     :class:`RunError` naming ``path`` and the part for anything else that is not plain data."""
-    import numpy as np
-
     if isinstance(value, torch.Tensor):
         return value.detach() if isinstance(value, torch.nn.Parameter) else value
     if isinstance(value, np.ndarray) and value.dtype != object:

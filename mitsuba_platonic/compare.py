@@ -20,6 +20,7 @@ VH/AO, where ``A`` is the opacity).
 
 from __future__ import annotations
 
+import json
 import os
 import sys
 import time
@@ -140,7 +141,7 @@ def kernel_time(fn: Callable[[], Any]) -> Tuple[float, int]:
     """Run ``fn`` once with Dr.Jit's kernel history on: (milliseconds of JIT-kernel execution,
     launches of every kind: kernels, copies, clears, reductions). The history is on only for this
     call, because recording it makes every launch wait for its timing query."""
-    import drjit as dr
+    import drjit as dr  # lazy: Dr.Jit only after the backend check (ensure_variant)
     dr.sync_thread()
     dr.set_flag(dr.JitFlag.KernelHistory, True)
     try:
@@ -215,7 +216,7 @@ def _check_inputs(volume: torch.Tensor, views: torch.Tensor, models: Sequence[st
 
 def _figure(model: str, cf: torch.Tensor, mi: torch.Tensor, views: torch.Tensor, title: str, path: Path) -> None:
     """One row per view: closed form | Mitsuba | |difference| heat map with a colour bar."""
-    from matplotlib.backends.backend_agg import FigureCanvasAgg
+    from matplotlib.backends.backend_agg import FigureCanvasAgg  # lazy: matplotlib is slow to import, only for figures
     from matplotlib.cm import ScalarMappable
     from matplotlib.colors import Normalize
     from matplotlib.figure import Figure
@@ -349,8 +350,6 @@ SUMMARY_KEYS = ("model", "resolution", "views", "filter", "options", "max_abs_di
 def write_summary(path: Union[str, Path], volume: str, views: torch.Tensor, results: Sequence[Mapping[str, Any]],
                   repeats: int) -> Path:
     """``compare.json``: the volume's name, ``repeats``, the view vectors and each result's :data:`SUMMARY_KEYS`."""
-    import json
-
     path = Path(path)
     path.write_text(json.dumps({"volume": volume, "repeats": repeats, "view_vectors": views.tolist(),
                                 "results": [{k: r[k] for k in SUMMARY_KEYS} for r in results]}, indent=2))

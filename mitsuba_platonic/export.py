@@ -1,8 +1,10 @@
-"""Export: volumes to files (.npz, Mitsuba .vol), turntable GIFs, and meshes (PLY with vertex colours).
+"""Export: a volume's files (.npz, Mitsuba .vol), turntable GIFs, and meshes (PLY with vertex colours).
 
-:func:`export_volume` writes all of them for one volume; :func:`export_reconstructions` and
-:func:`export_samples` are the ``reconstruct`` and ``generate`` pipelines (a model's volumes,
-then :func:`export_volume`), which the command line and the quickstart call.
+:func:`export_volume` writes all of them for one volume (the volume files through
+:func:`~mitsuba_platonic.volume_io.save_volume`, which owns their formats);
+:func:`export_reconstructions` and :func:`export_samples` are the ``reconstruct`` and ``generate``
+pipelines (a model's volumes, then :func:`export_volume`), which the command line and the
+quickstart call.
 
 Mesh extraction: marching cubes on the density channel at iso-level ``level`` (scikit-image),
 in voxel-index space ``(d, h, w)``, mapped to the world by the volume convention
@@ -26,14 +28,15 @@ from .errors import UserError
 from .fileio import atomic_write
 from .frames import display_frames, save_gif, turntable_frames
 from .images import composite, linear_to_srgb, save_grid, save_png, to_hwc
-from .render.grids import write_vol
 from .views import turntable
 from .volume import voxel_size, world_to_grid
+from .volume_io import save_volume
 
 if TYPE_CHECKING:
     from .model import Model
 
-__all__ = ["save_volume", "write_vol", "display_frames", "turntable_frames", "save_gif", "extract_mesh",
+#: save_volume is volume_io's, named here too for the callers that import it from export (notebooks).
+__all__ = ["save_volume", "display_frames", "turntable_frames", "save_gif", "extract_mesh",
            "save_ply", "Mesh", "Exported", "export_volume", "export_reconstructions", "export_samples", "output_names",
            "EXPORT_EXTENSIONS"]
 
@@ -45,18 +48,6 @@ def _with_ext(stem: Path, ext: str) -> Path:
     return stem.with_name(stem.name + ext)
 
 
-def save_volume(volume: torch.Tensor, stem: PathLike) -> List[Path]:
-    """Write a ``(C, N, N, N)`` volume as ``stem.npz`` (array ``volume``) and ``stem.vol`` (Mitsuba),
-    each whole or not at all (:func:`~mitsuba_platonic.fileio.atomic_write`)."""
-    stem = Path(stem)
-    stem.parent.mkdir(parents=True, exist_ok=True)
-    npz, vol = _with_ext(stem, ".npz"), _with_ext(stem, ".vol")
-    array = volume.detach().float().cpu().numpy()
-    atomic_write(npz, lambda tmp: np.savez_compressed(tmp, volume=array))
-    atomic_write(vol, lambda tmp: write_vol(volume, tmp))
-    return [npz, vol]
-
-
 class Mesh:
     """vertices ``(V, 3)`` world coordinates, faces ``(F, 3)`` indices, colours ``(V, 3)`` uint8."""
 
@@ -66,7 +57,7 @@ class Mesh:
 
 def extract_mesh(volume: torch.Tensor, level: float = 0.5) -> Mesh:
     """Marching cubes on the density (last channel) of ``(C, N, N, N)`` at ``level``."""
-    from skimage.measure import marching_cubes
+    from skimage.measure import marching_cubes  # lazy: scikit-image, only for meshes
 
     v = volume.detach().float().cpu()
     density = v[-1].numpy()

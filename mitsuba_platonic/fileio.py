@@ -8,7 +8,7 @@ import re
 from pathlib import Path
 from typing import Any, Callable, List, Optional
 
-__all__ = ["atomic_write", "temporary_name", "remove_temporaries"]
+__all__ = ["atomic_write", "temporary_name", "remove_temporaries", "interrupt_behind"]
 
 #: What :func:`temporary_name` names a temporary: ``.<stem>.tmp<pid><suffix>``.
 _TEMPORARY = re.compile(r"\..+\.tmp\d+(\.[^.]+)?")
@@ -45,7 +45,7 @@ def atomic_write(path: Path, write: Callable[[Path], Any], durable: bool = False
                 os.fsync(f.fileno())
         os.replace(tmp, path)
     except Exception as e:
-        interrupt = _interrupt_behind(e)
+        interrupt = interrupt_behind(e)
         if interrupt is not None:                            # the clean-up of a write Ctrl-C tore
             raise interrupt from None
         failed = _as_os_error(e, path, tmp)
@@ -57,8 +57,9 @@ def atomic_write(path: Path, write: Callable[[Path], Any], durable: bool = False
             tmp.unlink()
 
 
-def _interrupt_behind(e: BaseException) -> Optional[KeyboardInterrupt]:
-    """The ``KeyboardInterrupt`` that ``e`` was raised while handling (its context chain), if any."""
+def interrupt_behind(e: BaseException) -> Optional[KeyboardInterrupt]:
+    """The ``KeyboardInterrupt`` that ``e`` is or was raised while handling (its context chain), if any:
+    Dr.Jit re-raises a Ctrl-C in its callbacks as its own error, the interrupt only in the chain."""
     seen = set()
     while e is not None and id(e) not in seen:
         if isinstance(e, KeyboardInterrupt):

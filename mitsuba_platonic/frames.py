@@ -13,6 +13,7 @@ from typing import List, Sequence, Union
 
 import numpy as np
 import torch
+from PIL import Image
 
 from .fileio import atomic_write
 from .images import composite, linear_to_srgb, to_hwc
@@ -42,8 +43,6 @@ def turntable_frames(volume: torch.Tensor, model: str, frames: int = 36, elevati
 
 def save_gif(frames: Sequence[np.ndarray], path: PathLike, scale: int = 4, duration_ms: int = 60) -> Path:
     """Frames (float sRGB in [0, 1]) → an endlessly looping GIF, upscaled ``scale``× (nearest)."""
-    from PIL import Image
-
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
     pil = [Image.fromarray((np.clip(f, 0, 1) * 255 + 0.5).astype(np.uint8)) for f in frames]

@@ -23,6 +23,8 @@ from pathlib import Path
 from typing import Optional, Sequence, Tuple, Union
 
 import numpy as np
+import OpenEXR
+from PIL import Image
 
 from .fileio import atomic_write
 
@@ -100,8 +102,6 @@ def save_png(path: PathLike, img: np.ndarray) -> Path:
     [0, 1]. Parent folders are created. The file appears whole or not at all (written to a
     temporary sibling and renamed): a run killed while writing a sample leaves no torn PNG.
     """
-    from PIL import Image
-
 
     arr = to_uint8(_as_image(img, channels=(1, 3, 4)))
     path = Path(path)
@@ -138,8 +138,6 @@ def save_exr(path: PathLike, img: np.ndarray, channels: Optional[Sequence[str]] 
         ValueError: on a bad image, or channel names that are not unique non-empty strings
             matching the channel count (for C = 1 the default duplicates it into Y and A).
     """
-    import OpenEXR
-
     arr = _as_image(img).astype(np.float32)
     c = arr.shape[2]
     if channels is None:
@@ -171,8 +169,6 @@ def _ordered(names: Sequence[str]) -> Tuple[str, ...]:
 def exr_channel_names(path: PathLike) -> Tuple[str, ...]:
     """The channel names of an EXR file in the order :func:`load_exr` returns them
     (R, G, B, Y, A first, then any others alphabetically)."""
-    import OpenEXR
-
     path = Path(path)
     if not path.is_file():
         raise FileNotFoundError(f"EXR file {str(path)!r} does not exist")
@@ -192,8 +188,6 @@ def load_exr(path: PathLike, channels: Optional[Sequence[str]] = None) -> np.nda
         FileNotFoundError: if the file does not exist.
         ValueError: if a requested channel is not in the file.
     """
-    import OpenEXR
-
     path = Path(path)
     if not path.is_file():
         raise FileNotFoundError(f"EXR file {str(path)!r} does not exist")
@@ -235,7 +229,7 @@ def heatmap(err: np.ndarray, vmax: Optional[float] = None, cmap: str = "inferno"
         ValueError: on a wrong shape, NaN/Inf, negative values, a non-positive ``vmax`` or an
             unknown colour map.
     """
-    import matplotlib
+    import matplotlib  # lazy: matplotlib is slow to import, only for figures
 
     arr = np.asarray(err)
     if arr.ndim == 3 and arr.shape[2] == 1:
@@ -258,13 +252,13 @@ def heatmap(err: np.ndarray, vmax: Optional[float] = None, cmap: str = "inferno"
 
 def linear_to_srgb(x: np.ndarray) -> np.ndarray:
     """Encode linear values with the sRGB transfer function (colour-science), clipped to [0, 1]."""
-    import colour
+    import colour  # lazy: colour-science is slow to import (about a second)
     return np.asarray(colour.cctf_encoding(np.clip(np.asarray(x, dtype=np.float64), 0.0, 1.0), "sRGB"))
 
 
 def srgb_to_linear(x: np.ndarray) -> np.ndarray:
     """Decode sRGB-encoded values in [0, 1] to linear (colour-science)."""
-    import colour
+    import colour  # lazy: colour-science is slow to import (about a second)
     return np.asarray(colour.cctf_decoding(np.clip(np.asarray(x, dtype=np.float64), 0.0, 1.0), "sRGB"))
 
 

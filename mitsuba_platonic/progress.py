@@ -26,7 +26,7 @@ def is_live(stream: Optional[IO[str]] = None) -> bool:
             return True
     except (AttributeError, ValueError):                   # no isatty, or a closed stream
         return False
-    from tqdm.autonotebook import tqdm as auto
+    from tqdm.autonotebook import tqdm as auto  # lazy: tqdm.autonotebook looks for Jupyter on import
     from tqdm.std import tqdm as plain
     return auto is not plain                               # in a notebook: tqdm picked its widget
 
@@ -122,6 +122,6 @@ def progress_bar(total: int, initial: int = 0, unit: str = "it", desc: Optional[
     if disable:
         return _Silent(total, initial)
     if is_live(file):
-        from tqdm.auto import tqdm
+        from tqdm.auto import tqdm  # lazy: as in is_live
         return tqdm(total=total, initial=initial, unit=unit, desc=desc, file=file, dynamic_ncols=True)
     return LineProgress(total, initial=initial, unit=unit, desc=desc, every=every, file=file)

@@ -1,4 +1,4 @@
-"""`platonic bench` (cli.py + bench.py): its outputs exist and its numbers are what they claim.
+"""`platonic bench` (cli/renderers.py + bench/): its outputs exist and its numbers are what they claim.
 
 The quick bench runs once at 16³ with a batch of 2 (seconds); nothing here looks at a time.
 """

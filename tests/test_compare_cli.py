@@ -1,4 +1,4 @@
-"""`platonic compare` (cli.py + compare.py) and the image helpers (images.py)."""
+"""`platonic compare` (cli/renderers.py + compare.py) and the image helpers (images.py)."""
 
 from __future__ import annotations
 

@@ -131,7 +131,7 @@ def test_the_package_has_no_import_cycle():
 #: face, which re-exports the renderer) sits on top.
 LAYERS = [
     ("foundation", ["errors", "fileio", "backend", "resources", "progress", "_data"]),
-    ("conventions: views, volume, images", ["views", "volume", "images"]),
+    ("conventions: views, volume (and its files), images", ["views", "volume", "volume_io", "images"]),
     ("the checks every settings section shares", ["settings_checks"]),
     ("renderer", ["render", "compare", "frames"]),
     ("data: collections, photos, the data section", ["data"]),
@@ -186,8 +186,13 @@ def test_each_allowed_upward_import_exists_and_is_lazy(pair):
 #: Modules whose function-level imports of the package are lazy by design, and why.
 LAZY_BY_DESIGN = {
     "mitsuba_platonic.cli": "each command imports what it runs when it runs: --help and a wrong flag answer "
-                            "without importing torch, Mitsuba or the trainer",
+                            "without importing torch, Mitsuba or the trainer (the package and its modules)",
 }
+
+
+def lazy_by_design(module: str) -> bool:
+    """Whether ``module`` is, or is inside, a package of :data:`LAZY_BY_DESIGN`."""
+    return any(module == m or module.startswith(m + ".") for m in LAZY_BY_DESIGN)
 
 
 def test_each_function_level_import_of_the_package_says_why():
@@ -196,7 +201,7 @@ def test_each_function_level_import_of_the_package_says_why():
     Optional heavy third-party imports (Dr.Jit, Mitsuba, matplotlib, scipy) are not this test's."""
     silent = []
     for e in imports(modules()):
-        if not e.lazy or e.source in LAZY_BY_DESIGN:
+        if not e.lazy or lazy_by_design(e.source):
             continue
         lines = modules()[e.source].read_text().split("\n")
         above, k = [], e.line - 2
@@ -207,6 +212,38 @@ def test_each_function_level_import_of_the_package_says_why():
             silent.append(f"  {modules()[e.source].relative_to(PACKAGE.parent)}:{e.line} → {e.target}")
     assert not silent, ("function-level imports that do not say why (import at the top, or comment why "
                         "not):\n" + "\n".join(silent))
+
+
+def _says_why(lines: List[str], first: int) -> bool:
+    """Whether the import starting on line ``first`` (1-based) has a comment: on its own line, on the
+    comment lines right above it, or on the first import of the block of imports it ends."""
+    if "#" in lines[first - 1]:
+        return True
+    k = first - 2
+    while k >= 0 and lines[k].strip().startswith(("import ", "from ")) and "#" not in lines[k]:
+        k -= 1
+    return k >= 0 and "#" in lines[k] and lines[k].strip().startswith(("#", "import ", "from "))
+
+
+def test_each_function_level_import_says_why():
+    """Third-party imports too (issue 26): an import inside a function says why it is not at the top
+    (an optional or slow dependency: ``# lazy: matplotlib is slow to import``), outside the modules
+    that are lazy by design."""
+    silent = []
+    for name, path in modules().items():
+        if lazy_by_design(name):
+            continue
+        text = path.read_text()
+        lines = text.split("\n")
+        for fn in ast.walk(ast.parse(text)):
+            if not isinstance(fn, (ast.FunctionDef, ast.AsyncFunctionDef)):
+                continue
+            for node in ast.walk(fn):
+                if isinstance(node, (ast.Import, ast.ImportFrom)) and not _says_why(lines, node.lineno):
+                    where = f"{path.relative_to(PACKAGE.parent)}:{node.lineno}"
+                    silent.append(f"  {where}: {lines[node.lineno - 1].strip()}")
+    assert not silent, ("function-level imports that do not say why (import at the top, or comment why "
+                        "not):\n" + "\n".join(sorted(set(silent))))
 
 
 def test_a_cycle_is_found_and_named(tmp_path):

@@ -116,7 +116,7 @@ def _place_labels(ax, points: List[Tuple[float, float, str, str]], fontsize: flo
 def _log_axes(ax, xs: Sequence[float], ys: Sequence[float]) -> None:
     """Log-log axes spanning the data with room for labels (at least a factor 4 on each axis),
     ticks at 1, 2, 5 × 10^k labelled in plain numbers."""
-    from matplotlib.ticker import FuncFormatter, LogLocator, NullFormatter
+    from matplotlib.ticker import FuncFormatter, LogLocator, NullFormatter  # lazy: matplotlib is slow to import
 
     ax.set_xscale("log")
     ax.set_yscale("log")
@@ -143,7 +143,7 @@ def pareto_plot(rows: List[Dict[str, Any]], path: Path, title: str) -> Path:
     Right, when present: the other image formations (the authors' layer against our reference, the
     path tracer against its own high-spp render), on their own axes.
     """
-    from matplotlib.backends.backend_agg import FigureCanvasAgg
+    from matplotlib.backends.backend_agg import FigureCanvasAgg  # lazy: matplotlib is slow to import, only for figures
     from matplotlib.figure import Figure
     from matplotlib.lines import Line2D
 

@@ -28,7 +28,7 @@ def _release_memory() -> None:
     global _LIBC
     gc.collect()
     if "drjit" in sys.modules:
-        import drjit as dr
+        import drjit as dr  # already loaded: only then has Dr.Jit a cache to free
         dr.sync_thread()
         dr.flush_malloc_cache()
     if _LIBC is None:

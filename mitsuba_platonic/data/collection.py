@@ -51,12 +51,12 @@ from ..fileio import atomic_write
 from ..images import exr_channel_names, save_exr, save_png, to_hwc, to_png_rgba
 from ..progress import progress_bar
 from ..render import RenderSettings, render
-from ..render.grids import write_vol
 from ..render.physical import render_physical, sample_lighting
 from ..render.settings import FORMATIONS, LIGHTINGS
 from ..render.sky import ENVMAPS, baked_envmaps
 from ..render.variant import ensure_variant
 from ..volume import CHANNELS
+from ..volume_io import write_vol
 from . import shapes
 
 __all__ = ["CollectionSpec", "make_collection", "load_manifest", "FORMATIONS", "RENDERERS",
@@ -488,7 +488,7 @@ def _remove_temporaries(out: Path) -> None:
 @contextmanager
 def _lock(path: Path) -> Iterator[None]:
     """An exclusive advisory lock: one writer per collection folder (others wait)."""
-    import fcntl
+    import fcntl  # lazy: POSIX only, where a collection is locked
     with open(path, "w") as f:
         fcntl.flock(f, fcntl.LOCK_EX)
         try:

@@ -25,7 +25,7 @@ def contact_sheet(shape_class: str, path: Union[str, Path], n_shapes: int = 4, n
     composited over white and sRGB-encoded for display. ``shape_seed(i)`` picks the seeds (the
     default matches :class:`~mitsuba_platonic.data.collection.CollectionSpec` with ``seed``).
     """
-    from matplotlib.figure import Figure
+    from matplotlib.figure import Figure  # lazy: matplotlib is slow to import, only for figures
 
     if shape_seed is None:
         spec = CollectionSpec(shape_class, seed=seed)

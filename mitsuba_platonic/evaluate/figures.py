@@ -19,9 +19,9 @@ def save_image_grid(lines: Sequence[Sequence[torch.Tensor]], titles: Sequence[st
     :func:`~.metrics.display_image`: RGBA over white, opacity in grey), ``titles`` above the first
     line, an optional label left of each line, ``suptitle`` on top. ``cell``: inches per image
     (width, height); ``extra_height``: inches added for the title. Returns ``path``."""
-    import matplotlib
+    import matplotlib  # lazy: matplotlib is slow to import, only for figures; Agg before pyplot
     matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
+    import matplotlib.pyplot as plt  # lazy: as matplotlib above
 
     cols = len(titles)
     fig, axes = plt.subplots(len(lines), cols, figsize=(cell[0] * cols, cell[1] * len(lines) + extra_height),

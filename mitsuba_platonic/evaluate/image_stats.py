@@ -78,7 +78,7 @@ def roughness(img: torch.Tensor) -> Optional[float]:
 
 def foreground_lab(img: torch.Tensor) -> np.ndarray:
     """``(K, 3)`` CIE L*a*b* of the foreground pixels' own colours (RGB / α), K ≥ 0."""
-    import colour
+    import colour  # lazy: colour-science is slow to import (about a second)
 
     x = _image(img)
     if x.shape[0] != 4:
@@ -102,7 +102,7 @@ def colour_distance(a: torch.Tensor, b: torch.Tensor) -> Dict[str, Optional[floa
     """Distance between the foreground colour distributions of two RGBA images: ``delta_e``
     (CIE76 ΔE of the mean L*a*b*) and ``sliced_w1`` (module docstring); both None when either
     foreground is empty."""
-    from scipy.stats import wasserstein_distance
+    from scipy.stats import wasserstein_distance  # lazy: scipy is slow to import
 
     la, lb = foreground_lab(a), foreground_lab(b)
     if not len(la) or not len(lb):

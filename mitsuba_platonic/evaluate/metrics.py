@@ -145,7 +145,7 @@ def dssim(a: ArrayLike, b: ArrayLike) -> float:
     ``use_sample_covariance=False`` and K1 = 0.01, K2 = 0.03 — the settings of Wang et al. 2004 —
     averaged over channels (``channel_axis``). Images must be at least 11×11.
     """
-    from skimage.metrics import structural_similarity
+    from skimage.metrics import structural_similarity  # lazy: scikit-image, only for SSIM
 
     a, b = _image_pair(a, b)
     if min(a.shape[1:]) < SSIM_WINDOW:
@@ -294,7 +294,7 @@ def chamfer_distance(output: ArrayLike, target: ArrayLike, threshold: float = IO
 
     Raises ``UserError`` when the target has no occupied voxel (the distance is undefined).
     """
-    from scipy.ndimage import distance_transform_edt
+    from scipy.ndimage import distance_transform_edt  # lazy: scipy is slow to import
 
     o, t = _density_pair(output, target)
     th = _threshold(threshold)
@@ -455,7 +455,7 @@ def fid(real: ArrayLike, fake: ArrayLike, weights: Optional[Union[str, Path]] = 
     (matrix square root by ``scipy.linalg.sqrtm``, its imaginary round-off dropped). The
     standard FID uses Inception-v3 pool3 features (``weights``: a TorchScript file of it).
     """
-    from scipy import linalg
+    from scipy import linalg  # lazy: scipy.linalg, only for FID
 
     net = network if network is not None else load_feature_network(weights, "Inception-v3")
     xr, xf = _rgb_batch(real, "real images"), _rgb_batch(fake, "fake images")

@@ -30,6 +30,7 @@ the quickstart's novel-view score (MAE and silhouette IoU over :data:`NOVEL_VIEW
 from __future__ import annotations
 
 from dataclasses import dataclass, field
+from pathlib import Path
 from typing import Dict, List, Optional, Sequence, Tuple
 
 import numpy as np
@@ -351,8 +352,6 @@ def held_out_truths(records: Sequence[Dict], model: str) -> List[torch.Tensor]:
     ``folder``, ``volume`` file and ``view``), each in its input camera's frame
     (:func:`truth_in_input_frame`); a :class:`~mitsuba_platonic.errors.UserError` naming an
     unreadable volume file."""
-    from pathlib import Path
-
     out = []
     for r in records:
         path = Path(r["folder"]) / r["volume"]

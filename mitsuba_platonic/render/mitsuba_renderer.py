@@ -62,7 +62,7 @@ def build_scene(n: int, model: str, options: RenderSettings) -> Any:
     """The Mitsuba scene for an N³ volume under ``model``, loaded from ``scenes/raymarch.xml``
     (VH, AO) or ``scenes/raymarch_ea.xml`` (EA) with empty grids of the right size."""
     mi = ensure_variant()
-    import drjit as dr
+    import drjit as dr  # lazy: Dr.Jit only after the backend check (ensure_variant)
 
     grids = {"density": dr.zeros(mi.TensorXf, (n, n, n, 1))}
     if model == "ea":                                         # VH and AO carry no colour grid
@@ -105,7 +105,7 @@ def _pair_render_op():
     """The custom op class, defined once Mitsuba's variant (and so Dr.Jit) is loaded."""
     global _PairRender
     if _PairRender is None:
-        import drjit as dr
+        import drjit as dr  # lazy: Dr.Jit only after the backend check (ensure_variant)
 
         class PairRender(dr.CustomOp):
             """``mi.render`` for one (volume, view) pair of a batch.
@@ -147,7 +147,7 @@ def differentiable_render(scene: Any, params: Any, grids: Dict[str, torch.Tensor
     integrator's ``render_backward`` (with ``seed + 1``) after re-binding this render's inputs.
     Returns the ``(H, W, C)`` image as a torch tensor.
     """
-    import drjit as dr
+    import drjit as dr  # lazy: Dr.Jit only after the backend check (ensure_variant)
     keys = list(grids)
 
     @dr.wrap(source="torch", target="drjit")

@@ -138,7 +138,7 @@ def sample_lighting(rng: np.random.Generator, kind: str = "sunsky",
 
 def luminance(rgb: np.ndarray) -> np.ndarray:
     """Relative luminance Y of linear sRGB ``(..., 3)`` (colour-science, sRGB primaries and D65)."""
-    import colour
+    import colour  # lazy: colour-science is slow to import (about a second)
     cs = colour.models.RGB_COLOURSPACE_sRGB
     return colour.RGB_luminance(rgb, cs.primaries, cs.whitepoint)
 
@@ -162,7 +162,7 @@ def sky_mean_luminance(lighting: Lighting) -> float:
     seed, so the same light always meters the same value. Y is the luminance of linear sRGB.
     """
     ensure_variant()
-    import drjit as dr
+    import drjit as dr  # lazy: Dr.Jit only after the backend check (ensure_variant)
     import mitsuba as mi
     emitter = lighting.emitter()
     sampler = mi.load_dict({"type": "independent"})
@@ -263,7 +263,7 @@ def _ad_scene(n: int, spp: int, max_depth: int, filter: str) -> Tuple[Any, Any]:
     key = (n, spp, max_depth, filter)
     if key not in _AD_SCENES:
         mi = ensure_variant()
-        import drjit as dr
+        import drjit as dr  # lazy: Dr.Jit only after the backend check (ensure_variant)
         σ_cap = -math.log(1.0 - V_MAX_PHYSICAL) / voxel_size(n)
         # the extinction grid's majorant, above its largest value: prbvolpath's gradients need null
         # collisions everywhere

@@ -19,13 +19,17 @@ scene structure is written twice.
 
 from __future__ import annotations
 
+import argparse
 import math
 import numbers
 from pathlib import Path
 from typing import Any, Dict, Mapping, Optional, Sequence, Union
 
+import torch
+
 from ..resources import scenes_folder
-from .grids import extinction, write_vol
+from ..volume_io import read_npz, write_vol
+from .grids import extinction
 from .variant import ensure_variant
 
 __all__ = ["SCENES", "scene_path", "load_scene", "xml_value", "write_scene_grids"]
@@ -111,10 +115,8 @@ def write_scene_grids(volume: Any, folder: Union[str, Path]) -> Dict[str, Path]:
 
     ``density.vol`` (the density, raymarch*.xml), ``albedo.vol`` (the colour, EA volumes only) and
     ``sigma_t.vol`` (the path tracer's extinction, physical.xml; RGBA volumes only), each with
-    :func:`mitsuba_platonic.render.grids.write_vol`. Returns ``{parameter: path}``.
+    :func:`mitsuba_platonic.volume_io.write_vol`. Returns ``{parameter: path}``.
     """
-    import torch
-
     v = torch.as_tensor(volume).detach().float().cpu()
     if v.dim() != 4 or v.shape[0] not in (1, 4):
         raise ValueError(f"expected a (1 or 4, N, N, N) volume, got {tuple(v.shape)}")
@@ -129,18 +131,13 @@ def write_scene_grids(volume: Any, folder: Union[str, Path]) -> Dict[str, Path]:
 
 def main(argv: Optional[Sequence[str]] = None) -> None:
     """``python -m mitsuba_platonic.render.scenes VOLUME.npz OUT``: write OUT/{density,albedo,sigma_t}.vol."""
-    import argparse
-
-    import numpy as np
-
     parser = argparse.ArgumentParser(prog="python -m mitsuba_platonic.render.scenes",
                                      description="Write the .vol grids the scenes/*.xml files read for a "
                                                  "volume saved as .npz (array 'volume', (C, N, N, N)).")
     parser.add_argument("volume", help="an .npz written by platonic generate/reconstruct")
     parser.add_argument("out", help="folder for density.vol, albedo.vol, sigma_t.vol")
     args = parser.parse_args(argv)
-    with np.load(args.volume) as f:
-        volume = f["volume"]
+    volume = read_npz(Path(args.volume))[0]
     for key, path in write_scene_grids(volume, args.out).items():
         print(f"{key}={path}")
 

@@ -19,6 +19,7 @@ carries them in ``scenes/envmaps/`` (the folder ``platonic make-dataset --lighti
 
 from __future__ import annotations
 
+import argparse
 import math
 from pathlib import Path
 from typing import List, Optional, Sequence, Tuple, Union
@@ -63,7 +64,7 @@ def latlong_direction(u: np.ndarray, v: np.ndarray) -> np.ndarray:
 def _radiance(emitter, d: np.ndarray) -> np.ndarray:
     """RGB radiance ``(M, 3)`` the emitter sends along ``-d`` (seen looking towards ``d``)."""
     mi = ensure_variant()
-    import drjit as dr
+    import drjit as dr  # lazy: Dr.Jit only after the backend check (ensure_variant)
     si = dr.zeros(mi.SurfaceInteraction3f, len(d))
     si.wi = mi.Vector3f(-d[:, 0], -d[:, 1], -d[:, 2])
     return np.array(emitter.eval(si)).reshape(3, len(d)).T          # Color3f: channel-major
@@ -147,8 +148,6 @@ def baked_envmaps(folder: Union[str, Path, None] = None, skies: Sequence[Tuple[f
 
 def main(argv: Optional[Sequence[str]] = None) -> None:
     """``python -m mitsuba_platonic.render.sky``: bake the skies of :data:`SKIES`."""
-    import argparse
-
     parser = argparse.ArgumentParser(prog="python -m mitsuba_platonic.render.sky",
                                      description="Bake lat-long EXR skies from Mitsuba's sunsky for envmap lighting.")
     parser.add_argument("--out", default=str(sky_cache()),

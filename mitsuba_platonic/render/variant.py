@@ -48,7 +48,7 @@ def ensure_variant() -> Any:
     """
     global _chosen
     chosen = _chosen if _chosen is not None else _pick()    # the backend check first: no Dr.Jit without LLVM
-    import mitsuba as mi
+    import mitsuba as mi  # lazy: after the backend check; Mitsuba loads LLVM
     if mi.variant() != chosen:
         try:
             mi.set_variant(chosen)

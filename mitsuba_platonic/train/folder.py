@@ -13,6 +13,7 @@ import json
 import os
 from pathlib import Path
 
+from .. import __version__
 from ..checkpoint import RunError, checkpoint_files
 
 __all__ = ["RUN_MARKER", "is_run_folder", "claim_run_folder"]
@@ -55,8 +56,6 @@ def claim_run_folder(folder: Path) -> None:
 
 def _write_marker(folder: Path) -> None:
     """Write :data:`RUN_MARKER` directly (not through a temporary: a torn marker still marks the folder)."""
-    from .. import __version__
-
     text = json.dumps({"written_by": "platonic train", "mitsuba_platonic": __version__, "pid": os.getpid()})
     with open(folder / RUN_MARKER, "w") as f:
         f.write(text + "\n")

@@ -47,6 +47,7 @@ import csv
 import os
 import signal
 import time
+import warnings
 from contextlib import contextmanager
 from pathlib import Path
 from typing import Any, Dict, Iterator, List, Optional, Tuple
@@ -117,7 +118,7 @@ def run_lock(run_dir: Path) -> Iterator[Path]:
     A lock file whose process is gone is free (the kernel dropped its lock) and is taken over; a
     live holder makes this raise :class:`RunError`. The file is removed on exit.
     """
-    import fcntl
+    import fcntl  # lazy: POSIX only, where a run folder is locked
 
     run_dir.mkdir(parents=True, exist_ok=True)
     path = run_dir / "run.lock"
@@ -183,7 +184,7 @@ class _ScalarLog:
             with open(self.path) as f:
                 self.rows = [r for r in csv.DictReader(f) if int(r["step"]) <= start_step]
         try:
-            from torch.utils.tensorboard import SummaryWriter
+            from torch.utils.tensorboard import SummaryWriter  # lazy: TensorBoard is slow to import, and may be broken
             self.tb = SummaryWriter(str(folder / "tb"), purge_step=start_step + 1)
         except ImportError:  # tensorboard is a dependency; keep training if it is broken
             self.tb = None
@@ -280,7 +281,7 @@ def training_threads(cfg: Config) -> Iterator[None]:
         torch.set_num_threads(cfg.run.threads)
     n, dr, before = drjit_threads(cfg), None, None
     if n is not None:
-        import drjit as dr
+        import drjit as dr  # lazy: Dr.Jit only where a run renders with Mitsuba
         before = dr.thread_count()
         if n != before:
             dr.set_thread_count(n)
@@ -299,8 +300,6 @@ _MARCHER_SETTINGS = ("step", "spp", "jitter", "termination")
 def _warn_ignored_settings(cfg: Config) -> None:
     """Warn (naming the keys) where the config sets what the run ignores: marcher settings with
     ``render.backend`` 'closed_form', an elevation with view distribution 'sphere'."""
-    import warnings
-
     for section in ("data", "train"):
         part = getattr(cfg, section)
         if part.view_distribution == "sphere" and part.elevation is not None:

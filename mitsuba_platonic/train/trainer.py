@@ -85,6 +85,7 @@ import torch
 import torch.distributed as dist
 import torch.nn.functional as F
 from torch import nn
+from torch.nn.parallel import DistributedDataParallel as DDP
 
 from ..config import Config, ConfigError
 from ..model import RING_VIEWS, Model, critic_config
@@ -153,7 +154,6 @@ class Trainer:
                                      if cfg.train.ema is not None else None)
         self.modules: Dict[str, nn.Module] = dict(self.nets.items())
         if world > 1:
-            from torch.nn.parallel import DistributedDataParallel as DDP
             self.modules = {k: DDP(m, device_ids=[device.index] if device.type == "cuda" else None)
                             for k, m in self.nets.items()}
         t = cfg.train

@@ -24,6 +24,8 @@ from pathlib import Path
 from typing import Optional, Tuple, Union
 
 import numpy as np
+import png
+from PIL import Image, UnidentifiedImageError
 
 from .rejections import ImageRejected, PathLike
 
@@ -131,8 +133,6 @@ def _key_alpha(values: np.ndarray, key) -> np.ndarray:
 
 def _png_bit_depth(data: bytes) -> int:
     """The bit depth of a PNG's samples, from its header (pypng)."""
-    import png
-
     reader = png.Reader(bytes=data)
     reader.preamble()
     return int(reader.bitdepth)
@@ -142,8 +142,6 @@ def _exif_orientation(exif: Optional[bytes]) -> int:
     """The orientation tag of raw EXIF data (1, "as stored", when absent)."""
     if not exif:
         return 1
-    from PIL import Image
-
     tags = Image.Exif()
     tags.load(exif)
     return int(tags.get(_EXIF_ORIENTATION, 1))
@@ -156,8 +154,6 @@ def _decode_png16(data: bytes) -> Tuple[np.ndarray, bool, int]:
     ``sBIT`` rescaling). Grey is repeated into R, G, B; without an alpha channel alpha is 65535,
     or 0 where the pixel equals the ``tRNS`` colour key.
     """
-    import png
-
     width, height, rows, info = png.Reader(bytes=data).read()
     codes = np.vstack([np.asarray(row, dtype=np.uint16) for row in rows])
     codes = codes.reshape(height, width, int(info["planes"]))
@@ -218,8 +214,6 @@ def decode_image(source: Union[PathLike, bytes], name: Optional[str] = None) -> 
             or ``too_large``; the message names the file.
         OSError: if the path cannot be read.
     """
-    from PIL import Image, UnidentifiedImageError
-
     if isinstance(source, (bytes, bytearray, memoryview)):
         data = bytes(source)
         label = name or "<bytes>"

@@ -25,6 +25,7 @@ from __future__ import annotations
 import math
 
 import numpy as np
+from PIL import Image
 
 from .rejections import ImageRejected
 
@@ -52,8 +53,6 @@ def check_aspect(w: int, h: int, name: str, what: str = "the image") -> None:
 
 def _resample(planes: np.ndarray, resolution: int) -> np.ndarray:
     """``(C, S, S)`` float32 → ``(C, R, R)`` with Pillow's antialiasing triangle filter."""
-    from PIL import Image
-
     out = np.empty((planes.shape[0], resolution, resolution), np.float32)
     for c, plane in enumerate(planes):
         image = Image.fromarray(np.ascontiguousarray(plane, dtype=np.float32))

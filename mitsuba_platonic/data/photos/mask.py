@@ -106,7 +106,7 @@ def clean_mask(support: np.ndarray, *, min_region: float = MIN_REGION) -> np.nda
        noise, leftover background bits; at 1000² px the default drops regions under 500 px,
        a fraction of one output pixel at R = 64).
     """
-    from scipy import ndimage
+    from scipy import ndimage  # lazy: scipy is slow to import
 
     mask = _strip_frame(support)
     if not mask.any():
@@ -138,7 +138,7 @@ def white_background_alpha(rgb_codes: np.ndarray, max_value: int, threshold: flo
         max_value: the code of full intensity (255 or 65535; 1 for floats in [0, 1]).
         threshold: tolerance in encoded units of [0, 1] (0.05 ≈ 13 of 255 codes).
     """
-    from scipy import ndimage
+    from scipy import ndimage  # lazy: scipy is slow to import
 
     if not 0.0 <= threshold < 1.0:
         raise UserError(f"threshold must lie in [0, 1), got {threshold!r}")
@@ -175,7 +175,7 @@ def premultiplied_linear(decoded: DecodedImage, *, background: Optional[str] = N
         ImageRejected: ``no_alpha`` (no real transparency and ``background`` is None) or
             ``fully_transparent`` (the mask is empty, before or after cleaning).
     """
-    from scipy import ndimage
+    from scipy import ndimage  # lazy: scipy is slow to import
 
     codes = decoded.pixels
     max_value = decoded.max_value

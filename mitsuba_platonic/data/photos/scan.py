@@ -233,7 +233,6 @@ def scan(folder: PathLike, options: ImageOptions, splits: Tuple[float, float, fl
 
     keys = list(groups)
     srgb_decoding_table(8)           # import colour-science (slow) once, before any thread
-    import png  # noqa: F401  (likewise)
     import scipy.ndimage  # noqa: F401  (likewise)
     n_workers = min(8, os.cpu_count() or 1)
     if n_workers > 1 and len(keys) > 1:

@@ -1,0 +1,96 @@
+"""The ``platonic`` command line: its parser and :func:`main`.
+
+Subcommands (one ``argparse`` subparser each), one module per group, each command a thin handler
+that checks its flags, calls the library function that does the work and prints what it wrote:
+
+- :mod:`.training`: ``quickstart``, ``train``, ``evaluate``.
+- :mod:`.export`: ``reconstruct`` / ``generate``, a trained run's volumes, turntables and meshes.
+- :mod:`.dataset`: ``make-dataset``, procedural shape classes rendered to image collections.
+- :mod:`.renderers`: ``compare`` (closed form vs Mitsuba on one volume) and ``bench`` (the
+  renderers' speed/accuracy trade).
+- :mod:`.checkpoints`: ``convert-checkpoint``, for a trusted checkpoint the safe loader refuses
+  (the only command that unpickles with ``weights_only=False``).
+
+Shared: :mod:`.args` (``CLIError``, the argparse number types, ``--models``), :mod:`.exits`
+(the one-line messages of errors, Ctrl-C and warnings). To add a command, write an
+``add_<command>(sub)`` that adds its subparser with ``handler`` (parsed arguments → exit code) and
+``interrupted`` (what a Ctrl-C leaves) defaults, and list it in :data:`SUBCOMMANDS`.
+
+Every module here imports only argparse and the package's light modules at the top; each handler
+imports what it runs when it runs, so ``--help`` and a wrong flag answer without numpy, torch or Mitsuba.
+
+Exit codes: 0 on success; 2 on a user error (usage errors, unreadable or invalid files, invalid
+options: :class:`~mitsuba_platonic.errors.UserError`, which ``ConfigError``, ``RunError`` and
+``CLIError`` are, ``BackendError``, and ``OSError`` from files and disks), printed as one line on
+stderr without a traceback; 130 on Ctrl-C, one line saying what was saved. Any other exception is
+a bug and keeps its traceback (exit code 1).
+"""
+
+from __future__ import annotations
+
+import argparse
+import sys
+from typing import Callable, Optional, Sequence
+
+from .. import __version__
+from ..backend import BackendError
+from ..errors import UserError
+from .args import PROG, CLIError, parse_models
+from .checkpoints import add_convert_checkpoint
+from .dataset import add_make_dataset
+from .exits import error_message, interrupt_behind, interrupt_message, printable_streams, run_handler
+from .export import add_generate, add_reconstruct
+from .renderers import add_bench, add_compare
+from .training import add_evaluate, add_quickstart, add_train
+
+__all__ = ["main", "build_parser", "parse_models", "CLIError", "SUBCOMMANDS"]
+
+#: Subcommand registrars, in help order. Add ``add_<command>`` functions here.
+SUBCOMMANDS: Sequence[Callable[["argparse._SubParsersAction"], None]] = (
+    add_quickstart, add_train, add_reconstruct, add_generate, add_evaluate, add_make_dataset, add_compare,
+    add_bench, add_convert_checkpoint)
+
+
+def build_parser() -> argparse.ArgumentParser:
+    """The ``platonic`` parser with one subparser per subcommand."""
+    parser = argparse.ArgumentParser(
+        prog=PROG, description="PlatonicGAN with closed-form and Mitsuba 3 rendering layers.")
+    parser.add_argument("--version", action="version", version=f"{PROG} {__version__}")
+    sub = parser.add_subparsers(dest="command", metavar="COMMAND", required=True)
+    for add in SUBCOMMANDS:
+        add(sub)
+    return parser
+
+
+def main(argv: Optional[Sequence[str]] = None) -> int:
+    """Run ``platonic`` with ``argv`` (default ``sys.argv[1:]``); return the exit code.
+
+    Usage errors (argparse) and user errors (:class:`~mitsuba_platonic.errors.UserError`,
+    ``BackendError``, and ``OSError``: a missing file, no permission, a full disk) print a
+    one-line message on stderr and return 2; Ctrl-C, at any moment (numpy and torch load in
+    here, where it is caught), prints one line on stderr saying what was saved and how to go on
+    and returns 130; ``--help`` and ``--version`` return 0. Any other exception is a bug: it
+    propagates with its traceback. A warning (a skipped photo, a checkpoint fallen back from) is
+    one line, ``platonic <command>: warning: …``, not Python's file-and-source-line format.
+    """
+    printable_streams()
+    args: Optional[argparse.Namespace] = None
+    try:
+        parser = build_parser()
+        try:
+            args = parser.parse_args(argv)
+        except SystemExit as e:  # argparse has printed usage / help already
+            return int(e.code) if isinstance(e.code, int) else 2
+        return run_handler(args)
+    except KeyboardInterrupt as e:
+        print(interrupt_message(args, e), file=sys.stderr)
+        return 130
+    except (UserError, BackendError, OSError) as e:
+        print(error_message(args, e), file=sys.stderr)
+        return 2
+    except Exception as e:
+        interrupt = interrupt_behind(e)
+        if interrupt is None:
+            raise
+        print(interrupt_message(args, interrupt), file=sys.stderr)
+        return 130

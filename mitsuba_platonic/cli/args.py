@@ -1,0 +1,72 @@
+"""What the commands share about their arguments: the error they raise, the argparse types of
+numbers, the ``--models`` list and the ``--out`` folder check.
+
+Light on purpose (argparse and the package's errors only), as is every module of the command
+line at import time: ``platonic --help`` loads no numpy, torch or Mitsuba.
+"""
+
+from __future__ import annotations
+
+import argparse
+from pathlib import Path
+from typing import Callable, List
+
+from ..errors import UserError
+
+__all__ = ["PROG", "CLIError", "positive_int", "non_negative_int", "resolution", "positive_float",
+           "parse_models", "check_out_folder"]
+
+PROG = "platonic"
+
+
+class CLIError(UserError):
+    """A user error: reported as ``platonic <command>: error: <message>``, exit code 2."""
+
+
+# --------------------------------------------------------------------------- argument types
+
+
+def _number_type(convert: Callable[[str], float], minimum: float, what: str) -> Callable[[str], float]:
+    """An argparse type: ``convert(text)``, finite and ≥ ``minimum``, else an error saying ``what``."""
+    def parse(text: str):
+        try:
+            value = convert(text)
+        except ValueError:
+            raise argparse.ArgumentTypeError(f"expected {what}, got {text!r}") from None
+        if not (value >= minimum and value != float("inf")):
+            raise argparse.ArgumentTypeError(f"expected {what}, got {text!r}")
+        return value
+    return parse
+
+
+positive_int = _number_type(int, 1, "a positive integer")
+non_negative_int = _number_type(int, 0, "a non-negative integer")
+resolution = _number_type(int, 2, "an integer resolution of at least 2")
+positive_float = _number_type(float, float.fromhex("0x1p-1074"), "a positive finite number")
+
+
+# --------------------------------------------------------------------------- checks after parsing
+
+
+def parse_models(text: str) -> List[str]:
+    """``"vh,ao,ea"`` → ``['vh', 'ao', 'ea']`` (validated, duplicates dropped, order kept)."""
+    from ..volume import MODELS          # lazy: volume imports torch
+
+    models: List[str] = []
+    for m in (s.strip().lower() for s in text.split(",")):
+        if not m:
+            continue
+        if m not in MODELS:
+            raise CLIError(f"unknown model {m!r} in --models {text!r}; expected a comma-separated "
+                           f"subset of {','.join(MODELS)}")
+        if m not in models:
+            models.append(m)
+    if not models:
+        raise CLIError(f"--models {text!r} names no model; expected e.g. vh,ao,ea")
+    return models
+
+
+def check_out_folder(out: Path) -> None:
+    """Refuse an ``--out`` that exists and is not a folder (before any work)."""
+    if out.exists() and not out.is_dir():
+        raise CLIError(f"--out {str(out)!r} exists and is not a folder")

@@ -1,0 +1,171 @@
+"""Volume files: a ``(C, N, N, N)`` volume read from and written to ``.npz`` and Mitsuba ``.vol``.
+
+The one place that knows the two file formats (docs/conventions.md, "Volumes"):
+
+- ``.npz``: a numpy archive with the array ``volume``, ``(C, N, N, N)`` (or ``(1, C, N, N, N)``),
+  C = 4 ``[r, g, b, density]`` or 1 ``[density]``, values in [0, 1]. :func:`read_npz` checks all
+  of that and says what is wrong; :func:`write_npz` writes it.
+- ``.vol``: Mitsuba's grid file, written here with numpy byte for byte as ``mi.VolumeGrid.write``
+  does (so writing one needs neither Mitsuba nor LLVM): ``VOL``, version 3, encoding 1 (float32),
+  the sizes x, y, z and the channel count (int32), the bounding box [0, 1]³ (6 float32), then the
+  grid ``[Z, Y, X, C]`` (:func:`to_mitsuba_grid`) with C fastest, little-endian.
+
+:func:`save_volume` writes both beside each other, each whole or not at all; :func:`load_volume`
+reads a volume the command line names (``builtin:<kind>`` or a ``.npz`` file).
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import List, Optional, Union
+
+import numpy as np
+import torch
+
+from .errors import UserError
+from .fileio import atomic_write
+from .volume import TEST_VOLUMES, test_volume
+
+__all__ = ["BUILTIN_PREFIX", "VolumeFileError", "to_mitsuba_grid", "read_npz", "load_volume", "write_npz",
+           "write_vol", "save_volume"]
+
+PathLike = Union[str, Path]
+
+#: How a built-in test volume is named where a volume file could be: ``builtin:figure``.
+BUILTIN_PREFIX = "builtin:"
+
+#: The ``.vol`` header before the sizes: magic, version 3, encoding 1 (float32).
+_VOL_MAGIC = b"VOL\x03" + np.int32(1).astype("<i4").tobytes()
+
+
+class VolumeFileError(UserError):
+    """A volume file that does not exist, cannot be read or holds no valid volume."""
+
+
+def to_mitsuba_grid(v: torch.Tensor) -> torch.Tensor:
+    """``(C, D, H, W)`` torch volume → ``(N, N, N, C)`` Mitsuba grid ``[Z, Y, X, C]`` (a view, no copy):
+    a permute and two flips (Z = N−1−d, Y = N−1−h, X = w), the layout of Mitsuba's grids and ``.vol`` files."""
+    return v.permute(1, 2, 3, 0).flip(0, 1)                   # [d, h, w, c] → [Z, Y, X, C]
+
+
+# --------------------------------------------------------------------------- reading
+
+
+def read_npz(path: Path) -> torch.Tensor:
+    """Read and validate the array ``volume`` of a ``.npz`` file → ``(1, C, N, N, N)`` float32.
+
+    Raises :class:`VolumeFileError` naming the file and what is wrong (missing, not an archive, no
+    array ``volume``, a wrong shape, values outside [0, 1], …)."""
+    path = Path(path)
+    name = str(path)
+    if not path.exists():
+        raise VolumeFileError(f"volume file {name!r} does not exist")
+    if not path.is_file():
+        raise VolumeFileError(f"volume file {name!r} is not a file")
+    try:
+        archive = np.load(path, allow_pickle=False)
+    except Exception as e:  # numpy raises several types for non-npz content
+        raise VolumeFileError(f"could not read {name!r} as a .npz archive: {e}") from None
+    if not isinstance(archive, np.lib.npyio.NpzFile):
+        raise VolumeFileError(f"{name!r} is a single .npy array, not a .npz archive; save it with "
+                              f"numpy.savez({name!r}, volume=array)")
+    with archive:
+        if "volume" not in archive.files:
+            found = ", ".join(archive.files) or "no arrays"
+            raise VolumeFileError(f"{name!r} has no array named 'volume' (found: {found}); save it with "
+                                  f"numpy.savez(path, volume=array)")
+        try:
+            v = archive["volume"]
+        except Exception as e:
+            raise VolumeFileError(f"could not read array 'volume' from {name!r}: {e}") from None
+    return torch.from_numpy(_checked(v, name))[None]
+
+
+def _checked(v: np.ndarray, name: str) -> np.ndarray:
+    """The array ``volume`` of file ``name`` as a contiguous ``(C, N, N, N)`` float32, or :class:`VolumeFileError`."""
+    expected = ("must have shape (C, N, N, N) or (1, C, N, N, N) with C = 4 [r, g, b, density] "
+                "or C = 1 [density]")
+    if v.ndim == 5:
+        if v.shape[0] != 1:
+            raise VolumeFileError(f"{name!r}: array 'volume' {expected}, got shape {v.shape} "
+                                  f"(batch {v.shape[0]} ≠ 1)")
+        v = v[0]
+    if v.ndim != 4:
+        raise VolumeFileError(f"{name!r}: array 'volume' {expected}, got shape {v.shape}")
+    if v.shape[0] not in (1, 4):
+        raise VolumeFileError(f"{name!r}: array 'volume' {expected}, got shape {v.shape} with C = {v.shape[0]}")
+    if not v.shape[1] == v.shape[2] == v.shape[3]:
+        raise VolumeFileError(f"{name!r}: array 'volume' must be cubic (N, N, N), got spatial shape {v.shape[1:]}")
+    if v.shape[1] < 2:
+        raise VolumeFileError(f"{name!r}: array 'volume' needs a resolution N of at least 2, got {v.shape[1]}")
+    if not (np.issubdtype(v.dtype, np.floating) or np.issubdtype(v.dtype, np.integer) or v.dtype == bool):
+        raise VolumeFileError(f"{name!r}: array 'volume' must hold numbers, got dtype {v.dtype}")
+    v = v.astype(np.float32)
+    if not np.isfinite(v).all():
+        raise VolumeFileError(f"{name!r}: array 'volume' contains NaN or Inf")
+    lo, hi = float(v.min()), float(v.max())
+    if lo < 0.0 or hi > 1.0:
+        bad = np.argwhere((v < 0.0) | (v > 1.0))
+        raise VolumeFileError(f"{name!r}: array 'volume' values must lie in [0, 1], got range "
+                              f"[{lo:.6g}, {hi:.6g}] ({len(bad)} value(s) outside, the first at index "
+                              f"{tuple(int(i) for i in bad[0])}, channel first)")
+    return np.ascontiguousarray(v)
+
+
+def load_volume(spec: str, resolution: Optional[int] = None) -> torch.Tensor:
+    """``builtin:<kind>`` (a :func:`~mitsuba_platonic.volume.test_volume` at ``resolution``, default
+    32) or a path to a ``.npz`` file holding ``volume`` → ``(1, C, N, N, N)``, C = 4 or 1.
+
+    For a file, ``resolution`` (if given) must match the file's N. The messages name the command
+    line's ``--volume`` and ``--resolution``, which pass ``spec`` and ``resolution`` through.
+    """
+    if spec.startswith(BUILTIN_PREFIX):
+        kind = spec[len(BUILTIN_PREFIX):]
+        if kind not in TEST_VOLUMES:
+            choices = ", ".join(BUILTIN_PREFIX + k for k in TEST_VOLUMES)
+            raise VolumeFileError(f"unknown built-in volume {spec!r}; expected one of {choices} or a .npz file")
+        n = 32 if resolution is None else resolution
+        return test_volume(n, kind, "ea")
+    path = Path(spec)
+    if path.suffix.lower() != ".npz":
+        raise VolumeFileError(f"--volume must be builtin:figure, builtin:cloud or a .npz file, got {spec!r}")
+    v = read_npz(path)
+    if resolution is not None and resolution != v.shape[-1]:
+        raise VolumeFileError(f"--resolution {resolution} does not match {spec!r}, whose volume is "
+                              f"{v.shape[-1]}³ (leave --resolution out for files)")
+    return v
+
+
+# --------------------------------------------------------------------------- writing
+
+
+def write_npz(volume: torch.Tensor, path: PathLike) -> Path:
+    """Write a ``(C, N, N, N)`` volume to ``path`` as a compressed ``.npz`` with the array ``volume``
+    (directly: wrap it in :func:`~mitsuba_platonic.fileio.atomic_write` for a whole-or-nothing file)."""
+    np.savez_compressed(path, volume=volume.detach().float().cpu().numpy())
+    return Path(path)
+
+
+def write_vol(volume: torch.Tensor, path: PathLike) -> Path:
+    """Write a ``(C, N, N, N)`` volume in Mitsuba's ``.vol`` format (grid layout ``[Z, Y, X, C]``), the
+    bytes ``mi.VolumeGrid(grid).write(path)`` writes, without Mitsuba."""
+    grid = to_mitsuba_grid(volume.detach().float().cpu()).contiguous().numpy()
+    z, y, x, c = grid.shape
+    header = _VOL_MAGIC + np.array([x, y, z, c], "<i4").tobytes() + np.array([0, 0, 0, 1, 1, 1], "<f4").tobytes()
+    with open(path, "wb") as f:
+        f.write(header)
+        f.write(grid.astype("<f4", copy=False).tobytes())
+    return Path(path)
+
+
+def save_volume(volume: torch.Tensor, stem: PathLike) -> List[Path]:
+    """Write a ``(C, N, N, N)`` volume as ``stem.npz`` (array ``volume``) and ``stem.vol`` (Mitsuba),
+    each whole or not at all (:func:`~mitsuba_platonic.fileio.atomic_write`); ``stem`` keeps its dots
+    (``shot.v1`` → ``shot.v1.npz``)."""
+    stem = Path(stem)
+    stem.parent.mkdir(parents=True, exist_ok=True)
+    npz, vol = stem.with_name(stem.name + ".npz"), stem.with_name(stem.name + ".vol")
+    volume = volume.detach().float().cpu()
+    atomic_write(npz, lambda tmp: write_npz(volume, tmp))
+    atomic_write(vol, lambda tmp: write_vol(volume, tmp))
+    return [npz, vol]
