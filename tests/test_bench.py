@@ -10,6 +10,7 @@ import io
 import json
 import math
 import shutil
+import time
 from pathlib import Path
 
 import pytest
@@ -98,7 +99,10 @@ def test_rows_have_the_fields(quick):
             assert -1.0 <= r["grad_cosine"] <= 1.0 + 1e-9
     for t in result["train"]:
         assert t["skipped"] is None, t["skipped"]
-        assert t["images_per_s"] > 0
+        assert t["images_per_s"] > 0 and t["resolution"] == N
+        shares = (t["renderer_share"], t["networks_share"], t["optimiser_share"])
+        assert all(0.0 <= x <= 1.0 for x in shares) and sum(shares) == pytest.approx(1.0, abs=1e-6), shares
+        assert 0.0 < t["renderer_backward_share"] <= t["renderer_share"] and t["optimiser_share"] > 0
     assert [t["renderer"] for t in result["train"]] == ["closed_form", "mitsuba", "physical"]
 
 
@@ -223,3 +227,58 @@ def test_doc_section_is_written(quick, tmp_path):
     bad.write_text("no markers\n")
     with pytest.raises(ValueError, match="generated section"):
         write_doc(result, bad, plots)
+
+
+# --------------------------------------------------------------------------- where a training step's time goes
+
+
+class _SlowIdentity(torch.autograd.Function):
+    """An identity that sleeps a known time forward and backward."""
+
+    @staticmethod
+    def forward(ctx, x, seconds):
+        ctx.seconds = seconds
+        time.sleep(seconds)
+        return x.clone()
+
+    @staticmethod
+    def backward(ctx, grad):
+        time.sleep(ctx.seconds)
+        return grad, None
+
+
+@pytest.mark.usefixtures("tiny_class")
+def test_the_step_clock_gives_the_renderer_its_forward_and_backward_and_the_optimisers_their_steps(tmp_path):
+    from mitsuba_platonic.bench.train import StepClock
+    from mitsuba_platonic.config import load_config
+    from mitsuba_platonic.train.data import load_training_data
+    from mitsuba_platonic.train.trainer import Trainer
+    from tiny_shapes import TINY
+
+    cfg = load_config(None, [f"run.out_dir={tmp_path}/runs", f"data.cache={tmp_path}/data", f"data.shape_class={TINY}",
+                             "data.n_shapes=4", "data.views_per_shape=2", "model.resolution=16", "model.width=4",
+                             "model.latent=8", "train.batch_size=2", "render.backend=closed_form"])
+    trainer = Trainer(cfg, load_training_data(cfg, progress=False), torch.device("cpu"))
+    own_render, own_step = trainer.render, trainer.opt_g.step
+    calls = []
+    pause = 0.05
+
+    def slow_render(volume, views, seed):           # the real render between two known sleeps
+        calls.append(volume.requires_grad)
+        return _SlowIdentity.apply(own_render(_SlowIdentity.apply(volume, pause), views, seed), pause)
+    trainer.render = slow_render
+    clock = StepClock(trainer)
+    t0 = time.perf_counter()
+    trainer.step(0)
+    wall = time.perf_counter() - t0
+    parts = clock.totals()
+    # a step renders the random view and the input view, both through G: each call's forward holds two
+    # sleeps, and each backward two more, between the marks
+    assert calls == [True, True]
+    assert parts["renderer_forward"] >= 2 * 2 * pause
+    assert parts["renderer_backward"] >= 2 * 2 * pause
+    assert 0.0 < parts["optimiser"] and sum(parts.values()) <= wall
+    clock.detach()
+    assert trainer.render is slow_render and trainer.opt_g.step == own_step
+    clock.reset()
+    assert clock.totals() == {"renderer_forward": 0.0, "renderer_backward": 0.0, "optimiser": 0.0}

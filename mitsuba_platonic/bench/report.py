@@ -75,16 +75,21 @@ def markdown_tables(result: Dict[str, Any], plot_dir: Optional[str] = None) -> s
         lines.append("")
     if result.get("train"):
         t = result["train"][0]
-        lines += [f"### Training speed (reconstruction, EA, {t['resolution']}³, width {t['width']}, batch "
+        lines += [f"### Training speed (the quickstart's step: reconstruction, EA, width {t['width']}, batch "
                   f"{t['batch']}, {t['steps']} steps after {t['warmup_steps']} warm-up)", "",
-                  "| renderer | Dr.Jit threads | s/step | images/s | vs closed form |", "|---|---:|---:|---:|---:|"]
+                  "Shares of a step's time: the renderer (forward and backward), the optimisers' steps, and "
+                  "the networks (everything else: E, G, D forward and backward, losses, R1, the moving average).", "",
+                  "| N | renderer | Dr.Jit threads | s/step | images/s | vs closed form | renderer (of it backward) | "
+                  "networks | optimiser |", "|---:|---|---:|---:|---:|---:|---:|---:|---:|"]
         for t in result["train"]:
             threads = "—" if t.get("drjit_threads") is None else t["drjit_threads"]
             if t.get("skipped"):
-                lines.append(f"| {t['config']} | {threads} | skipped: {t['skipped']} |||")
+                lines.append(f"| {t['resolution']} | {t['config']} | {threads} | skipped: {t['skipped']} ||||||")
             else:
-                lines.append(f"| {t['config']} | {threads} | {t['s_per_step']:.3f} | {t['images_per_s']:.1f} | "
-                             f"{t['vs_closed_form']:.2f}× |")
+                lines.append(f"| {t['resolution']} | {t['config']} | {threads} | {t['s_per_step']:.3f} | "
+                             f"{t['images_per_s']:.1f} | {t['vs_closed_form']:.2f}× | {t['renderer_share']:.0%} "
+                             f"({t['renderer_backward_share']:.0%}) | {t['networks_share']:.0%} | "
+                             f"{t['optimiser_share']:.0%} |")
         lines.append("")
     return "\n".join(lines)
 

@@ -134,10 +134,10 @@ def run_bench(settings: BenchSettings, log: Callable[[str], None] = print) -> Di
                 result["rows"].extend(_bench_model(s, n, model, views, repeats, ref_spp, bandwidth, log))
         if s.train:
             if s.quick:
-                result["train"] = _bench_train(min(s.resolutions), s.train_width, s.batch, 1, 1, log)
+                result["train"] = _bench_train([min(s.resolutions)], s.train_width, s.batch, 1, 1, log, s.physical)
             else:
-                result["train"] = _bench_train(s.train_resolution, s.train_width, s.train_batch, s.train_steps,
-                                               s.train_warmup, log)
+                result["train"] = _bench_train(resolutions, s.train_width, s.train_batch, s.train_steps,
+                                               s.train_warmup, log, s.physical)
         result["meta"]["duration_s"] = time.perf_counter() - t_start
         return _clean(result)
     finally:

@@ -33,7 +33,6 @@ class BenchSettings:
     physical: bool = True                       # the path-tracer rows (the slowest part of a run)
     physical_max_resolution: int = 64           # … measured up to this N (128³ path tracing: most of an hour)
     train: bool = True
-    train_resolution: int = 32
     train_width: int = 16
     train_batch: int = 8
     train_steps: int = 5
@@ -52,8 +51,6 @@ class BenchSettings:
                 raise ValueError(f"{name} must be a positive int, got {v!r}")
         if self.threads is not None and (not isinstance(self.threads, int) or self.threads < 1):
             raise ValueError(f"threads must be a positive int, got {self.threads!r}")
-        if self.train_resolution not in RESOLUTIONS:
-            raise ValueError(f"train_resolution must be among {RESOLUTIONS}, got {self.train_resolution!r}")
         for m in self.models:
             if m not in CHANNELS:
                 raise ValueError(f"models must be among {tuple(CHANNELS)}, got {m!r}")
