@@ -166,7 +166,7 @@ def test_r1_penalty_of_a_linear_critic_is_its_squared_weight_norm():
     lin = torch.nn.Linear(12, 1).double()
     D = lambda x: lin(x.flatten(1)).squeeze(1)                      # noqa: E731
     x = torch.rand(5, 3, 2, 2, dtype=torch.float64)
-    logits, r1 = r1_penalty(D, x)
+    logits, _, r1 = r1_penalty(D, x)
     w = lin.weight.detach().flatten()
     assert torch.allclose(logits, D(x))
     assert torch.allclose(r1, (w ** 2).sum())
@@ -189,25 +189,28 @@ def test_r1_penalty_matches_finite_differences_on_a_nonlinear_critic():
     for i in range(3):
         g = [(D(x[i:i + 1] + h * e) - D(x[i:i + 1] - h * e)).item() / (2 * h) for e in torch.eye(6, dtype=x.dtype)]
         want += sum(v * v for v in g) / 3
-    _, r1 = r1_penalty(D, x)
+    _, _, r1 = r1_penalty(D, x)
     assert abs(float(r1) - want) < 1e-7
     r1.backward()
     w = net[0].weight
     analytic = float(w.grad[2, 4])
     w.data[2, 4] += h                                                 # .data: the penalty needs autograd on
-    up = float(r1_penalty(D, x)[1])
+    up = float(r1_penalty(D, x)[2])
     w.data[2, 4] -= 2 * h
-    down = float(r1_penalty(D, x)[1])
+    down = float(r1_penalty(D, x)[2])
     w.data[2, 4] += h
     assert abs(analytic - (up - down) / (2 * h)) < 1e-6 * max(1.0, abs(analytic))
 
 
-def test_r1_weight_adds_half_gamma_times_the_penalty_at_the_reals_to_the_critic_loss(tmp_path):
+@pytest.mark.parametrize("every, step, applied", [(1, 0, True), (4, 0, True), (4, 1, False), (4, 8, True)])
+def test_r1_weight_adds_half_gamma_times_the_penalty_at_the_reals_to_the_critic_loss(tmp_path, every, step, applied):
     """One trainer step with r1_weight γ = 5 makes the Adam step of the loss
-    d_loss + γ/2 ‖∇ₓD(x_real)‖² on the batch D saw (penalty at the reals, not at the fakes)."""
+    d_loss + k γ/2 ‖∇ₓD(x_real)‖² on the batch D saw (penalty at the reals, not at the fakes) on
+    every k-th step (k = r1_every; lazy R1), and of d_loss alone on the others."""
     from mitsuba_platonic.train.losses import r1_penalty
     γ = 5.0
-    trainer = _trainer(tmp_path, f"train.r1_weight={γ}", "train.d_gate=null", "train.lr_d=1e-3")
+    trainer = _trainer(tmp_path, f"train.r1_weight={γ}", "train.d_gate=null", "train.lr_d=1e-3",
+                       f"train.r1_every={every}")
     net = trainer.nets["D"]
     reference, at_fakes = copy.deepcopy(net), copy.deepcopy(net)
     seen = {}
@@ -218,17 +221,34 @@ def test_r1_weight_adds_half_gamma_times_the_penalty_at_the_reals_to_the_critic_
         return original(name, opt_, real, fake, *args)
 
     trainer._critic_update = spy
-    trainer.step(0)
+    trainer.step(step)
     betas = tuple(trainer.cfg.train.betas)
     for copy_, where in ((reference, "real"), (at_fakes, "fake")):
         opt = torch.optim.Adam(copy_.parameters(), lr=1e-3, betas=betas)
-        _, r1 = r1_penalty(copy_, seen[where])
-        loss = d_loss("nonsaturating", copy_(seen["real"]), copy_(seen["fake"])) + 0.5 * γ * r1
+        loss = d_loss("nonsaturating", copy_(seen["real"]), copy_(seen["fake"]))
+        if applied:
+            loss = loss + 0.5 * γ * every * r1_penalty(copy_, seen[where])[2]
         opt.zero_grad()
         loss.backward()
         opt.step()
     assert all(torch.allclose(a, b, atol=1e-6) for a, b in zip(net.parameters(), reference.parameters()))
-    assert not all(torch.allclose(a, b, atol=1e-6) for a, b in zip(net.parameters(), at_fakes.parameters()))
+    if applied:
+        assert not all(torch.allclose(a, b, atol=1e-6) for a, b in zip(net.parameters(), at_fakes.parameters()))
+
+
+def test_r1_penalty_over_reals_and_fakes_together_is_the_reals_own():
+    """With the fakes in the same forward pass (a critic whose samples do not interact) the reals'
+    logits, the fakes' logits and the penalty are those of separate passes."""
+    from mitsuba_platonic.train.losses import r1_penalty
+    torch.manual_seed(2)
+    net = torch.nn.Sequential(torch.nn.Conv2d(4, 3, 3, 2, 1), torch.nn.LeakyReLU(0.2), torch.nn.Flatten(),
+                              torch.nn.Linear(3 * 4 * 4, 1)).double()
+    D = lambda x: net(x).squeeze(1)                                   # noqa: E731
+    real, fake = torch.rand(3, 4, 8, 8, dtype=torch.float64), torch.rand(2, 4, 8, 8, dtype=torch.float64)
+    l_real, none, r1 = r1_penalty(D, real)
+    l_real2, l_fake, r1_2 = r1_penalty(D, real, fake)
+    assert none is None and l_fake.shape == (2,)
+    assert torch.allclose(l_real, l_real2) and torch.allclose(l_fake, D(fake)) and torch.allclose(r1, r1_2)
 
 
 def test_r1_weight_is_refused_when_negative_or_with_wgan_gp():
@@ -238,3 +258,5 @@ def test_r1_weight_is_refused_when_negative_or_with_wgan_gp():
     with pytest.raises(ConfigError, match="train.r1_weight: the R1 penalty is for the non-saturating loss"):
         load_config(None, ["train.r1_weight=1", "train.loss=wgan-gp"])
     assert load_config(None, []).train.r1_weight == 0.0
+    with pytest.raises(ConfigError, match=r"train.r1_every: expected a positive value, got 0"):
+        load_config(None, ["train.r1_every=0"])

@@ -2,7 +2,8 @@
 
 Non-saturating (logits l):  L_D = softplus(−l_real) + softplus(l_fake)   (= −log D(x) − log(1 − D(G)))
                             L_G = softplus(−l_fake)                      (= −log D(G))
-R1 (optional, non-saturating): L_D += γ/2 · mean over reals of ‖∇_x l(x)‖²  (Mescheder et al. 2018)
+R1 (optional, non-saturating): L_D += γ/2 · mean over reals of ‖∇_x l(x)‖²  (Mescheder et al. 2018);
+                            lazy (k = train.r1_every): k γ/2 · … on every k-th step only (Karras et al. 2020)
 Colour TV (optional prior on G, EA volumes [r, g, b, ρ]): over every pair (i, j) of face-neighbouring
 voxels, w_ij = min(ρ_i, ρ_j) (held constant) and
                             L_tv = Σ w_ij ‖c_i − c_j‖₁ / (3 Σ w_ij)
@@ -20,7 +21,7 @@ on logits that differ by 1e-3, so a gate on it would block a D that has learnt n
 
 from __future__ import annotations
 
-from typing import Callable, Tuple
+from typing import Callable, Optional, Tuple
 
 import torch
 import torch.nn.functional as F
@@ -52,16 +53,22 @@ def gradient_penalty(D: Callable[[torch.Tensor], torch.Tensor], real: torch.Tens
     return ((grad.flatten(1).norm(dim=1) - 1.0) ** 2).mean()
 
 
-def r1_penalty(D: Callable[[torch.Tensor], torch.Tensor], real: torch.Tensor) -> Tuple[torch.Tensor, torch.Tensor]:
-    """(logits D(x), mean over the batch of ‖∇ₓ D(x)‖₂²) at the real images x, differentiable in
-    D's weights: the R1 penalty (times γ/2), which keeps D flat on the data so that a D that
-    learns cannot sharpen into the steep boundary that makes G's gradients explode.
+def r1_penalty(D: Callable[[torch.Tensor], torch.Tensor], real: torch.Tensor,
+               fake: Optional[torch.Tensor] = None) -> Tuple[torch.Tensor, Optional[torch.Tensor], torch.Tensor]:
+    """(logits D(x) at the reals x, logits D(fake) or None, mean over the reals of ‖∇ₓ D(x)‖₂²),
+    differentiable in D's weights: the R1 penalty (times γ/2), which keeps D flat on the data so
+    that a D that learns cannot sharpen into the steep boundary that makes G's gradients explode.
 
-    One forward pass serves both the logits of the loss and the penalty."""
+    One forward pass serves the logits of the loss and the penalty; with ``fake`` it runs over
+    reals and fakes together (for a critic whose samples do not interact: no BatchNorm), and
+    the penalty still differentiates the reals' logits alone."""
     x = real.detach().requires_grad_(True)
-    logits = D(x)
+    if fake is None:
+        logits, l_fake = D(x), None
+    else:
+        logits, l_fake = D(torch.cat([x, fake])).split([len(x), len(fake)])
     (grad,) = torch.autograd.grad(logits.sum(), x, create_graph=True)
-    return logits, grad.flatten(1).pow(2).sum(1).mean()
+    return logits, l_fake, grad.flatten(1).pow(2).sum(1).mean()
 
 
 def colour_tv(volume: torch.Tensor) -> torch.Tensor:

@@ -72,7 +72,9 @@ class TrainConfig:
     from the photo");
     r1_weight: γ of the R1 penalty γ/2 · E‖∇ₓD(x)‖² on real images (Mescheder et al. 2018),
     added to every critic's non-saturating loss (0: none; WGAN-GP has its own penalty)
-    (:func:`mitsuba_platonic.train.losses.r1_penalty`, docs/training.md); colour_tv: weight of
+    (:func:`mitsuba_platonic.train.losses.r1_penalty`, docs/training.md); r1_every: k of a lazy R1,
+    the penalty on every k-th step only, weighted k times (1: every step; docs/training.md, "Where a
+    step's time goes"); colour_tv: weight of
     G's density-weighted colour total variation (EA, not 'gan3d'; 0: none)
     (:func:`mitsuba_platonic.train.losses.colour_tv`, docs/training.md); ema: null, or the decay β
     of an exponential moving average of E's and G's weights, which samples, checkpoints' inference
@@ -106,6 +108,7 @@ class TrainConfig:
     pose: str = "input"
     pose_weight: float = 0.0
     r1_weight: float = 0.0
+    r1_every: int = 1
     colour_tv: float = 0.0
     ema: Optional[float] = None
     d_augment: List[str] = field(default_factory=list)
@@ -153,6 +156,7 @@ class TrainConfig:
         if len(self.betas) != 2 or not all(0.0 <= b < 1.0 for b in self.betas):
             raise ConfigError(f"train.betas: expected two numbers in [0, 1), got {self.betas!r}")
         non_negative("train.r1_weight", self.r1_weight)
+        positive("train.r1_every", self.r1_every)
         if self.r1_weight > 0 and self.loss != "nonsaturating":
             raise ConfigError("train.r1_weight: the R1 penalty is for the non-saturating loss; "
                               f"train.loss {self.loss!r} has its own (train.gp_weight)")

@@ -300,12 +300,12 @@ class Trainer:
             g_aug = torch.Generator()
             g_aug.manual_seed(int(np.random.SeedSequence([cfg.run.seed, step, 11, self.rank]).generate_state(1)[0]))
             real_d, fake_d = augment(real_d, t.d_augment, g_aug), augment(fake_d, t.d_augment, g_aug)
-        self._critic_update("D", self.opt_d, real_d, fake_d.detach(), eps, t.d_gate, out)
+        self._critic_update("D", self.opt_d, real_d, fake_d.detach(), eps, t.d_gate, out, step)
 
         # -- D3 (Platonic3D): ground-truth volumes vs generated ----------------------------------
         loss_g3 = torch.zeros((), device=self.device)
         if t.mode == "platonic3d":
-            loss_g3 = self._update_d3(v, g, eps, out)
+            loss_g3 = self._update_d3(v, g, eps, out, step)
 
         # -- G and E: fool D from random views (and D3), reconstruct the input view --------------
         loss_adv = g_loss(t.loss, D(fake_d))
@@ -353,11 +353,13 @@ class Trainer:
             self._update_ema(step)
 
     def _critic_update(self, name: str, opt: torch.optim.Optimizer, real: torch.Tensor, fake: torch.Tensor,
-                       eps: torch.Tensor, gate: Optional[float], out: Dict[str, float]) -> None:
+                       eps: torch.Tensor, gate: Optional[float], out: Dict[str, float], step: int) -> None:
         """``d_steps`` updates of critic ``name`` ('D' or 'D3') on real vs (detached) fake.
 
         Each update evaluates a fresh loss with the critic's current weights (WGAN-GP adds its
-        penalty at x̂ = ε real + (1 − ε) fake; ``r1_weight`` > 0 adds γ/2 ‖∇ₓD(x)‖² at the reals).
+        penalty at x̂ = ε real + (1 − ε) fake; ``r1_weight`` > 0 adds k γ/2 ‖∇ₓD(x)‖² at the reals
+        on every k-th ``step``, k = ``r1_every``), reals and fakes in one forward pass unless the
+        critic has BatchNorm (whose batch statistics would then mix them).
         With a ``gate``, an update happens only while the
         critic's soft accuracy on this batch is ≤ gate; the first refusal ends the loop. Logs
         ``loss_<name>`` and ``acc_<name>`` (soft) / ``acc_<name>_hard`` of the first evaluation,
@@ -366,15 +368,23 @@ class Trainer:
         t, critic = self.cfg.train, self.modules[name]
         key = name.lower()
         updates = 0
+        # lazy R1 (train.r1_every = k): the penalty on every k-th step only, weighted k times
+        r1_now = t.r1_weight > 0 and step % t.r1_every == 0
+        # one forward pass over reals and fakes together where no BatchNorm mixes them
+        together = not any(isinstance(m, nn.modules.batchnorm._BatchNorm) for m in critic.modules())
         for i in range(t.d_steps):
-            if t.r1_weight > 0:                              # γ/2 ‖∇ₓD(x)‖² at the reals
-                l_real, r1 = r1_penalty(critic, real)
+            if r1_now:                                       # γ/2 ‖∇ₓD(x)‖² at the reals
+                l_real, l_fake, r1 = r1_penalty(critic, real, fake if together else None)
+                if not together:
+                    l_fake = critic(fake)
+            elif together:
+                l_real, l_fake = critic(torch.cat([real, fake])).split([len(real), len(fake)])
+                r1 = None
             else:
-                l_real, r1 = critic(real), None
-            l_fake = critic(fake)
+                l_real, l_fake, r1 = critic(real), critic(fake), None
             loss = d_loss(t.loss, l_real, l_fake)
             if r1 is not None:
-                loss = loss + 0.5 * t.r1_weight * r1
+                loss = loss + 0.5 * t.r1_weight * t.r1_every * r1
             if t.loss == "wgan-gp":
                 loss = loss + t.gp_weight * gradient_penalty(critic, real, fake, eps[: len(real)].to(self.device))
             acc = self._ratio(soft_accuracy_counts(l_real, l_fake))
@@ -394,9 +404,10 @@ class Trainer:
         """Σ numerator / Σ denominator over all processes."""
         return float(self._all_sum(counts[0].detach().cpu()) / self._all_sum(counts[1]))
 
-    def _update_d3(self, v: torch.Tensor, g: torch.Generator, eps: torch.Tensor, out: Dict[str, float]) -> torch.Tensor:
+    def _update_d3(self, v: torch.Tensor, g: torch.Generator, eps: torch.Tensor, out: Dict[str, float],
+                   step: int) -> torch.Tensor:
         """D3 updates (ground truth vs v.detach()); returns G's 3D adversarial loss on v."""
-        self._critic_update("D3", self.opt_d3, self._real_volumes(g), v.detach(), eps, None, out)
+        self._critic_update("D3", self.opt_d3, self._real_volumes(g), v.detach(), eps, None, out, step)
         return g_loss(self.cfg.train.loss, self.modules["D3"](v))
 
     def _real_volumes(self, g: torch.Generator) -> torch.Tensor:
@@ -436,7 +447,7 @@ class Trainer:
         out: Dict[str, float] = {}
         z = self.modules["E"](self._shard(self.images[idx.to(self.device)])) if rec else z_prior
         v = G(z)
-        self._critic_update("D3", self.opt_d3, real, v.detach(), eps, None, out)
+        self._critic_update("D3", self.opt_d3, real, v.detach(), eps, None, out, step)
         terms = {"adv3d": g_loss(t.loss, D3(v))}
         if rec:
             terms["rec3d"] = t.rec_weight * self._volume_rec(v, idx, out)
