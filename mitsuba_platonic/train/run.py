@@ -61,7 +61,7 @@ from ..errors import Interrupted, UserError
 from ..loading import checkpoint_config, model_from_checkpoint
 from ..model import Model
 from ..progress import progress_bar
-from .data import load_training_data
+from .data import TrainingData, load_training_data
 from .fits import check_model_fits
 from .folder import RUN_MARKER, claim_run_folder, prepare_run_folder, read_run_config, run_lock
 from .keeper import Checkpoints, non_finite
@@ -128,18 +128,7 @@ def _train(cfg: Config, run_dir: Path, resume: bool, progress: bool, stop_at: Op
         prepare_run_folder(run_dir, cfg, resume, config_file)
     if world > 1:
         dist.barrier()                                       # rank 0 checked the folder first
-    if rank == 0:
-        try:
-            data = load_training_data(cfg, progress=progress)
-        except KeyboardInterrupt as e:                       # Ctrl-C before the first step: say what is kept
-            what = getattr(e, "saved", None) or "nothing of it is cached"
-            done = f"{run_dir / 'checkpoints'} is as it was" if resume else "no checkpoint was written"
-            raise Interrupted(f"while preparing the training data: {what}; no training step ran and {done}; "
-                              f"run the same command again to continue") from e
-    if world > 1:
-        dist.barrier()                                       # the procedural cache is complete
-    if rank != 0:
-        data = load_training_data(cfg, progress=False)
+    data = _training_data(cfg, run_dir, resume, progress, rank, world)
     trainer = Trainer(cfg, data, device, rank, world)
     checkpoints = Checkpoints(run_dir, cfg)                  # and the newest good one on disk
     start = checkpoints.resume(trainer, device, warn=rank == 0) if resume else 0
@@ -184,14 +173,8 @@ def _train(cfg: Config, run_dir: Path, resume: bool, progress: bool, stop_at: Op
                 break
         clean = True
     except BaseException as e:                               # a failing step: save nothing, say so
-        if rank == 0 and not isinstance(e, RunError):
-            if isinstance(e, (UserError, OSError)):          # the user's input, a full disk: one line
-                raise RunError(f"training failed {where}: {e}; {checkpoints.kept()}") from e
-            bad = non_finite(trainer.state_dict()) if isinstance(e, ValueError) else None
-            if bad is not None:                              # a diverged run (NaN or Inf in the weights), not a bug
-                raise RunError(f"training failed {where}: {e} (the training state is not finite: NaN or Inf in "
-                               f"{bad}; lower the learning rates); {checkpoints.kept()}") from e
-            e.add_note(f"training failed {where}; {checkpoints.kept()}")   # a bug: it keeps its traceback
+        if rank == 0:
+            _say_what_failed(e, where, trainer, checkpoints)
         raise
     finally:
         bar.close()
@@ -225,6 +208,41 @@ def _train(cfg: Config, run_dir: Path, resume: bool, progress: bool, stop_at: Op
         raise Interrupted(f"after step {step} of {cfg.run.steps}: {held}; continue with the same command and "
                           f"--resume", saved=held)
     return run_dir
+
+
+
+def _training_data(cfg: Config, run_dir: Path, resume: bool, progress: bool, rank: int, world: int) -> TrainingData:
+    """The run's training data: rank 0 loads it (rendering a procedural collection on first use)
+    while the other processes wait, then they read what it cached. Ctrl-C meanwhile is
+    :class:`~mitsuba_platonic.errors.Interrupted`, saying what of the data and the run is kept."""
+    if rank == 0:
+        try:
+            data = load_training_data(cfg, progress=progress)
+        except KeyboardInterrupt as e:                       # Ctrl-C before the first step: say what is kept
+            what = getattr(e, "saved", None) or "nothing of it is cached"
+            done = f"{run_dir / 'checkpoints'} is as it was" if resume else "no checkpoint was written"
+            raise Interrupted(f"while preparing the training data: {what}; no training step ran and {done}; "
+                              f"run the same command again to continue") from e
+    if world > 1:
+        dist.barrier()                                       # the procedural cache is complete
+    if rank != 0:
+        data = load_training_data(cfg, progress=False)
+    return data
+
+
+def _say_what_failed(e: BaseException, where: str, trainer: Trainer, checkpoints: Checkpoints) -> None:
+    """Called while ``e`` propagates out of the loop ``where`` (``in step 5``): a :class:`RunError`
+    of one line for the user's input or a full disk, and for a diverged run (NaN or Inf in the
+    weights); otherwise (a bug) a note on ``e``, which keeps its traceback. Each says what is kept."""
+    if isinstance(e, RunError):
+        return
+    if isinstance(e, (UserError, OSError)):                  # the user's input, a full disk: one line
+        raise RunError(f"training failed {where}: {e}; {checkpoints.kept()}") from e
+    bad = non_finite(trainer.state_dict()) if isinstance(e, ValueError) else None
+    if bad is not None:                                      # a diverged run (NaN or Inf in the weights), not a bug
+        raise RunError(f"training failed {where}: {e} (the training state is not finite: NaN or Inf in "
+                       f"{bad}; lower the learning rates); {checkpoints.kept()}") from e
+    e.add_note(f"training failed {where}; {checkpoints.kept()}")   # a bug: it keeps its traceback
 
 
 def load_run(run_dir: Path, device: str = "cpu") -> Tuple[Config, Model, int]:
