@@ -26,7 +26,7 @@ import re
 import warnings
 from contextlib import contextmanager
 from pathlib import Path
-from typing import Any, Dict, Iterator, List, Optional, Union
+from typing import Any, Dict, Iterator, List, Optional, Set, Union
 
 from ..errors import UserError
 from ..fileio import atomic_write
@@ -158,22 +158,7 @@ def overwrite_plan(out: Path) -> List[Path]:
         spec = CollectionSpec.from_dict(json.loads((out / "collection.json").read_text()))
     except (OSError, ValueError, TypeError, AttributeError):
         pass
-    owned = set()
-    if spec is not None:
-        for i in range(spec.n_shapes):               # the plan: every file this spec writes
-            owned |= {f"volumes/{i:05d}.npz", f"volumes/{i:05d}.vol"}
-            for k in range(spec.views_per_shape):
-                owned |= {f"images/{image_id(i, k)}.png", f"exr/{image_id(i, k)}.exr"}
-        named = list(read_records(out / "records.jsonl").values())
-        try:
-            named += json.loads((out / "manifest.json").read_text())["images"]
-        except (OSError, ValueError, KeyError, TypeError):
-            pass
-        for r in named:
-            if isinstance(r, dict):
-                owned |= {v for key in ("image", "exr", "volume") if isinstance(v := r.get(key), str)}
-                if isinstance(r.get("volume"), str) and r["volume"].endswith(".npz"):
-                    owned.add(r["volume"][:-4] + ".vol")
+    owned = _owned(out, spec) if spec is not None else set()
     remove: List[Path] = []
     foreign: List[str] = []
     for name in RECORDS:
@@ -204,6 +189,28 @@ def overwrite_plan(out: Path) -> List[Path]:
         raise UserError(f"overwrite (--overwrite): {out} {what} ({shown}); nothing was deleted: "
                         f"move them away or use another folder")
     return remove
+
+
+
+def _owned(out: Path, spec: CollectionSpec) -> Set[str]:
+    """The files (relative paths) the collection ``spec`` in ``out`` wrote or plans to: its plan, and
+    every file its records and manifest name (a volume's ``.vol`` beside its ``.npz``)."""
+    owned: Set[str] = set()
+    for i in range(spec.n_shapes):                   # the plan: every file this spec writes
+        owned |= {f"volumes/{i:05d}.npz", f"volumes/{i:05d}.vol"}
+        for k in range(spec.views_per_shape):
+            owned |= {f"images/{image_id(i, k)}.png", f"exr/{image_id(i, k)}.exr"}
+    named = list(read_records(out / "records.jsonl").values())
+    try:
+        named += json.loads((out / "manifest.json").read_text())["images"]
+    except (OSError, ValueError, KeyError, TypeError):
+        pass
+    for r in named:
+        if isinstance(r, dict):
+            owned |= {v for key in ("image", "exr", "volume") if isinstance(v := r.get(key), str)}
+            if isinstance(r.get("volume"), str) and r["volume"].endswith(".npz"):
+                owned.add(r["volume"][:-4] + ".vol")
+    return owned
 
 
 def temporaries(out: Path) -> List[Path]:
