@@ -26,25 +26,18 @@ NET_KEYS = ("resolution", "latent", "width", "norm", "encoder_hidden", "upsample
 
 @dataclass
 class ModelConfig:
-    """resolution: volume and image size R (16 | 32 | 64 | 128); latent: size of z;
-    width: channels at the highest resolution (the paper: 64); norm: 'batch' (the paper) |
-    'instance' | 'none'. The default is 'none': with BatchNorm the quickstart's reconstruction
-    loss stays at 0.21 and novel-view IoU at 0.18 (0.007 and 0.63 without; docs/training.md);
-    'none' also makes data-parallel training identical to single-process training.
-    encoder_hidden: width of the encoder's last layer before its Linear to z (0, the default:
-    none; the authors' encoder: 1024, see docs/paper.md). upsample: how G doubles its
-    resolution, 'transposed' (the paper's k4 s2 transposed convolutions) | 'resize' (nearest ×2
-    and a k3 convolution; mitsuba_platonic.models.UPSAMPLES). critic_init: how the critics D and
-    D3 start, 'dcgan' (N(0, 0.02), as every network and the paper) | 'he' (He's initialisation
-    for LeakyReLU, drawn from the run's seed after the others): without normalisation a DCGAN
-    critic's logits are ~5e-4 and it does not learn in the quickstart's 2,000 steps
-    (docs/training.md, "A discriminator that never learns"). init: how E and G start, 'dcgan'
-    (the paper's) | 'he' (He's, scaled by each layer's fan-in; G's output layer keeps the start
-    at density 1/R: mitsuba_platonic.models.init_he): without normalisation the DCGAN
-    initialisation gives every input image the same first volume (docs/training.md).
-    critic_width: channels of the critics' (D's, D3's) first layer, doubling per stage as E's;
-    null: ``width``. D is a 2D network: at 32 it costs little next to G's 3D convolutions
-    (docs/training.md, "E and G that start blind, and a wider D")."""
+    """The model section, one line per key (why each default: docs/training.md, as named).
+
+    resolution: volume and image size R (16 | 32 | 64 | 128).
+    latent: the size of z.
+    width: channels at the highest resolution (the paper: 64).
+    norm: 'batch' (the paper's) | 'instance' | 'none' (the default: "What the numbers say").
+    encoder_hidden: width of E's last layer before its Linear to z; 0: none (the authors': 1024, docs/paper.md).
+    upsample: how G doubles its resolution, 'transposed' (the paper's k4 s2) | 'resize' (nearest ×2, k3).
+    critic_init: how D and D3 start, 'dcgan' (N(0, 0.02)) | 'he' ("A discriminator that never learns").
+    init: how E and G start, 'dcgan' (the paper's) | 'he' (scaled by fan-in: "E and G that start blind").
+    critic_width: channels of D's and D3's first layer, doubling per stage; null: ``width`` (same section).
+    """
 
     resolution: int = 32
     latent: int = 64

@@ -30,7 +30,7 @@ import torch
 from torch import nn
 
 __all__ = ["NORMS", "UPSAMPLES", "INITS", "NetConfig", "Encoder", "Generator", "Discriminator",
-           "VolumeDiscriminator", "PoseHead", "build_networks", "init_weights", "init_critic_he", "init_he"]
+           "VolumeDiscriminator", "PoseHead", "init_weights", "init_critic_he", "init_he"]
 
 NORMS = ("batch", "instance", "none")
 #: How G doubles its resolution: the paper's transposed convolution (k4, s2, p1), or a nearest
@@ -323,12 +323,3 @@ def init_he(net: nn.Module) -> None:
             m.weight.normal_(0.0, math.sqrt(2.0 / fan))       # gain √2 of the ReLU that follows
             if m.bias is not None:
                 m.bias.zero_()
-
-
-def build_networks(cfg: NetConfig, volume_discriminator: bool = False) -> nn.ModuleDict:
-    """E, G, D (and D3) for ``cfg``, initialised; a ModuleDict so one state_dict holds all."""
-    nets = nn.ModuleDict({"E": Encoder(cfg), "G": Generator(cfg), "D": Discriminator(cfg)})
-    if volume_discriminator:
-        nets["D3"] = VolumeDiscriminator(cfg)
-    nets.apply(init_weights)
-    return nets

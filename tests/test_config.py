@@ -52,9 +52,13 @@ def test_floats_accept_ints_and_yaml_1_1_exponents():
 
 @pytest.mark.parametrize("override, message", [
     ("train.lr_g=.inf", "train.lr_g: expected a finite number, got inf"),
+    ("train.lr_d=.nan", "train.lr_d: expected a finite number, got nan"),
+    ("train.rec_weight=.inf", "train.rec_weight: expected a finite number, got inf"),
+    ("train.gp_weight=-.inf", "train.gp_weight: expected a finite number, got -inf"),
     ("data.threshold=.nan", "data.threshold: expected a finite number, got nan"),
     ("render.fov=-.inf", "render.fov: expected a finite number, got -inf"),
     ("train.elevation=[0, .inf]", "train.elevation[1]: expected a finite number, got inf"),
+    ("data.elevation=.nan", "data.elevation: expected a finite number or a list or null, got nan"),
 ])
 def test_non_finite_numbers_name_the_key(override, message):
     assert _error(override) == message

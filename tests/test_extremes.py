@@ -69,9 +69,11 @@ def test_long_rays_at_128_underflow_to_exact_opacity_without_nan(model):
 
 @pytest.mark.parametrize("step", [4.0, 2.0, 1.0, 0.5, 0.25, 0.0625])
 @pytest.mark.parametrize("model", MODELS)
-def test_steps_from_4_voxels_to_a_sixteenth_match_beer_lambert(step, model):
-    """A slab of L = 8 voxels of density v, head-on, aligned with every step's segments."""
-    n, first, L, v = 32, 8, 8, 0.3
+@pytest.mark.parametrize("v", [0.05, 0.3, 0.9])
+def test_steps_from_4_voxels_to_a_sixteenth_match_beer_lambert(step, model, v):
+    """A slab of L = 8 voxels of density v, head-on, aligned with every step's segments:
+    T = exp(−σ L Δ) = (1 − v)^L (VH: e^{−vL}), C = c (1 − T)."""
+    n, first, L = 32, 8, 8
     density = torch.zeros(1, 1, n, n, n)
     density[:, :, first:first + L] = v
     out = render(_volume(density, model), V.front_view(1), model, "mitsuba", filter="nearest", step=step)

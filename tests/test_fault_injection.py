@@ -505,6 +505,7 @@ def _garbage(path: Path):
 
 CORRUPTIONS = {
     "zero bytes": lambda p: p.write_bytes(b""),
+    "truncated": lambda p: p.write_bytes(p.read_bytes()[: p.stat().st_size // 2]),
     "random bytes": _garbage,
     "wrong version": lambda p: torch.save({**torch.load(p, weights_only=False), "version": CHECKPOINT_VERSION + 1}, p),
     "no version": lambda p: torch.save({k: v for k, v in torch.load(p, weights_only=False).items() if k != "version"}, p),

@@ -144,16 +144,6 @@ def test_a_run_whose_parameters_went_non_finite_saves_nothing(tmp_path, monkeypa
     assert _finite(R.load_checkpoint(ckpts / "last.pt"))
 
 
-@pytest.mark.parametrize("override,key", [
-    ("train.lr_g=.inf", "train.lr_g"), ("train.lr_d=.nan", "train.lr_d"), ("train.rec_weight=.inf", "train.rec_weight"),
-    ("train.gp_weight=-.inf", "train.gp_weight"), ("data.threshold=.nan", "data.threshold"),
-    ("train.elevation=[0, .inf]", "train.elevation"), ("data.elevation=.nan", "data.elevation"),
-])
-def test_non_finite_settings_are_refused(tmp_path, override, key):
-    with pytest.raises(ConfigError, match=f"^{key}"):
-        _cfg(tmp_path, override)
-
-
 @pytest.mark.parametrize("name", ["../../x", "a/b", "ABSOLUTE", "..", ".", ""])
 def test_run_names_are_one_folder_name(tmp_path, name, capsys):
     name = str(tmp_path / "x") if name == "ABSOLUTE" else name
@@ -207,6 +197,9 @@ def test_a_stale_lock_of_a_dead_process_is_taken_over(tmp_path):
 
 
 def test_a_truncated_last_checkpoint_falls_back_to_the_newest_loadable_one(tmp_path, capsys):
+    """Past two broken checkpoints in a row (a truncated last.pt, an empty step_0000004.pt) to step 2,
+    and the resumed run's scalars.csv holds each step once. One broken file of each kind, and no
+    loadable one at all, are test_fault_injection.py's."""
     run_dir = R.train(_cfg(tmp_path), progress=False)
     ckpts = run_dir / "checkpoints"
     last = ckpts / "last.pt"
@@ -226,20 +219,3 @@ def test_a_truncated_last_checkpoint_falls_back_to_the_newest_loadable_one(tmp_p
     assert state["step"] == 6 and _finite(state)
     rows = (run_dir / "scalars.csv").read_text().splitlines()
     assert [int(r.split(",")[0]) for r in rows[1:]] == [1, 2, 3, 4, 5, 6]
-
-
-def test_no_loadable_checkpoint_is_a_one_line_error(tmp_path, capsys):
-    run_dir = R.train(_cfg(tmp_path, "run.steps=2"), progress=False)
-    ckpts = run_dir / "checkpoints"
-    for p in ckpts.glob("*.pt"):
-        p.write_bytes(p.read_bytes()[:100])
-    img = next((tmp_path / "data").glob("*/images/*.png"))
-    capsys.readouterr()
-    for command in (["generate", "--run", str(run_dir), "-n", "1"], ["reconstruct", "--run", str(run_dir), str(img)]):
-        assert main(command) == 2
-        err = one_line(capsys.readouterr().err, command[0], kind="error")
-        assert "last.pt" in err and "step_0000002.pt" in err
-    args = sum((["--set", a] for a in _overrides(tmp_path, "run.steps=4")), [])
-    assert main(["train", "--resume", "--quiet", *args]) == 2
-    err = one_line(capsys.readouterr().err, "train", kind="error")
-    assert "last.pt" in err and "step_0000002.pt" in err

@@ -89,25 +89,6 @@ def test_error_against_fine_step_reference_falls_monotonically(model):
     assert all(a > b for a, b in zip(errors, errors[1:])), errors
 
 
-@pytest.mark.parametrize("step", [1.0, 0.5, 0.25])
-@pytest.mark.parametrize("v", [0.05, 0.5, 0.9])
-def test_constant_slab_matches_beer_lambert(step, v):
-    """A slab of L voxels of density v, seen head-on: T = exp(−σ L Δ) = (1 − v)^L, C = c (1 − T)."""
-    n, first, L = 16, 5, 6
-    vol = torch.zeros(1, 4, n, n, n)
-    vol[:, :3, first:first + L] = torch.tensor([0.2, 0.5, 0.8])[:, None, None, None]
-    vol[:, 3, first:first + L] = v
-    view = V.front_view(1)
-    T = (1 - v) ** L
-    ao = render(vol[:, 3:], view, "ao", "mitsuba", filter="nearest", step=step)
-    assert torch.allclose(ao, torch.full_like(ao, 1 - T), atol=1e-5)
-    vh = render(vol[:, 3:], view, "vh", "mitsuba", filter="nearest", step=step)
-    assert torch.allclose(vh, torch.full_like(vh, 1 - np.exp(-v * L)), atol=1e-5)
-    ea = render(vol, view, "ea", "mitsuba", filter="nearest", step=step)
-    want = torch.tensor([0.2 * (1 - T), 0.5 * (1 - T), 0.8 * (1 - T), 1 - T])
-    assert torch.allclose(ea[0, :, 3, 7], want, atol=1e-5)
-
-
 DENSITIES = [0.0, 1e-8, 0.5, 1 - 1e-7, 1.0]
 
 

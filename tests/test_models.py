@@ -3,9 +3,19 @@
 import pytest
 import yaml
 import torch
+from torch import nn
 
 from mitsuba_platonic.config import ConfigError, load_config
-from mitsuba_platonic.models import NetConfig, build_networks
+from mitsuba_platonic.models import Discriminator, Encoder, Generator, NetConfig, VolumeDiscriminator, init_weights
+
+
+def build_networks(cfg: NetConfig, volume_discriminator: bool = False) -> nn.ModuleDict:
+    """E, G, D (and D3) for ``cfg``, initialised as every network starts (``init_weights``)."""
+    nets = nn.ModuleDict({"E": Encoder(cfg), "G": Generator(cfg), "D": Discriminator(cfg)})
+    if volume_discriminator:
+        nets["D3"] = VolumeDiscriminator(cfg)
+    nets.apply(init_weights)
+    return nets
 
 
 @pytest.mark.parametrize("resolution,channels,norm", [(16, 4, "batch"), (32, 1, "instance"), (64, 4, "none")])

@@ -1,6 +1,6 @@
-"""The Mitsuba scene files in scenes/: each loads and renders with Mitsuba alone, the renderers
-build their scenes from them (same images as the dictionaries they replaced), and the skies
-baked from ``sunsky`` are lat-long EXRs with the sun where it was asked for."""
+"""The Mitsuba scene files in scenes/: each loads and renders with Mitsuba alone, a user's render
+of a file is the project's, the path tracer's differentiable scene keeps its fixed majorant, and
+the skies baked from ``sunsky`` are lat-long EXRs with the sun where it was asked for."""
 
 import math
 from pathlib import Path
@@ -12,9 +12,8 @@ import torch
 from mitsuba_platonic import render
 from mitsuba_platonic import views as V
 from mitsuba_platonic.render import sky
-from mitsuba_platonic.render.physical import Lighting, _medium_grids, _scene, render_physical
+from mitsuba_platonic.render.physical import Lighting, _medium_grids, render_physical
 from mitsuba_platonic.render.scenes import SCENES, load_scene, write_scene_grids
-from mitsuba_platonic.render.settings import RenderSettings
 from mitsuba_platonic.render.variant import ensure_variant
 from mitsuba_platonic.volume import test_volume
 
@@ -114,122 +113,27 @@ def test_a_users_physical_render_is_the_projects(files):
     assert np.abs(mine - theirs[0, :3].permute(1, 2, 0).numpy()).max() <= 1e-6 * np.abs(mine).max()
 
 
-# -- the scenes the code built as dictionaries before scenes/ held them (frozen copies) ---------
+# -- the path tracer's differentiable scene ------------------------------------------------------
 
-def _old_grid(mi, data, filter, **extra):
-    to_world = mi.ScalarTransform4f(mi.ScalarMatrix4f([[2.0, 0.0, 0.0, -1.0], [0.0, 2.0, 0.0, -1.0],
-                                                       [0.0, 0.0, 2.0, -1.0], [0.0, 0.0, 0.0, 1.0]]))
-    return {"type": "gridvolume", "grid": mi.VolumeGrid(data), "to_world": to_world, "filter_type": filter,
-            "raw": True, **extra}
-
-
-def _old_sensor(mi, n, spp, origin, up, film=None, **extra):
-    return {"type": "orthographic",
-            "to_world": mi.ScalarTransform4f().look_at(origin=[float(x) for x in origin], target=[0.0, 0.0, 0.0],
-                                                       up=[float(x) for x in up]),
-            "film": {"type": "hdrfilm", "width": n, "height": n, "pixel_format": "rgb",
-                     "rfilter": {"type": "box"}, **(film or {})},
-            "sampler": {"type": "independent", "sample_count": int(spp)}, **extra}
-
-
-def _old_marcher_scene(mi, n, model, o):
+def test_the_ad_scene_keeps_its_fixed_majorant_when_grids_are_bound():
+    """render_physical_ad's scene (scenes/physical.xml) bounds σ_t by a fixed majorant, headroom ×
+    the largest σ_t a density below V_MAX_PHYSICAL gives, not by the maximum of the grid bound to it
+    (which changes every step)."""
     import drjit as dr
 
-    from mitsuba_platonic.render import raymarch
-
-    def grid(c):
-        return mi.load_dict(_old_grid(mi, dr.zeros(mi.TensorXf, (n, n, n, c)), o.filter))
-
-    density = grid(1)
-    medium = {"type": "heterogeneous", "sigma_t": density, "scale": n / 2.0, "id": "medium"}
-    integrator = {"type": raymarch.INTEGRATOR_NAME, "model": model, "resolution": n, "step": float(o.step),
-                  "jitter": bool(o.jitter), "termination": float(o.termination), "filter": o.filter,
-                  "density": density}
-    if model == "ea":
-        medium["albedo"] = integrator["albedo"] = grid(3)
-    return mi.load_dict({"type": "scene", "integrator": integrator, "medium": medium,
-                         "sensor": _old_sensor(mi, n, o.spp, (0, 0, 2), (0, 1, 0), film={"sample_border": False},
-                                               near_clip=2.0 ** -7, far_clip=8.0,
-                                               medium={"type": "ref", "id": "medium"})})
-
-
-def _old_physical_scene(mi, v, view, light, integrator, spp, max_depth, filter, σ_max=None):
-    σ, albedo = _medium_grids(v)
-    _, up, w = V.camera_frames(view[None])
-    emitter = {"type": "sunsky", "sun_direction": list(light.sun_direction), "turbidity": float(light.turbidity),
-               "albedo": 0.2, "to_world": mi.ScalarTransform4f().rotate([1, 0, 0], -90.0)}
-    σ_grid = _old_grid(mi, σ, filter, **({"max_value": σ_max} if σ_max is not None else {}))
-    return mi.load_dict({
-        "type": "scene",
-        "integrator": {"type": integrator, "max_depth": int(max_depth), "hide_emitters": True},
-        "emitter": emitter,
-        "volume": {"type": "cube", "bsdf": {"type": "null"},
-                   "interior": {"type": "heterogeneous", "sigma_t": σ_grid, "albedo": _old_grid(mi, albedo, filter),
-                                "scale": 1.0, "phase": {"type": "isotropic"}}},
-        "sensor": _old_sensor(mi, v.shape[-1], spp, 3.0 * w[0], up[0]),
-    })
-
-
-@pytest.mark.parametrize("model, options", [("ao", {}), ("vh", {"step": 0.5, "filter": "nearest"}),
-                                            ("ea", {"spp": 4, "jitter": True})])
-def test_the_marcher_scene_file_renders_as_the_dict_scene_did(model, options):
-    """``build_scene`` (scenes/raymarch*.xml) and the dictionary it replaced, with the same grids and
-    view bound: identical images, bit for bit."""
-    from mitsuba_platonic.render.mitsuba_renderer import _sensor_transform, build_scene, to_mitsuba_grid
+    from mitsuba_platonic.render.physical import MAJORANT_HEADROOM, V_MAX_PHYSICAL, _ad_scene
 
     mi = _mi()
-    o = RenderSettings(backend="mitsuba", model=model, **options).validate()
-    vol = _volume() if model == "ea" else _volume()[3:]
-    grids = [to_mitsuba_grid(vol[-1:])] + ([to_mitsuba_grid(vol[:3])] if model == "ea" else [])
-    right, up, w = V.camera_frames(OBLIQUE)
-    images = []
-    for scene in (build_scene(N, model, o), _old_marcher_scene(mi, N, model, o)):
-        params = mi.traverse(scene)
-        for key, g in zip(("medium.sigma_t.data", "medium.albedo.data"), grids):
-            params[key] = mi.TensorXf(g.contiguous().numpy())
-        params["sensor.to_world"] = _sensor_transform(mi, right[1], up[1], w[1])
-        params.update()
-        images.append(np.array(mi.render(scene, seed=5)))
-    assert images[0].shape == (N, N, 4 if model == "ea" else 3)
-    assert np.array_equal(images[0], images[1])
-
-
-@pytest.mark.parametrize("integrator", ["volpath", "prbvolpath"])
-def test_the_physical_scene_file_renders_as_the_dict_scene_did(integrator):
-    """scenes/physical.xml against the dictionary it replaced, same volume, view, sun and seed.
-    Not bit for bit: the file's camera and sky rotation are computed in double precision
-    (the dictionary's in single), which moves pixels by ~1e-6 of the brightest."""
-    import drjit as dr
-
-    mi = _mi()
-    v = _volume()
-    view = OBLIQUE[0]
-    sun = np.array([0.3, 0.7, 0.65]) / np.linalg.norm([0.3, 0.7, 0.65])
-    light = Lighting(sun_direction=tuple(float(x) for x in sun), turbidity=5.0)
-    if integrator == "volpath":
-        new = _scene(mi, v, view, light, spp=4, max_depth=8, filter="trilinear")
-        old = _old_physical_scene(mi, v, view, light, "volpath", 4, 8, "trilinear")
-    else:                       # render_physical_ad's scene: a fixed majorant; grids, sun, view bound
-        from mitsuba_platonic.render.physical import MAJORANT_HEADROOM, V_MAX_PHYSICAL, _ad_scene
-        σ_max = MAJORANT_HEADROOM * -math.log(1.0 - V_MAX_PHYSICAL) / (2.0 / N)
-        new, _ = _ad_scene(N, 4, 4, "trilinear")
-        old = _old_physical_scene(mi, v, view, Lighting(), "prbvolpath", 4, 4, "trilinear", σ_max=σ_max)
-        σ, albedo = _medium_grids(v)
-        _, up, w = V.camera_frames(view[None])
-        for scene in (new, old):                 # as render_physical_ad binds a pair
-            params = mi.traverse(scene)
-            params["volume.interior_medium.sigma_t.data"] = mi.TensorXf(σ)
-            params["volume.interior_medium.albedo.data"] = mi.TensorXf(albedo)
-            params["emitter.sun_direction"] = mi.Vector3f(*light.sun_direction)
-            params["emitter.turbidity"] = mi.Float(light.turbidity)
-            params["sensor.to_world"] = mi.ScalarTransform4f().look_at(
-                origin=[float(x) for x in 3.0 * w[0]], target=[0.0, 0.0, 0.0], up=[float(x) for x in up[0]])
-            params.update()
-        majorant = new.shapes()[0].interior_medium().get_majorant(dr.zeros(mi.MediumInteraction3f))
-        assert np.isclose(float(majorant[0][0]), σ_max, rtol=1e-6)       # fixed, not the grid's maximum
-    a, b = np.array(mi.render(new, seed=3)), np.array(mi.render(old, seed=3))
-    assert a.shape == (N, N, 3) and a.max() > 0.05
-    assert np.abs(a - b).max() <= 1e-5 * a.max()
+    σ_max = MAJORANT_HEADROOM * -math.log(1.0 - V_MAX_PHYSICAL) / (2.0 / N)
+    scene, _ = _ad_scene(N, 4, 4, "trilinear")
+    σ, albedo = _medium_grids(_volume())
+    params = mi.traverse(scene)
+    params["volume.interior_medium.sigma_t.data"] = mi.TensorXf(σ)
+    params["volume.interior_medium.albedo.data"] = mi.TensorXf(albedo)
+    params.update()
+    assert float(σ.max()) < σ_max
+    majorant = scene.shapes()[0].interior_medium().get_majorant(dr.zeros(mi.MediumInteraction3f))
+    assert np.isclose(float(majorant[0][0]), σ_max, rtol=1e-6)
 
 
 # -- baked skies ----------------------------------------------------------------------------

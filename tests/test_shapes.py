@@ -215,10 +215,6 @@ def test_primitives_are_exact_where_documented():
     e = S.ellipsoid(torch.tensor([[0.5, 0, 0], [0, 0.2, 0], [0, 0, 0.0], [1.0, 1.0, 1.0]]),
                     (0, 0, 0), (0.5, 0.2, 0.3))
     assert abs(float(e[0])) < 1e-6 and abs(float(e[1])) < 1e-6 and e[2] < 0 and e[3] > 0
-    # smooth min: min far apart, below min where blended
-    a, b = torch.tensor([0.0, 0.0]), torch.tensor([1.0, 0.0])
-    sm = S.smooth_min(a, b, 0.2)
-    assert float(sm[0]) == 0.0 and float(sm[1]) < 0.0
 
 
 def test_polygon_is_exact_at_sharp_corners():

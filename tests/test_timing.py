@@ -16,10 +16,10 @@ def _one_kernel():
 
 def test_kernel_time_counts_the_call_s_launches_and_leaves_the_history_off():
     ms, launches = kernel_time(_one_kernel)
-    assert launches >= 1 and ms >= 0.0
+    assert launches >= 1 and 0.0 < ms < 10_000.0                 # the kernel ran, and took milliseconds
     assert not dr.flag(dr.JitFlag.KernelHistory)
     assert kernel_time(lambda: None) == (0.0, 0)              # nothing launched: nothing counted
-    assert best_kernel_ms(_one_kernel, 2) >= 0.0
+    assert 0.0 < best_kernel_ms(_one_kernel, 2) < 10_000.0
 
 
 def test_kernel_time_switches_the_history_off_on_an_error():

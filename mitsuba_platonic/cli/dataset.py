@@ -46,7 +46,8 @@ def _check_dataset_flags(args: argparse.Namespace) -> None:
 
 def _cmd_make_dataset(args: argparse.Namespace) -> int:
     from ..data import shapes
-    from ..data.collection import CollectionSpec, check_envmap, default_envmaps, make_collection
+    from ..data.collection import CollectionSpec, make_collection
+    from ..data.envmaps import check_envmap, default_envmaps
     from ..data.preview import contact_sheet
 
     known = shapes.list_classes()
@@ -80,8 +81,8 @@ def _cmd_make_dataset(args: argparse.Namespace) -> int:
 
 
 def add_make_dataset(sub: "argparse._SubParsersAction") -> None:
-    from ..data.collection import FORMATIONS
-    from ..render.settings import RenderSettings
+    from ..data.collection_spec import RENDERERS
+    from ..render.settings import CAMERAS, FILTERS, FORMATIONS, LIGHTINGS, RenderSettings
     from ..views import DEFAULT_ELEVATION, DISTRIBUTIONS
 
     p = sub.add_parser(
@@ -98,15 +99,15 @@ def add_make_dataset(sub: "argparse._SubParsersAction") -> None:
     p.add_argument("--resolution", type=positive_int, default=64, help="N, 16 … 128 (default: %(default)s)")
     p.add_argument("--formation", choices=FORMATIONS, default="ea",
                    help="image formation (default: %(default)s)")
-    p.add_argument("--renderer", choices=("closed_form", "mitsuba"), default="closed_form",
+    p.add_argument("--renderer", choices=RENDERERS, default="closed_form",
                    help="renderer for vh/ao/ea (default: %(default)s)")
-    p.add_argument("--filter", choices=("trilinear", "nearest"), default="trilinear")
+    p.add_argument("--filter", choices=FILTERS, default="trilinear")
     p.add_argument("--view-dist", choices=DISTRIBUTIONS, default="sphere",
                    help="view distribution (default: %(default)s)")
     p.add_argument("--elevation", type=_elevation, default=None,
                    help="'low,high' degrees for band (default {:g},{:g}); one number for ring (default {:g})"
                    .format(*DEFAULT_ELEVATION["band"], DEFAULT_ELEVATION["ring"]))
-    p.add_argument("--lighting", choices=("sunsky", "envmap", "mixed"), default=None,
+    p.add_argument("--lighting", choices=LIGHTINGS, default=None,
                    help="physical formation only: random sky, environment map, or either (default: sunsky)")
     p.add_argument("--envmap", action="append", default=None,
                    help="an environment map .exr (repeatable; default: scenes/envmaps/*.exr)")
@@ -114,7 +115,7 @@ def add_make_dataset(sub: "argparse._SubParsersAction") -> None:
                    help="physical formation only: samples per pixel (default: 32)")
     p.add_argument("--max-depth", type=positive_int, default=None,
                    help="physical formation only: longest path (default: 8)")
-    p.add_argument("--camera", choices=("orthographic", "perspective"), default="orthographic",
+    p.add_argument("--camera", choices=CAMERAS, default="orthographic",
                    help="vh/ao/ea images: the camera (default: %(default)s)")
     p.add_argument("--fov", type=positive_float, default=RenderSettings.fov,
                    help="perspective: full field of view in degrees (default: %(default)s)")

@@ -77,6 +77,8 @@ def _cmd_compare(args: argparse.Namespace) -> int:
 
 
 def add_compare(sub: "argparse._SubParsersAction") -> None:
+    from ..render.settings import FILTERS
+
     p = sub.add_parser(
         "compare", help="compare the closed-form and Mitsuba renderers on one volume",
         description="Render a volume with the closed-form layers and the Mitsuba ray marcher from "
@@ -91,7 +93,7 @@ def add_compare(sub: "argparse._SubParsersAction") -> None:
     p.add_argument("--models", default="vh,ao,ea", help="comma-separated models (default: %(default)s)")
     p.add_argument("--views", type=positive_int, default=4,
                    help="number of views: the front view, then random views (default: %(default)s)")
-    p.add_argument("--filter", choices=("trilinear", "nearest"), default="trilinear",
+    p.add_argument("--filter", choices=FILTERS, default="trilinear",
                    help="volume lookups, both backends (default: %(default)s)")
     p.add_argument("--step", type=positive_float, default=1.0,
                    help="Mitsuba ray-marching step in voxels (default: %(default)s)")
@@ -142,6 +144,7 @@ def _cmd_bench(args: argparse.Namespace) -> int:
 
 def add_bench(sub: "argparse._SubParsersAction") -> None:
     from ..bench import RESOLUTIONS
+    from ..volume import TEST_VOLUMES
 
     p = sub.add_parser(
         "bench", help="measure the renderers' speed/accuracy trade (JSON, Markdown, Pareto plots)",
@@ -159,7 +162,7 @@ def add_bench(sub: "argparse._SubParsersAction") -> None:
     p.add_argument("--threads", type=positive_int, default=None,
                    help="torch and Dr.Jit threads (default: leave them as they are: all cores)")
     p.add_argument("--models", default="vh,ao,ea", help="comma-separated models (default: %(default)s)")
-    p.add_argument("--volume", choices=("figure", "cloud"), default="figure",
+    p.add_argument("--volume", choices=tuple(TEST_VOLUMES), default="figure",
                    help="built-in test volume (default: %(default)s)")
     p.add_argument("--seed", type=non_negative_int, default=0,
                    help="seed of the views, the loss weights and the path tracer (default: %(default)s)")

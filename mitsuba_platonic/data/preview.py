@@ -11,7 +11,7 @@ from .. import views as V
 from ..images import composite, linear_to_srgb, to_hwc
 from ..render import render
 from . import shapes
-from .collection import CollectionSpec
+from .collection_spec import CollectionSpec
 
 __all__ = ["contact_sheet"]
 
@@ -23,7 +23,7 @@ def contact_sheet(shape_class: str, path: Union[str, Path], n_shapes: int = 4, n
 
     Rows are shapes, columns views (a turntable at ``elevation`` degrees); EA closed form,
     composited over white and sRGB-encoded for display. ``shape_seed(i)`` picks the seeds (the
-    default matches :class:`~mitsuba_platonic.data.collection.CollectionSpec` with ``seed``).
+    default matches :class:`~mitsuba_platonic.data.collection_spec.CollectionSpec` with ``seed``).
     """
     from matplotlib.figure import Figure  # lazy: matplotlib is slow to import, only for figures
 

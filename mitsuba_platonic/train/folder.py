@@ -1,22 +1,36 @@
-"""What a run folder is, so that ``train`` writes only into its own.
+"""The run folder: what one is, so that ``train`` writes only into its own; one run at a time in
+it; and the resolved config it records.
 
 A run folder is one ``train`` created: it writes :data:`RUN_MARKER` (``run.json``) first, into a
 folder that did not exist or was empty. A folder written before the marker existed is recognised
 by its own records: a checkpoint in ``checkpoints/``. Any other folder that holds something is a
 user's, and :func:`claim_run_folder` refuses it before anything in it is touched (no temporary
 removed, no ``run.lock`` taken).
+
+One run per folder: :func:`run_lock` holds ``run.lock``, an exclusive lock (``flock``) that the
+kernel releases when its process ends, so a lock file left by a killed run is simply taken over,
+while a second run in the folder of a live one is refused. :func:`prepare_run_folder` then checks
+that the folder's checkpoints agree with ``--resume``, removes what a killed run was writing and
+records the resolved config (``config.yaml``), which :func:`read_run_config` reads back.
 """
 
 from __future__ import annotations
 
 import json
 import os
+from contextlib import contextmanager
 from pathlib import Path
+from typing import Iterator, Optional
+
+import yaml
 
 from .. import __version__
 from ..checkpoint import RunError, checkpoint_files
+from ..config import Config, ConfigError, config_from_dict, yaml_problem
+from ..fileio import atomic_write, remove_temporaries
+from ..loading import config_difference
 
-__all__ = ["RUN_MARKER", "is_run_folder", "claim_run_folder"]
+__all__ = ["RUN_MARKER", "is_run_folder", "claim_run_folder", "run_lock", "prepare_run_folder", "read_run_config"]
 
 #: The file ``train`` writes first into a folder it makes a run folder.
 RUN_MARKER = "run.json"
@@ -59,3 +73,114 @@ def _write_marker(folder: Path) -> None:
     text = json.dumps({"written_by": "platonic train", "mitsuba_platonic": __version__, "pid": os.getpid()})
     with open(folder / RUN_MARKER, "w") as f:
         f.write(text + "\n")
+
+
+def _lock_holder(fd: int) -> str:
+    try:
+        text = os.pread(fd, 64, 0).decode(errors="replace").strip()
+    except OSError:
+        return "?"
+    return text if text.isdigit() else "?"
+
+
+@contextmanager
+def run_lock(run_dir: Path) -> Iterator[Path]:
+    """Hold ``run_dir/run.lock`` (an exclusive ``flock`` holding this process's pid) while inside.
+
+    A lock file whose process is gone is free (the kernel dropped its lock) and is taken over; a
+    live holder makes this raise :class:`RunError`. The file is removed on exit.
+    """
+    import fcntl  # lazy: POSIX only, where a run folder is locked
+
+    run_dir.mkdir(parents=True, exist_ok=True)
+    path = run_dir / "run.lock"
+    while True:
+        fd = os.open(path, os.O_RDWR | os.O_CREAT, 0o644)
+        try:
+            fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
+        except OSError:
+            holder = _lock_holder(fd)
+            os.close(fd)
+            raise RunError(f"{run_dir} is in use by another training run (pid {holder}, lock {path}); "
+                           f"wait for it to end or choose another run.name") from None
+        try:
+            same = os.path.samestat(os.fstat(fd), os.stat(path))
+        except FileNotFoundError:
+            same = False
+        if same:
+            break
+        os.close(fd)                                 # its holder removed it as we opened it: again
+    try:
+        try:
+            os.ftruncate(fd, 0)
+            os.pwrite(fd, f"{os.getpid()}\n".encode(), 0)
+        except OSError as e:                         # a full disk: say where
+            raise OSError(e.errno, e.strerror, str(path)) from None
+        yield path
+    finally:
+        try:
+            os.unlink(path)                          # while still holding it: no one can hold a stale copy
+        finally:
+            os.close(fd)
+
+
+def prepare_run_folder(run_dir: Path, cfg: Config, resume: bool, config_file: Optional[Path] = None) -> None:
+    """Ready the claimed and locked ``run_dir`` for ``cfg``: :class:`RunError` unless it holds a
+    checkpoint exactly when ``resume`` asks to continue one, and on ``resume`` unless its
+    ``config.yaml`` has the same data, model, render and train settings; then remove the temporaries
+    a killed run left and write ``cfg`` as ``config.yaml`` (atomically: ``--resume`` reads it), unless
+    that file is ``config_file``, the user's ``--config``, which is never written."""
+    existing = checkpoint_files(run_dir / "checkpoints")
+    if resume and not existing:
+        raise RunError(f"--resume: {run_dir} has no checkpoint to continue from")
+    if not resume and existing:
+        raise RunError(f"{run_dir} already holds a run; pass --resume to continue it, or choose "
+                       f"another run.name")
+    run_dir.mkdir(parents=True, exist_ok=True)
+    for folder in (run_dir, run_dir / "checkpoints"):   # what a killed run was writing (we hold the lock)
+        remove_temporaries(folder)
+    if resume:
+        try:
+            saved = read_run_config(run_dir / "config.yaml")
+        except RunError as e:
+            raise RunError(f"--resume: {e}") from None
+        diff = config_difference(saved, cfg, there="there")
+        if diff is not None:
+            raise RunError(f"--resume: the {diff.split('.')[0]} settings differ from {run_dir}/config.yaml "
+                           f"({diff}); an exact continuation needs the same config (only run.* may change)")
+    if not _same_file(config_file, run_dir / "config.yaml"):
+        text = yaml.safe_dump(cfg.to_dict(), sort_keys=False)
+        atomic_write(run_dir / "config.yaml", lambda p: p.write_text(text))
+
+
+def _same_file(a: Optional[Path], b: Path) -> bool:
+    try:
+        return a is not None and os.path.samefile(a, b)
+    except OSError:
+        return False
+
+
+def read_run_config(path: Path) -> Config:
+    """The resolved config a run wrote (``RUN/config.yaml``), validated; :class:`RunError` naming
+    ``path`` if it is missing, not valid YAML, not a mapping, or has a bad key or value."""
+    expected = "expected the run's resolved config as `platonic train` wrote it"
+    try:
+        text = path.read_text()
+    except FileNotFoundError:
+        raise RunError(f"{path} is missing; {expected}") from None
+    except OSError as e:
+        raise RunError(f"{path} cannot be read: {e}") from None
+    except UnicodeDecodeError:
+        raise RunError(f"{path} is not a text file (not UTF-8); {expected}") from None
+    try:
+        data = yaml.safe_load(text)
+    except yaml.YAMLError as e:
+        raise RunError(f"{path} is not valid YAML ({yaml_problem(e)}); {expected}") from None
+    if not isinstance(data, dict):
+        got = "an empty file" if data is None else f"a {type(data).__name__}"
+        raise RunError(f"{path}: expected a mapping of sections (run, data, model, render, train), got {got}; "
+                       f"{expected}")
+    try:
+        return config_from_dict(data)
+    except ConfigError as e:
+        raise RunError(f"{path}: {e}; {expected}") from None

@@ -8,11 +8,10 @@ Every SDF takes points ``p`` of shape ``(..., 3)`` (world or design-frame ``(x, 
 sequences; they are converted to ``p``'s dtype and device. Formulas use ``|·|`` for the
 Euclidean norm, ``a⁺ = max(a, 0)`` and ``clamp(t, 0, 1)``.
 
-Some SDFs are *bounds* rather than exact distances (the ellipsoid, tapered capsules, the
-boolean combinations). They are exact or first-order exact close to the surface, which is
-all the one-voxel occupancy ramp needs. :func:`profile_sdf` (revolved profiles) and
-:func:`polygon2d` are exact, also at sharp corners and steps, where first-order estimates
-would let density leak far from the surface.
+Some SDFs are *bounds* rather than exact distances (the ellipsoid, tapered capsules). They
+are exact or first-order exact close to the surface, which is all the one-voxel occupancy ramp
+needs. :func:`profile_sdf` (revolved profiles) and :func:`polygon2d` are exact, also at sharp
+corners and steps, where first-order estimates would let density leak far from the surface.
 
 From distances to volumes
 -------------------------
@@ -53,12 +52,10 @@ __all__ = [
     "polygon2d", "extrude",
     # revolution
     "revolve", "profile_sdf", "smooth_profile",
-    # combinations
-    "union", "intersection", "subtraction", "smooth_min", "smooth_union",
     # volumes
     "occupancy", "Part", "composite", "grid_points",
     # part builders
-    "sphere_part", "box_part", "capsule_part", "ellipsoid_part", "cylinder_part",
+    "sphere_part", "box_part", "capsule_part", "cylinder_part",
     "torus_part", "revolve_part",
 ]
 
@@ -336,49 +333,6 @@ def revolve(p: torch.Tensor, sdf2d: Callable[[torch.Tensor, torch.Tensor], torch
     return sdf2d(torch.sqrt(q[..., 0] ** 2 + q[..., 2] ** 2), q[..., 1])
 
 
-# --------------------------------------------------------------------------- combinations
-
-def union(*ds: torch.Tensor) -> torch.Tensor:
-    """``min_i d_i`` (exact outside, a bound inside)."""
-    out = ds[0]
-    for d in ds[1:]:
-        out = torch.minimum(out, d)
-    return out
-
-
-def intersection(*ds: torch.Tensor) -> torch.Tensor:
-    """``max_i d_i`` (a bound)."""
-    out = ds[0]
-    for d in ds[1:]:
-        out = torch.maximum(out, d)
-    return out
-
-
-def subtraction(d_a: torch.Tensor, d_b: torch.Tensor) -> torch.Tensor:
-    """A minus B: ``max(d_a, −d_b)`` (a bound)."""
-    return torch.maximum(d_a, -d_b)
-
-
-def smooth_min(a: torch.Tensor, b: torch.Tensor, k: float) -> torch.Tensor:
-    """Polynomial smooth minimum with blend radius ``k``:
-    ``h = clamp(½ + ½ (b − a) / k, 0, 1)``, ``d = b + h (a − b) − k h (1 − h)``.
-
-    Equals ``min(a, b)`` where ``|a − b| ≥ k`` and fills the crease with a fillet elsewhere.
-    """
-    if k <= 0:
-        return torch.minimum(a, b)
-    h = (0.5 + 0.5 * (b - a) / k).clamp(0.0, 1.0)
-    return b + h * (a - b) - k * h * (1.0 - h)
-
-
-def smooth_union(*ds: torch.Tensor, k: float = 0.05) -> torch.Tensor:
-    """Left fold of :func:`smooth_min` over several distances."""
-    out = ds[0]
-    for d in ds[1:]:
-        out = smooth_min(out, d, k)
-    return out
-
-
 # --------------------------------------------------------------------------- volumes
 
 def occupancy(sdf: torch.Tensor, n: int, width_voxels: float = 1.0) -> torch.Tensor:
@@ -558,13 +512,6 @@ def capsule_part(a: Vec, b: Vec, radius: float, colour: Colour,
     r_min = radius if radius_b is None else min(radius, radius_b)
     return Part(lambda p: capsule(p, a, b, radius, radius_b), colour, np.asarray([a, b]),
                 r_max, 2.0 * r_min, name)
-
-
-def ellipsoid_part(centre: Vec, radii: Vec, colour: Colour,
-                   frame: Optional[np.ndarray] = None, name: str = "") -> Part:
-    """An :func:`ellipsoid` part."""
-    return Part(lambda p: ellipsoid(p, centre, radii, frame), colour,
-                _corners(centre, radii, frame), 0.0, 2.0 * min(radii), name)
 
 
 def cylinder_part(centre: Vec, radius: float, half_height: float, colour: Colour,
