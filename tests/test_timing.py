@@ -1,5 +1,7 @@
 """compare.kernel_time: Dr.Jit's kernel history read around one call, and switched off after it."""
 
+import math
+
 import pytest
 
 from mitsuba_platonic.compare import best_kernel_ms, kernel_time
@@ -16,10 +18,11 @@ def _one_kernel():
 
 def test_kernel_time_counts_the_call_s_launches_and_leaves_the_history_off():
     ms, launches = kernel_time(_one_kernel)
-    assert launches >= 1 and 0.0 < ms < 10_000.0                 # the kernel ran, and took milliseconds
+    assert launches >= 1 and 0.0 < ms and math.isfinite(ms)    # the kernel ran (no bound on its time: a test never times)
     assert not dr.flag(dr.JitFlag.KernelHistory)
     assert kernel_time(lambda: None) == (0.0, 0)              # nothing launched: nothing counted
-    assert 0.0 < best_kernel_ms(_one_kernel, 2) < 10_000.0
+    best = best_kernel_ms(_one_kernel, 2)
+    assert 0.0 < best and math.isfinite(best)
 
 
 def test_kernel_time_switches_the_history_off_on_an_error():
