@@ -16,8 +16,10 @@ Shared: :mod:`.args` (``CLIError``, the argparse number types, ``--models``), :m
 ``add_<command>(sub)`` that adds its subparser with ``handler`` (parsed arguments → exit code) and
 ``interrupted`` (what a Ctrl-C leaves) defaults, and list it in :data:`SUBCOMMANDS`.
 
-Every module here imports only argparse and the package's light modules at the top; each handler
-imports what it runs when it runs, so ``--help`` and a wrong flag answer without numpy, torch or Mitsuba.
+Every module here imports only argparse and the package's light modules at the top, so importing
+the package loads no numpy or torch; building the parser loads torch (the choice lists it offers
+live beside the torch code that owns them) but never Mitsuba or Dr.Jit: each handler imports
+what it runs when it runs, so ``--help`` and a wrong flag answer without starting LLVM.
 
 Exit codes: 0 on success; 2 on a user error (usage errors, unreadable or invalid files, invalid
 options: :class:`~mitsuba_platonic.errors.UserError`, which ``ConfigError``, ``RunError`` and

@@ -2,7 +2,7 @@
 numbers, the ``--models`` list and the ``--out`` folder check.
 
 Light on purpose (argparse and the package's errors only), as is every module of the command
-line at import time: ``platonic --help`` loads no numpy, torch or Mitsuba.
+line at import time: importing it loads no numpy or torch, and ``platonic --help`` no Mitsuba.
 """
 
 from __future__ import annotations
