@@ -113,6 +113,14 @@ def _trainer(cache, roll_setting, *overrides):
     return Trainer(cfg, load_training_data(cfg, progress=False), torch.device("cpu"))
 
 
+def _as_judged(seen):
+    """D's inputs of a step as [reals, fakes, G's adversarial images]: D's update runs its reals and
+    fakes through one forward pass (no BatchNorm), the first half of which are the reals."""
+    both, *rest = seen
+    half = len(both) // 2
+    return [both[:half], both[half:], *rest]
+
+
 @pytest.mark.usefixtures("tiny_class")
 @pytest.mark.parametrize("setting", ["none", "uniform"])
 def test_d_sees_exactly_the_turned_images(cache, monkeypatch, setting):
@@ -129,6 +137,7 @@ def test_d_sees_exactly_the_turned_images(cache, monkeypatch, setting):
     monkeypatch.setattr(trainer_module, "roll", recording_roll)
     trainer.nets["D"].register_forward_hook(lambda module, args, output: seen.append(args[0]))
     trainer.step(0)
+    seen = _as_judged(seen)
     assert len(seen) == 3                                    # D's real, D's fake, G's adversarial term
     if setting == "none":
         assert turned == []
@@ -166,6 +175,7 @@ def test_matched_turns_the_reals_by_their_slots_views_and_leaves_the_fakes(cache
     trainer.render = lambda v, w, seed: rendered.append((w, render(v, w, seed))) or rendered[-1][1]
     trainer.nets["D"].register_forward_hook(lambda module, args, output: seen.append(args[0]))
     trainer.step(0)
+    seen = _as_judged(seen)
     assert len(turned) == 1 and len(views) == 1
     (w, θ0), (reals, out, angles) = views[0], turned[0]
     random_views, fakes = rendered[0]
