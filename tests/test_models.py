@@ -350,3 +350,23 @@ def test_model_init_he_redraws_e_and_g_and_nothing_else(tmp_path, tiny_class):
         assert not torch.equal(next(dcgan.nets[name].parameters()), next(he.nets[name].parameters()))
     last = (m.weight.detach() for m in (dcgan.model.G.convolutions()[-1], he.model.G.convolutions()[-1]))
     assert abs(float(next(last).std()) - 0.02) < 0.004 and abs(float(next(last).std()) - 0.02) < 0.004
+
+
+@pytest.mark.parametrize("norm, upsample", [("none", "resize_last"), ("batch", "transposed"), ("none", "resize")])
+def test_the_channels_last_generator_computes_what_the_usual_layout_does(norm, upsample):
+    """G keeps its 3D weights channels-last for speed; the same weights in the usual layout, on the
+    usual input, give the same volume (float round-off), and G's volume comes out contiguous, with
+    gradients for every weight."""
+    import copy
+    torch.manual_seed(0)
+    G = Generator(NetConfig(resolution=16, width=8, latent=16, norm=norm, upsample=upsample))
+    convs = G.convolutions()
+    assert all(c.weight.is_contiguous(memory_format=torch.channels_last_3d) for c in convs)
+    usual = copy.deepcopy(G.net).to(memory_format=torch.contiguous_format)
+    assert all(m.weight.is_contiguous() for m in usual if isinstance(m, (nn.Conv3d, nn.ConvTranspose3d)))
+    z = torch.randn(3, 16)
+    v = G(z)
+    assert v.is_contiguous() and v.shape == (3, 4, 16, 16, 16)
+    assert torch.allclose(v, usual(z[:, :, None, None, None]), atol=1e-5)
+    v.sum().backward()
+    assert all(p.grad is not None and torch.isfinite(p.grad).all() for p in G.parameters())
