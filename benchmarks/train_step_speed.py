@@ -6,7 +6,8 @@
 The older commit's package is unpacked (``git archive``) into a temporary folder and put first on
 ``PYTHONPATH`` of a child process; this checkout's package runs the same way, so both time the
 same script, with the same virtual environment, on the same machine, in alternating rounds (the
-best round counts). Each measurement: the config's trainer on random images (the speed of a step
+best round counts). Each child runs in its package's folder (``python -c`` puts the working
+directory first on ``sys.path``) and prints the package it imported, which the table names. Each measurement: the config's trainer on random images (the speed of a step
 does not depend on what the images show), ``--warmup`` steps, then ``--steps`` timed steps, with
 the run's thread settings. Prints s/step per commit and config and the ratio. Figures only.
 """
@@ -40,6 +41,8 @@ with training_threads(cfg):
     t0 = time.perf_counter()
     for s in range(warm, warm + steps):
         trainer.step(s)
+import mitsuba_platonic
+print(mitsuba_platonic.__file__)
 print((time.perf_counter() - t0) / steps)
 """
 
@@ -47,8 +50,11 @@ print((time.perf_counter() - t0) / steps)
 def _time(package_root: Path, config: str, steps: int, warmup: int, overrides) -> float:
     env = {**os.environ, "PYTHONPATH": str(package_root)}
     out = subprocess.run([sys.executable, "-c", CHILD, config, str(steps), str(warmup), *overrides], env=env,
-                         capture_output=True, text=True, check=True)
-    return float(out.stdout.strip().splitlines()[-1])
+                         cwd=package_root, capture_output=True, text=True, check=True)   # cwd: first on sys.path
+    *_, imported, seconds = out.stdout.strip().splitlines()
+    if not Path(imported).resolve().is_relative_to(package_root.resolve()):
+        raise RuntimeError(f"the child imported {imported}, not the package under {package_root}")
+    return float(seconds)
 
 
 def main() -> None:
