@@ -22,6 +22,15 @@ def _images(b=6, h=16):
     return x
 
 
+def _tiny_trainer(tmp_path, *overrides):
+    """A trainer on the tiny procedural class at 16³, batch 4, through the closed form."""
+    cfg = load_config(None, [f"run.out_dir={tmp_path}/runs", f"data.cache={tmp_path}/data",
+                             f"data.shape_class={TINY}", "data.n_shapes=4", "data.views_per_shape=2",
+                             "model.resolution=16", "model.width=4", "model.latent=8", "train.batch_size=4",
+                             "render.backend=closed_form", *overrides])
+    return Trainer(cfg, load_training_data(cfg, progress=False), torch.device("cpu"))
+
+
 def _gen(seed=1):
     return torch.Generator().manual_seed(seed)
 
@@ -99,11 +108,7 @@ def test_the_config_names_the_key_for_unknown_or_repeated_augmentations():
 def test_the_trainer_shows_d_augmented_reals_and_fakes_and_g_learns_through_them(tmp_path, monkeypatch):
     import mitsuba_platonic.train.trainer as T
 
-    cfg = load_config(None, [f"run.out_dir={tmp_path}/runs", f"data.cache={tmp_path}/data",
-                             f"data.shape_class={TINY}", "data.n_shapes=4", "data.views_per_shape=2",
-                             "model.resolution=16", "model.width=4", "model.latent=8", "train.batch_size=4",
-                             "render.backend=closed_form", "train.d_augment=[translation, cutout]"])
-    trainer = Trainer(cfg, load_training_data(cfg, progress=False), torch.device("cpu"))
+    trainer = _tiny_trainer(tmp_path, "train.d_augment=[translation, cutout]")
     seen, fakes = [], []
     real_augment = T.augment
 
@@ -193,12 +198,7 @@ def test_photo_augment_refuses_what_it_cannot_do():
 def test_the_trainer_gives_e_the_target_and_d_the_same_augmented_photos(tmp_path, monkeypatch):
     import mitsuba_platonic.train.trainer as T
 
-    cfg = load_config(None, [f"run.out_dir={tmp_path}/runs", f"data.cache={tmp_path}/data",
-                             f"data.shape_class={TINY}", "data.n_shapes=4", "data.views_per_shape=2",
-                             "model.resolution=16", "model.width=4", "model.latent=8", "train.batch_size=4",
-                             "render.backend=closed_form", "train.photo_augment=[flip, colour]",
-                             "train.d_augment=[cutout]"])
-    trainer = Trainer(cfg, load_training_data(cfg, progress=False), torch.device("cpu"))
+    trainer = _tiny_trainer(tmp_path, "train.photo_augment=[flip, colour]", "train.d_augment=[cutout]")
     made, e_saw, d_saw = [], [], []
     real_photos, real_d_augment = T.augment_photos, T.augment
     monkeypatch.setattr(T, "augment_photos", lambda x, names, g: made.append(real_photos(x, names, g)) or made[-1])
