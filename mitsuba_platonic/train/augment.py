@@ -85,14 +85,20 @@ _TRANSFORMS = {"flip": _flip, "translation": _translation, "cutout": _cutout}
 def augment(x: torch.Tensor, transforms: Sequence[str], g: torch.Generator) -> torch.Tensor:
     """``x`` ``(B, C, H, W)`` through ``transforms`` (names from :data:`AUGMENTS`, applied in that
     order), each image with its own random draw from ``g``; differentiable in ``x``."""
+    return _apply(x, transforms, g, _TRANSFORMS, "augment", "augmentation")
+
+
+def _apply(x: torch.Tensor, transforms: Sequence[str], g: torch.Generator, table, caller: str,
+           what: str) -> torch.Tensor:
+    """``x`` through the named ``transforms`` of ``table`` (name → transform), in the table's order."""
     if x.dim() != 4:
-        raise ValueError(f"augment needs (B, C, H, W) images, got shape {tuple(x.shape)}")
-    unknown = [t for t in transforms if t not in _TRANSFORMS]
+        raise ValueError(f"{caller} needs (B, C, H, W) images, got shape {tuple(x.shape)}")
+    unknown = [t for t in transforms if t not in table]
     if unknown:
-        raise ValueError(f"unknown augmentation(s) {unknown}; expected some of {list(AUGMENTS)}")
-    for name in AUGMENTS:
+        raise ValueError(f"unknown {what}(s) {unknown}; expected some of {list(table)}")
+    for name, transform in table.items():
         if name in transforms:
-            x = _TRANSFORMS[name](x, g)
+            x = transform(x, g)
     return x
 
 
@@ -132,14 +138,6 @@ _PHOTO_TRANSFORMS = {"flip": _flip, "colour": _colour}
 def augment_photos(x: torch.Tensor, transforms: Sequence[str], g: torch.Generator) -> torch.Tensor:
     """A step's photos ``(B, C, H, W)`` (premultiplied RGBA for ``colour``) through ``transforms``
     (names from :data:`PHOTO_AUGMENTS`, applied in that order), each photo with its own draw from ``g``."""
-    if x.dim() != 4:
-        raise ValueError(f"augment_photos needs (B, C, H, W) images, got shape {tuple(x.shape)}")
-    unknown = [t for t in transforms if t not in _PHOTO_TRANSFORMS]
-    if unknown:
-        raise ValueError(f"unknown photo augmentation(s) {unknown}; expected some of {list(PHOTO_AUGMENTS)}")
-    if "colour" in transforms and x.shape[1] != 4:
+    if "colour" in transforms and x.dim() == 4 and x.shape[1] != 4:
         raise ValueError(f"the 'colour' photo augmentation needs RGBA photos, got {x.shape[1]} channel(s)")
-    for name in PHOTO_AUGMENTS:
-        if name in transforms:
-            x = _PHOTO_TRANSFORMS[name](x, g)
-    return x
+    return _apply(x, transforms, g, _PHOTO_TRANSFORMS, "augment_photos", "photo augmentation")
