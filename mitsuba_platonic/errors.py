@@ -8,13 +8,25 @@
   ``ImageRejected`` are user errors too).
 - :class:`Interrupted` (a ``KeyboardInterrupt``): Ctrl-C, with a message saying what was saved
   and how to continue. The command line prints it as one line and exits with code 130.
+
+A Ctrl-C is not lost where a C extension swallows it: Python raises ``KeyboardInterrupt`` in
+whatever Python code runs when the signal arrives, and that can be code a compiled library
+calls and whose exception it then clears (an overload resolution trying the next candidate).
+The command line therefore runs in :func:`remembering_ctrl_c`, which notes every Ctrl-C before
+raising, and long loops call :func:`raise_if_ctrl_c` between units of work (one shape of a
+collection), which raises the interrupt again if it was noted but swallowed.
 """
 
 from __future__ import annotations
 
-from typing import Optional
+import signal
+import threading
+from contextlib import contextmanager
+from typing import Iterator, Optional
 
-__all__ = ["UserError", "Interrupted"]
+__all__ = ["UserError", "Interrupted", "remembering_ctrl_c", "raise_if_ctrl_c"]
+
+_ctrl_c = {"pressed": False}
 
 
 class UserError(ValueError):
@@ -28,3 +40,34 @@ class Interrupted(KeyboardInterrupt):
     def __init__(self, message: str, saved: Optional[str] = None):
         super().__init__(message)
         self.saved = saved
+
+
+def _note_and_raise(signum: int, frame: object) -> None:
+    _ctrl_c["pressed"] = True
+    raise KeyboardInterrupt
+
+
+@contextmanager
+def remembering_ctrl_c() -> Iterator[None]:
+    """Within the block, Ctrl-C (SIGINT) notes itself before it raises ``KeyboardInterrupt`` as
+    usual, so that :func:`raise_if_ctrl_c` can raise it again where a compiled library swallowed
+    it; the handler before is restored afterwards. Only where SIGINT has Python's default
+    handler (not where it is ignored, or where someone installed their own) and in the main
+    thread (the only one Python runs signal handlers in)."""
+    _ctrl_c["pressed"] = False
+    previous = signal.getsignal(signal.SIGINT)
+    if previous is not signal.default_int_handler or threading.current_thread() is not threading.main_thread():
+        yield
+        return
+    signal.signal(signal.SIGINT, _note_and_raise)
+    try:
+        yield
+    finally:
+        signal.signal(signal.SIGINT, previous)
+
+
+def raise_if_ctrl_c() -> None:
+    """Raise ``KeyboardInterrupt`` if a Ctrl-C was noted within :func:`remembering_ctrl_c`; the
+    interrupt's own exception is on its way already unless something swallowed it."""
+    if _ctrl_c["pressed"]:
+        raise KeyboardInterrupt

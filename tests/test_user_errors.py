@@ -169,11 +169,39 @@ train: {{batch_size: 2}}
     data = tmp_path / "data"
     rc, stdout, stderr = _interrupt_when(["train", "--config", str(cfg_file), "--quiet"],
                                          lambda: any(data.glob("*/images/*.png")))
-    assert rc == 130, stderr
+    images = len(list(data.glob("*/images/*.png")))
+    assert rc == 130, f"exit {rc} with {images} of 5000 images on disk; stdout {stdout!r}, stderr {stderr!r}"
     err = one_line(stderr, "train")
     assert "preparing the training data" in err and "of 5000 images" in err and "no training step" in err, err
     assert not (tmp_path / "runs" / "r" / "checkpoints").exists()
     assert not (tmp_path / "runs" / "r" / "run.lock").exists()
+
+
+def test_a_ctrl_c_a_library_swallows_still_interrupts_the_collection(tmp_path, monkeypatch):
+    """A compiled library can clear the KeyboardInterrupt raised in Python code it calls; within
+    the command line's handler the press is noted and the next shape raises it again."""
+    from mitsuba_platonic.data import collection as C
+    from mitsuba_platonic.errors import Interrupted, remembering_ctrl_c
+    real = C.save_exr
+    swallowed = []
+
+    def save_exr_swallowing_ctrl_c(path, img):
+        if not swallowed:
+            try:
+                os.kill(os.getpid(), signal.SIGINT)
+                time.sleep(5)                                 # the handler raises in here
+            except KeyboardInterrupt:
+                swallowed.append(True)                        # ... and the "library" clears it
+        return real(path, img)
+
+    monkeypatch.setattr(C, "save_exr", save_exr_swallowing_ctrl_c)
+    spec = C.CollectionSpec(shape_class=CLASS, n_shapes=4, views_per_shape=1, resolution=16, formation="ea",
+                            renderer="closed_form")
+    with remembering_ctrl_c():
+        with pytest.raises(Interrupted, match="1 of 4 images"):
+            C.make_collection(tmp_path / "c", spec, progress=False)
+    assert swallowed == [True]
+    assert signal.getsignal(signal.SIGINT) is signal.default_int_handler      # restored
 
 
 # --------------------------------------------------------------------------- 6. compare at 1000³

@@ -36,7 +36,7 @@ from typing import Callable, Optional, Sequence
 
 from .. import __version__
 from ..backend import BackendError
-from ..errors import UserError
+from ..errors import UserError, remembering_ctrl_c
 from .args import PROG, CLIError, parse_models
 from .checkpoints import add_convert_checkpoint
 from .dataset import add_make_dataset
@@ -76,6 +76,11 @@ def main(argv: Optional[Sequence[str]] = None) -> int:
     one line, ``platonic <command>: warning: …``, not Python's file-and-source-line format.
     """
     printable_streams()
+    with remembering_ctrl_c():                               # a Ctrl-C a library swallows is raised again
+        return _run(argv)
+
+
+def _run(argv: Optional[Sequence[str]]) -> int:
     args: Optional[argparse.Namespace] = None
     try:
         parser = build_parser()

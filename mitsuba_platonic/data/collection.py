@@ -30,7 +30,7 @@ from typing import Any, Callable, Dict, List, Optional, Tuple, Union
 import numpy as np
 import torch
 
-from ..errors import Interrupted, UserError
+from ..errors import Interrupted, UserError, raise_if_ctrl_c
 from ..fileio import atomic_write
 from ..images import save_exr, save_png, to_hwc, to_png_rgba
 from ..progress import progress_bar
@@ -141,6 +141,7 @@ def _render_pending(out: Path, spec: CollectionSpec, records: Dict[str, Dict[str
             if log.read(1) != "\n":
                 log.write("\n")
         for i in range(n):
+            raise_if_ctrl_c()                        # a Ctrl-C a library swallowed in the shape before
             pending = [k for k in range(K) if not done(i, k)]
             if not pending and all((out / "volumes" / f"{i:05d}{ext}").exists() for ext in (".npz", ".vol")):
                 continue
