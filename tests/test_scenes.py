@@ -47,10 +47,12 @@ def files(tmp_path_factory):
 def _render_alone(mi, path, params):
     """What a user does: ``mi.load_file`` with string parameters, then ``mi.render``."""
     obj = mi.load_file(str(path), **{k: str(v) for k, v in params.items()})
+    camera = {"type": "perspective", "fov": 60, "film": {"type": "hdrfilm", "width": N, "height": N}}
     if isinstance(obj, mi.Emitter):                 # an emitter file: seen by a tiny camera
-        obj = mi.load_dict({"type": "scene", "emitter": obj, "integrator": {"type": "path"},
-                            "sensor": {"type": "perspective", "fov": 60,
-                                       "film": {"type": "hdrfilm", "width": N, "height": N}}})
+        obj = mi.load_dict({"type": "scene", "emitter": obj, "integrator": {"type": "path"}, "sensor": camera})
+    elif not obj.sensors() or obj.integrator() is None:    # a file of emitters only (sun_and_sky.xml)
+        parts = {f"emitter_{i}": e for i, e in enumerate(obj.emitters())}
+        obj = mi.load_dict({"type": "scene", **parts, "integrator": {"type": "path"}, "sensor": camera})
     return np.array(mi.render(obj, seed=0))
 
 
@@ -62,9 +64,11 @@ def _file_params(files):
         "raymarch.xml": [dict(raymarch, model="ao"), dict(raymarch, model="vh", step=0.5)],
         "raymarch_ea.xml": [dict(raymarch, albedo=files["albedo"])],
         "physical.xml": [physical, dict(physical, integrator="prbvolpath", sun_direction="0, 0.5, 0.8"),
-                         dict(physical, lighting="envmap", envmap=files["envmap"], rotation=30)],
+                         dict(physical, lighting="envmap", envmap=files["envmap"], rotation=30),
+                         dict(physical, lighting="sun_and_sky", max_depth=2, sunlight_direction="0, -0.6, -0.8")],
         "emitters/sunsky.xml": [dict(turbidity=5)],
         "emitters/envmap.xml": [dict(envmap=files["envmap"])],
+        "emitters/sun_and_sky.xml": [dict(sky_radiance="0.2, 0.3, 0.4")],
     }
 
 
