@@ -206,24 +206,26 @@ def sweep(σ: torch.Tensor, directions: torch.Tensor) -> Sweep:
     def to_planes(v: torch.Tensor, b: int) -> torch.Tensor:   # [d, h, w] → [plane, row, column], plane 0 sunward
         return (v.flip(int(axis[b])) if flip[b] else v).permute(int(axis[b]), *across[b].tolist())
 
-    σ_p = torch.stack([to_planes(σ[b, 0], b) for b in range(b_)])        # (B, N, N, N)
+    # unbind, not σ[b]: the gradient of an index is a zeroed copy of the whole batch per pair
+    σ_p = torch.stack([to_planes(one, b) for b, one in enumerate(σ[:, 0].unbind(0))])   # (B, N, N, N)
     c = -1.0 + (torch.arange(n, dtype=torch.float64) + 0.5) * Δ
     rows, cols = torch.meshgrid(c, c, indexing="ij")
     grid = (torch.stack([cols, rows], dim=-1)[None] + Δ * δ[:, None, None, :]).to(σ)   # p + δ, in [−1, 1]
     ahead = F.grid_sample(σ_p, grid, mode="bilinear", padding_mode="zeros", align_corners=False)   # σ_{i−1}(p + δ)
     ℓ = length.to(σ)[:, None, None, None]
     factor = torch.exp(-0.5 * ℓ * (σ_p + torch.cat([torch.zeros_like(σ_p[:, :1]), ahead[:, :-1]], dim=1)))
-    A = [1.0 - factor[:, :1]]                                  # opacity 1 − T: zero outside the cube
+    per_plane = factor.split(1, dim=1)                         # split, not slices: one gradient copy, not N
+    A = [1.0 - per_plane[0]]                                   # opacity 1 − T: zero outside the cube
     for i in range(1, n):                                      # T_{i−1}(p + δ): the previous plane, moved
         moved = F.grid_sample(A[-1], grid, mode="bilinear", padding_mode="zeros", align_corners=False)
-        A.append(1.0 - (1.0 - moved) * factor[:, i:i + 1])
+        A.append(1.0 - (1.0 - moved) * per_plane[i])
     A_p = torch.cat(A, dim=1)
     opacity = []
-    for b in range(b_):                                        # back to [d, h, w]
+    for b, t in enumerate(A_p.unbind(0)):                      # back to [d, h, w]
         back = [0, 0, 0]
         for position, ax in enumerate((int(axis[b]), *across[b].tolist())):
             back[ax] = position
-        t = A_p[b].permute(*back)
+        t = t.permute(*back)
         opacity.append(t.flip(int(axis[b])) if flip[b] else t)
     return Sweep(torch.stack(opacity)[:, None], axis, flip, length, g / ga[:, None])
 
@@ -256,14 +258,14 @@ def transmittance(s: Sweep, σ: torch.Tensor, q: torch.Tensor, σ_q: torch.Tenso
     P0 = torch.floor(P).clamp(-1, n - 1)                       # the plane on the light's side (−1: none)
     f = (P - P0).clamp_min(0.0)
     x = q + f[..., None] * step                                # x⁺: on plane P₀
-    σ_x = _lookup(σ, x)[:, 0]
+    σ_x = _lookup(σ, x).squeeze(1)
     T = torch.exp(-0.5 * f * ℓ * (σ_q + σ_x))
     for _ in range(2 * shadow_planes):                         # half planes: the ray crosses rows, where σ bends
         x = x + 0.5 * step
-        σ_next = _lookup(σ, x)[:, 0]
+        σ_next = _lookup(σ, x).squeeze(1)
         T = T * torch.exp(-0.25 * ℓ * (σ_x + σ_next))
         σ_x = σ_next
-    return T * (1.0 - _lookup(s.opacity, x)[:, 0])            # the sweep's T where the ray has got to
+    return T * (1.0 - _lookup(s.opacity, x).squeeze(1))       # the sweep's T where the ray has got to
 
 
 # -- Camera ----------------------------------------------------------------------------------------
@@ -305,7 +307,7 @@ def render_single_scatter(volume: torch.Tensor, views: torch.Tensor, lights: Any
     σ = extinction(volume[:, 3:])
     # -- camera samples: albedo and σ, and their place in the grid
     grid = world_to_grid(_camera_samples(views, n, m, s)).to(volume)
-    σ_x = F.grid_sample(σ, grid, mode="bilinear", padding_mode="zeros", align_corners=False)[:, 0]   # (B, N·m, N, N)
+    σ_x = F.grid_sample(σ, grid, mode="bilinear", padding_mode="zeros", align_corners=False).squeeze(1)   # (B, N·m, N, N)
     # the albedo is the medium's colour, read as Mitsuba's grid reads it: its edge values up to the faces
     a = F.grid_sample(volume[:, :3], grid, mode="bilinear", padding_mode="border", align_corners=False)
     q = ((grid.flip(-1) + 1.0) * (n / 2.0) - 0.5).reshape(b_, -1, 3)   # grid_sample (x, y, z) → index [d, h, w]
