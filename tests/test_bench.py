@@ -89,6 +89,9 @@ def test_rows_have_the_fields(quick):
             assert {"plain layer (affine_grid)", "authors' EA (1024 samples)", "path tracer spp 1"} <= set(rows)
             assert rows["authors' EA (1024 samples)"]["formation"] == "authors"
             assert rows["path tracer spp 1"]["formation"] == "physical"
+            assert {"single scattering", "single scattering m 2"} <= set(rows)
+            assert rows["single scattering"]["formation"] == "single_scatter"
+            assert rows["single scattering"]["grad_cosine"] > 0.9     # against 8 samples per voxel
         for r in rows.values():
             assert set(LABELS) <= set(r)
             assert r["skipped"] is None, r["skipped"]

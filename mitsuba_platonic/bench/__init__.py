@@ -13,7 +13,9 @@ pairs (the built-in test volume, B random views) is rendered by:
   image formation of the PlatonicGAN authors' public code: a different image formation, reported
   for its time and for how far its images are from ours), and the differentiable path tracer
   (``backend="physical"``, :func:`~mitsuba_platonic.render.physical.render_physical_ad`: its own
-  image formation under a random sky) at spp {1, 4}.
+  image formation under a random sky) at spp {1, 4}, and single scattering of a sun and a sky
+  (:func:`~mitsuba_platonic.render.single_scatter.render_single_scatter`, up to 32³) at its
+  defaults and at 2 samples per voxel.
 
 Every row records (all times per image, the best of ``repeats`` timed calls after an untimed
 warm-up call):
@@ -28,8 +30,10 @@ warm-up call):
 - ``rmse`` / ``max_abs``: image error against the *converged reference*: the ray marcher at step
   0.25 with spp 16 on a regular grid (rendered pair by pair). Rows of another image formation are
   measured against their own reference: the path tracer against itself at ``physical_ref_spp``
-  (the same scene, views and sky, whose sun is drawn from the seed and not from the spp); the
-  authors' layer against *our* reference (for information: it renders a different image).
+  (the same scene, views and sky, whose sun is drawn from the seed and not from the spp); single
+  scattering against itself at 8 samples per voxel and a shadow ray of 4 planes (the same suns
+  and skies); the authors' layer against *our* reference (for information: it renders a
+  different image).
 - ``grad_cosine``, ``grad_norm_ratio`` (‖g‖ / ‖g_ref‖) and ``grad_rel_err`` (‖g − g_ref‖ / ‖g_ref‖):
   the gradient of L w.r.t. the volume against the reference's gradient of the same L.
 - ``rmse_vs_closed_form`` / ``max_abs_vs_closed_form``: image difference from the closed form.

@@ -11,9 +11,11 @@ from dataclasses import asdict
 from datetime import datetime, timezone
 from typing import Any, Callable, Dict, List, Optional, Tuple
 
+import numpy as np
 import torch
 
 from ..render import render
+from ..render.single_scatter import LightBatch, render_single_scatter, sample_sun_and_sky
 from ..render.variant import ensure_variant
 from ..views import sample_views
 from ..volume import CHANNELS, test_volume
@@ -41,6 +43,21 @@ def _closed_form(model: str) -> RenderFn:
 def _physical(spp: int, max_depth: int, seed: int) -> RenderFn:
     return lambda v, w: render(v, w, "ea", "physical", seed=seed, physical_spp=spp, max_depth=max_depth,
                                lighting="sunsky")
+
+
+#: The single-scattering rows (label, options) and their converged reference: 8 samples per voxel,
+#: a shadow ray of 4 planes (one ray per pixel, as the rows).
+SINGLE_SCATTER_CONFIGS = (("single scattering", {}), ("single scattering m 2", {"steps_per_voxel": 2}))
+SINGLE_SCATTER_REFERENCE = {"steps_per_voxel": 8, "shadow_planes": 4}
+
+
+def _single_scatter(lights: LightBatch, options: Dict[str, Any]) -> RenderFn:
+    return lambda v, w: render_single_scatter(v, w, lights, **options)
+
+
+def _bench_lights(b: int, seed: int) -> List[LightBatch]:
+    """Pair i's sun and sky, drawn from (seed, i): one :class:`LightBatch` of one light per pair."""
+    return [LightBatch.of([sample_sun_and_sky(np.random.default_rng([seed, i]))]) for i in range(b)]
 
 
 def _reference(fn: RenderFn, volume: torch.Tensor, views: torch.Tensor,
@@ -197,8 +214,18 @@ def _bench_model(s: BenchSettings, n: int, model: str, views: torch.Tensor, repe
     else:
         add(row, authors_ea, ref)
 
-    if not s.physical or n > s.physical_max_resolution:
+    if not s.physical:                                        # the light formations: path tracer, single scattering
         return rows
+    if n <= s.physical_max_resolution:
+        _path_tracer_rows(s, n, b, model, volume, views, weights, ref_spp, add, log)
+    if n <= s.single_scatter_max_resolution:
+        _single_scatter_rows(s, n, b, model, volume, views, weights, add, log)
+    return rows
+
+
+def _path_tracer_rows(s: BenchSettings, n: int, b: int, model: str, volume: torch.Tensor, views: torch.Tensor,
+                      weights: torch.Tensor, ref_spp: int, add: Callable, log: Callable[[str], None]) -> None:
+    """The path tracer's rows (``add`` measures and records one), against itself at ``ref_spp``."""
     t0 = time.perf_counter()
     # one call for the whole batch: the path tracer draws pair b's sky as the b-th draw from the seed
     phys_ref = _forward_backward(_physical(ref_spp, s.physical_max_depth, s.seed), volume, views, weights)
@@ -209,4 +236,25 @@ def _bench_model(s: BenchSettings, n: int, model: str, views: torch.Tensor, repe
                  {"physical_spp": spp, "max_depth": s.physical_max_depth, "lighting": "sunsky", "seed": s.seed},
                  formation="physical", reference=f"path tracer spp {ref_spp}, same scene, views and sky"),
             _physical(spp, s.physical_max_depth, s.seed), phys_ref, vs_closed=False)
-    return rows
+
+
+def _single_scatter_rows(s: BenchSettings, n: int, b: int, model: str, volume: torch.Tensor, views: torch.Tensor,
+                         weights: torch.Tensor, add: Callable, log: Callable[[str], None]) -> None:
+    """The single-scattering rows (``add`` measures and records one), against
+    :data:`SINGLE_SCATTER_REFERENCE` under the same suns and skies."""
+    t0 = time.perf_counter()
+    per_pair = _bench_lights(b, s.seed)
+    lights = LightBatch(*(torch.cat([getattr(one, k) for one in per_pair]) for k in ("direction", "irradiance", "sky")))
+    images, grads = [], []
+    for i, light in enumerate(per_pair):                      # pair by pair: the reference's samples are many
+        img, g = _forward_backward(_single_scatter(light, SINGLE_SCATTER_REFERENCE), volume[i:i + 1],
+                                   views[i:i + 1], weights[i:i + 1])
+        images.append(img)
+        grads.append(g)
+        _release_memory()
+    log(f"{n}³ ea: single-scattering reference in {time.perf_counter() - t0:.1f} s")
+    for label, options in SINGLE_SCATTER_CONFIGS:
+        add(_row(n, b, model, "single_scatter", label, {"steps_per_voxel": 4, "shadow_planes": 2, **options},
+                 formation="single_scatter",
+                 reference="single scattering, 8 samples per voxel, shadow ray 4 planes; same views and suns"),
+            _single_scatter(lights, options), (torch.cat(images), torch.cat(grads)), vs_closed=False)

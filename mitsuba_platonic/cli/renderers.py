@@ -172,7 +172,8 @@ def add_bench(sub: "argparse._SubParsersAction") -> None:
                    help="timed training steps per renderer, after 2 warm-up steps (default: %(default)s)")
     p.add_argument("--no-train", action="store_true", help="skip the training-speed measurement")
     p.add_argument("--no-physical", action="store_true",
-                   help="skip the path-tracer rows (most of a run's time at 64³ and above)")
+                   help="skip the rows of light: the path tracer's and single scattering's (most of a run's time "
+                        "at 64³ and above)")
     p.add_argument("--physical-max-resolution", type=positive_int, default=64, metavar="N",
                    help="measure the path tracer only up to N³ (default: %(default)s; at 128³ its rows take "
                         "most of an hour on 2 cores)")
