@@ -98,7 +98,8 @@ class Config:
                     raise ConfigError(f"data.elevation: {PRGAN} needs a collection on its ring at {ring:g}°; "
                                       f"got {data_ring!r}")
         if self.data.source == "procedural" and self.data.formation != "physical" \
-                and self.render.backend != "physical" and self.data.formation != self.render.model:
+                and self.render.backend not in ("physical", "single_scatter") \
+                and self.data.formation != self.render.model:
             raise ConfigError(f"render.model: {self.render.model!r} differs from data.formation "
                               f"{self.data.formation!r}; the renderer must match how the images were formed")
         return self

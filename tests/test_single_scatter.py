@@ -11,9 +11,10 @@ import torch
 
 from mitsuba_platonic.errors import UserError
 from mitsuba_platonic.render.grids import extinction
+from mitsuba_platonic.render import render
 from mitsuba_platonic.render.single_scatter import (SKY_DIRECTIONS, SKY_WEIGHTS, LightBatch, SunAndSky,
-                                                    reference_render, render_single_scatter, sample_sun_and_sky,
-                                                    sweep, transmittance)
+                                                    reference_render, render_single_scatter, sample_lights,
+                                                    sample_sun_and_sky, sweep, transmittance)
 from mitsuba_platonic.volume import voxel_size
 
 N = 16
@@ -149,7 +150,7 @@ def test_opaque_voxels_and_extreme_suns_give_finite_images_and_gradients(sun):
     v = ((x.abs() < 0.5) & (y.abs() < 0.5) & (z.abs() < 0.5)).float()           # exact 1s and 0s
     volume = torch.stack([0.5 * torch.ones_like(v), torch.ones_like(v), v, v])[None].requires_grad_()
     image = render_single_scatter(volume, torch.tensor([[0.0, 0.0, 1.0]]), [_sun(sun, sky=0.1)])
-    assert torch.isfinite(image).all() and float(image[0, 3].max()) > 0.999
+    assert torch.isfinite(image).all() and float(image[0, 3].detach().max()) > 0.999
     image[0, :3].sum().backward()
     assert torch.isfinite(volume.grad).all()
     assert float(volume.grad[0, :3].abs().sum()) > 0
@@ -243,3 +244,26 @@ def test_a_light_batch_holds_the_lights_in_order():
         assert 10.0 - 1e-9 <= math.degrees(math.asin(light.sun_direction[1])) <= 75.0 + 1e-9
         y = (0.2126, 0.7152, 0.0722)
         assert abs(np.dot(light.sun_irradiance, y) / (4 * math.pi) + np.dot(light.sky_radiance, y) - 0.5) < 1e-12
+
+
+# --------------------------------------------------------------------------- the render() backend
+
+
+def test_the_single_scatter_backend_draws_its_lights_from_the_seed():
+    torch.manual_seed(4)
+    volume, views = torch.rand(3, 4, 8, 8, 8) * 0.6, torch.nn.functional.normalize(torch.randn(3, 3), dim=-1)
+    a = render(volume, views, "ea", "single_scatter", seed=7, spp=4, steps_per_voxel=2)
+    b = render_single_scatter(volume, views, sample_lights(3, 7), spp=4, steps_per_voxel=2)
+    assert torch.equal(a, b)
+    assert not torch.equal(a, render(volume, views, "ea", "single_scatter", seed=8, spp=4, steps_per_voxel=2))
+    assert sample_lights(3, 7).direction[1].tolist() == list(sample_sun_and_sky(np.random.default_rng([7, 1])).sun_direction)
+
+
+@pytest.mark.parametrize("settings, message", [({"model": "ao"}, "model"), ({"filter": "nearest"}, "filter"),
+                                               ({"shadow_planes": -1}, "shadow_planes"),
+                                               ({"steps_per_voxel": 0}, "steps_per_voxel")])
+def test_the_single_scatter_backend_refuses_what_it_does_not_render(settings, message):
+    model = settings.pop("model", "ea")
+    volume = torch.zeros(1, 1 if model == "ao" else 4, 8, 8, 8)
+    with pytest.raises(UserError, match=message):
+        render(volume, torch.tensor([[0.0, 0.0, 1.0]]), model, "single_scatter", **settings)

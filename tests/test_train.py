@@ -62,6 +62,7 @@ CASES = [
     ("mitsuba", "ao", "reconstruction", "platonic", "nonsaturating"),
     ("mitsuba", "ea", "generation", "platonic", "wgan-gp"),
     ("physical", "ea", "reconstruction", "platonic", "nonsaturating"),
+    ("single_scatter", "ea", "generation", "platonic", "nonsaturating"),
     ("closed_form", "ea", "reconstruction", "platonic3d", "nonsaturating"),
     ("closed_form", "ea", "generation", "gan3d", "wgan-gp"),
 ]
@@ -69,7 +70,7 @@ CASES = [
 
 @pytest.mark.parametrize("backend,model,task,mode,loss", CASES)
 def test_one_step_changes_what_it_should(tmp_path, backend, model, task, mode, loss):
-    formation = "ea" if backend == "physical" else model
+    formation = "ea" if backend in ("physical", "single_scatter") else model
     cfg = _cfg(tmp_path, f"render.backend={backend}", f"render.model={model}", f"data.formation={formation}",
                f"train.task={task}", f"train.mode={mode}", f"train.loss={loss}", "render.physical_spp=1",
                "render.max_depth=2")

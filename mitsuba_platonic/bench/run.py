@@ -11,11 +11,10 @@ from dataclasses import asdict
 from datetime import datetime, timezone
 from typing import Any, Callable, Dict, List, Optional, Tuple
 
-import numpy as np
 import torch
 
 from ..render import render
-from ..render.single_scatter import LightBatch, render_single_scatter, sample_sun_and_sky
+from ..render.single_scatter import LightBatch, render_single_scatter, sample_lights
 from ..render.variant import ensure_variant
 from ..views import sample_views
 from ..volume import CHANNELS, test_volume
@@ -56,8 +55,9 @@ def _single_scatter(lights: LightBatch, options: Dict[str, Any]) -> RenderFn:
 
 
 def _bench_lights(b: int, seed: int) -> List[LightBatch]:
-    """Pair i's sun and sky, drawn from (seed, i): one :class:`LightBatch` of one light per pair."""
-    return [LightBatch.of([sample_sun_and_sky(np.random.default_rng([seed, i]))]) for i in range(b)]
+    """Pair i's sun and sky, as the single_scatter backend draws them: one :class:`LightBatch` per pair."""
+    lights = sample_lights(b, seed)
+    return [LightBatch(lights.direction[i:i + 1], lights.irradiance[i:i + 1], lights.sky[i:i + 1]) for i in range(b)]
 
 
 def _reference(fn: RenderFn, volume: torch.Tensor, views: torch.Tensor,

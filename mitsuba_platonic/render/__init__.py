@@ -31,12 +31,15 @@ def render(volume: torch.Tensor, views: torch.Tensor, model: str = "ea",
         views: ``(B, 3)`` unit vectors from the object towards the camera.
         model: image formation, 'vh' | 'ao' | 'ea'.
         backend: 'closed_form' (the paper's layers, reference mode), 'mitsuba' (the batched ray
-            marcher) or 'physical' (the differentiable path tracer under a random sky; 'ea' only).
-        seed: random numbers of this call (the marcher's jitter, the path tracer's skies).
+            marcher), 'physical' (the differentiable path tracer under a random sky; 'ea' only) or
+            'single_scatter' (single scattering of a random sun and sky; 'ea' only).
+        seed: random numbers of this call (the marcher's jitter, the path tracer's and single
+            scattering's skies).
         options: the :class:`RenderSettings` the backend reads: ``filter`` ('nearest' |
             'trilinear', every backend; default 'trilinear'); 'mitsuba': ``step`` (voxels,
             default 1), ``spp`` (default 1), ``jitter`` (default False), ``termination`` (default 0);
-            'physical': ``lighting``, ``physical_spp``, ``max_depth``.
+            'physical': ``lighting``, ``physical_spp``, ``max_depth``; 'single_scatter': ``spp``
+            (default 1), ``steps_per_voxel`` (4), ``shadow_planes`` (2).
 
     Returns:
         ``(B, 1, N, N)`` opacity for VH/AO, ``(B, 4, N, N)`` premultiplied RGB + alpha for EA.
@@ -71,6 +74,11 @@ def render_with(volume: torch.Tensor, views: torch.Tensor, settings: RenderSetti
         check_lanes(volume.shape[0], volume.shape[-1], settings.spp)   # before Dr.Jit: say why, up front
         from .marcher import march       # imports Dr.Jit and sets Mitsuba's variant: on the first Mitsuba render
         return march(volume, views, settings, seed)
+    if settings.backend == "single_scatter":
+        from .single_scatter import render_single_scatter, sample_lights   # torch only; kept off the import path
+        return render_single_scatter(volume, views.to(volume.device), sample_lights(volume.shape[0], seed),
+                                     steps_per_voxel=settings.steps_per_voxel, shadow_planes=settings.shadow_planes,
+                                     spp=settings.spp)
     from .physical import render_physical_ad    # the path tracer (its scene files, Mitsuba): on first use
     return render_physical_ad(volume, views, lighting=settings.lighting, spp=settings.physical_spp,
                               max_depth=settings.max_depth, seed=seed, filter=settings.filter)

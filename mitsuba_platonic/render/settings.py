@@ -20,9 +20,10 @@ from .closed_form import FILTERS as GRID_SAMPLE_MODES
 
 __all__ = ["RenderSettings", "BACKENDS", "MODELS", "FILTERS", "LIGHTINGS", "FORMATIONS", "CAMERAS", "OPTIONS_OF"]
 
-#: Backends: the paper's closed-form layers (reference), the batched Dr.Jit ray marcher, and
-#: Mitsuba's differentiable volumetric path tracer under natural light.
-BACKENDS = ("closed_form", "mitsuba", "physical")
+#: Backends: the paper's closed-form layers (reference), the batched Dr.Jit ray marcher,
+#: Mitsuba's differentiable volumetric path tracer under natural light, and single scattering of
+#: a sun and a sky (:mod:`.single_scatter`, torch).
+BACKENDS = ("closed_form", "mitsuba", "physical", "single_scatter")
 FILTERS = tuple(GRID_SAMPLE_MODES)                          # trilinear, nearest
 LIGHTINGS = ("sunsky", "envmap", "mixed")
 #: How a collection's images are formed: the renderer's image formations, or path-traced (make-dataset).
@@ -33,6 +34,7 @@ OPTIONS_OF: Dict[str, tuple] = {
     "closed_form": ("filter", "camera", "fov", "distance"),
     "mitsuba": ("filter", "camera", "fov", "distance", "step", "spp", "jitter", "termination"),
     "physical": ("filter", "lighting", "physical_spp", "max_depth"),
+    "single_scatter": ("spp", "steps_per_voxel", "shadow_planes"),
 }
 
 
@@ -40,18 +42,21 @@ OPTIONS_OF: Dict[str, tuple] = {
 class RenderSettings:
     """How volumes become images.
 
-    backend: 'closed_form' | 'mitsuba' (ray marcher) | 'physical' (path tracer under natural light).
+    backend: 'closed_form' | 'mitsuba' (ray marcher) | 'physical' (path tracer under natural light) |
+        'single_scatter' (single scattering of a random sun and sky per image; EA-style RGBA).
     model: image formation, 'vh' | 'ao' | 'ea' (the physical backend renders EA-style RGBA).
     filter: 'trilinear' | 'nearest' grid lookups (every backend).
     camera: 'orthographic' (the paper's) | 'perspective' (a pinhole; closed form and marcher).
     fov, distance: the pinhole's full field of view in degrees and its distance from the centre
         (None: 1 / tan(fov/2), where the centre plane fills the image; :func:`~mitsuba_platonic.views.lens`).
     step: the marcher's segment length in voxels (> 0; 1 reproduces the closed form's planes).
-    spp: the marcher's rays per pixel (a perfect square unless ``jitter``).
+    spp: the marcher's (and single scattering's) rays per pixel (a perfect square unless ``jitter``).
     jitter: random sub-pixel positions and depth within each segment (marcher).
     termination: the marcher stops a ray once its transmittance is ≤ this (0 = exact).
     lighting: the path tracer's light, 'sunsky' (differentiable) | 'envmap' | 'mixed'.
     physical_spp, max_depth: the path tracer's samples per pixel and path depth.
+    steps_per_voxel, shadow_planes: single scattering's samples per voxel along a camera ray and
+        the sun's shadow ray in planes (docs/rendering.md, "Single scattering").
 
     ``docs/speed_accuracy.md`` says what each option costs and buys.
     """
@@ -69,6 +74,8 @@ class RenderSettings:
     lighting: str = "sunsky"
     physical_spp: int = 4
     max_depth: int = 4
+    steps_per_voxel: int = 4
+    shadow_planes: int = 2
 
     def validate(self) -> "RenderSettings":
         """Return self, or raise ``ValueError('<field>: what was expected, got …')``."""
@@ -81,10 +88,12 @@ class RenderSettings:
         if isinstance(self.step, bool) or not isinstance(self.step, (int, float)) \
                 or not math.isfinite(self.step) or not self.step >= 1.0 / 64:
             raise ValueError(f"step: expected a finite number of voxels ≥ 1/64, got {self.step!r}")
-        for name in ("spp", "physical_spp", "max_depth"):
+        for name in ("spp", "physical_spp", "max_depth", "steps_per_voxel"):
             value = getattr(self, name)
             if isinstance(value, bool) or not isinstance(value, int) or value < 1:
                 raise ValueError(f"{name}: expected a positive int, got {value!r}")
+        if isinstance(self.shadow_planes, bool) or not isinstance(self.shadow_planes, int) or self.shadow_planes < 0:
+            raise ValueError(f"shadow_planes: expected an int ≥ 0, got {self.shadow_planes!r}")
         if not isinstance(self.jitter, bool):
             raise ValueError(f"jitter: expected true or false, got {self.jitter!r}")
         if not self.jitter and math.isqrt(self.spp) ** 2 != self.spp:
@@ -93,10 +102,12 @@ class RenderSettings:
         if isinstance(self.termination, bool) or not isinstance(self.termination, (int, float)) \
                 or not 0.0 <= self.termination < 1.0:
             raise ValueError(f"termination: expected a number in [0, 1), got {self.termination!r}")
-        if self.backend == "physical" and self.model != "ea":
-            raise ValueError("model: the physical backend renders colour; use 'ea' images")
-        if self.backend == "physical" and self.camera != "orthographic":
-            raise ValueError("camera: the physical backend renders with the orthographic camera only")
+        if self.backend in ("physical", "single_scatter") and self.model != "ea":
+            raise ValueError(f"model: the {self.backend} backend renders colour; use 'ea' images")
+        if self.backend in ("physical", "single_scatter") and self.camera != "orthographic":
+            raise ValueError(f"camera: the {self.backend} backend renders with the orthographic camera only")
+        if self.backend == "single_scatter" and (self.filter != "trilinear" or self.jitter):
+            raise ValueError("filter, jitter: the single_scatter backend reads trilinearly on a regular sub-pixel grid")
         if self.backend == "physical" and self.lighting != "sunsky":
             raise ValueError(f"lighting: the physical backend renders differentiably under 'sunsky' only, got "
                              f"{self.lighting!r} (environment maps light path-traced collections: make-dataset "

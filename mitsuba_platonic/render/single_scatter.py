@@ -67,7 +67,7 @@ from ..views import camera_frames, validate_views
 from ..volume import voxel_size, world_to_grid
 from .grids import extinction
 
-__all__ = ["SunAndSky", "LightBatch", "sample_sun_and_sky", "SKY_DIRECTIONS", "Sweep", "sweep", "transmittance",
+__all__ = ["SunAndSky", "LightBatch", "sample_sun_and_sky", "sample_lights", "SKY_DIRECTIONS", "Sweep", "sweep", "transmittance",
            "render_single_scatter", "reference_render", "mean_luminance", "EXPOSURES", "SKY_WEIGHTS"]
 
 #: Rec. 709 / sRGB luminance weights of linear RGB.
@@ -151,6 +151,11 @@ def sample_sun_and_sky(rng: np.random.Generator) -> SunAndSky:
     sky = 0.5 * share
     sun = 0.5 * (1.0 - share) * 4.0 * math.pi                  # E_s / 4π is the sun's share of L̄
     return SunAndSky(d, (sun, sun, sun), (sky, sky, sky))
+
+
+def sample_lights(b: int, seed: int) -> LightBatch:
+    """B lights from the :func:`sample_sun_and_sky` prior, pair i's drawn from ``(seed, i)``."""
+    return LightBatch.of([sample_sun_and_sky(np.random.default_rng([seed, i])) for i in range(b)])
 
 
 def mean_luminance(lights: LightBatch) -> torch.Tensor:
