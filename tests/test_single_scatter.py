@@ -165,7 +165,8 @@ def _scene():
     blob = 0.8 * torch.exp(-(((x - 0.1) ** 2 + y ** 2 + (z + 0.1) ** 2) / 0.4 ** 2))
     box = 0.9 * ((x.abs() < 0.3) & ((y + 0.45).abs() < 0.15) & (z.abs() < 0.5)).double()
     v = (blob + box).clamp(0, 1)
-    return torch.stack([0.8 * torch.ones_like(v), 0.3 + 0.5 * (y > 0).double(), 0.3 * torch.ones_like(v), v])[None].float()
+    colour = [0.8 * torch.ones_like(v), 0.3 + 0.5 * (y > 0).double(), 0.3 * torch.ones_like(v)]
+    return torch.stack([*colour, v])[None].float()
 
 
 SUN_ABOVE, SUN_OBLIQUE, HORIZON = _sun((0.0, 1.0, 0.0)), _sun(_unit(0.5, 0.7, -0.3)), _sun((1.0, 0.0, 0.0))
@@ -256,7 +257,8 @@ def test_the_single_scatter_backend_draws_its_lights_from_the_seed():
     b = render_single_scatter(volume, views, sample_lights(3, 7), spp=4, steps_per_voxel=2)
     assert torch.equal(a, b)
     assert not torch.equal(a, render(volume, views, "ea", "single_scatter", seed=8, spp=4, steps_per_voxel=2))
-    assert sample_lights(3, 7).direction[1].tolist() == list(sample_sun_and_sky(np.random.default_rng([7, 1])).sun_direction)
+    second = sample_sun_and_sky(np.random.default_rng([7, 1]))
+    assert sample_lights(3, 7).direction[1].tolist() == list(second.sun_direction)
 
 
 @pytest.mark.parametrize("settings, message", [({"model": "ao"}, "model"), ({"filter": "nearest"}, "filter"),

@@ -67,8 +67,9 @@ from ..views import camera_frames, validate_views
 from ..volume import voxel_size, world_to_grid
 from .grids import extinction
 
-__all__ = ["SunAndSky", "LightBatch", "sample_sun_and_sky", "sample_lights", "SKY_DIRECTIONS", "Sweep", "sweep", "transmittance",
-           "render_single_scatter", "reference_render", "mean_luminance", "EXPOSURES", "SKY_WEIGHTS"]
+__all__ = ["SunAndSky", "LightBatch", "sample_sun_and_sky", "sample_lights", "SKY_DIRECTIONS", "SKY_WEIGHTS",
+           "Sweep", "sweep", "transmittance", "render_single_scatter", "reference_render", "mean_luminance",
+           "EXPOSURES"]
 
 #: Rec. 709 / sRGB luminance weights of linear RGB.
 _Y = (0.2126, 0.7152, 0.0722)
@@ -79,7 +80,7 @@ EXPOSURES = ("metered", "none")
 #: The sky's quadrature directions: the six axes and the eight diagonals of the grid. Each moves a
 #: whole number of voxels in a plane per plane swept (δ ∈ {0, ±1}), so their sweeps read no value
 #: between voxels: measured against ``volpath``, the six axes alone leave the sky 4.5–6 % too
-#: bright and all 26 neighbours of a voxel are no closer than these 14 (docs/rendering.md).
+#: bright, and all 26 neighbours of a voxel come no closer to it than these 14 (docs/rendering.md).
 SKY_DIRECTIONS = ((1.0, 0.0, 0.0), (-1.0, 0.0, 0.0), (0.0, 1.0, 0.0), (0.0, -1.0, 0.0), (0.0, 0.0, 1.0),
                   (0.0, 0.0, -1.0)) + tuple((x / math.sqrt(3.0), y / math.sqrt(3.0), z / math.sqrt(3.0))
                                             for x in (1.0, -1.0) for y in (1.0, -1.0) for z in (1.0, -1.0))
@@ -154,7 +155,8 @@ def sample_sun_and_sky(rng: np.random.Generator) -> SunAndSky:
 
 
 def sample_lights(b: int, seed: int) -> LightBatch:
-    """B lights from the :func:`sample_sun_and_sky` prior, pair i's drawn from ``(seed, i)``."""
+    """B lights from the :func:`sample_sun_and_sky` prior, pair i's drawn from ``(seed, i)``: the
+    lights of ``render(..., backend='single_scatter', seed=seed)``."""
     return LightBatch.of([sample_sun_and_sky(np.random.default_rng([seed, i])) for i in range(b)])
 
 
@@ -164,7 +166,7 @@ def mean_luminance(lights: LightBatch) -> torch.Tensor:
     return (lights.irradiance @ y) / (4.0 * math.pi) + lights.sky @ y
 
 
-# -- Light: optical-depth volumes -----------------------------------------------------------------
+# -- Light: transmittance volumes -----------------------------------------------------------------
 
 
 @dataclass(frozen=True)
@@ -244,7 +246,8 @@ def _lookup(volume: torch.Tensor, q: torch.Tensor) -> torch.Tensor:
                          align_corners=False)[:, :, :, 0, 0]
 
 
-def transmittance(s: Sweep, σ: torch.Tensor, q: torch.Tensor, σ_q: torch.Tensor, shadow_planes: int = 0) -> torch.Tensor:
+def transmittance(s: Sweep, σ: torch.Tensor, q: torch.Tensor, σ_q: torch.Tensor,
+                  shadow_planes: int = 0) -> torch.Tensor:
     """T towards each sweep's light at points of continuous grid index ``q`` ``(B·L, K, 3)``
     ([d, h, w], voxel centres at integers) where σ is ``σ_q`` ``(B·L, K)``; ``σ`` the volume
     ``(B·L, 1, N, N, N)`` the sweep was made of.
@@ -312,7 +315,8 @@ def render_single_scatter(volume: torch.Tensor, views: torch.Tensor, lights: Any
     σ = extinction(volume[:, 3:])
     # -- camera samples: albedo and σ, and their place in the grid
     grid = world_to_grid(_camera_samples(views, n, m, s)).to(volume)
-    σ_x = F.grid_sample(σ, grid, mode="bilinear", padding_mode="zeros", align_corners=False).squeeze(1)   # (B, N·m, N, N)
+    σ_x = F.grid_sample(σ, grid, mode="bilinear", padding_mode="zeros",
+                        align_corners=False).squeeze(1)         # (B, N·m, N, N)
     # the albedo is the medium's colour, read as Mitsuba's grid reads it: its edge values up to the faces
     a = F.grid_sample(volume[:, :3], grid, mode="bilinear", padding_mode="border", align_corners=False)
     q = ((grid.flip(-1) + 1.0) * (n / 2.0) - 0.5).reshape(b_, -1, 3)   # grid_sample (x, y, z) → index [d, h, w]
