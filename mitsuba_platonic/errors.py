@@ -53,12 +53,16 @@ def remembering_ctrl_c() -> Iterator[None]:
     usual, so that :func:`raise_if_ctrl_c` can raise it again where a compiled library swallowed
     it; the handler before is restored afterwards. Only where SIGINT has Python's default
     handler (not where it is ignored, or where someone installed their own) and in the main
-    thread (the only one Python runs signal handlers in)."""
+    thread (the only one Python runs signal handlers in). SIGINT is also unblocked there: a
+    process inherits its parent's signal mask, and a blocked Ctrl-C would wait unseen until the
+    command had finished."""
     _ctrl_c["pressed"] = False
     previous = signal.getsignal(signal.SIGINT)
     if previous is not signal.default_int_handler or threading.current_thread() is not threading.main_thread():
         yield
         return
+    if hasattr(signal, "pthread_sigmask"):                   # a parent's blocked SIGINT is inherited: unblock it
+        signal.pthread_sigmask(signal.SIG_UNBLOCK, {signal.SIGINT})
     signal.signal(signal.SIGINT, _note_and_raise)
     try:
         yield

@@ -129,11 +129,11 @@ def test_cuda_variant_without_cuda_says_what_to_do(tmp_path):
 # --------------------------------------------------------------------------- 5. Ctrl-C while data is prepared
 
 
-def _interrupt_when(command, ready, timeout=240):
+def _interrupt_when(command, ready, timeout=240, preexec_fn=None):
     """Start ``python -m mitsuba_platonic.cli COMMAND``, send SIGINT once ``ready()``; → (rc, stdout, stderr)."""
     env = dict(os.environ, PYTHONUNBUFFERED="1")
     p = subprocess.Popen([sys.executable, "-m", "mitsuba_platonic.cli", *command], stdout=subprocess.PIPE,
-                         stderr=subprocess.PIPE, env=env, text=True)
+                         stderr=subprocess.PIPE, env=env, text=True, preexec_fn=preexec_fn)
     deadline = time.time() + timeout
     while not ready() and time.time() < deadline and p.poll() is None:
         time.sleep(0.1)
@@ -175,6 +175,18 @@ train: {{batch_size: 2}}
     assert "preparing the training data" in err and "of 5000 images" in err and "no training step" in err, err
     assert not (tmp_path / "runs" / "r" / "checkpoints").exists()
     assert not (tmp_path / "runs" / "r" / "run.lock").exists()
+
+
+def test_ctrl_c_interrupts_a_command_whose_parent_blocked_sigint(tmp_path):
+    """The signal mask is inherited: a command started with SIGINT blocked unblocks it."""
+    out = tmp_path / "d"
+    rc, _, stderr = _interrupt_when(
+        ["make-dataset", "--class", CLASS, "--shapes", "5000", "--views", "1", "--resolution", "16",
+         "--out", str(out), "--quiet"],
+        lambda: any((out / "images").glob("*.png")) if (out / "images").is_dir() else False,
+        preexec_fn=lambda: signal.pthread_sigmask(signal.SIG_BLOCK, {signal.SIGINT}))
+    assert rc == 130, f"exit {rc}; stderr {stderr!r}"
+    assert "interrupted" in one_line(stderr, "make-dataset")
 
 
 def test_a_ctrl_c_a_library_swallows_still_interrupts_the_collection(tmp_path, monkeypatch):
