@@ -266,6 +266,9 @@ def transmittance(s: Sweep, σ: torch.Tensor, q: torch.Tensor, σ_q: torch.Tenso
     P0 = torch.floor(P).clamp(-1, n - 1)                       # the plane on the light's side (−1: none)
     f = (P - P0).clamp_min(0.0)
     x = q + f[..., None] * step                                # x⁺: on plane P₀
+    if shadow_planes == 0:                                     # σ and the sweep read at x⁺ alike: one lookup
+        σ_x, A = _lookup(torch.cat([σ, s.opacity], dim=1), x).unbind(1)
+        return torch.exp(-0.5 * f * ℓ * (σ_q + σ_x)) * (1.0 - A)
     σ_x = _lookup(σ, x).squeeze(1)
     T = torch.exp(-0.5 * f * ℓ * (σ_q + σ_x))
     for _ in range(2 * shadow_planes):                         # half planes: the ray crosses rows, where σ bends
