@@ -37,8 +37,8 @@ def render(volume: torch.Tensor, views: torch.Tensor, model: str = "ea",
             scattering's skies).
         options: the :class:`RenderSettings` the backend reads: ``filter`` ('nearest' |
             'trilinear'; default 'trilinear'; every backend but 'single_scatter', which reads
-            trilinearly); 'mitsuba': ``step`` (voxels, default 1), ``spp`` (default 1), ``jitter`` (default False), ``termination`` (default 0);
-            'physical': ``lighting``, ``physical_spp``, ``max_depth``; 'single_scatter': ``spp``
+            trilinearly); 'mitsuba': ``step`` (voxels, default 1), ``spp`` (default 1), ``jitter``
+            (default False), ``termination`` (default 0); 'physical': ``lighting``, ``physical_spp``, ``max_depth``; 'single_scatter': ``spp``
             (default 1), ``steps_per_voxel`` (4), ``shadow_planes`` (2).
 
     Returns:
