@@ -38,8 +38,9 @@ def render(volume: torch.Tensor, views: torch.Tensor, model: str = "ea",
         options: the :class:`RenderSettings` the backend reads: ``filter`` ('nearest' |
             'trilinear'; default 'trilinear'; every backend but 'single_scatter', which reads
             trilinearly); 'mitsuba': ``step`` (voxels, default 1), ``spp`` (default 1), ``jitter``
-            (default False), ``termination`` (default 0); 'physical': ``lighting``, ``physical_spp``, ``max_depth``; 'single_scatter': ``spp``
-            (default 1), ``steps_per_voxel`` (4), ``shadow_planes`` (2).
+            (default False), ``termination`` (default 0); 'physical': ``lighting``,
+            ``physical_spp``, ``max_depth``; 'single_scatter': ``spp`` (default 1),
+            ``steps_per_voxel`` (4), ``shadow_planes`` (2).
 
     Returns:
         ``(B, 1, N, N)`` opacity for VH/AO, ``(B, 4, N, N)`` premultiplied RGB + alpha for EA.
