@@ -117,6 +117,8 @@ def tilt(volume: torch.Tensor, elevation: torch.Tensor) -> torch.Tensor:
         right = (1, 0, 0),   up = ω × right = (0, cos θ, −sin θ),   ω = (0, sin θ, cos θ)
 
     so at θ = ±90° it is the pole's frame of :func:`rotate` (right = +x) without a special case.
+    As right = +x, a sample's x is its voxel's own, and the trilinear read is a bilinear one in
+    each x column's (depth, height) plane: one 2D ``grid_sample`` with the columns as channels.
     Rendering the result from the front view ω₀ renders ``volume`` from ω(0, θ): a volume in an
     upright object frame, seen by the input camera at an elevation E estimated
     (``train.pose: elevation``, :mod:`mitsuba_platonic.train.trainer`).
@@ -126,12 +128,17 @@ def tilt(volume: torch.Tensor, elevation: torch.Tensor) -> torch.Tensor:
                          f"got {tuple(elevation.shape)}")
     θ = elevation.to(torch.float64)
     s, c = torch.sin(θ), torch.cos(θ)
-    zero, one = torch.zeros_like(θ), torch.ones_like(θ)
-    right = torch.stack([one, zero, zero], dim=-1)
-    up = torch.stack([zero, c, -s], dim=-1)
-    w = torch.stack([zero, s, c], dim=-1)
-    grid = world_to_grid(_frame_points(right, up, w, volume.shape[-1]).to(volume.device)).to(volume.dtype)
-    return F.grid_sample(volume, grid, mode="bilinear", padding_mode="zeros", align_corners=False)
+    b, ch, n = volume.shape[0], volume.shape[1], volume.shape[-1]
+    centres = -1.0 + (torch.arange(n, dtype=torch.float64, device=θ.device) + 0.5) * voxel_size(n)
+    z, y = centres.flip(0)[:, None], centres.flip(0)[None, :]          # plane k's depth, row i's height
+    # p = z ω + y up + x right: x stays x_j (a voxel centre, so no blend along x), and p's height and
+    # depth depend on (k, i) alone: one bilinear read per (k, i) of every x column's (d, h) plane
+    p_y = z * s[:, None, None] + y * c[:, None, None]
+    p_z = z * c[:, None, None] - y * s[:, None, None]
+    grid = torch.stack([-p_y, -p_z], dim=-1).to(device=volume.device, dtype=volume.dtype)   # (x, y) → (h, d)
+    columns = volume.permute(0, 1, 4, 2, 3).reshape(b, ch * n, n, n)   # (B, C·W, D, H)
+    out = F.grid_sample(columns, grid, mode="bilinear", padding_mode="zeros", align_corners=False)
+    return out.reshape(b, ch, n, n, n).permute(0, 1, 3, 4, 2)
 
 
 def reduce_depth(camera_volume: torch.Tensor, model: str, path: Optional[torch.Tensor] = None) -> torch.Tensor:
