@@ -54,12 +54,6 @@ def _single_scatter(lights: LightBatch, options: Dict[str, Any]) -> RenderFn:
     return lambda v, w: render_single_scatter(v, w, lights, **options)
 
 
-def _bench_lights(b: int, seed: int) -> List[LightBatch]:
-    """Pair i's sun and sky, as the single_scatter backend draws them: one :class:`LightBatch` per pair."""
-    lights = sample_lights(b, seed)
-    return [LightBatch(lights.direction[i:i + 1], lights.irradiance[i:i + 1], lights.sky[i:i + 1]) for i in range(b)]
-
-
 def _reference(fn: RenderFn, volume: torch.Tensor, views: torch.Tensor,
                weights: torch.Tensor) -> Tuple[torch.Tensor, torch.Tensor]:
     """Image and gradient of L of a (slow) reference renderer, one pair at a time (bounded memory)."""
@@ -243,10 +237,10 @@ def _single_scatter_rows(s: BenchSettings, n: int, b: int, model: str, volume: t
     """The single-scattering rows (``add`` measures and records one), against
     :data:`SINGLE_SCATTER_REFERENCE` under the same suns and skies."""
     t0 = time.perf_counter()
-    per_pair = _bench_lights(b, s.seed)
-    lights = LightBatch(*(torch.cat([getattr(one, k) for one in per_pair]) for k in ("direction", "irradiance", "sky")))
+    lights = sample_lights(b, s.seed)                         # as the single_scatter backend draws them
     images, grads = [], []
-    for i, light in enumerate(per_pair):                      # pair by pair: the reference's samples are many
+    for i in range(b):                                        # pair by pair: the reference's samples are many
+        light = LightBatch(lights.direction[i:i + 1], lights.irradiance[i:i + 1], lights.sky[i:i + 1])
         img, g = _forward_backward(_single_scatter(light, SINGLE_SCATTER_REFERENCE), volume[i:i + 1],
                                    views[i:i + 1], weights[i:i + 1])
         images.append(img)

@@ -55,7 +55,7 @@ than the 14, and the perspective camera. Everything is torch, differentiable by 
 from __future__ import annotations
 
 import math
-from dataclasses import asdict, dataclass
+from dataclasses import dataclass
 from typing import Any, Dict, Sequence, Tuple
 
 import numpy as np
@@ -111,9 +111,6 @@ class SunAndSky:
             x = np.asarray(getattr(self, name), dtype=np.float64)
             if x.shape != (3,) or not np.all(np.isfinite(x)) or np.any(x < 0):
                 raise UserError(f"{name}: expected 3 finite values ≥ 0 (linear RGB), got {getattr(self, name)!r}")
-
-    def to_dict(self) -> Dict[str, Any]:
-        return asdict(self)
 
     def scene_params(self) -> Dict[str, Any]:
         """This light as parameters of ``scenes/physical.xml`` (``lighting`` picks emitters/sun_and_sky.xml)."""
@@ -199,7 +196,7 @@ def sweep(σ: torch.Tensor, directions: torch.Tensor) -> Sweep:
     reads are bilinear; outside the cube σ = 0 and T = 1 (a ray towards the light that has left
     the cube sideways stays outside).
     """
-    b_, n = σ.shape[0], σ.shape[-1]
+    n = σ.shape[-1]
     Δ = voxel_size(n)
     d = directions.detach().to(torch.float64).cpu()
     g = torch.stack([-d[:, 2], -d[:, 1], d[:, 0]], dim=-1)     # the direction in grid index units
