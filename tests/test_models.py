@@ -370,3 +370,55 @@ def test_the_channels_last_generator_computes_what_the_usual_layout_does(norm, u
     assert torch.allclose(v, usual(z[:, :, None, None, None]), atol=1e-5)
     v.sum().backward()
     assert all(p.grad is not None and torch.isfinite(p.grad).all() for p in G.parameters())
+
+
+# -- G's resize stage as one transposed convolution -----------------------------------------------
+
+@pytest.mark.parametrize("layout", [torch.contiguous_format, torch.channels_last_3d])
+def test_the_resize_stage_is_a_nearest_upsampling_then_its_k3_convolution(layout):
+    """ResizeConv3d against the two operations it replaces (nn.Upsample ×2 nearest, then
+    nn.Conv3d k3 p1 with the same weights): the same outputs, including every border voxel (where
+    the zero padding enters), and the same gradients for input, weight and bias; also for an input
+    of exact 0s and 1s, an odd size and channel counts that are not powers of two."""
+    from mitsuba_platonic.models import ResizeConv3d
+    torch.manual_seed(0)
+    fused = ResizeConv3d(5, 3, bias=True).to(memory_format=layout)
+    plain = nn.Conv3d(5, 3, 3, 1, 1, bias=True)
+    with torch.no_grad():
+        plain.weight.copy_(fused.weight)
+        plain.bias.copy_(fused.bias)
+    for x0 in (torch.randn(2, 5, 5, 6, 7), (torch.rand(2, 5, 5, 6, 7) > 0.5).float()):
+        x0 = x0.contiguous(memory_format=layout)
+        xa, xb = x0.clone().requires_grad_(True), x0.clone().requires_grad_(True)
+        ya, yb = fused(xa), plain(nn.functional.interpolate(xb, scale_factor=2, mode="nearest"))
+        assert ya.shape == yb.shape == (2, 3, 10, 12, 14)
+        assert torch.allclose(ya, yb, atol=1e-5), float((ya - yb).abs().max())
+        w = torch.randn_like(yb)
+        (ya * w).sum().backward()
+        (yb * w).sum().backward()
+        assert torch.allclose(xa.grad, xb.grad, atol=1e-4)
+        for p, q in ((fused.weight, plain.weight), (fused.bias, plain.bias)):
+            assert torch.allclose(p.grad, q.grad, rtol=1e-5, atol=1e-4), float((p.grad - q.grad).abs().max())
+            p.grad, q.grad = None, None
+
+
+@pytest.mark.parametrize("upsample", ["resize", "resize_last"])
+def test_a_checkpoint_of_a_generator_whose_resize_stages_upsampled_apart_still_loads(upsample):
+    """Before the resize stage was one module, it was nn.Upsample and nn.Conv3d in G's sequence.
+    That generator's state dict (the keys a checkpoint holds) loads strictly into today's G, which
+    then computes what the older one did."""
+    import copy
+    from mitsuba_platonic.models import ResizeConv3d
+    torch.manual_seed(0)
+    G = Generator(NetConfig(resolution=16, width=8, latent=16, norm="none", upsample=upsample))
+    old = copy.deepcopy(G.net)
+    for i, m in enumerate(old):
+        if isinstance(m, ResizeConv3d):
+            plain = nn.Conv3d(m.in_channels, m.out_channels, 3, 1, 1, bias=m.bias is not None)
+            plain.load_state_dict(m.state_dict())
+            old[i - 1], old[i] = nn.Upsample(scale_factor=2, mode="nearest"), plain
+    assert sum(isinstance(m, nn.Upsample) for m in old) == (2 if upsample == "resize" else 1)
+    fresh = Generator(NetConfig(resolution=16, width=8, latent=16, norm="none", upsample=upsample))
+    fresh.net.load_state_dict(old.state_dict(), strict=True)
+    z = torch.randn(3, 16)
+    assert torch.allclose(fresh(z), old(z[:, :, None, None, None]), atol=1e-5)
