@@ -1,8 +1,8 @@
-"""The model section of a config (``model:``): the networks' sizes and how they start.
+"""The model section of a config (``model:``): the networks' sizes, arithmetic and how they start.
 
 :class:`ModelConfig` is the section's dataclass, beside the networks it configures
-(:mod:`mitsuba_platonic.models`). Six of its keys (:data:`NET_KEYS`) are the networks' own shape
-settings, :class:`~mitsuba_platonic.models.NetConfig`'s fields of the same names;
+(:mod:`mitsuba_platonic.models`). Seven of its keys (:data:`NET_KEYS`) are the networks' own settings
+(their shapes and arithmetic), :class:`~mitsuba_platonic.models.NetConfig`'s fields of the same names;
 :meth:`ModelConfig.net_config` hands them over, with what the other sections decide (the
 image formation's channels, the PrGAN view code, the pose head), so the two never disagree.
 The other three (``init``, ``critic_init``, ``critic_width``) are training's: how the networks
@@ -15,13 +15,13 @@ import dataclasses
 from dataclasses import dataclass
 from typing import Optional
 
-from .models import INITS, NORMS, RESOLUTIONS, UPSAMPLES, NetConfig
+from .models import INITS, NORMS, PRECISIONS, RESOLUTIONS, UPSAMPLES, NetConfig
 from .settings_checks import choice, non_negative, positive
 
 __all__ = ["ModelConfig", "NET_KEYS"]
 
 #: The model keys that :class:`~mitsuba_platonic.models.NetConfig` takes as they are.
-NET_KEYS = ("resolution", "latent", "width", "norm", "encoder_hidden", "upsample")
+NET_KEYS = ("resolution", "latent", "width", "norm", "encoder_hidden", "upsample", "precision")
 
 
 @dataclass
@@ -37,6 +37,7 @@ class ModelConfig:
     critic_init: how D and D3 start, 'dcgan' (N(0, 0.02)) | 'he' ("A discriminator that never learns").
     init: how E and G start, 'dcgan' (the paper's) | 'he' (scaled by fan-in: "E and G that start blind").
     critic_width: channels of D's and D3's first layer, doubling per stage; null: ``width`` (same section).
+    precision: the networks' arithmetic, 'fp32' | 'bf16' (convolutions in bfloat16: "Where a step's time goes").
     """
 
     resolution: int = 32
@@ -48,6 +49,7 @@ class ModelConfig:
     critic_init: str = "dcgan"
     init: str = "dcgan"
     critic_width: Optional[int] = None
+    precision: str = "fp32"
 
     def validate(self) -> "ModelConfig":
         """Check this section's values; raise :class:`~mitsuba_platonic.settings_checks.ConfigError`
@@ -59,13 +61,14 @@ class ModelConfig:
         choice("model.upsample", self.upsample, UPSAMPLES)
         choice("model.critic_init", self.critic_init, INITS)
         choice("model.init", self.init, INITS)
+        choice("model.precision", self.precision, PRECISIONS)
         if self.critic_width is not None:
             positive("model.critic_width", self.critic_width)
         non_negative("model.encoder_hidden", self.encoder_hidden)
         return self
 
     def net_config(self, channels: int, view_codes: int = 0, pose: bool = False) -> NetConfig:
-        """E's and G's shapes: this section's :data:`NET_KEYS`, with ``channels`` for the volumes
+        """E's and G's shapes and arithmetic: this section's :data:`NET_KEYS`, with ``channels`` for the volumes
         and images (1 or 4: the image formation's), ``view_codes`` (the length of the view code
         appended to z, 0: none) and ``pose`` (a pose head), which the config's other sections decide."""
         return NetConfig(**{key: getattr(self, key) for key in NET_KEYS}, volume_channels=channels,

@@ -22,14 +22,15 @@ training with half the batch per process makes exactly the single-process update
 
 from __future__ import annotations
 
+import contextlib
 import math
 from dataclasses import dataclass
-from typing import List
+from typing import ContextManager, List
 
 import torch
 from torch import nn
 
-__all__ = ["NORMS", "UPSAMPLES", "INITS", "NetConfig", "Encoder", "Generator", "Discriminator",
+__all__ = ["NORMS", "UPSAMPLES", "INITS", "PRECISIONS", "NetConfig", "Encoder", "Generator", "Discriminator",
            "VolumeDiscriminator", "PoseHead", "ResizeConv3d", "init_weights", "init_critic_he", "init_he"]
 
 NORMS = ("batch", "instance", "none")
@@ -44,6 +45,20 @@ RESOLUTIONS = (16, 32, 64, 128)
 #: DCGAN initialisation of every network (:func:`init_weights`), or He's (:func:`init_critic_he`
 #: for the critics, :func:`init_he` for E and G).
 INITS = ("dcgan", "he")
+#: The networks' arithmetic (``model.precision``): float32 throughout, or their convolutions and
+#: matrix products in bfloat16 under :func:`torch.autocast` (weights, optimiser state and every
+#: network's output stay float32; the renderers never see bfloat16). bfloat16 keeps float32's range
+#: with an 8-bit mantissa: on a CPU with AVX-512 BF16 (or a GPU) the paper-scale step is 1.5×
+#: faster; what it does to training is measured in docs/training.md, "Where a step's time goes".
+PRECISIONS = ("fp32", "bf16")
+
+
+def arithmetic(precision: str, x: torch.Tensor) -> ContextManager:
+    """The context a network computes in (:data:`PRECISIONS`): autocast to bfloat16 on ``x``'s
+    device for 'bf16', nothing for 'fp32'."""
+    if precision == "bf16":
+        return torch.autocast(x.device.type, dtype=torch.bfloat16)
+    return contextlib.nullcontext()
 
 
 @dataclass(frozen=True)
@@ -55,8 +70,8 @@ class NetConfig:
     PrGAN-style baseline, ``train.mode: prgan``: a one-hot of one of 8 ring views; 0: none, G
     sees z only); upsample: how G's stages double the resolution (:data:`UPSAMPLES`); pose:
     whether a :class:`PoseHead` reads the input camera's elevation from z (``train.pose:
-    elevation``). A config's model section builds it
-    (:meth:`~mitsuba_platonic.model_settings.ModelConfig.net_config`, its six keys of the same names)."""
+    elevation``); precision: the networks' arithmetic (:data:`PRECISIONS`). A config's model section
+    builds it (:meth:`~mitsuba_platonic.model_settings.ModelConfig.net_config`, its seven keys of the same names)."""
 
     resolution: int = 32
     volume_channels: int = 4
@@ -68,6 +83,7 @@ class NetConfig:
     upsample: str = "transposed"
     view_codes: int = 0
     pose: bool = False
+    precision: str = "fp32"
 
     def validate(self) -> "NetConfig":
         if self.resolution not in RESOLUTIONS:
@@ -89,6 +105,8 @@ class NetConfig:
             raise ValueError(f"view_codes must be a non-negative int, got {self.view_codes!r}")
         if not isinstance(self.pose, bool):
             raise ValueError(f"pose must be True or False, got {self.pose!r}")
+        if self.precision not in PRECISIONS:
+            raise ValueError(f"precision must be one of {PRECISIONS}, got {self.precision!r}")
         return self
 
     @property
@@ -211,7 +229,9 @@ class Generator(nn.Module):
                 else f"z of shape (B, {n})"
             raise ValueError(f"G expects {what}, got {tuple(z.shape)}")
         x = z[:, :, None, None, None].contiguous(memory_format=torch.channels_last_3d)
-        return self.net(x).contiguous()                     # the volume in the usual layout for the renderers
+        with arithmetic(self.cfg.precision, z):
+            v = self.net(x)
+        return v.float().contiguous()                       # float32, in the usual layout for the renderers
 
 
 class Discriminator(nn.Module):
@@ -227,7 +247,8 @@ class Discriminator(nn.Module):
         r, c = self.cfg.resolution, self.cfg.image_channels
         if x.dim() != 4 or x.shape[1:] != (c, r, r):
             raise ValueError(f"D expects images (B, {c}, {r}, {r}), got {tuple(x.shape)}")
-        return self.head(self.trunk(x)).flatten()
+        with arithmetic(self.cfg.precision, x):
+            return self.head(self.trunk(x)).flatten().float()
 
 
 class VolumeDiscriminator(nn.Module):
@@ -243,7 +264,8 @@ class VolumeDiscriminator(nn.Module):
         r, c = self.cfg.resolution, self.cfg.volume_channels
         if v.dim() != 5 or v.shape[1:] != (c, r, r, r):
             raise ValueError(f"D3 expects volumes (B, {c}, {r}, {r}, {r}), got {tuple(v.shape)}")
-        return self.head(self.trunk(v)).flatten()
+        with arithmetic(self.cfg.precision, v):
+            return self.head(self.trunk(v)).flatten().float()
 
 
 class Encoder(nn.Module):
@@ -272,7 +294,8 @@ class Encoder(nn.Module):
         r, c = self.cfg.resolution, self.cfg.image_channels
         if x.dim() != 4 or x.shape[1:] != (c, r, r):
             raise ValueError(f"E expects images (B, {c}, {r}, {r}), got {tuple(x.shape)}")
-        return self.head(self.hidden(self.trunk(x)).flatten(1))
+        with arithmetic(self.cfg.precision, x):
+            return self.head(self.hidden(self.trunk(x)).flatten(1)).float()
 
 
 class PoseHead(nn.Module):

@@ -485,3 +485,39 @@ def test_gradients_of_successive_calls_are_separate_tensors(model):
     assert torch.equal(grads[0], copies[0] + 1.0)
     assert all(torch.equal(a, b) for a, b in zip(grads[1:], copies[1:]))
     assert all(t.shape == (8, c, 32, 32, 32) and t.is_contiguous() for t in grads)
+
+
+@pytest.mark.parametrize("model, n, step", [("ea", 16, 1.0), ("ea", 32, 0.5), ("ao", 32, 1.0), ("ao", 16, 0.75)])
+def test_the_backward_reading_the_recorded_lookups_equals_one_that_looks_up_again(monkeypatch, model, n, step):
+    """The backward pass reads each segment's lookup as the forward pass recorded it; the same
+    gradient comes out of a backward pass that makes the 8 gathers again (tiled at 32³ with step 1,
+    per-thread copies otherwise), on a volume with exact 0s and 1s."""
+    import importlib
+    M = importlib.import_module("mitsuba_platonic.render.marcher")
+    vol = _pair(model, n, "cloud", batch=2)
+    vol[:, -1, : n // 4] = 1.0                                 # opaque slabs and empty ones
+    vol[:, -1, -n // 4:] = 0.0
+    views = torch.cat([V.front_view(1), OBLIQUE[:1]])
+    w = torch.rand(2, 4 if model == "ea" else 1, n, n)
+    grads, images = {}, {}
+    for recorded in (True, False):
+        monkeypatch.setattr(M, "RECORD_LOOKUPS", recorded)
+        x = vol.clone().requires_grad_()
+        images[recorded] = render(x, views, model, "mitsuba", step=step)
+        (images[recorded] * w).sum().backward()
+        grads[recorded] = x.grad
+    assert torch.equal(images[True], images[False])
+    assert torch.allclose(grads[True], grads[False], rtol=1e-5, atol=1e-7), \
+        float((grads[True] - grads[False]).abs().max())
+
+
+def test_a_differentiable_render_too_large_to_record_is_refused_with_its_size(monkeypatch):
+    """Before it allocates: the message gives rays, segments and the GiB the records would take
+    (T_k and the lookup beside it, 5 floats per ray and segment for EA)."""
+    import importlib
+    M = importlib.import_module("mitsuba_platonic.render.marcher")
+    monkeypatch.setattr(M, "RECORD_LIMIT", 16 * 16 * 16 * 5 - 1)
+    x = _pair("ea", 16, "cloud", batch=1).requires_grad_()
+    with pytest.raises(ValueError, match=r"256 rays × 16 segments records 0\.0 GiB"):
+        render(x, V.front_view(1), "ea", "mitsuba")
+    assert render(x.detach(), V.front_view(1), "ea", "mitsuba").shape == (1, 4, 16, 16)

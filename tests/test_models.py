@@ -108,6 +108,7 @@ def test_bad_inputs():
     ("train.mode=gan3d", r"train\.rec_target"),
     ("render.model=vh", r"render\.model"),
     ("run.steps=true", r"run\.steps: expected int"),
+    ("model.precision=fp16", r"model\.precision: expected one of"),
     ("trainsteps", r"key=value"),
 ])
 def test_config_errors_name_the_key(override, match):
@@ -422,3 +423,40 @@ def test_a_checkpoint_of_a_generator_whose_resize_stages_upsampled_apart_still_l
     fresh.net.load_state_dict(old.state_dict(), strict=True)
     z = torch.randn(3, 16)
     assert torch.allclose(fresh(z), old(z[:, :, None, None, None]), atol=1e-5)
+
+
+# -- the networks' arithmetic (model.precision) ----------------------------------------------------
+
+def test_bf16_networks_compute_in_bfloat16_and_hand_back_float32():
+    """With ``precision='bf16'`` every network's output is float32 and near the float32 network's
+    with the same weights (bfloat16's 8-bit mantissa: a relative error of order 2⁻⁸ per layer), but
+    not equal to it (so the arithmetic did change); the gradients reach every weight, which stays
+    float32. Also at exact 0 and 1 inputs."""
+    import dataclasses
+    torch.manual_seed(0)
+    fp32 = NetConfig(resolution=16, volume_channels=4, image_channels=4, latent=8, width=8, norm="none",
+                     upsample="resize_last")
+    bf16 = dataclasses.replace(fp32, precision="bf16")
+    for x in (torch.rand(3, 4, 16, 16), (torch.rand(3, 4, 16, 16) > 0.5).float()):
+        for cls in (Encoder, Generator, Discriminator, VolumeDiscriminator):
+            a, b = cls(fp32), cls(bf16)
+            b.load_state_dict(a.state_dict())
+            inp = {Generator: torch.randn(3, 8), VolumeDiscriminator: torch.rand(3, 4, 16, 16, 16)}.get(cls, x)
+            ya, yb = a(inp), b(inp)
+            assert yb.dtype == torch.float32 and yb.shape == ya.shape
+            scale = float(ya.detach().abs().max())
+            assert float((ya - yb).detach().abs().max()) < 0.05 * scale, cls.__name__
+            assert not torch.equal(ya, yb), cls.__name__
+            yb.sum().backward()
+            assert all(p.dtype == torch.float32 and p.grad is not None and p.grad.dtype == torch.float32
+                       and torch.isfinite(p.grad).all() for p in b.parameters()), cls.__name__
+
+
+def test_precision_reaches_every_network_from_the_config():
+    """``model.precision`` is the one setting of E's, G's and the critics' arithmetic."""
+    from mitsuba_platonic.model import Model, critic_config
+    cfg = load_config(None, ["model.precision=bf16", "model.resolution=16", "model.width=4", "model.latent=8",
+                             "model.critic_width=8"])
+    model = Model.from_config(cfg)
+    assert model.E.cfg.precision == model.G.cfg.precision == critic_config(cfg).precision == "bf16"
+    assert Model.from_config(load_config(None, [])).G.cfg.precision == "fp32"

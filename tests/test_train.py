@@ -87,6 +87,19 @@ def test_one_step_changes_what_it_should(tmp_path, backend, model, task, mode, l
         assert changed["D3"]
 
 
+def test_a_bf16_step_with_r1_and_the_pose_head_changes_every_network(tmp_path):
+    """``model.precision: bf16`` through the marcher, with R1's double backward through D and the
+    pose head's tilt: finite scalars, float32 weights, and E, G, D and P all move."""
+    cfg = _cfg(tmp_path, "model.precision=bf16", "render.backend=mitsuba", "render.model=ea", "data.formation=ea",
+               "train.task=reconstruction", "train.r1_weight=1.0", "train.pose=elevation", "train.pose_weight=1.0")
+    trainer = Trainer(cfg, load_training_data(cfg, progress=False), torch.device("cpu"))
+    before = {k: _params(m) for k, m in trainer.nets.items()}
+    out = trainer.step(0)
+    assert all(np.isfinite(v) for v in out.values()), out
+    assert all(p.dtype == torch.float32 for m in trainer.nets.values() for p in m.parameters())
+    assert {k: _changed(before[k], m) for k, m in trainer.nets.items()} == {k: True for k in trainer.nets}
+
+
 def _input_view_mse(trainer, batch):
     """The reconstruction error computed here, not by the trainer: render G(E(x)) from the input
     view with the Mitsuba ray marcher (the trainer renders with the closed form) and take the MSE

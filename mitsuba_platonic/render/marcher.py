@@ -65,7 +65,10 @@ sample depends on what lies behind it.
 
 Adjoint (one launch, no division by τ, exact at τ = 0). The forward pass of a differentiable call
 records T_k for every ray r and segment k (4 bytes each, at k · rays + r: a packet writes and
-reads neighbouring floats). The backward pass marches each ray back to
+reads neighbouring floats), and beside it the segment's lookup (v, or EA's RGBA as one 16-byte
+packet at the same position), so the backward pass reads each lookup back in order instead of
+making its 8 scattered gathers again (:data:`RECORD_LOOKUPS`; 5 floats per ray and segment
+for EA, within :data:`RECORD_LIMIT`). The backward pass marches each ray back to
 front, accumulating the suffix radiance R_k = Σ_{m>k} (Π_{k<j<m} τ_j)(1 − τ_m) c_m and the suffix
 transmittance U_k = Π_{j>k} τ_j:
 
@@ -126,18 +129,26 @@ from .variant import ensure_variant, variant_device
 mi = ensure_variant()
 import drjit as dr  # noqa: E402  (after the variant is set)
 
-__all__ = ["march", "n_segments", "segment_transmittance", "tiled_ray", "tiled_backward", "V_MAX", "RECORD_LIMIT"]
+__all__ = ["march", "n_segments", "recorded_floats", "segment_transmittance", "tiled_ray", "tiled_backward", "V_MAX", "RECORD_LIMIT"]
 
 #: Density clamp used by AO/EA when step != 1 (log domain).
 V_MAX = 1.0 - 1e-6
 
-#: Most (ray, segment) pairs a differentiable call may record (4 bytes each): 2 GiB.
+#: Most floats a differentiable call may record (:func:`recorded_floats` per ray and segment): 2 GiB.
 RECORD_LIMIT = 2 ** 29
 
 
 def n_segments(n: int, step: float) -> int:
     """Segments per ray: ⌈N / step⌉ (the last one may be shorter)."""
     return max(1, math.ceil(n / step - 1e-9))
+
+
+def recorded_floats(model: str, c: int) -> int:
+    """Floats a pass for the gradient records per ray and segment: T_k, and with
+    :data:`RECORD_LOOKUPS` the lookup beside it (C floats); VH records nothing per segment."""
+    if model == "vh":
+        return 0
+    return 1 + (c if RECORD_LOOKUPS else 0)
 
 
 def segment_transmittance(model: str, unit: bool, v: Any, s: Any) -> Tuple[Any, Any]:
@@ -350,6 +361,20 @@ class _Batch:
             rgba += w * dr.gather(mi.Vector4f, self.data, idx, inside)   # one packet: r, g, b, v
         return rgba.w, mi.Color3f(rgba.x, rgba.y, rgba.z)
 
+    def keep_lookup(self, looks: Any, at: Any, v: Any, c: Optional[Any]) -> None:
+        """Store a lookup for the backward pass: RGBA as one 4-float packet at ``at`` (EA), or v."""
+        if c is None:
+            dr.scatter(looks, v, at)
+        else:
+            dr.scatter(looks, mi.Vector4f(c.x, c.y, c.z, v), at)
+
+    def recorded_lookup(self, looks: Any, at: Any) -> Tuple[Any, Any]:
+        """The lookup :meth:`keep_lookup` stored at ``at``: (v, c) as :meth:`lookup` returns them."""
+        if self.C == 1:
+            return dr.gather(mi.Float, looks, at, self.real), None
+        rgba = dr.gather(mi.Vector4f, looks, at, self.real)
+        return rgba.w, mi.Color3f(rgba.x, rgba.y, rgba.z)
+
     def transmittance(self, v: Any, s: Any) -> Tuple[Any, Any]:
         """τ of a segment of s voxels at density v, and dτ/dv."""
         return segment_transmittance(self.model, self.unit, v, s)
@@ -357,9 +382,11 @@ class _Batch:
     # -- Forward ---------------------------------------------------------------------------
 
     @dr.syntax
-    def forward(self, record: Optional[Any], whole: bool = False, boxes: Optional[Any] = None) -> Tuple[Any, Any, Any]:
+    def forward(self, record: Optional[Any], whole: bool = False, boxes: Optional[Any] = None,
+                looks: Optional[Any] = None) -> Tuple[Any, Any, Any]:
         """Front-to-back march → (final transmittance T, emitted colour C, segments marched); with
-        ``record`` (a Float of n_rays · n_steps) store T_k before each segment for the backward pass;
+        ``record`` (a Float of n_rays · n_steps) store T_k before each segment for the backward pass,
+        and with ``looks`` (C times as long) each segment's lookup (RGBA or v) beside it;
         with ``whole`` (a pass for the gradient) never stop at T = 0; with ``boxes`` (6 floats per
         pair, :func:`occupied_boxes`) march only the segments that meet the pair's box."""
         ea = self.model == "ea"
@@ -376,6 +403,8 @@ class _Batch:
                 dr.scatter(record, T, k * self.n_rays + ray)       # neighbouring lanes, neighbouring floats
             p, s = self.segment(k)
             v, c = self.lookup(self.corners(p))
+            if looks is not None:                                 # the backward's lookup, read back in order
+                self.keep_lookup(looks, k * self.n_rays + ray, v, c)
             if self.model == "vh":
                 depth += s * v
                 T = dr.exp(-depth)                                # exactly the closed form's exp(−Σ v)
@@ -415,9 +444,10 @@ class _Batch:
     # -- Backward --------------------------------------------------------------------------
 
     @dr.syntax
-    def backward(self, record: Any, marched: Any, grad: Any, δρ: Any, δC: Any) -> None:
+    def backward(self, record: Any, marched: Any, grad: Any, δρ: Any, δC: Any, looks: Optional[Any] = None) -> None:
         """Back-to-front march from each ray's last marched segment, scattering ∂L/∂v (and ∂L/∂c)
-        into ``grad`` (same layout as ``data``). δρ: ∂L/∂ρ or ∂L/∂α per ray; δC: ∂L/∂C (EA)."""
+        into ``grad`` (same layout as ``data``). δρ: ∂L/∂ρ or ∂L/∂α per ray; δC: ∂L/∂C (EA);
+        ``looks``: the forward's lookups (:meth:`keep_lookup`), else the lookups are made again."""
         ea = self.model == "ea"
         ray = self.ray
 
@@ -429,10 +459,11 @@ class _Batch:
         active = k > 0
         while active:
             k -= 1
-            T_k = dr.gather(mi.Float, record, k * self.n_rays + ray, self.real)
+            at = k * self.n_rays + ray                            # (segment k, ray r) in the records
+            T_k = dr.gather(mi.Float, record, at, self.real)
             p, s = self.segment(k)
             corners = self.corners(p)
-            v, c = self.lookup(corners)
+            v, c = self.lookup(corners) if looks is None else self.recorded_lookup(looks, at)
             τ, dτ = self.transmittance(v, s)
             gτ = -δρ * T_k * U                                    # ∂α/∂τ = −T U
             if ea:
@@ -530,6 +561,12 @@ def tiled_backward(n: int, spp: int) -> bool:
 TILED = os.environ.get("MITSUBA_PLATONIC_TILED", "1") != "0"
 
 
+#: A pass for the gradient records each segment's lookup beside T_k, and the backward pass reads
+#: it back in order instead of making the 8 gathers again (module docstring, "Adjoint")
+#: (``MITSUBA_PLATONIC_RECORD_LOOKUPS=0``: the backward looks up again, for comparisons).
+RECORD_LOOKUPS = os.environ.get("MITSUBA_PLATONIC_RECORD_LOOKUPS", "1") != "0"
+
+
 #: Forward-only calls skip empty space (module docstring, "Empty space"; exact)
 #: (``MITSUBA_PLATONIC_SKIP_EMPTY=0``: march every segment, for comparisons).
 SKIP_EMPTY = os.environ.get("MITSUBA_PLATONIC_SKIP_EMPTY", "1") != "0"
@@ -579,7 +616,7 @@ class _Static:
         self.shape, self.opt, self.record, self.tiled = shape, opt, record, tiled
         # Dr.Jit's thread count too: the backward's Expand scatters size their per-thread copies of
         # the gradient when a kernel is recorded, so a replay under more threads would overrun them
-        self.key = (shape, opt, record, tiled, dr.thread_count())
+        self.key = (shape, opt, record, tiled, dr.thread_count(), RECORD_LOOKUPS)
 
     def __hash__(self) -> int:
         return hash(self.key)
@@ -596,20 +633,22 @@ def _forward_pass(data: Any, frames: Any, seed: Any, boxes: Optional[Any], stati
     (b, c, n), opt, record = static.shape, static.opt, static.record
     batch = _Batch(data, frames, b, c, n, opt, seed)
     vh = opt.model == "vh"
-    # every T_k the backward reads (k < segments marched) is written first: no clearing
+    # every T_k (and lookup) the backward reads (k < segments marched) is written first: no clearing
     Ts = dr.empty(mi.Float, batch.n_rays * batch.n_steps) if record and not vh else None
-    T, C, marched = batch.forward(Ts, whole=record, boxes=boxes)
+    looks = dr.empty(mi.Float, c * batch.n_rays * batch.n_steps) if Ts is not None and RECORD_LOOKUPS else None
+    T, C, marched = batch.forward(Ts, whole=record, boxes=boxes, looks=looks)
     values = [C.x, C.y, C.z, 1.0 - T] if opt.model == "ea" else [1.0 - T]
     if record and vh:
         Ts = T                                                # VH's gradient needs only the final T
-    dr.eval(values, Ts, marched)                              # the one forward launch
-    return values, Ts, marched
+    dr.eval(values, Ts, looks, marched)                       # the one forward launch
+    return values, (Ts, looks), marched
 
 
 def _backward_pass(data: Any, frames: Any, seed: Any, Ts: Any, marched: Any, δ: list, static: _Static) -> Any:
     """The backward launches: ∂L/∂volume in torch's layout ``(B, C, N, N, N)`` from the per-ray
     gradients δ (the march, then :func:`_torch_layout`)."""
     (b, c, n), opt = static.shape, static.opt
+    Ts, looks = Ts
     batch = _Batch(data, frames, b, c, n, opt, seed, tiled=static.tiled)
     if static.tiled:                  # per-ray inputs in the lanes' order; idle lanes march 0 segments
         δ = [dr.gather(mi.Float, x, batch.ray, batch.real) for x in δ]
@@ -621,7 +660,7 @@ def _backward_pass(data: Any, frames: Any, seed: Any, Ts: Any, marched: Any, δ:
     if opt.model == "vh":
         batch.backward_vh(Ts, marched, grad, δρ)
     else:
-        batch.backward(Ts, marched, grad, δρ, δC)
+        batch.backward(Ts, marched, grad, δρ, δC, looks)
     dr.eval(grad)                                             # the backward launch
     out = _torch_layout(grad, b, c, n, batch.pairs)
     dr.eval(out)                                              # and its layout conversion
@@ -701,9 +740,10 @@ class _March(torch.autograd.Function):
         b, c, n = volume.shape[0], volume.shape[1], volume.shape[-1]
         lanes, steps = b * n * n * opt.spp, n_segments(n, opt.step)
         record = ctx.needs_input_grad[0]
-        if record and lanes * steps > RECORD_LIMIT:
+        floats = recorded_floats(opt.model, c)
+        if record and lanes * steps * floats > RECORD_LIMIT:
             raise ValueError(f"a differentiable render of {lanes} rays × {steps} segments records "
-                             f"{4 * lanes * steps / 2**30:.1f} GiB; use fewer pairs, spp or a larger step")
+                             f"{4 * floats * lanes * steps / 2**30:.1f} GiB; use fewer pairs, spp or a larger step")
         keep: list = []                                           # torch memory Dr.Jit reads
         data = _shared(_channels_last(volume, keep), keep)        # the (B, N, N, N, C) batch
         frames = _frames(views, keep)
