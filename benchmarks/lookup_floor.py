@@ -9,7 +9,9 @@ march takes N samples per ray (step 1, 1 spp). "lookups only" is a Dr.Jit kernel
 exactly the marcher's lookups along every ray (its own ray geometry, ``_Batch.segment`` and
 ``_Batch.corners``) and sums them, with no compositing and no early stop: a lower bound for any
 forward pass that reads the volume this way, and the backward pass reads it again (and adds as
-much into the gradient). Kernel times come from Dr.Jit's kernel history (no torch side).
+much into the gradient). Kernel times come from Dr.Jit's kernel history (no torch side). The
+marcher is timed twice in the same run: with a backward pass that makes its lookups again, and
+with one that reads the lookups the forward pass recorded (``RECORD_LOOKUPS``, the default).
 """
 
 from __future__ import annotations
@@ -51,8 +53,12 @@ def main() -> None:
     b = args.batch
     print(f"# EA, trilinear, step 1, 1 spp, batch {b}, random views, 'figure' volume; {mi.variant()} with "
           f"{dr.thread_count()} Dr.Jit threads; ms per image of Dr.Jit kernel time (best of {args.repeats})")
-    print(f"{'N':>4} | {'lookups only':>12} | {'G floats/s':>10} | {'forward (records)':>17} | {'backward':>8} | "
-          f"f+b ÷ lookups")
+    print("# 'looks up again': the backward pass gathers each lookup again (MITSUBA_PLATONIC_RECORD_LOOKUPS=0);")
+    print("# 'reads the record': it reads the lookups the forward pass recorded (the default). f+b ÷ floor: the")
+    print("# forward and backward kernels against the lookups of both passes (2 × 'lookups only').")
+    print(f"{'N':>4} | {'lookups only':>12} | {'G floats/s':>10} | {'forward':>7} | {'backward':>8} | "
+          f"{'÷ floor':>7} | {'forward':>7} | {'backward':>8} | {'÷ floor':>7}")
+    print(f"{'':>4} | {'':>12} | {'':>10} | {'looks up again':^34} | {'reads the record':^34}")
     for n in args.resolutions:
         vol = test_volume(n, "figure", "ea").expand(b, -1, -1, -1, -1).contiguous()
         views = V.sample_views(b, seed=1)
@@ -72,16 +78,21 @@ def main() -> None:
         def forward() -> torch.Tensor:
             return M.march(x, views, opt)
 
-        fwd = best_kernel_ms(forward, args.repeats)
-        image = forward()
+        times = {}
+        for recorded in (False, True):                       # the backward looks up again / reads the record
+            M.RECORD_LOOKUPS = recorded
+            fwd = best_kernel_ms(forward, args.repeats)
+            image = forward()
 
-        def backward() -> None:
-            torch.autograd.grad(image.sum(), x, retain_graph=True)
+            def backward() -> None:
+                torch.autograd.grad(image.sum(), x, retain_graph=True)
 
-        bwd = best_kernel_ms(backward, args.repeats)
+            times[recorded] = (fwd, best_kernel_ms(backward, args.repeats))
         floats = b * n * n * M.n_segments(n, 1.0) * 32
-        print(f"{n:>4} | {floor / b:>12.3f} | {floats / floor / 1e6:>10.2f} | {fwd / b:>17.3f} | {bwd / b:>8.3f} | "
-              f"{(fwd + bwd) / floor:>12.2f}", flush=True)
+        row = f"{n:>4} | {floor / b:>12.3f} | {floats / floor / 1e6:>10.2f}"
+        for fwd, bwd in times.values():
+            row += f" | {fwd / b:>7.3f} | {bwd / b:>8.3f} | {(fwd + bwd) / (2 * floor):>7.2f}"
+        print(row, flush=True)
 
 
 if __name__ == "__main__":

@@ -2,6 +2,7 @@
 
     .venv/bin/python benchmarks/train_step_speed.py --against 6e1fc08 [--config quickstart --config paper]
                                                     [--steps 30] [--warmup 5] [--rounds 2] [--set KEY=VALUE ...]
+                                                    [--this-set KEY=VALUE ...]
 
 The older commit's package is unpacked (``git archive``) into a temporary folder and put first on
 ``PYTHONPATH`` of a child process; this checkout's package runs the same way, so both time the
@@ -65,6 +66,9 @@ def main() -> None:
     ap.add_argument("--warmup", type=int, default=5)
     ap.add_argument("--rounds", type=int, default=2)
     ap.add_argument("--set", dest="overrides", action="append", default=[], metavar="KEY=VALUE")
+    ap.add_argument("--this-set", dest="this_overrides", action="append", default=[], metavar="KEY=VALUE",
+                    help="an override for this checkout only (a setting the older commit lacks, e.g. "
+                         "model.precision=bf16)")
     args = ap.parse_args()
     configs = args.config or ["quickstart"]
     with tempfile.TemporaryDirectory() as tmp:
@@ -76,8 +80,9 @@ def main() -> None:
             best = {"old": float("inf"), "new": float("inf")}
             for _ in range(args.rounds):
                 best["old"] = min(best["old"], _time(old, config, args.steps, args.warmup, args.overrides))
-                best["new"] = min(best["new"], _time(ROOT, config, args.steps, args.warmup, args.overrides))
-            label = " ".join([config, *args.overrides])
+                best["new"] = min(best["new"], _time(ROOT, config, args.steps, args.warmup,
+                                                     args.overrides + args.this_overrides))
+            label = " ".join([config, *args.overrides] + [f"(this checkout: {o})" for o in args.this_overrides])
             print(f"| {label} | {best['old']:.4f} | {best['new']:.4f} | {best['old'] / best['new']:.2f}× |", flush=True)
 
 

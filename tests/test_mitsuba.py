@@ -180,9 +180,9 @@ def test_vh_and_ao_read_one_channel_ea_reads_rgba_packets(monkeypatch):
     seen = []
     original = M._Batch.__init__
 
-    def spy(self, data, frames, b, c, n, settings, seed):
+    def spy(self, data, frames, b, c, n, settings, seed, **kw):
         seen.append((settings.model, c, dr_width(data), b * n ** 3))
-        original(self, data, frames, b, c, n, settings, seed)
+        original(self, data, frames, b, c, n, settings, seed, **kw)
 
     monkeypatch.setattr(M._Batch, "__init__", spy)
     monkeypatch.setattr(M, "FREEZE", False)                  # trace, so the spy sees every call
@@ -331,6 +331,16 @@ def test_tiled_lane_order_puts_a_packets_rays_far_apart(n, spp):
     dj = np.abs(packets(j)[:, :, None] - packets(j)[:, None, :])
     apart = np.maximum(di, dj) + np.eye(16, dtype=np.int64)[None] * n   # a lane and itself: excluded
     assert apart.min() >= n // 4
+
+
+@pytest.mark.parametrize("n, spp", [(16, 1), (32, 4), (64, 1)])
+def test_tiled_lane_is_the_inverse_of_tiled_ray(n, spp):
+    """The forward pass writes ray r's records where lane tiled_lane(r) of the tiled backward reads
+    them: tiled_lane ∘ tiled_ray is the identity on every lane of 3 pairs."""
+    M = _marcher()
+    lanes = np.arange(3 * n * n * spp, dtype=np.uint32)
+    ray = M.tiled_ray(M.mi.UInt32(lanes), n, spp)
+    assert np.array_equal(np.asarray(M.tiled_lane(ray, n, spp), dtype=np.int64), lanes.astype(np.int64))
 
 
 @pytest.mark.parametrize("model", ["vh", "ao"])
@@ -521,3 +531,17 @@ def test_a_differentiable_render_too_large_to_record_is_refused_with_its_size(mo
     with pytest.raises(ValueError, match=r"256 rays × 16 segments records 0\.0 GiB"):
         render(x, V.front_view(1), "ea", "mitsuba")
     assert render(x.detach(), V.front_view(1), "ea", "mitsuba").shape == (1, 4, 16, 16)
+
+
+def test_the_ea_gradient_comes_back_channels_last_as_the_generator_computes():
+    """EA's gradient is handed to torch in the layout it was scattered in (channels last, no
+    conversion launch); VH's and AO's in torch's default layout. The values are the closed form's."""
+    for model in ("ea", "ao"):
+        vol = _pair(model, 16, "cloud", batch=2)
+        x = vol.clone().requires_grad_()
+        y = vol.clone().requires_grad_()
+        w = torch.rand(2, 4 if model == "ea" else 1, 16, 16)
+        g = torch.autograd.grad((render(x, OBLIQUE[:2], model, "mitsuba") * w).sum(), x)[0]
+        ref = torch.autograd.grad((render(y, OBLIQUE[:2], model, "closed_form") * w).sum(), y)[0]
+        assert g.is_contiguous(memory_format=torch.channels_last_3d) if model == "ea" else g.is_contiguous()
+        assert (g - ref).norm() / ref.norm() <= 1e-3

@@ -64,11 +64,14 @@ pass that records for the gradient marches the whole ray, because the gradient a
 sample depends on what lies behind it.
 
 Adjoint (one launch, no division by τ, exact at τ = 0). The forward pass of a differentiable call
-records T_k for every ray r and segment k (4 bytes each, at k · rays + r: a packet writes and
-reads neighbouring floats), and beside it the segment's lookup (v, or EA's RGBA as one 16-byte
-packet at the same position), so the backward pass reads each lookup back in order instead of
-making its 8 scattered gathers again (:data:`RECORD_LOOKUPS`; 5 floats per ray and segment
-for EA, within :data:`RECORD_LIMIT`). The backward pass marches each ray back to
+records T_k for every ray r and segment k (4 bytes each), and beside it the segment's lookup
+(v, or EA's RGBA as one 16-byte packet at the same position), so the backward pass reads each
+lookup back instead of making its 8 scattered gathers again (:data:`RECORD_LOOKUPS`; 5 floats
+per ray and segment for EA, within :data:`RECORD_LIMIT`). Ray r's records sit at k · rays + l(r),
+where l(r) is the lane that marches r backwards (:func:`tiled_lane` for the tiled backward
+below, else r): the backward's packets, which march rays far apart, read neighbouring floats,
+and the forward's writes are the strided ones (64³ EA, batch 8: records in ray order cost the
+backward 0.5 ms per image more than they save the forward). The backward pass marches each ray back to
 front, accumulating the suffix radiance R_k = Σ_{m>k} (Π_{k<j<m} τ_j)(1 − τ_m) c_m and the suffix
 transmittance U_k = Π_{j>k} τ_j:
 
@@ -101,11 +104,12 @@ voxels w₀, w₀ + 1 that a row shares, into slots that :func:`_torch_layout` a
 voxels — the same sums (64³ VH/AO backward kernel, batch 8: 28 ms → 11 ms). EA's RGBA packets
 already add per lane.
 
-The gradient leaves in torch's layout ``(B, C, N, N, N)``: a second launch of the backward pass
-(:func:`_torch_layout`) gathers it from the channels-last or pair layout into an array of Dr.Jit's
-allocation cache, which torch then wraps without a copy. Converting it in torch instead allocated
-a fresh B·C·N³ tensor per call, whose page faults cost more than the copy (64³ EA, batch 8,
-measured alone: 10.8 ms a call in torch, 2.0 ms as the gather launch).
+EA's gradient leaves as it was scattered, channels last: torch wraps Dr.Jit's array without a
+copy as a ``(B, 4, N, N, N)`` tensor with channels-last strides, the layout the generator computes
+in (:class:`~mitsuba_platonic.models.Generator`); a gather launch into torch's default layout
+cost 0.9 ms per image at 64³ (batch 8), a third of the backward pass. The pair layout's gradient
+(VH, AO) is summed back into voxels by a second launch (:func:`_torch_layout`) into an array of
+Dr.Jit's allocation cache, which torch also wraps without a copy.
 
 Otherwise (other N or spp, or the CUDA backend) it uses ``Expand`` on the LLVM backend (each
 thread adds into its own copy of the gradient, summed at the end: exact, but the copies cost two
@@ -129,7 +133,7 @@ from .variant import ensure_variant, variant_device
 mi = ensure_variant()
 import drjit as dr  # noqa: E402  (after the variant is set)
 
-__all__ = ["march", "n_segments", "recorded_floats", "segment_transmittance", "tiled_ray", "tiled_backward", "V_MAX", "RECORD_LIMIT"]
+__all__ = ["march", "n_segments", "recorded_floats", "segment_transmittance", "tiled_ray", "tiled_lane", "tiled_backward", "V_MAX", "RECORD_LIMIT"]
 
 #: Density clamp used by AO/EA when step != 1 (log domain).
 V_MAX = 1.0 - 1e-6
@@ -219,9 +223,11 @@ class _Batch:
     """
 
     def __init__(self, data: Any, frames: Any, b: int, c: int, n: int, opt: RenderSettings, seed: int,
-                 tiled: bool = False):
+                 tiled: bool = False, records_tiled: bool = False):
         self.data, self.frames, self.B, self.C, self.N, self.opt = data, frames, b, c, n, opt
         self.tiled = tiled
+        #: the records are laid out in the tiled backward's lane order (:meth:`forward`)
+        self.records_tiled = tiled or records_tiled
         # tiled: whole pairs of idle lanes pad the launch to > 2 blocks per thread (:func:`_tiled_pairs`)
         self.n_lanes = _tiled_pairs(b) * n * n * opt.spp if tiled else b * n * n * opt.spp
         # tiled: no two threads add into the same volume (module docstring)
@@ -392,7 +398,10 @@ class _Batch:
         ea = self.model == "ea"
         n_steps, ε = self.n_steps, self.ε
         whole = whole and ε == 0.0                                # the gradient needs every segment
-        ray = dr.arange(mi.UInt32, self.n_rays)                   # T_k of ray r is record[k · n_rays + r]
+        ray = dr.arange(mi.UInt32, self.n_rays)
+        # T_k of ray r is record[k · n_rays + slot(r)], slot(r) = the lane that marches r backwards:
+        # a backward packet then reads 16 neighbouring records (module docstring, "Adjoint")
+        slot = tiled_lane(ray, self.N, self.opt.spp) if self.records_tiled else ray
         k, k_end = (mi.UInt32(0), mi.UInt32(n_steps)) if boxes is None else self.box_segments(boxes)
         T = mi.Float(1.0)
         depth = mi.Float(0.0)                                     # VH: optical depth Σ s v
@@ -400,11 +409,11 @@ class _Batch:
         active = k < k_end
         while active:
             if record is not None:
-                dr.scatter(record, T, k * self.n_rays + ray)       # neighbouring lanes, neighbouring floats
+                dr.scatter(record, T, k * self.n_rays + slot)
             p, s = self.segment(k)
             v, c = self.lookup(self.corners(p))
             if looks is not None:                                 # the backward's lookup, read back in order
-                self.keep_lookup(looks, k * self.n_rays + ray, v, c)
+                self.keep_lookup(looks, k * self.n_rays + slot, v, c)
             if self.model == "vh":
                 depth += s * v
                 T = dr.exp(-depth)                                # exactly the closed form's exp(−Σ v)
@@ -449,7 +458,8 @@ class _Batch:
         into ``grad`` (same layout as ``data``). δρ: ∂L/∂ρ or ∂L/∂α per ray; δC: ∂L/∂C (EA);
         ``looks``: the forward's lookups (:meth:`keep_lookup`), else the lookups are made again."""
         ea = self.model == "ea"
-        ray = self.ray
+        # this lane's records: lane l of a tiled pass (the forward wrote them there), else ray r = l
+        slot = dr.arange(mi.UInt32, self.n_lanes)
 
         # Back to front from where the forward march stopped (only a positive ε stops it early),
         # with the suffix radiance R and the suffix transmittance U
@@ -459,7 +469,7 @@ class _Batch:
         active = k > 0
         while active:
             k -= 1
-            at = k * self.n_rays + ray                            # (segment k, ray r) in the records
+            at = k * self.n_rays + slot                           # (segment k, this lane's ray) in the records
             T_k = dr.gather(mi.Float, record, at, self.real)
             p, s = self.segment(k)
             corners = self.corners(p)
@@ -499,26 +509,14 @@ def pair_layout(tiled: bool, c: int, opt: RenderSettings) -> bool:
     return tiled and c == 1 and opt.filter == "trilinear"
 
 
-def _torch_layout(grad: Any, b: int, c: int, n: int, pairs: bool) -> Any:
-    """The backward's gradient → a new Float in torch's layout ``(B, C, N, N, N)`` (one gather launch).
-
-    From the pair layout ``(B, N, N, N + 1, 2)`` (:meth:`_Batch.splat`, C = 1): ∂ of voxel w =
-    slot w + 1's first half + slot w's second half. From channels last ``(B, N, N, N, C)``: element
-    (b, ch, voxel) is element (b, voxel, ch). A single-channel gradient without pairs is already in
-    torch's layout and is returned as it is.
-    """
-    if c == 1 and not pairs:
-        return grad
-    V = n ** 3
-    i = dr.arange(mi.UInt32, b * c * V)                       # element i of the (B, C, N, N, N) result
-    if pairs:
-        row, w = i // n, i % n                                # row (b, d, h) of N voxels, voxel w in it
-        slot = row * (2 * (n + 1)) + 2 * w                    # slot w of the row (N + 1 slots of 2 floats)
-        return dr.gather(mi.Float, grad, slot + 2) + dr.gather(mi.Float, grad, slot + 1)
-    # (gathering per result element measured faster than reading packets and scattering channels:
-    # 2.0 against 3.2 ms for 64³ EA, batch 8; torch's permuted copy into a fresh tensor: 10.8 ms)
-    bc, voxel = i // V, i % V
-    return dr.gather(mi.Float, grad, ((bc // c) * V + voxel) * c + bc % c)
+def _torch_layout(grad: Any, b: int, n: int) -> Any:
+    """The backward's single-channel gradient in the pair layout ``(B, N, N, N + 1, 2)``
+    (:meth:`_Batch.splat`) → a new Float in torch's layout ``(B, 1, N, N, N)`` (one gather launch):
+    ∂ of voxel w = slot w + 1's first half + slot w's second half."""
+    i = dr.arange(mi.UInt32, b * n ** 3)                      # element i of the (B, 1, N, N, N) result
+    row, w = i // n, i % n                                    # row (b, d, h) of N voxels, voxel w in it
+    slot = row * (2 * (n + 1)) + 2 * w                        # slot w of the row (N + 1 slots of 2 floats)
+    return dr.gather(mi.Float, grad, slot + 2) + dr.gather(mi.Float, grad, slot + 1)
 
 
 def tiled_ray(lane: Any, n: int, spp: int) -> Any:
@@ -533,6 +531,19 @@ def tiled_ray(lane: Any, n: int, spp: int) -> Any:
     ii, jj, sub = (m // t) % t, m % t, m // (t * t)               # position in the tile, sub-sample
     i, j = (tile // 4) * t + ii, (tile % 4) * t + jj
     return b * P + (i * n + j) * spp + sub
+
+
+def tiled_lane(ray: Any, n: int, spp: int) -> Any:
+    """The lane of the tiled order that marches ``ray`` (a UInt32 array): the inverse of
+    :func:`tiled_ray`."""
+    P, t = n * n * spp, n // 4
+    b = ray // P
+    pixel = (ray - b * P) // spp
+    sub = ray - b * P - pixel * spp
+    i, j = pixel // n, pixel % n
+    tile = (i // t) * 4 + j // t                                  # which tile, so which lane of a packet
+    m = (sub * t + i % t) * t + j % t                             # which packet: sub-sample, row, column in the tile
+    return b * P + m * 16 + tile
 
 
 def _tiled_pairs(b: int) -> int:
@@ -613,6 +624,7 @@ class _Static:
     replays otherwise."""
 
     def __init__(self, shape: Tuple[int, int, int], opt: RenderSettings, record: bool, tiled: bool = False):
+        # tiled: the backward's lanes in the tiled order; the forward's records in that order
         self.shape, self.opt, self.record, self.tiled = shape, opt, record, tiled
         # Dr.Jit's thread count too: the backward's Expand scatters size their per-thread copies of
         # the gradient when a kernel is recorded, so a replay under more threads would overrun them
@@ -631,7 +643,7 @@ def _forward_pass(data: Any, frames: Any, seed: Any, boxes: Optional[Any], stati
     on its Dr.Jit arrays (volume, camera frames, seed, boxes) and ``static``, so ``dr.freeze`` can
     replay its kernel without re-tracing (see :data:`FREEZE`)."""
     (b, c, n), opt, record = static.shape, static.opt, static.record
-    batch = _Batch(data, frames, b, c, n, opt, seed)
+    batch = _Batch(data, frames, b, c, n, opt, seed, records_tiled=static.tiled)
     vh = opt.model == "vh"
     # every T_k (and lookup) the backward reads (k < segments marched) is written first: no clearing
     Ts = dr.empty(mi.Float, batch.n_rays * batch.n_steps) if record and not vh else None
@@ -645,8 +657,9 @@ def _forward_pass(data: Any, frames: Any, seed: Any, boxes: Optional[Any], stati
 
 
 def _backward_pass(data: Any, frames: Any, seed: Any, Ts: Any, marched: Any, δ: list, static: _Static) -> Any:
-    """The backward launches: ∂L/∂volume in torch's layout ``(B, C, N, N, N)`` from the per-ray
-    gradients δ (the march, then :func:`_torch_layout`)."""
+    """The backward launch: ∂L/∂volume from the per-ray gradients δ, in the volume's channels-last
+    layout ``(B, N, N, N, C)`` (EA), or in torch's ``(B, 1, N, N, N)`` (VH, AO: from the pair
+    layout by a second launch, :func:`_torch_layout`)."""
     (b, c, n), opt = static.shape, static.opt
     Ts, looks = Ts
     batch = _Batch(data, frames, b, c, n, opt, seed, tiled=static.tiled)
@@ -662,7 +675,9 @@ def _backward_pass(data: Any, frames: Any, seed: Any, Ts: Any, marched: Any, δ:
     else:
         batch.backward(Ts, marched, grad, δρ, δC, looks)
     dr.eval(grad)                                             # the backward launch
-    out = _torch_layout(grad, b, c, n, batch.pairs)
+    if not batch.pairs:
+        return grad                                           # channels last (C = 4) or torch's (C = 1)
+    out = _torch_layout(grad, b, n)
     dr.eval(out)                                              # and its layout conversion
     return out
 
@@ -752,7 +767,9 @@ class _March(torch.autograd.Function):
         seed_arr = dr.opaque(mi.UInt32, seed if opt.jitter else 0)   # an input array: a new seed replays
         skip = SKIP_EMPTY and not record                          # forward-only: skip empty space
         boxes = _shared(occupied_boxes(volume), keep) if skip else None
-        values, Ts, marched = run(data, frames, seed_arr, boxes, _Static((b, c, n), opt, record))
+        # the records in the order of the backward's lanes: tiled where the backward will be
+        records_tiled = record and tiled_backward(n, opt.spp)
+        values, Ts, marched = run(data, frames, seed_arr, boxes, _Static((b, c, n), opt, record, records_tiled))
         image = _per_ray_to_image(values, b, n, opt.spp)
         ctx.args = (data, frames, seed_arr, Ts, marched, _Static((b, c, n), opt, False), lanes)
         ctx.keep = keep
@@ -770,9 +787,9 @@ class _March(torch.autograd.Function):
             _spread_over_threads(lanes, 1)
         run = _frozen_backward if FREEZE else _backward_pass
         grad = run(data, frames, seed_arr, Ts, marched, δ, _Static(static.shape, static.opt, False, tiled))
-        # torch's default layout, in Dr.Jit's memory: a channels-last view would carry its strides
-        # into the generator's backward (32³ training step, EA: 62 → 58 ms with a copy)
-        out = grad.torch().view(b, c, n, n, n)
+        # in Dr.Jit's memory, no copy: EA's gradient channels last as it was scattered (the layout G
+        # computes in), VH's and AO's in torch's default layout
+        out = grad.torch().view(b, n, n, n, c).permute(0, 4, 1, 2, 3)
         del δ
         dr.sync_thread()                                          # nothing in flight reads ``keep``
         return out, None, None, None

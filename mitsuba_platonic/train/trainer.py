@@ -274,7 +274,7 @@ class Trainer:
         z = E(x) if rec else self._shard(z_prior).to(self.device)
         if ring_k is None:
             v = G(z)
-            v_view, v_input = v.repeat_interleave(K, 0), v
+            v_view, v_input = (v.repeat_interleave(K, 0) if K > 1 else v), v   # K = 1: no copy
             if "P" in self.modules:                          # train.pose: elevation: upright v, seen from θ̂
                 v_input = tilt(v, self.modules["P"](z))
         else:
