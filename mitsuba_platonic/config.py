@@ -220,18 +220,19 @@ def load_config(path: Optional[Union[str, Path]] = None, overrides: Sequence[str
 def config_file(path: Union[str, Path]) -> Path:
     """The config file ``path`` names: the file itself where it exists, else the packaged config
     of that name (``paper``, ``paper.yaml`` or ``configs/paper.yaml``: the repository's configs
-    travel inside the package, so they are found from any folder). ConfigError otherwise."""
+    travel inside the package, so they are found from any folder, also one that holds a folder of
+    the same name, such as a run folder ``paper/``). ConfigError otherwise."""
 
     p = Path(path)
     if p.is_file():
         return p
-    if p.exists():
-        raise ConfigError(f"config file {str(path)!r} is not a file")
     if p.parent in (Path("."), Path("configs")) and p.suffix in ("", ".yaml"):
         try:
             return config_path(p.name)
         except FileNotFoundError:
             pass
+    if p.exists():
+        raise ConfigError(f"config file {str(path)!r} is not a file")
     raise ConfigError(f"config file {str(path)!r} does not exist (packaged configs, found by name from any "
                       f"folder: {', '.join(config_names())})")
 

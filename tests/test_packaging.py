@@ -68,6 +68,17 @@ def test_configs_are_found_by_name_from_any_folder(tmp_path, monkeypatch):
         config_file("elsewhere/paper.yaml")                                  # a path is never replaced
 
 
+def test_a_folder_named_like_a_packaged_config_does_not_hide_it(tmp_path, monkeypatch):
+    """A run folder ``paper/`` (``run.out_dir=paper``) beside the command: ``--config paper`` is
+    still the packaged config; a folder with no packaged config of its name is refused by name."""
+    monkeypatch.chdir(tmp_path)
+    (tmp_path / "paper").mkdir()
+    (tmp_path / "mine").mkdir()
+    assert config_file("paper") == resources.configs_folder() / "paper.yaml"
+    with pytest.raises(ConfigError, match="'mine' is not a file"):
+        config_file("mine")
+
+
 def test_skies_missing_from_an_installed_package_bake_into_the_user_cache(tmp_path, monkeypatch):
     """An installed package (no checkout) may be read-only: skies it lacks go to the user's cache."""
     monkeypatch.setattr(resources, "from_checkout", lambda: False)
