@@ -79,6 +79,11 @@ class Config:
             raise ConfigError(f"train.colour_tv: colour needs render.model 'ea', got {self.render.model!r}")
         if "colour" in self.train.photo_augment and self.render.model != "ea":
             raise ConfigError(f"train.photo_augment: 'colour' needs colour, render.model 'ea'; got {self.render.model!r}")
+        if self.model.photo_colour and (self.train.task != "reconstruction" or self.render.model != "ea"
+                                        or self.train.mode != "platonic"):
+            raise ConfigError("model.photo_colour: the colour is read from the input photo, so it needs "
+                              "train.task 'reconstruction', train.mode 'platonic' and render.model 'ea'; got "
+                              f"{self.train.task!r}, {self.train.mode!r} and {self.render.model!r}")
         if self.train.mode in MODES_3D and self.data.source != "procedural":
             raise ConfigError(f"train.mode: {self.train.mode!r} needs 3D ground truth, i.e. data.source 'procedural'")
         if self.train.mode == "prgan":                       # the PrGAN-style baseline: VH, 8 views on one ring

@@ -38,7 +38,7 @@ from torch import nn
 
 from .data.photos import decode_image, prepare_image
 from .errors import UserError
-from .models import Encoder, Generator, NetConfig, PoseHead, init_weights
+from .models import Encoder, Generator, NetConfig, PoseHead, init_weights, photo_colour
 from .render.closed_form import tilt
 from .render.settings import RenderSettings
 from .volume import CHANNELS
@@ -171,12 +171,14 @@ class Model(nn.Module):
         frames, on the model's device (eval mode: BatchNorm uses running statistics; the previous
         mode is restored). A PrGAN-style model's G gets the code of ring view 0, the input view.
         With a pose head, G's upright volume is tilted by the estimated elevation θ̂ = P(z),
-        ``tilt(G(z), θ̂)`` clamped to [0, 1] (trilinear round-off)."""
+        ``tilt(G(z), θ̂)`` clamped to [0, 1] (trilinear round-off). With ``photo_colour``, G also
+        gets each image's mean colour (:func:`~mitsuba_platonic.models.photo_colour`)."""
         self._needs_encoder()
 
         def run() -> torch.Tensor:
-            z = self.E(images.to(self.device))
-            v = self.G(self.code(z))
+            x = images.to(self.device)
+            z = self.E(x)
+            v = self.G(self.code(z), photo_colour(x)) if self.net.photo_colour else self.G(self.code(z))
             return v if self.P is None else tilt(v, self.P(z)).clamp(0.0, 1.0)
 
         return self._eval(run)
@@ -202,9 +204,11 @@ class Model(nn.Module):
     def generate(self, n: int, seed: int = 0) -> torch.Tensor:
         """G(z), z ~ N(0, I) drawn by a generator seeded with ``seed`` → ``(n, C, R, R, R)`` (a
         PrGAN-style model's G gets the code of ring view 0; a model with a pose head gives its
-        upright volumes, in their own frame: no input view to tilt them into)."""
-        z = torch.randn(n, self.latent, generator=torch.Generator().manual_seed(seed))
-        return self._eval(lambda: self.G(self.code(z.to(self.device))))
+        upright volumes, in their own frame: no input view to tilt them into; a model with
+        ``photo_colour`` has no photo to read a colour from and offsets from grey)."""
+        z = torch.randn(n, self.latent, generator=torch.Generator().manual_seed(seed)).to(self.device)
+        grey = torch.full((n, 3), 0.5, device=self.device) if self.net.photo_colour else None   # no photo: logit 0
+        return self._eval(lambda: self.G(self.code(z)) if grey is None else self.G(self.code(z), grey))
 
     def _eval(self, fn):
         was = self.training

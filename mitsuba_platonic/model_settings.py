@@ -1,7 +1,7 @@
 """The model section of a config (``model:``): the networks' sizes, arithmetic and how they start.
 
 :class:`ModelConfig` is the section's dataclass, beside the networks it configures
-(:mod:`mitsuba_platonic.models`). Seven of its keys (:data:`NET_KEYS`) are the networks' own settings
+(:mod:`mitsuba_platonic.models`). Eight of its keys (:data:`NET_KEYS`) are the networks' own settings
 (their shapes and arithmetic), :class:`~mitsuba_platonic.models.NetConfig`'s fields of the same names;
 :meth:`ModelConfig.net_config` hands them over, with what the other sections decide (the
 image formation's channels, the PrGAN view code, the pose head), so the two never disagree.
@@ -21,7 +21,7 @@ from .settings_checks import choice, non_negative, positive
 __all__ = ["ModelConfig", "NET_KEYS"]
 
 #: The model keys that :class:`~mitsuba_platonic.models.NetConfig` takes as they are.
-NET_KEYS = ("resolution", "latent", "width", "norm", "encoder_hidden", "upsample", "precision")
+NET_KEYS = ("resolution", "latent", "width", "norm", "encoder_hidden", "upsample", "precision", "photo_colour")
 
 
 @dataclass
@@ -38,6 +38,8 @@ class ModelConfig:
     init: how E and G start, 'dcgan' (the paper's) | 'he' (scaled by fan-in: "E and G that start blind").
     critic_width: channels of D's and D3's first layer, doubling per stage; null: ``width`` (same section).
     precision: the networks' arithmetic, 'fp32' | 'bf16' (convolutions in bfloat16: "Where a step's time goes").
+    photo_colour: G's colour as an offset from the input photo's mean colour (reconstruction, EA:
+    "A colour read from the photo").
     """
 
     resolution: int = 32
@@ -50,6 +52,7 @@ class ModelConfig:
     init: str = "dcgan"
     critic_width: Optional[int] = None
     precision: str = "fp32"
+    photo_colour: bool = False
 
     def validate(self) -> "ModelConfig":
         """Check this section's values; raise :class:`~mitsuba_platonic.settings_checks.ConfigError`

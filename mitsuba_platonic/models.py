@@ -25,13 +25,13 @@ from __future__ import annotations
 import contextlib
 import math
 from dataclasses import dataclass
-from typing import ContextManager, List
+from typing import ContextManager, List, Optional
 
 import torch
 from torch import nn
 
 __all__ = ["NORMS", "UPSAMPLES", "INITS", "PRECISIONS", "NetConfig", "Encoder", "Generator", "Discriminator",
-           "VolumeDiscriminator", "PoseHead", "ResizeConv3d", "init_weights", "init_critic_he", "init_he"]
+           "VolumeDiscriminator", "PoseHead", "ResizeConv3d", "photo_colour", "COLOUR_MIN", "init_weights", "init_critic_he", "init_he"]
 
 NORMS = ("batch", "instance", "none")
 #: How G doubles its resolution: the paper's transposed convolution (k4, s2, p1), or a nearest
@@ -70,8 +70,9 @@ class NetConfig:
     PrGAN-style baseline, ``train.mode: prgan``: a one-hot of one of 8 ring views; 0: none, G
     sees z only); upsample: how G's stages double the resolution (:data:`UPSAMPLES`); pose:
     whether a :class:`PoseHead` reads the input camera's elevation from z (``train.pose:
-    elevation``); precision: the networks' arithmetic (:data:`PRECISIONS`). A config's model section
-    builds it (:meth:`~mitsuba_platonic.model_settings.ModelConfig.net_config`, its seven keys of the same names)."""
+    elevation``); precision: the networks' arithmetic (:data:`PRECISIONS`); photo_colour: G's colour is an
+    offset from the input photo's mean colour (:meth:`Generator.forward`). A config's model section
+    builds it (:meth:`~mitsuba_platonic.model_settings.ModelConfig.net_config`, its eight keys of the same names)."""
 
     resolution: int = 32
     volume_channels: int = 4
@@ -84,6 +85,7 @@ class NetConfig:
     view_codes: int = 0
     pose: bool = False
     precision: str = "fp32"
+    photo_colour: bool = False
 
     def validate(self) -> "NetConfig":
         if self.resolution not in RESOLUTIONS:
@@ -107,6 +109,10 @@ class NetConfig:
             raise ValueError(f"pose must be True or False, got {self.pose!r}")
         if self.precision not in PRECISIONS:
             raise ValueError(f"precision must be one of {PRECISIONS}, got {self.precision!r}")
+        if not isinstance(self.photo_colour, bool):
+            raise ValueError(f"photo_colour must be True or False, got {self.photo_colour!r}")
+        if self.photo_colour and self.volume_channels != 4:
+            raise ValueError("photo_colour needs colour: volume_channels 4")
         return self
 
     @property
@@ -222,16 +228,46 @@ class Generator(nn.Module):
         """G's (transposed) convolutions, input first; the last one gives the volume."""
         return [m for m in self.net if isinstance(m, (nn.Conv3d, nn.ConvTranspose3d))]
 
-    def forward(self, z: torch.Tensor) -> torch.Tensor:
+    def forward(self, z: torch.Tensor, colour: Optional[torch.Tensor] = None) -> torch.Tensor:
+        """The volume for codes ``z``. With ``photo_colour`` (and only then) ``colour`` is the input
+        photos' mean colour m ``(B, 3)`` (:func:`photo_colour`), and G's colour logits are offsets
+        from it: c = σ(ℓ + logit m) per channel, the density's σ(ℓ) as always. A colour the
+        encoder has not learnt (an orange tree among green ones) is then still the photo's, and
+        an untrained G's colour (ℓ ≈ 0) starts at m instead of grey."""
         n = self.cfg.latent + self.cfg.view_codes
         if z.dim() != 2 or z.shape[1] != n:
             what = f"z and a view code, (B, {self.cfg.latent} + {self.cfg.view_codes})" if self.cfg.view_codes \
                 else f"z of shape (B, {n})"
             raise ValueError(f"G expects {what}, got {tuple(z.shape)}")
+        if self.cfg.photo_colour != (colour is not None):
+            raise ValueError("G was built with photo_colour and needs the photos' mean colour (B, 3)"
+                             if self.cfg.photo_colour else "G was built without photo_colour: it takes no colour")
+        if colour is not None and colour.shape != (z.shape[0], 3):
+            raise ValueError(f"G expects the photos' mean colour of shape ({z.shape[0]}, 3), got {tuple(colour.shape)}")
         x = z[:, :, None, None, None].contiguous(memory_format=torch.channels_last_3d)
         with arithmetic(self.cfg.precision, z):
-            v = self.net(x)
-        return v.float().contiguous()                       # float32, in the usual layout for the renderers
+            logits = self.net[:-1](x)                       # everything but the final sigmoid
+        logits = logits.float()
+        if colour is not None:
+            m = colour.to(logits).clamp(COLOUR_MIN, 1.0 - COLOUR_MIN)
+            offset = torch.cat([torch.logit(m), m.new_zeros(m.shape[0], 1)], dim=1)   # density: no offset
+            logits = logits + offset[:, :, None, None, None]
+        return torch.sigmoid(logits).contiguous()           # float32, in the usual layout for the renderers
+
+
+#: Where :func:`photo_colour` clamps a mean colour, so that its logit stays finite (≈ ±5.5).
+COLOUR_MIN = 1.0 / 255.0
+
+
+def photo_colour(images: torch.Tensor) -> torch.Tensor:
+    """The mean colour of the covered pixels of premultiplied RGBA images ``(B, 4, R, R)``:
+    m = Σ_pixels (r, g, b) / Σ_pixels α, ``(B, 3)``; ½ (grey) for an image with nothing in it."""
+    if images.dim() != 4 or images.shape[1] != 4:
+        raise ValueError(f"photo_colour expects premultiplied RGBA images (B, 4, R, R), got {tuple(images.shape)}")
+    coverage = images[:, 3].sum(dim=(1, 2))
+    total = images[:, :3].sum(dim=(2, 3))
+    m = total / coverage.clamp_min(1e-8)[:, None]
+    return torch.where(coverage[:, None] > 1e-8, m, torch.full_like(m, 0.5)).clamp(0.0, 1.0)
 
 
 class Discriminator(nn.Module):

@@ -460,3 +460,80 @@ def test_precision_reaches_every_network_from_the_config():
     model = Model.from_config(cfg)
     assert model.E.cfg.precision == model.G.cfg.precision == critic_config(cfg).precision == "bf16"
     assert Model.from_config(load_config(None, [])).G.cfg.precision == "fp32"
+
+
+# -- a colour read from the photo (model.photo_colour) ---------------------------------------------
+
+def test_photo_colour_is_the_mean_colour_of_the_covered_pixels():
+    """Premultiplied RGBA: a half-covered patch of colour (0.8, 0.4, 0.1) at α ½ and a fully
+    covered one of (0.2, 0.6, 1.0) average by coverage; an empty image is grey."""
+    from mitsuba_platonic.models import photo_colour
+    x = torch.zeros(2, 4, 8, 8)
+    x[0, :3, :4] = torch.tensor([0.8, 0.4, 0.1])[:, None, None] * 0.5
+    x[0, 3, :4] = 0.5
+    x[0, :3, 4:6] = torch.tensor([0.2, 0.6, 1.0])[:, None, None]
+    x[0, 3, 4:6] = 1.0
+    want = (torch.tensor([0.8, 0.4, 0.1]) * 0.5 * 32 + torch.tensor([0.2, 0.6, 1.0]) * 16) / (0.5 * 32 + 16)
+    m = photo_colour(x)
+    assert torch.allclose(m[0], want, atol=1e-6)
+    assert torch.equal(m[1], torch.full((3,), 0.5))
+    with pytest.raises(ValueError, match="premultiplied RGBA"):
+        photo_colour(torch.zeros(2, 1, 8, 8))
+
+
+def test_a_photo_colour_generator_offsets_its_colour_logits_from_the_photos():
+    """With G's colour logits at 0 (last layer's colour weights and biases zeroed) every voxel's
+    colour is the photo's mean colour m, even at m's extremes (clamped to [1/255, 254/255]: finite
+    logits); the density does not depend on m; G without photo_colour refuses a colour, and G with
+    it needs one of shape (B, 3)."""
+    from mitsuba_platonic.models import COLOUR_MIN
+    torch.manual_seed(0)
+    G = Generator(NetConfig(resolution=16, width=8, latent=16, norm="none", upsample="resize_last",
+                            photo_colour=True))
+    last = G.convolutions()[-1]
+    with torch.no_grad():
+        last.weight[:3].zero_()
+        last.bias[:3].zero_()
+    z = torch.randn(3, 16)
+    m = torch.tensor([[0.9, 0.3, 0.05], [0.0, 1.0, 0.5], [0.5, 0.5, 0.5]])
+    v = G(z, m)
+    want = m.clamp(COLOUR_MIN, 1 - COLOUR_MIN)[:, :, None, None, None].expand(-1, -1, 16, 16, 16)
+    assert torch.allclose(v[:, :3], want, atol=1e-6)
+    assert torch.isfinite(v).all()
+    assert torch.equal(v[:, 3], G(z, torch.full((3, 3), 0.5))[:, 3])
+    with pytest.raises(ValueError, match="needs the photos' mean colour"):
+        G(z)
+    with pytest.raises(ValueError, match=r"\(3, 3\)"):
+        G(z, m[:, :2])
+    with pytest.raises(ValueError, match="takes no colour"):
+        Generator(NetConfig(resolution=16, width=8, latent=16))(z, m)
+    with pytest.raises(ValueError, match="volume_channels 4"):
+        NetConfig(volume_channels=1, image_channels=1, photo_colour=True).validate()
+
+
+@pytest.mark.parametrize("override", ["train.task=generation", "render.model=vh"])
+def test_photo_colour_is_refused_where_there_is_no_photo_or_no_colour(override):
+    extra = ["data.formation=vh"] if override == "render.model=vh" else []
+    with pytest.raises(ConfigError, match="model.photo_colour"):
+        load_config(None, ["model.photo_colour=true", override, *extra])
+
+
+def test_a_photo_colour_model_reconstructs_in_each_photos_colour():
+    """Model.reconstruct hands G each image's mean colour: with the colour logits at 0, a red and a
+    blue photo give red and blue volumes from the same E and G; generate() offsets from grey."""
+    from mitsuba_platonic.model import Model
+    cfg = load_config(None, ["model.photo_colour=true", "model.resolution=16", "model.width=4", "model.latent=8",
+                             "model.upsample=resize_last"])
+    model = Model.from_config(cfg)
+    last = model.G.convolutions()[-1]                         # a k3 convolution: output channels first
+    with torch.no_grad():
+        last.weight[:3].zero_()
+        last.bias[:3].zero_()
+    x = torch.zeros(2, 4, 16, 16)
+    x[:, 3, 4:12, 4:12] = 1.0
+    x[0, 0, 4:12, 4:12] = 1.0                                 # red
+    x[1, 2, 4:12, 4:12] = 1.0                                 # blue
+    v = model.reconstruct(x)
+    assert v[0, 0].min() > 0.99 and v[0, 2].max() < 0.01
+    assert v[1, 2].min() > 0.99 and v[1, 0].max() < 0.01
+    assert torch.allclose(model.generate(2)[:, :3], torch.full((2, 3, 16, 16, 16), 0.5))

@@ -100,6 +100,32 @@ def test_a_bf16_step_with_r1_and_the_pose_head_changes_every_network(tmp_path):
     assert {k: _changed(before[k], m) for k, m in trainer.nets.items()} == {k: True for k in trainer.nets}
 
 
+def test_a_photo_colour_step_hands_g_the_mean_colour_of_es_own_input(tmp_path, monkeypatch):
+    """``model.photo_colour``: in a step, G gets the mean colour of exactly the photos E read
+    (after ``photo_augment``'s recolouring), and E, G and D all move."""
+    from mitsuba_platonic import models
+    cfg = _cfg(tmp_path, "model.photo_colour=true", "render.backend=mitsuba", "render.model=ea", "data.formation=ea",
+               "train.task=reconstruction", "train.photo_augment=[flip, colour]")
+    trainer = Trainer(cfg, load_training_data(cfg, progress=False), torch.device("cpu"))
+    seen = {}
+    def keep_input(module, inputs, output):                  # returns None: E's output stays as it is
+        seen.setdefault("x", inputs[0].detach().clone())
+
+    trainer.nets["E"].register_forward_hook(keep_input)
+    original = models.Generator.forward
+
+    def spy(self, z, colour=None):
+        seen.setdefault("colour", colour.detach().clone())
+        return original(self, z, colour)
+
+    monkeypatch.setattr(models.Generator, "forward", spy)
+    before = {k: _params(m) for k, m in trainer.nets.items()}
+    out = trainer.step(0)
+    assert all(np.isfinite(v) for v in out.values()), out
+    assert torch.allclose(seen["colour"], models.photo_colour(seen["x"]))
+    assert all(_changed(before[k], trainer.nets[k]) for k in ("E", "G", "D"))
+
+
 def _input_view_mse(trainer, batch):
     """The reconstruction error computed here, not by the trainer: render G(E(x)) from the input
     view with the Mitsuba ray marcher (the trainer renders with the closed form) and take the MSE
