@@ -4,7 +4,7 @@ Per step, with a generator seeded by (run seed, step) so a resumed run draws exa
 uninterrupted one would:
 
 1. sample a batch of real images x and, per volume, ``random_views`` views ω ~ p_view;
-2. z = E(x) (reconstruction) or z ~ N(0, I) (generation); v = G(z);
+2. z = E(x) (reconstruction) or z ~ N(0, I) (generation); v = G(z) (with ``model.photo_colour``: G(z, m(x)));
 3. I_view = R(ω, v); for reconstruction also I_front = R(ω₀, v) (the input view by convention);
 4. ``d_steps`` D updates on x vs I_view (each skipped, and the rest with it, while D's soft
    accuracy on this batch, ½(mean σ(l_real) + 1 − mean σ(l_fake)), is above ``d_gate``); with
