@@ -771,16 +771,16 @@ class _March(torch.autograd.Function):
         records_tiled = record and tiled_backward(n, opt.spp)
         values, Ts, marched = run(data, frames, seed_arr, boxes, _Static((b, c, n), opt, record, records_tiled))
         image = _per_ray_to_image(values, b, n, opt.spp)
-        ctx.args = (data, frames, seed_arr, Ts, marched, _Static((b, c, n), opt, False), lanes)
+        ctx.args = (data, frames, seed_arr, Ts, marched, _Static((b, c, n), opt, False), lanes, records_tiled)
         ctx.keep = keep
         return image
 
     @staticmethod
     def backward(ctx, grad_image: torch.Tensor):
-        data, frames, seed_arr, Ts, marched, static, lanes = ctx.args
+        data, frames, seed_arr, Ts, marched, static, lanes, records_tiled = ctx.args
         δ = list(_image_to_per_ray(grad_image.to(torch.float32), static.opt.spp, ctx.keep))
         b, c, n = static.shape
-        tiled = tiled_backward(n, static.opt.spp)
+        tiled = records_tiled                                     # the lane order the forward recorded in
         if tiled:
             _set_block_size(n * n * static.opt.spp)               # one block per pair: threads own volumes
         else:
