@@ -226,8 +226,8 @@ class _Batch:
                  tiled: bool = False, records_tiled: bool = False):
         self.data, self.frames, self.B, self.C, self.N, self.opt = data, frames, b, c, n, opt
         self.tiled = tiled
-        #: the records are laid out in the tiled backward's lane order (:meth:`forward`)
-        self.records_tiled = tiled or records_tiled
+        #: the forward pass writes its records in the tiled backward's lane order (:meth:`forward`)
+        self.records_tiled = records_tiled
         # tiled: whole pairs of idle lanes pad the launch to > 2 blocks per thread (:func:`_tiled_pairs`)
         self.n_lanes = _tiled_pairs(b) * n * n * opt.spp if tiled else b * n * n * opt.spp
         # tiled: no two threads add into the same volume (module docstring)
