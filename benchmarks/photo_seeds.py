@@ -5,8 +5,9 @@
 Each EVAL_DIR is the ``--out`` folder of ``platonic evaluate --run RUN`` on a photo run
 (``results.json``, its first row: the trained model). Per label it prints, for every seed's
 folder and as mean and spread (max − min) over them: the two-sample critic's accuracy per band
-(0.5: the renders pass for held-out photos), the side and back roughness ratios, the input-view,
-side and back ΔE, the input-view MAE and the card count. The issue's test of a new config is a
+(0.5: the renders pass for held-out photos), the share of held-out photos its critics call photos
+(below ½: the critic memorised its training photos, docs/evaluation.md), the side and back
+roughness ratios, the input-view, side and back ΔE, the input-view MAE and the card count. The issue's test of a new config is a
 lower novel-view accuracy by more than the spread of the seeds. Figures only.
 """
 
@@ -20,7 +21,7 @@ from typing import Dict, List, Optional
 import numpy as np
 
 COLUMNS = [("c2st_input", "acc. input", 3), ("c2st_near", "acc. near", 3), ("c2st_side", "acc. side", 3),
-           ("c2st_back", "acc. back", 3), ("roughness_side", "rough. side", 2), ("roughness_back", "rough. back", 2),
+           ("c2st_back", "acc. back", 3), ("c2st_photo_pass", "photos passed", 2), ("roughness_side", "rough. side", 2), ("roughness_back", "rough. back", 2),
            ("delta_e_input", "ΔE input", 1), ("delta_e_side", "ΔE side", 1), ("delta_e_back", "ΔE back", 1),
            ("input_view_mae", "input MAE", 4), ("not_cards", "not cards", 0)]
 

@@ -108,7 +108,28 @@ def test_an_empty_reconstruction_is_told_apart_everywhere(data):
     _, train, _, test = data
     j = J.judge(lambda x: torch.zeros(len(x), 4, N, N, N), train, test, SETTINGS, steps=150, repeats=1)
     assert min(j.c2st["accuracy"].values()) >= 0.95, j.c2st["accuracy"]
+    assert j.c2st["photo_pass"] >= 0.95                          # unseen photos of the class pass as photos
     assert j.means["coverage_side"] is None and j.means["roughness_side"] is None
+
+
+def test_a_critic_that_learnt_its_photos_not_the_class_calls_unseen_photos_renders_and_the_report_says_so(data):
+    """Training photos of one kind (the spheroids as they are), held-out 'photos' of another (their
+    colours inverted: a class the critic never saw as photos) against renders of empty volumes: the
+    held-out photos are called renders (p ≤ 0.2), and the report flags the row."""
+    from mitsuba_platonic.evaluate.photos import PhotoSection, judge_markdown
+    _, train, _, test = data
+    alien = test.clone()
+    alien[:, :3] = alien[:, 3:] - alien[:, :3]                   # premultiplied 1 − rgb where the object is
+    empty = torch.zeros_like(train)
+    out = J.two_sample_test(train, empty, alien, {"input": empty[:4]}, steps=150, repeats=2)
+    assert out["photo_pass"] <= 0.2, out
+    well = J.two_sample_test(train, empty, test, {"input": empty[:4]}, steps=150, repeats=2)
+    assert well["photo_pass"] >= 0.9, well
+    section = PhotoSection("r", "photos", SETTINGS, [], judgements=[("memorised", J.Judgement(out)),
+                                                                    ("learnt", J.Judgement(well))])
+    text = "\n".join(judge_markdown(section))
+    assert "**memorised: the critic calls" in text and "**learnt: the critic calls" not in text
+    assert "| memorised | " in text and f"| {out['photo_pass']:.2f} | {len(alien)} |" in text
 
 
 def test_the_critic_is_seeded_and_leaves_the_global_generator_alone(data):

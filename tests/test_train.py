@@ -126,36 +126,48 @@ def test_a_photo_colour_step_hands_g_the_mean_colour_of_es_own_input(tmp_path, m
     assert all(_changed(before[k], trainer.nets[k]) for k in ("E", "G", "D"))
 
 
-def _input_view_mse(trainer, batch):
+def _input_view_error(trainer, batch, distance):
     """The reconstruction error computed here, not by the trainer: render G(E(x)) from the input
-    view with the Mitsuba ray marcher (the trainer renders with the closed form) and take the MSE
-    against x. Training mode, so BatchNorm normalises this batch as it does in a step."""
+    view with the Mitsuba ray marcher (the trainer renders with the closed form) and take the mean
+    squared ('l2') or absolute ('l1') difference from x. Training mode, so BatchNorm normalises this
+    batch as it does in a step."""
     from mitsuba_platonic import render
     from mitsuba_platonic.views import front_view
     trainer.nets.train()
     with torch.no_grad():
         v = trainer.nets["G"](trainer.nets["E"](batch))
         rec = render(v, front_view(len(batch)), trainer.cfg.render.model, "mitsuba")
-    return float(((rec - batch) ** 2).mean())
+    return float(((rec - batch) ** 2).mean() if distance == "l2" else (rec - batch).abs().mean())
 
 
-def test_reconstruction_steps_lower_the_input_view_error(tmp_path):
+@pytest.mark.parametrize("distance", ["l2", "l1"])
+def test_reconstruction_steps_lower_the_input_view_error(tmp_path, distance):
     """On a fixed batch (one image, drawn twice) with the reconstruction term dominating
     (rec_weight 100; lr 1e-2 so that the normalisation-free default networks move within a few
-    steps): every step's logged loss_rec is the input-view MSE measured independently before that
-    step, and 8 steps lower it by more than 20 % (0.266 → 0.13)."""
+    steps): every step's logged loss_rec is the input-view error in ``train.rec_loss``'s distance
+    measured independently before that step, and 8 steps lower it by more than 20 %
+    (MSE 0.266 → 0.13)."""
     cfg = _cfg(tmp_path, "data.n_shapes=1", "data.views_per_shape=1", "train.batch_size=2",
                "train.task=reconstruction", "train.rec_weight=100", "train.lr_g=1e-2", "train.lr_e=1e-2",
-               "render.backend=closed_form", "render.model=ea", "data.formation=ea")
+               "render.backend=closed_form", "render.model=ea", "data.formation=ea", f"train.rec_loss={distance}")
     trainer = Trainer(cfg, load_training_data(cfg, progress=False), torch.device("cpu"))
     assert len(trainer.images) == 1
     batch = trainer.images.expand(2, -1, -1, -1)
-    measured = [_input_view_mse(trainer, batch)]
+    measured = [_input_view_error(trainer, batch, distance)]
     for step in range(8):
         out = trainer.step(step)
         assert out["loss_rec"] == pytest.approx(measured[-1], rel=1e-3), (step, out["loss_rec"], measured)
-        measured.append(_input_view_mse(trainer, batch))
+        measured.append(_input_view_error(trainer, batch, distance))
     assert measured[-1] < 0.8 * measured[0], measured
+
+
+def test_rec_loss_is_refused_unless_it_is_known_and_compares_images(tmp_path):
+    from mitsuba_platonic.settings_checks import ConfigError
+    with pytest.raises(ConfigError, match=r"^train\.rec_loss: .*'l1'"):
+        _cfg(tmp_path, "train.rec_loss=huber")
+    with pytest.raises(ConfigError, match=r"^train\.rec_loss: 'l1' applies to the input-view image term"):
+        _cfg(tmp_path, "train.mode=platonic3d", "train.rec_target=volume", "train.rec_loss=l1",
+             "train.task=reconstruction")
 
 
 def test_d_step_lowers_d_loss_on_its_batch(tmp_path):

@@ -429,8 +429,14 @@ def judge_markdown(section: PhotoSection) -> List[str]:
              f"averaged) learns to tell the run's training photos from renders of their reconstructions at random "
              f"turntable views, then tells the {j0.c2st['photos']} held-out photos from renders of theirs, per band of "
              f"angle from the input view. Accuracy 0.5: the renders pass for photos; 1: they never do.", "",
-             judge_table(section.judgements), "",
-             "Image statistics of the side (±90°) and back (180°) turntable views, means over the held-out photos: "
+             judge_table(section.judgements), ""]
+    lines += [f"- **{method}: the critic calls {100 * j.c2st['photo_pass']:.0f} % of the held-out photos photos.** Below half, "
+              f"it has learnt its training photos rather than the class, and its accuracies above measure that, not "
+              f"the renders: read the turntable figure (docs/evaluation.md, \"When the critic memorises\")."
+              for method, j in section.judgements if j.c2st["photo_pass"] < 0.5]
+    if lines[-1] != "":
+        lines.append("")
+    lines += ["Image statistics of the side (±90°) and back (180°) turntable views, means over the held-out photos: "
              "roughness = mean |Laplacian| of the render over white on the object, relative to the input-view "
              "render (speckle, checkerboards: > 1) and, for the input view, to the photo; ΔE (CIE76) of the mean "
              "L*a*b* colour against the photo's and the sliced Wasserstein distance of the colour distributions; "

@@ -22,7 +22,7 @@ from .augment import AUGMENTS, PHOTO_AUGMENTS
 from .losses import LOSSES
 from .roll import ROLLS
 
-__all__ = ["TrainConfig", "TASKS", "MODES", "MODES_3D", "REC_TARGETS", "POSES", "PRGAN"]
+__all__ = ["TrainConfig", "TASKS", "MODES", "MODES_3D", "REC_TARGETS", "REC_LOSSES", "POSES", "PRGAN"]
 
 #: What E/G learn: reconstruct the input image, or generate from z ~ N(0, I).
 TASKS = ("reconstruction", "generation")
@@ -33,6 +33,9 @@ MODES_3D = ("platonic3d", "gan3d")
 #: train.rec_target: the reconstruction term compares the input image with v's render at the
 #: input view, or v with the input image's ground-truth volume (3D modes)
 REC_TARGETS = ("image", "volume")
+#: train.rec_loss: the input-view term's distance, the paper's mean squared error or the mean
+#: absolute error (docs/training.md, "An input view as sharp as the photo")
+REC_LOSSES = ("l2", "l1")
 #: train.pose: G's volume in the input camera's frame, or upright and tilted by an elevation E reads
 POSES = ("input", "elevation")
 #: How messages name ``train.mode: prgan``.
@@ -51,7 +54,9 @@ class TrainConfig:
     rec_weight: λ of the reconstruction term; rec_target: what that term compares, 'image' (the
     input image with the render of v at the input view: PlatonicGAN's, 2D data only) or 'volume'
     (v with the input image's ground-truth volume in its camera's frame: 3D supervision, the 3D
-    modes only; the 3D-GAN baseline's, which renders nothing); weight_3d: weight of the 3D adversarial term;
+    modes only; the 3D-GAN baseline's, which renders nothing); rec_loss: the image term's distance,
+    'l2' (mean (I_front − x)², the paper's) or 'l1' (mean |I_front − x|: the median, not the mean, of
+    what the code cannot tell apart; image targets only); weight_3d: weight of the 3D adversarial term;
     lr_g, lr_e, lr_d: Adam learning rates (lr_d 2e-5, not the authors' 1e-5: measured in
     docs/training.md); betas: Adam betas; d_gate: update D only while its *soft* accuracy
     ½(mean σ(l_real) + 1 − mean σ(l_fake)) ≤ this (0.6, the authors' gate; null: always). It never
@@ -97,6 +102,7 @@ class TrainConfig:
     gp_weight: float = 10.0
     rec_weight: float = 5.0
     rec_target: str = "image"
+    rec_loss: str = "l2"
     weight_3d: float = 1.0
     lr_g: float = 1e-3
     lr_e: float = 1e-3
@@ -182,6 +188,10 @@ class TrainConfig:
         if self.d_gate is not None and not 0.0 < self.d_gate <= 1.0:
             raise ConfigError(f"train.d_gate: expected null or a number in (0, 1], got {self.d_gate!r}")
         choice("train.rec_target", self.rec_target, REC_TARGETS)
+        choice("train.rec_loss", self.rec_loss, REC_LOSSES)
+        if self.rec_loss != "l2" and self.rec_target != "image":
+            raise ConfigError(f"train.rec_loss: {self.rec_loss!r} applies to the input-view image term; "
+                              f"rec_target {self.rec_target!r} compares volumes by their mean squared error")
         if self.rec_target == "volume" and self.mode not in MODES_3D:
             raise ConfigError(f"train.rec_target: 'volume' needs 3D ground truth, i.e. train.mode one of "
                               f"{list(MODES_3D)}, got {self.mode!r}")

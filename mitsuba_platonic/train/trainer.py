@@ -11,7 +11,8 @@ uninterrupted one would:
    ``d_roll: uniform`` D sees each of them turned in-plane by its own random angle (the images
    of G's adversarial term too), with ``matched`` the reals turned by the tilt of a right
    volume's view (:mod:`.roll`);
-5. G (and E) update on  L_G = adv(D(I_view)) + λ_rec ‖x − I_front‖² (+ w₃ adv₃(D3(v))).
+5. G (and E) update on  L_G = adv(D(I_view)) + λ_rec ‖x − I_front‖² (+ w₃ adv₃(D3(v))), the mean
+   squared difference; with ``rec_loss: l1`` the mean absolute one, λ_rec mean |x − I_front|.
 
 Where the volume stands (``train.pose``). With 'input' (the paper's view-space reconstruction)
 v lives in the input camera's frame: I_front renders it from ω₀ and the random views ω are drawn
@@ -318,7 +319,7 @@ class Trainer:
             terms["rec3d"] = t.rec_weight * self._volume_rec(v_input, idx, out)
         elif rec:
             i_front = self.render(v_input, front_view(b).to(self.device), seed + 1)
-            loss_rec = F.mse_loss(i_front, x)
+            loss_rec = F.mse_loss(i_front, x) if t.rec_loss == "l2" else F.l1_loss(i_front, x)
             terms["rec"] = t.rec_weight * loss_rec
             out["loss_rec"] = float(self._all_sum(loss_rec.detach().cpu()) / self.world)
         if t.pose_weight > 0:                                # P learns the elevations of G's renders
