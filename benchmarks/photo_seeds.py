@@ -21,7 +21,8 @@ from typing import Dict, List, Optional
 import numpy as np
 
 COLUMNS = [("c2st_input", "acc. input", 3), ("c2st_near", "acc. near", 3), ("c2st_side", "acc. side", 3),
-           ("c2st_back", "acc. back", 3), ("c2st_photo_pass", "photos passed", 2), ("roughness_side", "rough. side", 2), ("roughness_back", "rough. back", 2),
+           ("c2st_back", "acc. back", 3), ("c2st_photo_pass", "photos passed", 2),
+           ("c2st_auc_side", "AUC side", 2), ("c2st_auc_back", "AUC back", 2), ("roughness_side", "rough. side", 2), ("roughness_back", "rough. back", 2),
            ("delta_e_input", "ΔE input", 1), ("delta_e_side", "ΔE side", 1), ("delta_e_back", "ΔE back", 1),
            ("input_view_mae", "input MAE", 4), ("not_cards", "not cards", 0)]
 

@@ -26,8 +26,15 @@ of the held-out reconstructions in each band b:
 the same for every band, so bands are comparable. It is also reported on its own, as the share of
 held-out photos the critic calls photos, p = mean_x [f(x) > 0]: a critic that has memorised its
 few dozen training photos calls unseen photos renders (p well below ½), and then the band
-accuracies say more about p than about the renders (a run with garish red and green blotches on
-its far side scored 0.51 at the side on the tree photos with p = 0.22; docs/evaluation.md). Averaged over :data:`CRITIC_REPEATS` critics
+accuracies say more about p than about the renders (on the tree photos, over 18 runs, the side
+band's accuracy follows p with Pearson's r = 0.97; docs/evaluation.md, "When the critic
+memorises"). Hence also the threshold-free form of the same test, the area under the critic's
+ROC curve per band (Mann–Whitney),
+
+    AUC_b = mean over held-out photos x and renders r in band b of ( [f(x) > f(r)] + ½ [f(x) = f(r)] )
+
+0.5: photos and renders are ranked alike; 1: every photo above every render. It does not move with
+where the critic puts its threshold, only with how it orders unseen photos and renders. Averaged over :data:`CRITIC_REPEATS` critics
 (seeds ``seed``, ``seed + 1``, …) to lower the critic's own variance. With few held-out photos the
 accuracy moves in steps of 1/(2M); the report says M.
 
@@ -144,7 +151,8 @@ def two_sample_test(train_photos: torch.Tensor, train_renders: torch.Tensor, tes
     ``test_renders`` (band name → ``(K, C, R, R)``). Returns ``accuracy`` (band → mean accuracy over
     the critics), ``spread`` (band → their standard deviation), ``train_accuracy`` (on the training
     sets, a check that the critic learnt at all), ``photo_pass`` (the share of held-out photos the
-    critics call photos, mean over them), ``photos`` (M) and ``renders`` (band → K)."""
+    critics call photos, mean over them), ``auc`` (band → mean AUC over the critics), ``photos`` (M) and
+    ``renders`` (band → K)."""
     train_photos = _check_images(train_photos, "train_photos")
     train_renders = _check_images(train_renders, "train_renders")
     test_photos = _check_images(test_photos, "test_photos")
@@ -165,34 +173,40 @@ def two_sample_test(train_photos: torch.Tensor, train_renders: torch.Tensor, tes
     acc: Dict[str, List[float]] = {k: [] for k in bands}
     train_acc: List[float] = []
     photo_pass: List[float] = []
+    auc: Dict[str, List[float]] = {k: [] for k in bands}
     threads = torch.get_num_threads()
     # one thread: the critic's convolutions are too small to share (two threads ran 10× slower on a busy 2-core machine)
     torch.set_num_threads(1)
     try:
         with torch.random.fork_rng(devices=[]):                   # the caller's global RNG stays as it was
             _score_critics(train_photos, train_renders, test_photos, bands, seed, steps, repeats, batch,
-                           acc, train_acc, photo_pass)
+                           acc, train_acc, photo_pass, auc)
     finally:
         torch.set_num_threads(threads)
     return {"accuracy": {k: float(np.mean(v)) for k, v in acc.items()},
             "spread": {k: float(np.std(v)) for k, v in acc.items()},
             "train_accuracy": float(np.mean(train_acc)), "photo_pass": float(np.mean(photo_pass)),
-            "photos": len(test_photos),
+            "auc": {k: float(np.mean(v)) for k, v in auc.items()}, "photos": len(test_photos),
             "renders": {k: len(v) for k, v in bands.items()}}
 
 
 def _score_critics(train_photos: torch.Tensor, train_renders: torch.Tensor, test_photos: torch.Tensor,
                    bands: Dict[str, torch.Tensor], seed: int, steps: int, repeats: int, batch: int,
-                   acc: Dict[str, List[float]], train_acc: List[float], photo_pass: List[float]) -> None:
+                   acc: Dict[str, List[float]], train_acc: List[float], photo_pass: List[float],
+                   auc: Dict[str, List[float]]) -> None:
     """Train ``repeats`` critics and append their accuracies to ``acc`` (per band) and ``train_acc``,
-    and the share of held-out photos each calls photos to ``photo_pass``."""
+    the share of held-out photos each calls photos to ``photo_pass``, and their AUCs to ``auc``."""
     for r in range(repeats):
         critic = _train_critic(train_photos, train_renders, seed + r, steps, batch)
         with torch.no_grad():
-            real = float((critic(test_photos) > 0).float().mean())
+            f_photo = critic(test_photos).flatten()
+            real = float((f_photo > 0).float().mean())
             photo_pass.append(real)
             for k, x in bands.items():
-                acc[k].append(0.5 * (real + float((critic(x) <= 0).float().mean())))
+                f_render = critic(x).flatten()
+                acc[k].append(0.5 * (real + float((f_render <= 0).float().mean())))
+                above = f_photo[:, None] - f_render[None, :]           # every (photo, render) pair
+                auc[k].append(float(((above > 0).double() + 0.5 * (above == 0).double()).mean()))
             train_acc.append(0.5 * (float((critic(train_photos) > 0).float().mean())
                                     + float((critic(train_renders) <= 0).float().mean())))
 
@@ -277,6 +291,7 @@ class Judgement:
         out: Dict[str, Any] = {f"c2st_{k}": v for k, v in self.c2st["accuracy"].items()}
         out["c2st_train"] = self.c2st["train_accuracy"]
         out["c2st_photo_pass"] = self.c2st["photo_pass"]
+        out.update({f"c2st_auc_{k}": v for k, v in self.c2st["auc"].items()})
         out.update(self.means)
         return out
 
@@ -335,14 +350,15 @@ def _num(value: Optional[float], digits: int = 3) -> str:
 
 def judge_table(rows: Sequence[Tuple[str, Judgement]]) -> str:
     """Markdown: per method, the two-sample critic's accuracy per band (0.5: indistinguishable from
-    the held-out photos), on its own training sets, and the share of held-out photos it calls photos."""
+    the held-out photos) with its AUC in brackets, on its own training sets, and the share of held-out
+    photos it calls photos."""
     names = [b[0] for b in BANDS]
     head = " | ".join(f"{n} ({lo:g}–{hi:g}°)" if hi > lo else f"{n} ({lo:g}°)" for n, lo, hi in BANDS)
     lines = [f"| Method | {head} | critic on its training sets | held-out photos called photos | held-out photos |",
              "|---|" + "---|" * (len(names) + 3)]
     for method, j in rows:
-        acc = j.c2st["accuracy"]
-        lines.append(f"| {method} | " + " | ".join(_num(acc.get(n)) for n in names) +
+        acc, auc = j.c2st["accuracy"], j.c2st["auc"]
+        lines.append(f"| {method} | " + " | ".join(f"{_num(acc.get(n))} ({_num(auc.get(n), 2)})" for n in names) +
                      f" | {_num(j.c2st['train_accuracy'])} | {_num(j.c2st['photo_pass'], 2)} | {j.c2st['photos']} |")
     return "\n".join(lines)
 

@@ -428,7 +428,9 @@ def judge_markdown(section: PhotoSection) -> List[str]:
              f"No ground truth, so a judge: a fresh critic (seeded, {CRITIC_STEPS} steps by default, 3 critics "
              f"averaged) learns to tell the run's training photos from renders of their reconstructions at random "
              f"turntable views, then tells the {j0.c2st['photos']} held-out photos from renders of theirs, per band of "
-             f"angle from the input view. Accuracy 0.5: the renders pass for photos; 1: they never do.", "",
+             f"angle from the input view. Accuracy 0.5: the renders pass for photos; 1: they never do. In "
+             f"brackets the AUC: how often the critic ranks a held-out photo above a render (0.5: alike), whatever "
+             f"its threshold.", "",
              judge_table(section.judgements), ""]
     lines += [f"- **{method}: the critic calls {100 * j.c2st['photo_pass']:.0f} % of the held-out photos photos.** Below half, "
               f"it has learnt its training photos rather than the class, and its accuracies above measure that, not "
