@@ -34,9 +34,11 @@ ROC curve per band (Mann–Whitney),
     AUC_b = mean over held-out photos x and renders r in band b of ( [f(x) > f(r)] + ½ [f(x) = f(r)] )
 
 0.5: photos and renders are ranked alike; 1: every photo above every render. It does not move with
-where the critic puts its threshold, only with how it orders unseen photos and renders. Averaged over :data:`CRITIC_REPEATS` critics
-(seeds ``seed``, ``seed + 1``, …) to lower the critic's own variance. With few held-out photos the
-accuracy moves in steps of 1/(2M); the report says M.
+where the critic puts its threshold, only with how it orders unseen photos and renders.
+
+Every figure is averaged over :data:`CRITIC_REPEATS` critics (seeds ``seed``, ``seed + 1``, …) to
+lower the critic's own variance. With M held-out photos the accuracy moves in steps of 1/(2M);
+the report says M.
 
 **Image statistics** (:mod:`.image_stats`), per held-out photo x with reconstruction V, renders
 I_φ = R(ω(φ, 0), V) with the run's renderer:
@@ -354,12 +356,13 @@ def judge_table(rows: Sequence[Tuple[str, Judgement]]) -> str:
     photos it calls photos."""
     names = [b[0] for b in BANDS]
     head = " | ".join(f"{n} ({lo:g}–{hi:g}°)" if hi > lo else f"{n} ({lo:g}°)" for n, lo, hi in BANDS)
-    lines = [f"| Method | {head} | critic on its training sets | held-out photos called photos | held-out photos |",
-             "|---|" + "---|" * (len(names) + 3)]
+    lines = [f"| Method | {head} | critic on its training sets | held-out photos called photos | "
+             f"held-out photos |", "|---|" + "---|" * (len(names) + 3)]
     for method, j in rows:
         acc, auc = j.c2st["accuracy"], j.c2st["auc"]
-        lines.append(f"| {method} | " + " | ".join(f"{_num(acc.get(n))} ({_num(auc.get(n), 2)})" for n in names) +
-                     f" | {_num(j.c2st['train_accuracy'])} | {_num(j.c2st['photo_pass'], 2)} | {j.c2st['photos']} |")
+        cells = " | ".join(f"{_num(acc.get(n))} ({_num(auc.get(n), 2)})" for n in names)
+        lines.append(f"| {method} | {cells} | {_num(j.c2st['train_accuracy'])} | {_num(j.c2st['photo_pass'], 2)} | "
+                     f"{j.c2st['photos']} |")
     return "\n".join(lines)
 
 

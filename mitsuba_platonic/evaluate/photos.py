@@ -432,10 +432,10 @@ def judge_markdown(section: PhotoSection) -> List[str]:
              f"brackets the AUC: how often the critic ranks a held-out photo above a render (0.5: alike), whatever "
              f"its threshold.", "",
              judge_table(section.judgements), ""]
-    lines += [f"- **{method}: the critic calls {100 * j.c2st['photo_pass']:.0f} % of the held-out photos photos.** Below half, "
-              f"it has learnt its training photos rather than the class, and its accuracies above measure that, not "
-              f"the renders: read the turntable figure (docs/evaluation.md, \"When the critic memorises\")."
-              for method, j in section.judgements if j.c2st["photo_pass"] < 0.5]
+    lines += [f"- **{method}: the critic calls {100 * j.c2st['photo_pass']:.0f} % of the held-out photos photos.** "
+              f"Below half, it has learnt its training photos rather than the class, and its accuracies above "
+              f"measure that, not the renders: read the turntable figure (docs/evaluation.md, \"When the critic "
+              f"memorises\")." for method, j in section.judgements if j.c2st["photo_pass"] < 0.5]
     if lines[-1] != "":
         lines.append("")
     lines += ["Image statistics of the side (±90°) and back (180°) turntable views, means over the held-out photos: "

@@ -34,7 +34,7 @@ MODES_3D = ("platonic3d", "gan3d")
 #: input view, or v with the input image's ground-truth volume (3D modes)
 REC_TARGETS = ("image", "volume")
 #: train.rec_loss: the input-view term's distance, the paper's mean squared error or the mean
-#: absolute error (docs/training.md, "An input view as sharp as the photo")
+#: absolute error (docs/training.md, "Tried on top of photos.yaml")
 REC_LOSSES = ("l2", "l1")
 #: train.pose: G's volume in the input camera's frame, or upright and tilted by an elevation E reads
 POSES = ("input", "elevation")
