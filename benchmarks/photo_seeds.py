@@ -7,8 +7,8 @@ Each EVAL_DIR is the ``--out`` folder of ``platonic evaluate --run RUN`` on a ph
 folder and as mean and spread (max − min) over them: the two-sample critic's accuracy per band
 (0.5: the renders pass for held-out photos), the share of held-out photos its critics call photos
 (below ½: the critic memorised its training photos, docs/evaluation.md), the side and back
-roughness ratios, the input-view, side and back ΔE, the input-view MAE and the card count. The issue's test of a new config is a
-lower novel-view accuracy by more than the spread of the seeds. Figures only.
+roughness ratios, the input-view, side and back ΔE, the input-view MAE and the card count. The
+issue's test of a new config is a lower novel-view accuracy by more than the spread of the seeds. Figures only.
 """
 
 from __future__ import annotations
@@ -22,7 +22,8 @@ import numpy as np
 
 COLUMNS = [("c2st_input", "acc. input", 3), ("c2st_near", "acc. near", 3), ("c2st_side", "acc. side", 3),
            ("c2st_back", "acc. back", 3), ("c2st_photo_pass", "photos passed", 2),
-           ("c2st_auc_side", "AUC side", 2), ("c2st_auc_back", "AUC back", 2), ("roughness_side", "rough. side", 2), ("roughness_back", "rough. back", 2),
+           ("c2st_auc_side", "AUC side", 2), ("c2st_auc_back", "AUC back", 2),
+           ("roughness_side", "rough. side", 2), ("roughness_back", "rough. back", 2),
            ("delta_e_input", "ΔE input", 1), ("delta_e_side", "ΔE side", 1), ("delta_e_back", "ΔE back", 1),
            ("input_view_mae", "input MAE", 4), ("not_cards", "not cards", 0)]
 
