@@ -77,6 +77,8 @@ class Config:
         self.train.validate()
         if self.train.colour_tv > 0 and self.render.model != "ea":
             raise ConfigError(f"train.colour_tv: colour needs render.model 'ea', got {self.render.model!r}")
+        if self.train.colour_match > 0 and self.render.model != "ea":
+            raise ConfigError(f"train.colour_match: colour needs render.model 'ea', got {self.render.model!r}")
         if "colour" in self.train.photo_augment and self.render.model != "ea":
             raise ConfigError(f"train.photo_augment: 'colour' needs colour, render.model 'ea'; got {self.render.model!r}")
         if self.model.photo_colour and (self.train.task != "reconstruction" or self.render.model != "ea"

@@ -1,11 +1,12 @@
 """train.colour_tv: the density-weighted colour total variation (train/losses.colour_tv) on known
-volumes, its gradient (colour only, never density), and the trainer handing it to G."""
+volumes, its gradient (colour only, never density), and the trainer handing it to G; and
+train.colour_match (train/losses.colour_match): the mean colour of the object from every side."""
 
 import pytest
 import torch
 
 from mitsuba_platonic.config import ConfigError, load_config
-from mitsuba_platonic.train.losses import colour_tv
+from mitsuba_platonic.train.losses import colour_match, colour_tv, mean_colour
 
 
 def _volume(n=4, colour=(0.2, 0.5, 0.7), density=1.0):
@@ -88,3 +89,91 @@ def test_the_trainer_hands_colour_tv_to_g_only_when_its_weight_is_set(tmp_path):
     with pytest.raises(ConfigError, match="train.colour_tv: the 'gan3d' baseline"):
         load_config(None, ["train.colour_tv=0.1", "train.mode=gan3d", "train.loss=wgan-gp",
                            "train.rec_target=volume"])
+
+
+def _image(colour, alpha):
+    """A premultiplied RGBA image (1, 4, 4, 4): ``colour`` where ``alpha`` ``(4, 4)`` covers."""
+    a = torch.as_tensor(alpha, dtype=torch.float64)
+    return torch.cat([torch.tensor(colour, dtype=torch.float64)[:, None, None] * a, a[None]])[None]
+
+
+def test_mean_colour_weighs_each_pixel_by_its_coverage():
+    """Four pixels of red at α 1 and four of blue at α ½: Σ rgb = (4, 0, 2) over Σ α = 6, so
+    c̄ = (4/6, 0, 2/6): each pixel counts by its coverage."""
+    alpha = torch.zeros(4, 4, dtype=torch.float64)
+    alpha[:1] = 1.0                                          # 4 pixels of red
+    img = _image((1.0, 0.0, 0.0), alpha)
+    blue = torch.zeros(4, 4, dtype=torch.float64)
+    blue[3] = 0.5                                            # 4 pixels of blue at α ½
+    img = img + _image((0.0, 0.0, 1.0), blue)
+    assert torch.allclose(mean_colour(img), torch.tensor([[4 / 6, 0.0, 2 / 6]], dtype=torch.float64))
+    assert torch.equal(mean_colour(torch.zeros(1, 4, 3, 3)), torch.zeros(1, 3))         # empty: 0, finite
+    with pytest.raises(ValueError, match=r"mean_colour: expected RGBA images \(B, 4, H, W\), got \(1, 1, 3, 3\)"):
+        mean_colour(torch.zeros(1, 1, 3, 3))
+
+
+def test_colour_match_is_zero_for_the_same_colour_from_another_side_and_the_mean_difference_otherwise():
+    """A view of another silhouette in the photo's colour costs nothing; a view darker by half costs
+    the mean over channels of |c/2 − c|; K = 2 views per photo pair up with their own photo."""
+    full, part = torch.ones(4, 4, dtype=torch.float64), torch.zeros(4, 4, dtype=torch.float64)
+    part[1:3, 1:3] = 0.7
+    photo = _image((0.2, 0.4, 0.6), full)
+    assert float(colour_match(_image((0.2, 0.4, 0.6), part), photo)) == pytest.approx(0.0, abs=1e-12)
+    dark = _image((0.1, 0.2, 0.3), part)
+    assert float(colour_match(dark, photo)) == pytest.approx((0.1 + 0.2 + 0.3) / 3, rel=1e-12)
+    photos = torch.cat([photo, _image((0.1, 0.2, 0.3), full)])
+    views = torch.cat([_image((0.2, 0.4, 0.6), part), dark, dark, dark])   # photo 0: 0, 0.2; photo 1: 0, 0
+    assert float(colour_match(views, photos)) == pytest.approx(0.2 / 4, rel=1e-12)
+    with pytest.raises(ValueError, match="colour_match: expected K renders per photo, got 3 for 2"):
+        colour_match(views[:3], photos)
+
+
+def test_colour_match_moves_the_views_and_not_the_photos_and_matches_finite_differences():
+    torch.manual_seed(1)
+    views = torch.rand(4, 4, 3, 3, dtype=torch.float64)
+    views[:, :3] *= views[:, 3:]                             # premultiplied
+    views.requires_grad_(True)
+    photos = torch.rand(2, 4, 3, 3, dtype=torch.float64, requires_grad=True)
+    assert torch.autograd.gradcheck(lambda v: colour_match(v, photos), (views,))
+    colour_match(views, photos).backward()
+    assert photos.grad is None or not photos.grad.any()
+
+
+def test_the_config_refuses_colour_match_without_colour_or_an_input_photo():
+    with pytest.raises(ConfigError, match="train.colour_match: colour needs render.model 'ea', got 'vh'"):
+        load_config(None, ["train.colour_match=1", "render.model=vh", "data.formation=vh"])
+    with pytest.raises(ConfigError, match=r"train.colour_match: expected a non-negative value, got -1"):
+        load_config(None, ["train.colour_match=-1"])
+    with pytest.raises(ConfigError, match="train.colour_match: the random views answer to the input photo's colour.*"
+                                          "task 'generation'"):
+        load_config(None, ["train.colour_match=1", "train.task=generation"])
+
+
+@pytest.mark.usefixtures("tiny_class")
+def test_the_trainer_hands_g_the_colour_match_of_the_views_d_saw_against_the_photos_e_read(tmp_path):
+    """With weight w, G's 'colour_match' term is w · mean |c̄(I_view) − c̄(x)|, computed here from
+    the random views D's update saw (its fakes) and the photos E read; without it, no such term."""
+    from mitsuba_platonic.train.data import load_training_data
+    from mitsuba_platonic.train.trainer import Trainer
+    from tiny_shapes import TINY
+    for weight in (0.0, 2.0):
+        cfg = load_config(None, [
+            f"data.cache={tmp_path}", f"data.shape_class={TINY}", "data.n_shapes=4", "data.views_per_shape=2",
+            "model.resolution=16", "model.width=4", "model.latent=8", "train.batch_size=2", "train.random_views=2",
+            "render.backend=closed_form", "train.task=reconstruction", f"train.colour_match={weight}"])
+        trainer = Trainer(cfg, load_training_data(cfg, progress=False), torch.device("cpu"))
+        seen, terms = {"D": []}, {}
+        trainer.nets["E"].register_forward_hook(lambda m, i, o: [seen.setdefault("x", i[0].detach().clone())] and None)
+        trainer.nets["D"].register_forward_hook(lambda m, i, o: seen["D"].append(i[0].detach().clone()))
+        original = trainer._g_objective
+        trainer._g_objective = lambda t: terms.update(t) or original(t)
+        trainer.step(0)
+        if not weight:
+            assert "colour_match" not in terms
+            continue
+        x = seen["x"]
+        fakes = seen["D"][0][len(x) * 2:]                    # D's update: 2 · 2 reals (x repeated), 4 views
+        assert len(fakes) == 4
+        c = lambda im: im[:, :3].sum((2, 3)) / im[:, 3].sum((1, 2))[:, None]
+        expected = weight * (c(fakes) - c(x).repeat_interleave(2, 0)).abs().mean()
+        assert float(terms["colour_match"].detach()) == pytest.approx(float(expected), rel=1e-5)

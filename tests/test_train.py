@@ -170,6 +170,54 @@ def test_rec_loss_is_refused_unless_it_is_known_and_compares_images(tmp_path):
              "train.task=reconstruction")
 
 
+def test_adv_input_shows_d_the_input_view_and_adds_its_term_to_gs_objective(tmp_path, monkeypatch):
+    """``train.adv_input: w``: D's update sees the photos, the random views and, as further fakes,
+    the input-view renders, which equal G(E(x)) rendered from the input view by the Mitsuba marcher
+    (computed here with the weights before the step; the trainer renders with the closed form);
+    G's objective holds w · mean softplus(−D(I_front)) with the updated D. Without the key, D sees
+    no input view and G has no such term."""
+    import copy
+
+    import torch.nn.functional as F
+    from mitsuba_platonic import render
+    from mitsuba_platonic.views import front_view
+    base = ("render.backend=closed_form", "render.model=ea", "data.formation=ea", "train.task=reconstruction")
+    for w in (0.5, 0.0):
+        cfg = _cfg(tmp_path / str(w), *base, f"train.adv_input={w}")
+        trainer = Trainer(cfg, load_training_data(cfg, progress=False), torch.device("cpu"))
+        nets = copy.deepcopy(trainer.nets)
+        seen, terms = {"D": []}, {}
+        trainer.nets["E"].register_forward_hook(lambda m, i, o: [seen.setdefault("x", i[0].detach().clone())] and None)
+        trainer.nets["D"].register_forward_hook(lambda m, i, o: seen["D"].append(i[0].detach().clone()))
+        original = trainer._g_objective
+        monkeypatch.setattr(trainer, "_g_objective", lambda t: terms.update(t) or original(t))
+        trainer.step(0)
+        x, B = seen["x"], len(seen["x"])
+        first = seen["D"][0]                                 # D's update: reals | random views | input views
+        assert len(first) == (3 if w else 2) * B
+        assert torch.equal(first[:B], x)
+        with torch.no_grad():
+            nets.train()
+            front = render(nets["G"](nets["E"](x)), front_view(B), "ea", "mitsuba")
+        if not w:
+            assert "adv_input" not in terms
+            continue
+        assert torch.allclose(first[2 * B:], front, atol=1e-3), float((first[2 * B:] - front).abs().max())
+        with torch.no_grad():
+            expected = w * F.softplus(-trainer.nets["D"](front)).mean()
+        assert float(terms["adv_input"].detach()) == pytest.approx(float(expected), rel=1e-3)
+
+
+def test_adv_input_is_refused_without_an_input_view_image_term(tmp_path):
+    from mitsuba_platonic.settings_checks import ConfigError
+    with pytest.raises(ConfigError, match=r"^train\.adv_input: expected"):
+        _cfg(tmp_path, "train.adv_input=-1")
+    with pytest.raises(ConfigError, match=r"^train\.adv_input: D judges the render of the input view.*task 'generation'"):
+        _cfg(tmp_path, "train.task=generation", "train.adv_input=1")
+    with pytest.raises(ConfigError, match=r"^train\.adv_input: .*d_roll 'uniform'"):
+        _cfg(tmp_path, "train.task=reconstruction", "train.d_roll=uniform", "train.adv_input=1")
+
+
 def test_d_step_lowers_d_loss_on_its_batch(tmp_path):
     """D's non-saturating loss −log σ(D(x)) − log(1 − σ(D(I_view))), computed here on the very
     images D saw in its update (recorded by a forward hook; real = rows of the data set), is lower

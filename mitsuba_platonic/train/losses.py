@@ -7,6 +7,10 @@ R1 (optional, non-saturating): L_D += γ/2 · mean over reals of ‖∇_x l(x)�
 Colour TV (optional prior on G, EA volumes [r, g, b, ρ]): over every pair (i, j) of face-neighbouring
 voxels, w_ij = min(ρ_i, ρ_j) (held constant) and
                             L_tv = Σ w_ij ‖c_i − c_j‖₁ / (3 Σ w_ij)
+Colour match (optional prior on G, premultiplied RGBA images): the mean colour of an image's
+object, c̄(I) = Σ_p rgb_p / Σ_p α_p, is the same from every side, so each random view I of the
+reconstruction of photo x answers to
+                            L_cm = mean over views and channels of |c̄(I) − c̄(x)|
 WGAN-GP:                    L_D = l_fake − l_real + λ (‖∇_x̂ D(x̂)‖ − 1)²,  x̂ = ε x + (1 − ε) G
                             L_G = −l_fake
 Soft accuracy of D on a batch (the authors' gate: D is updated only while it is ≤ 0.6, so D
@@ -26,7 +30,7 @@ from typing import Callable, Optional, Tuple
 import torch
 import torch.nn.functional as F
 
-__all__ = ["LOSSES", "d_loss", "g_loss", "gradient_penalty", "r1_penalty", "colour_tv", "soft_accuracy_counts", "hard_accuracy_counts"]
+__all__ = ["LOSSES", "d_loss", "g_loss", "gradient_penalty", "r1_penalty", "colour_tv", "mean_colour", "colour_match", "soft_accuracy_counts", "hard_accuracy_counts"]
 
 #: The GAN losses of :func:`d_loss` / :func:`g_loss` (anything but the first is WGAN-GP).
 LOSSES = ("nonsaturating", "wgan-gp")
@@ -94,11 +98,34 @@ def colour_tv(volume: torch.Tensor) -> torch.Tensor:
     return num / (3.0 * den).clamp_min(1e-12)
 
 
+def mean_colour(images: torch.Tensor) -> torch.Tensor:
+    """c̄(I) = Σ_p rgb_p / Σ_p α_p ``(B, 3)`` of premultiplied RGBA images ``(B, 4, H, W)``: the mean
+    colour of the object, each pixel weighted by its coverage (0 for an empty image)."""
+    if images.dim() != 4 or images.shape[1] != 4:
+        raise ValueError(f"mean_colour: expected RGBA images (B, 4, H, W), got {tuple(images.shape)}")
+    return images[:, :3].sum((2, 3)) / images[:, 3:].sum((2, 3)).clamp_min(1e-6)
+
+
+def colour_match(views: torch.Tensor, photos: torch.Tensor) -> torch.Tensor:
+    """L_cm = mean |c̄(I) − c̄(x)| (module docstring) of ``views`` ``(B K, 4, H, W)``, K renders per
+    photo of ``photos`` ``(B, 4, H, W)`` in order; the photos' colours are targets (detached).
+
+    An object seen from its other side is no darker and no other hue on average: this carries the
+    photo's colour to the sides the input view does not see, where otherwise only the critic,
+    which accepts any plausible colour, constrains it."""
+    k = len(views) // max(len(photos), 1)
+    if len(photos) == 0 or k * len(photos) != len(views):
+        raise ValueError(f"colour_match: expected K renders per photo, got {len(views)} for {len(photos)}")
+    target = mean_colour(photos.detach()).repeat_interleave(k, 0)
+    return (mean_colour(views) - target).abs().mean()
+
+
 def soft_accuracy_counts(real: torch.Tensor, fake: torch.Tensor) -> Tuple[torch.Tensor, torch.Tensor]:
     """(Σ σ(l_real) + Σ (1 − σ(l_fake)), count) as float tensors, summable across processes.
 
     Their ratio is the soft accuracy ½(mean σ(l_real) + 1 − mean σ(l_fake)) when both halves have
-    the same size (they do in the trainer); otherwise it weighs each logit equally.
+    the same size (they do in the trainer unless ``train.adv_input`` adds the input views to the
+    fakes); otherwise it weighs each logit equally.
     """
     score = torch.sigmoid(real).sum() + (1.0 - torch.sigmoid(fake)).sum()
     return score.detach().float(), torch.tensor(float(real.numel() + fake.numel()))

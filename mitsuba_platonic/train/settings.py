@@ -56,7 +56,10 @@ class TrainConfig:
     (v with the input image's ground-truth volume in its camera's frame: 3D supervision, the 3D
     modes only; the 3D-GAN baseline's, which renders nothing); rec_loss: the image term's distance,
     'l2' (mean (I_front − x)², the paper's) or 'l1' (mean |I_front − x|: the median, not the mean, of
-    what the code cannot tell apart; image targets only); weight_3d: weight of the 3D adversarial term;
+    what the code cannot tell apart; image targets only); adv_input: weight of a second adversarial
+    term on the render of the input view, which D also learns to tell from the photos (0: none, the
+    paper's: the input view answers to the reconstruction term alone; image targets, mode
+    'platonic'); weight_3d: weight of the 3D adversarial term;
     lr_g, lr_e, lr_d: Adam learning rates (lr_d 2e-5, not the authors' 1e-5: measured in
     docs/training.md); betas: Adam betas; d_gate: update D only while its *soft* accuracy
     ½(mean σ(l_real) + 1 − mean σ(l_fake)) ≤ this (0.6, the authors' gate; null: always). It never
@@ -81,7 +84,9 @@ class TrainConfig:
     the penalty on every k-th step only, weighted k times (1: every step; docs/training.md, "Where a
     step's time goes"); colour_tv: weight of
     G's density-weighted colour total variation (EA, not 'gan3d'; 0: none)
-    (:func:`mitsuba_platonic.train.losses.colour_tv`, docs/training.md); ema: null, or the decay β
+    (:func:`mitsuba_platonic.train.losses.colour_tv`, docs/training.md); colour_match: weight of the term
+    that holds the mean colour of each random view's object to the input photo's (reconstruction,
+    EA, mode 'platonic'; 0: none) (:func:`mitsuba_platonic.train.losses.colour_match`, docs/training.md); ema: null, or the decay β
     of an exponential moving average of E's and G's weights, which samples, checkpoints' inference
     weights and evaluation then use (:meth:`mitsuba_platonic.train.trainer.Trainer.inference_model`,
     docs/training.md); d_augment: the differentiable augmentations of every image D sees, real or
@@ -103,6 +108,7 @@ class TrainConfig:
     rec_weight: float = 5.0
     rec_target: str = "image"
     rec_loss: str = "l2"
+    adv_input: float = 0.0
     weight_3d: float = 1.0
     lr_g: float = 1e-3
     lr_e: float = 1e-3
@@ -116,6 +122,7 @@ class TrainConfig:
     r1_weight: float = 0.0
     r1_every: int = 1
     colour_tv: float = 0.0
+    colour_match: float = 0.0
     ema: Optional[float] = None
     d_augment: List[str] = field(default_factory=list)
     photo_augment: List[str] = field(default_factory=list)
@@ -167,6 +174,10 @@ class TrainConfig:
             raise ConfigError("train.r1_weight: the R1 penalty is for the non-saturating loss; "
                               f"train.loss {self.loss!r} has its own (train.gp_weight)")
         non_negative("train.colour_tv", self.colour_tv)
+        non_negative("train.colour_match", self.colour_match)
+        if self.colour_match > 0 and (self.task != "reconstruction" or self.mode != "platonic"):
+            raise ConfigError("train.colour_match: the random views answer to the input photo's colour, so it needs "
+                              f"train.task 'reconstruction' and mode 'platonic', got task {self.task!r}, mode {self.mode!r}")
         if self.colour_tv > 0 and self.mode == "gan3d":
             raise ConfigError("train.colour_tv: the 'gan3d' baseline trains G on volumes alone, without priors")
         unknown = [a for a in self.d_augment if a not in AUGMENTS]
@@ -192,6 +203,12 @@ class TrainConfig:
         if self.rec_loss != "l2" and self.rec_target != "image":
             raise ConfigError(f"train.rec_loss: {self.rec_loss!r} applies to the input-view image term; "
                               f"rec_target {self.rec_target!r} compares volumes by their mean squared error")
+        non_negative("train.adv_input", self.adv_input)
+        if self.adv_input > 0 and (self.task != "reconstruction" or self.mode != "platonic"
+                                   or self.rec_target != "image" or self.d_roll != "none"):
+            raise ConfigError("train.adv_input: D judges the render of the input view, so it needs train.task "
+                              "'reconstruction', mode 'platonic', rec_target 'image' and d_roll 'none', got task "
+                              f"{self.task!r}, mode {self.mode!r}, rec_target {self.rec_target!r}, d_roll {self.d_roll!r}")
         if self.rec_target == "volume" and self.mode not in MODES_3D:
             raise ConfigError(f"train.rec_target: 'volume' needs 3D ground truth, i.e. train.mode one of "
                               f"{list(MODES_3D)}, got {self.mode!r}")

@@ -13,6 +13,9 @@ uninterrupted one would:
    volume's view (:mod:`.roll`);
 5. G (and E) update on  L_G = adv(D(I_view)) + λ_rec ‖x − I_front‖² (+ w₃ adv₃(D3(v))), the mean
    squared difference; with ``rec_loss: l1`` the mean absolute one, λ_rec mean |x − I_front|.
+   With ``colour_match`` = w > 0, L_G adds w · mean |c̄(I_view) − c̄(x)|, c̄ the mean colour of an
+   image's object (:func:`.losses.colour_match`). With ``adv_input`` = w > 0, D's fakes also hold
+   I_front and L_G adds w · adv(D(I_front)): the input view answers to D as well as to the photo.
 
 Where the volume stands (``train.pose``). With 'input' (the paper's view-space reconstruction)
 v lives in the input camera's frame: I_front renders it from ω₀ and the random views ω are drawn
@@ -95,7 +98,7 @@ from ..render.closed_form import rotate, tilt
 from ..views import DEFAULT_ELEVATION, from_angles, front_view, sample_views, to_angles
 from .augment import augment, augment_photos
 from .data import TrainingData
-from .losses import (colour_tv, d_loss, g_loss, gradient_penalty, hard_accuracy_counts, r1_penalty,
+from .losses import (colour_match, colour_tv, d_loss, g_loss, gradient_penalty, hard_accuracy_counts, r1_penalty,
                      soft_accuracy_counts)
 from .renderer import make_renderer
 from .roll import input_frame_roll, roll
@@ -288,6 +291,9 @@ class Trainer:
             v_view, v_input = v[:b * K], v[b * K:]
         seed = int(np.random.SeedSequence([cfg.run.seed, step, 7, self.rank]).generate_state(1)[0] >> 2)
         i_view = self.render(v_view, views.to(self.device), seed)
+        i_front = None
+        if rec and t.rec_target == "image":                  # the input view (rendered before D: adv_input)
+            i_front = self.render(v_input, front_view(b).to(self.device), seed + 1)
         out: Dict[str, float] = {}
 
         # -- D: real photos vs rendered views, gated by its soft accuracy -----------------------
@@ -297,6 +303,8 @@ class Trainer:
             real_d = roll(real_d, ψ_real.to(self.device))
         if ψ_fake is not None:
             fake_d = roll(i_view, ψ_fake.to(self.device))
+        if t.adv_input > 0:                                  # the input view's renders are D's fakes too
+            fake_d = torch.cat([fake_d, i_front])
         if t.d_augment:                                      # train/augment.py: the same kind of T on both sides
             g_aug = torch.Generator()
             g_aug.manual_seed(int(np.random.SeedSequence([cfg.run.seed, step, 11, self.rank]).generate_state(1)[0]))
@@ -309,16 +317,23 @@ class Trainer:
             loss_g3 = self._update_d3(v, g, eps, out, step)
 
         # -- G and E: fool D from random views (and D3), reconstruct the input view --------------
-        loss_adv = g_loss(t.loss, D(fake_d))
-        terms = {"adv2d": loss_adv}
+        l_fake = D(fake_d)
+        if t.adv_input > 0:                                  # random views | input views
+            l_fake, l_front = l_fake.split([len(i_view), b])
+            terms = {"adv_input": t.adv_input * g_loss(t.loss, l_front)}
+        else:
+            terms = {}
+        loss_adv = g_loss(t.loss, l_fake)
+        terms["adv2d"] = loss_adv
         if t.mode == "platonic3d":
             terms["adv3d"] = t.weight_3d * loss_g3
         if t.colour_tv > 0:                                  # colour carried into the unseen body
             terms["colour_tv"] = t.colour_tv * colour_tv(v)
+        if t.colour_match > 0:                               # the photo's mean colour from every side
+            terms["colour_match"] = t.colour_match * colour_match(i_view, x)
         if rec and t.rec_target == "volume":
             terms["rec3d"] = t.rec_weight * self._volume_rec(v_input, idx, out)
         elif rec:
-            i_front = self.render(v_input, front_view(b).to(self.device), seed + 1)
             loss_rec = F.mse_loss(i_front, x) if t.rec_loss == "l2" else F.l1_loss(i_front, x)
             terms["rec"] = t.rec_weight * loss_rec
             out["loss_rec"] = float(self._all_sum(loss_rec.detach().cpu()) / self.world)
@@ -330,9 +345,9 @@ class Trainer:
 
     def _g_objective(self, terms: Dict[str, torch.Tensor]) -> torch.Tensor:
         """G's (and E's) loss: the sum of its weighted terms, named 'adv2d' (D on rendered views),
-        'adv3d' (D3 on volumes), 'rec' (the input view), 'rec3d' (the input image's ground-truth
-        volume), 'pose' (the elevations of G's renders) and 'colour_tv' (a prior, when its weight
-        is set). One place that sees every term, so
+        'adv3d' (D3 on volumes), 'adv_input' (D on the input view), 'rec' (the input view), 'rec3d' (the input image's ground-truth
+        volume), 'pose' (the elevations of G's renders), 'colour_tv' and 'colour_match' (priors, when their
+        weights are set). One place that sees every term, so
         the tests can check which of them reach G."""
         return sum(terms.values())
 
@@ -387,7 +402,8 @@ class Trainer:
             if r1 is not None:
                 loss = loss + 0.5 * t.r1_weight * t.r1_every * r1
             if t.loss == "wgan-gp":
-                loss = loss + t.gp_weight * gradient_penalty(critic, real, fake, eps[: len(real)].to(self.device))
+                loss = loss + t.gp_weight * gradient_penalty(critic, real, fake[: len(real)],   # adv_input: more fakes
+                                                                 eps[: len(real)].to(self.device))
             acc = self._ratio(soft_accuracy_counts(l_real, l_fake))
             if i == 0:
                 out[f"loss_{key}"] = float(self._all_sum(loss.detach().cpu()) / self.world)
