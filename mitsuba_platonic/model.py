@@ -38,7 +38,7 @@ from torch import nn
 
 from .data.photos import decode_image, prepare_image
 from .errors import UserError
-from .models import Encoder, Generator, NetConfig, PoseHead, init_weights, photo_colour
+from .models import Encoder, Generator, NetConfig, PoseHead, init_weights, input_colour
 from .render.closed_form import tilt
 from .render.settings import RenderSettings
 from .volume import CHANNELS
@@ -172,13 +172,19 @@ class Model(nn.Module):
         mode is restored). A PrGAN-style model's G gets the code of ring view 0, the input view.
         With a pose head, G's upright volume is tilted by the estimated elevation θ̂ = P(z),
         ``tilt(G(z), θ̂)`` clamped to [0, 1] (trilinear round-off). With ``photo_colour``, G also
-        gets each image's mean colour (:func:`~mitsuba_platonic.models.photo_colour`)."""
+        gets each image's mean colour (:func:`~mitsuba_platonic.models.photo_colour`), or with
+        ``photo_texture`` its colours along the rays of a camera at θ̂
+        (:func:`~mitsuba_platonic.models.photo_texture`)."""
         self._needs_encoder()
 
         def run() -> torch.Tensor:
             x = images.to(self.device)
             z = self.E(x)
-            v = self.G(self.code(z), photo_colour(x)) if self.net.photo_colour else self.G(self.code(z))
+            if self.net.photo_colour:                        # the colour G offsets from, read from x
+                θ = self.P(z) if self.P is not None and self.net.photo_texture else None
+                v = self.G(self.code(z), input_colour(x, self.net.photo_texture, self.resolution, θ))
+            else:
+                v = self.G(self.code(z))
             return v if self.P is None else tilt(v, self.P(z)).clamp(0.0, 1.0)
 
         return self._eval(run)

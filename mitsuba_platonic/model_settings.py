@@ -16,12 +16,13 @@ from dataclasses import dataclass
 from typing import Optional
 
 from .models import INITS, NORMS, PRECISIONS, RESOLUTIONS, UPSAMPLES, NetConfig
-from .settings_checks import choice, non_negative, positive
+from .settings_checks import ConfigError, choice, non_negative, positive
 
 __all__ = ["ModelConfig", "NET_KEYS"]
 
 #: The model keys that :class:`~mitsuba_platonic.models.NetConfig` takes as they are.
-NET_KEYS = ("resolution", "latent", "width", "norm", "encoder_hidden", "upsample", "precision", "photo_colour")
+NET_KEYS = ("resolution", "latent", "width", "norm", "encoder_hidden", "upsample", "precision", "photo_colour",
+            "photo_texture")
 
 
 @dataclass
@@ -40,6 +41,8 @@ class ModelConfig:
     precision: the networks' arithmetic, 'fp32' | 'bf16' (convolutions in bfloat16: "Where a step's time goes").
     photo_colour: G's colour as an offset from the input photo's mean colour (reconstruction, EA:
     "A colour read from the photo").
+    photo_texture: with photo_colour, the offset is from the photo's own colour at each voxel's pixel,
+    carried along the input camera's rays, not from its mean (:func:`~mitsuba_platonic.models.photo_texture`).
     """
 
     resolution: int = 32
@@ -53,6 +56,7 @@ class ModelConfig:
     critic_width: Optional[int] = None
     precision: str = "fp32"
     photo_colour: bool = False
+    photo_texture: bool = False
 
     def validate(self) -> "ModelConfig":
         """Check this section's values; raise :class:`~mitsuba_platonic.settings_checks.ConfigError`
@@ -68,6 +72,9 @@ class ModelConfig:
         if self.critic_width is not None:
             positive("model.critic_width", self.critic_width)
         non_negative("model.encoder_hidden", self.encoder_hidden)
+        if self.photo_texture and not self.photo_colour:
+            raise ConfigError("model.photo_texture: the offset per voxel is G's photo colour read per pixel, so it "
+                              "needs model.photo_colour: true")
         return self
 
     def net_config(self, channels: int, view_codes: int = 0, pose: bool = False) -> NetConfig:

@@ -28,10 +28,11 @@ from dataclasses import dataclass
 from typing import ContextManager, List, Optional
 
 import torch
+import torch.nn.functional as F
 from torch import nn
 
 __all__ = ["NORMS", "UPSAMPLES", "INITS", "PRECISIONS", "NetConfig", "Encoder", "Generator", "Discriminator",
-           "VolumeDiscriminator", "PoseHead", "ResizeConv3d", "photo_colour", "COLOUR_MIN", "init_weights", "init_critic_he", "init_he"]
+           "VolumeDiscriminator", "PoseHead", "ResizeConv3d", "photo_colour", "photo_texture", "input_colour", "COLOUR_MIN", "init_weights", "init_critic_he", "init_he"]
 
 NORMS = ("batch", "instance", "none")
 #: How G doubles its resolution: the paper's transposed convolution (k4, s2, p1), or a nearest
@@ -71,8 +72,9 @@ class NetConfig:
     sees z only); upsample: how G's stages double the resolution (:data:`UPSAMPLES`); pose:
     whether a :class:`PoseHead` reads the input camera's elevation from z (``train.pose:
     elevation``); precision: the networks' arithmetic (:data:`PRECISIONS`); photo_colour: G's colour is an
-    offset from the input photo's mean colour (:meth:`Generator.forward`). A config's model section
-    builds it (:meth:`~mitsuba_platonic.model_settings.ModelConfig.net_config`, its eight keys of the same names)."""
+    offset from the input photo's mean colour (:meth:`Generator.forward`); photo_texture: from the
+    photo's colour at each voxel's pixel instead (:func:`photo_texture`). A config's model section
+    builds it (:meth:`~mitsuba_platonic.model_settings.ModelConfig.net_config`, its keys of the same names)."""
 
     resolution: int = 32
     volume_channels: int = 4
@@ -86,6 +88,7 @@ class NetConfig:
     pose: bool = False
     precision: str = "fp32"
     photo_colour: bool = False
+    photo_texture: bool = False
 
     def validate(self) -> "NetConfig":
         if self.resolution not in RESOLUTIONS:
@@ -113,6 +116,9 @@ class NetConfig:
             raise ValueError(f"photo_colour must be True or False, got {self.photo_colour!r}")
         if self.photo_colour and self.volume_channels != 4:
             raise ValueError("photo_colour needs colour: volume_channels 4")
+        if not isinstance(self.photo_texture, bool) or (self.photo_texture and not self.photo_colour):
+            raise ValueError(f"photo_texture must be True or False, and True only with photo_colour; got "
+                             f"{self.photo_texture!r} (photo_colour {self.photo_colour!r})")
         return self
 
     @property
@@ -230,8 +236,8 @@ class Generator(nn.Module):
 
     def forward(self, z: torch.Tensor, colour: Optional[torch.Tensor] = None) -> torch.Tensor:
         """The volume for codes ``z``. With ``photo_colour`` (and only then) ``colour`` is the input
-        photos' mean colour m ``(B, 3)`` (:func:`photo_colour`), and G's colour logits are offsets
-        from it: c = σ(ℓ + logit m) per channel, the density's σ(ℓ) as always. A colour the
+        photos' mean colour m ``(B, 3)`` (:func:`photo_colour`) or a colour per voxel m ``(B, 3, R, R, R)``
+        (:func:`photo_texture`), and G's colour logits are offsets from it: c = σ(ℓ + logit m) per channel, the density's σ(ℓ) as always. A colour the
         encoder has not learnt (an orange tree among green ones) is then still the photo's, and
         an untrained G's colour (ℓ ≈ 0) starts at m instead of grey."""
         n = self.cfg.latent + self.cfg.view_codes
@@ -242,16 +248,19 @@ class Generator(nn.Module):
         if self.cfg.photo_colour != (colour is not None):
             raise ValueError("G was built with photo_colour and needs the photos' mean colour (B, 3)"
                              if self.cfg.photo_colour else "G was built without photo_colour: it takes no colour")
-        if colour is not None and colour.shape != (z.shape[0], 3):
-            raise ValueError(f"G expects the photos' mean colour of shape ({z.shape[0]}, 3), got {tuple(colour.shape)}")
+        r = self.cfg.resolution
+        if colour is not None and colour.shape not in ((z.shape[0], 3), (z.shape[0], 3, r, r, r)):
+            raise ValueError(f"G expects the photos' mean colour of shape ({z.shape[0]}, 3), or a colour per voxel "
+                             f"({z.shape[0]}, 3, {r}, {r}, {r}), got {tuple(colour.shape)}")
         x = z[:, :, None, None, None].contiguous(memory_format=torch.channels_last_3d)
         with arithmetic(self.cfg.precision, z):
             logits = self.net[:-1](x)                       # everything but the final sigmoid
         logits = logits.float()
         if colour is not None:
             m = colour.to(logits).clamp(COLOUR_MIN, 1.0 - COLOUR_MIN)
-            offset = torch.cat([torch.logit(m), m.new_zeros(m.shape[0], 1)], dim=1)   # density: no offset
-            logits = logits + offset[:, :, None, None, None]
+            m = m[:, :, None, None, None] if m.dim() == 2 else m
+            offset = torch.cat([torch.logit(m), m.new_zeros(m.shape[0], 1, *m.shape[2:])], dim=1)   # density: none
+            logits = logits + offset
         return torch.sigmoid(logits).contiguous()           # float32, in the usual layout for the renderers
 
 
@@ -268,6 +277,47 @@ def photo_colour(images: torch.Tensor) -> torch.Tensor:
     total = images[:, :3].sum(dim=(2, 3))
     m = total / coverage.clamp_min(1e-8)[:, None]
     return torch.where(coverage[:, None] > 1e-8, m, torch.full_like(m, 0.5)).clamp(0.0, 1.0)
+
+
+def photo_texture(images: torch.Tensor, resolution: int, elevation: Optional[torch.Tensor] = None) -> torch.Tensor:
+    """The photo's colour carried along the input camera's rays: ``(B, 3, R, R, R)``, a colour per
+    voxel of G's frame for premultiplied RGBA photos ``(B, 4, H, W)``.
+
+    The photo is first laid over its own mean colour m (:func:`photo_colour`), c = rgb + (1 − α) m,
+    so the background adds no colour of its own. A voxel centre p = (x, y, z) of G's frame
+    (docs/conventions.md: w along +x, h along −y, d along −z) is seen by an orthographic camera at
+    azimuth 0 and elevation θ (``elevation`` ``(B,)`` radians; None: 0, the volume in the input
+    camera's frame) at image coordinates
+
+        X = x,   Y = y cos θ − z sin θ        (right = +x, up = (0, cos θ, −sin θ))
+
+    and takes the colour there, read bilinearly (column X, row −Y; beyond the photo, its edge).
+    Every voxel along a ray gets that ray's pixel: the front of the object starts with the photo's
+    detail, the back with its mirror image, and G's offsets change what the views disagree with."""
+    if images.dim() != 4 or images.shape[1] != 4:
+        raise ValueError(f"photo_texture expects premultiplied RGBA images (B, 4, H, W), got {tuple(images.shape)}")
+    b = images.shape[0]
+    m = photo_colour(images)
+    c = images[:, :3] + (1.0 - images[:, 3:]) * m[:, :, None, None]
+    θ = torch.zeros(b, dtype=torch.float64) if elevation is None else elevation.detach().to("cpu", torch.float64)
+    if θ.shape != (b,):
+        raise ValueError(f"photo_texture: one elevation per photo expected, shape ({b},), got {tuple(θ.shape)}")
+    centres = -1.0 + (torch.arange(resolution, dtype=torch.float64) + 0.5) * (2.0 / resolution)
+    x = centres[None, None, None, :].expand(b, resolution, resolution, resolution)         # [b, d, h, w]
+    y = centres.flip(0)[None, None, :, None]                                               # h: along −y
+    z = centres.flip(0)[None, :, None, None]                                               # d: along −z
+    Y = y * torch.cos(θ)[:, None, None, None] - z * torch.sin(θ)[:, None, None, None]      # [b, d, h, 1]
+    grid = torch.stack([x, (-Y).expand(b, resolution, resolution, resolution)], dim=-1)    # (X, row) per voxel
+    grid = grid.reshape(b, resolution, resolution * resolution, 2).to(c)
+    out = F.grid_sample(c, grid.to(c.device), mode="bilinear", padding_mode="border", align_corners=False)
+    return out.reshape(b, 3, resolution, resolution, resolution)
+
+
+def input_colour(images: torch.Tensor, texture: bool, resolution: int,
+                 elevation: Optional[torch.Tensor] = None) -> torch.Tensor:
+    """What G's colour offsets from (``model.photo_colour``): the photos' mean colour ``(B, 3)``, or
+    with ``texture`` (``model.photo_texture``) their colour per voxel (:func:`photo_texture`)."""
+    return photo_texture(images, resolution, elevation) if texture else photo_colour(images)
 
 
 class Discriminator(nn.Module):

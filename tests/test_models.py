@@ -1,8 +1,10 @@
 """Networks: shapes and gradient flow; config validation."""
 
+import math
+
 import pytest
-import yaml
 import torch
+import yaml
 from torch import nn
 
 from mitsuba_platonic.config import ConfigError, load_config
@@ -537,3 +539,74 @@ def test_a_photo_colour_model_reconstructs_in_each_photos_colour():
     assert v[0, 0].min() > 0.99 and v[0, 2].max() < 0.01
     assert v[1, 2].min() > 0.99 and v[1, 0].max() < 0.01
     assert torch.allclose(model.generate(2)[:, :3], torch.full((2, 3, 16, 16, 16), 0.5))
+
+
+# -- the photo's colour per voxel (model.photo_texture) ----------------------------------------------
+
+
+def _ramp_photo(n=16, b=2):
+    """Premultiplied RGBA photos whose colour is linear in the row and the column (α 1 inside a
+    margin of 2 pixels, 0 around): bilinear reads of it are exact."""
+    r = torch.linspace(0.2, 0.8, n)
+    x = torch.zeros(b, 4, n, n)
+    x[:, 0], x[:, 1], x[:, 2] = r[:, None], r[None, :], 0.5 * r[:, None] + 0.3
+    x[:, 3] = 0.0
+    x[:, 3, 2:-2, 2:-2] = 1.0
+    x[:, :3] *= x[:, 3:]
+    return x
+
+
+def test_photo_texture_carries_each_pixel_along_the_input_cameras_ray():
+    """At elevation 0 every depth plane is the photo laid over its mean colour m (rgb + (1 − α) m);
+    at elevation θ the texture tilted into the input camera's frame (the closed form's tilt, an
+    independent resampling) is that same texture, exactly where both read a linear colour
+    (a ramp photo, away from the cube's faces), and not the untilted one."""
+    from mitsuba_platonic.models import photo_colour, photo_texture
+    from mitsuba_platonic.render.closed_form import tilt
+    x = _ramp_photo()
+    flat = x[:, :3] + (1.0 - x[:, 3:]) * photo_colour(x)[:, :, None, None]
+    t0 = photo_texture(x, 16)
+    assert t0.shape == (2, 3, 16, 16, 16)
+    assert torch.equal(t0, flat[:, :, None].expand(-1, -1, 16, -1, -1))
+    x[:, :3], x[:, 3] = x[:, :3] / x[:, 3:].clamp_min(1.0), 1.0   # the whole photo covered: a linear colour
+    x[:, 0], x[:, 1] = torch.linspace(0.2, 0.8, 16)[:, None], torch.linspace(0.2, 0.8, 16)[None, :]
+    x[:, 2] = 0.5 * x[:, 0] + 0.3
+    θ = torch.tensor([0.5, -0.3], dtype=torch.float64)
+    t0, c = photo_texture(x, 16), slice(5, 11)
+    seen = tilt(photo_texture(x, 16, θ), θ)
+    assert (seen[..., c, c, c] - t0[..., c, c, c]).abs().max() < 1e-6
+    assert (tilt(t0, θ)[..., c, c, c] - t0[..., c, c, c]).abs().max() > 0.03
+    with pytest.raises(ValueError, match=r"one elevation per photo expected, shape \(2,\), got \(3,\)"):
+        photo_texture(x, 16, torch.zeros(3))
+    with pytest.raises(ValueError, match=r"premultiplied RGBA images"):
+        photo_texture(x[:, :3], 16)
+
+
+def test_a_photo_texture_model_starts_from_the_photo_at_the_input_view():
+    """Model.reconstruct hands G the photo's texture as a camera at the pose head's elevation θ̂
+    sees it: with G's colour logits at 0 and the head set to θ̂ ≈ 17°, the volume's colour is
+    that texture tilted by θ̂ into the input frame, and not the texture of a camera at 0°.
+    model.photo_texture needs model.photo_colour."""
+    from mitsuba_platonic.model import Model
+    from mitsuba_platonic.models import COLOUR_MIN, photo_texture
+    from mitsuba_platonic.render.closed_form import tilt
+    cfg = load_config(None, ["model.photo_colour=true", "model.photo_texture=true", "model.resolution=16",
+                             "model.width=4", "model.latent=8", "model.upsample=resize_last",
+                             "train.pose=elevation"])
+    model = Model.from_config(cfg)
+    last = model.G.convolutions()[-1]
+    with torch.no_grad():
+        last.weight[:3].zero_()
+        last.bias[:3].zero_()
+        model.P.bias.fill_(0.2)                               # θ̂ = (π/2) tanh(0.2) ≈ 0.31 rad
+    x = _ramp_photo()
+    v = model.reconstruct(x)
+    with torch.no_grad():
+        θ = model.P(model.E(x))
+    assert torch.allclose(θ, torch.full((2,), math.pi / 2 * math.tanh(0.2)))
+    inside = v[:, 3:] > 0.01
+    for elevation, same in ((θ, True), (torch.zeros(2), False)):
+        want = tilt(photo_texture(x, 16, elevation).clamp(COLOUR_MIN, 1 - COLOUR_MIN), θ)
+        assert torch.allclose(v[:, :3] * inside, want * inside, atol=1e-5) == same
+    with pytest.raises(ConfigError, match="model.photo_texture: .*needs model.photo_colour: true"):
+        load_config(None, ["model.photo_texture=true"])

@@ -93,7 +93,7 @@ from torch.nn.parallel import DistributedDataParallel as DDP
 
 from ..config import Config, ConfigError
 from ..model import RING_VIEWS, Model, critic_config
-from ..models import Discriminator, VolumeDiscriminator, init_critic_he, init_he, init_weights, photo_colour
+from ..models import Discriminator, VolumeDiscriminator, init_critic_he, init_he, init_weights, input_colour
 from ..render.closed_form import rotate, tilt
 from ..views import DEFAULT_ELEVATION, from_angles, front_view, sample_views, to_angles
 from .augment import augment, augment_photos
@@ -277,7 +277,11 @@ class Trainer:
         self.nets.train()
         z = E(x) if rec else self._shard(z_prior).to(self.device)
         if ring_k is None:
-            v = G(z, photo_colour(x)) if cfg.model.photo_colour else G(z)    # model.photo_colour: from x
+            if cfg.model.photo_colour:                       # G's colour offsets from x's (models.input_colour)
+                θ = self.modules["P"](z) if "P" in self.modules and cfg.model.photo_texture else None
+                v = G(z, input_colour(x, cfg.model.photo_texture, cfg.model.resolution, θ))
+            else:
+                v = G(z)
             v_view, v_input = (v.repeat_interleave(K, 0) if K > 1 else v), v   # K = 1: no copy
             if "P" in self.modules:                          # train.pose: elevation: upright v, seen from θ̂
                 v_input = tilt(v, self.modules["P"](z))
