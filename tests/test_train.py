@@ -126,6 +126,45 @@ def test_a_photo_colour_step_hands_g_the_mean_colour_of_es_own_input(tmp_path, m
     assert all(_changed(before[k], trainer.nets[k]) for k in ("E", "G", "D"))
 
 
+def test_a_photo_texture_step_hands_g_the_texture_of_es_input_at_the_heads_elevation(tmp_path, monkeypatch):
+    """``model.photo_texture`` with the pose head: in a step, G gets the colour per voxel of exactly
+    the photos E read, as a camera at the elevation P reads from E's code sees them
+    (:func:`~mitsuba_platonic.models.photo_texture`), and E, G, D and P all move."""
+    from mitsuba_platonic import models
+    cfg = _cfg(tmp_path, "model.photo_colour=true", "model.photo_texture=true", "render.backend=mitsuba",
+               "render.model=ea", "data.formation=ea", "train.task=reconstruction", "train.pose=elevation",
+               "train.pose_weight=1.0")
+    trainer = Trainer(cfg, load_training_data(cfg, progress=False), torch.device("cpu"))
+    with torch.no_grad():
+        trainer.nets["P"].bias.fill_(0.3)                    # an elevation far from 0 from the first step
+    seen = {}
+    trainer.nets["E"].register_forward_hook(lambda m, i, o: [seen.setdefault("x", i[0].detach().clone()),
+                                                             seen.setdefault("z", o.detach().clone())] and None)
+    original = models.Generator.forward
+
+    def spy(self, z, colour=None):
+        seen.setdefault("colour", colour.detach().clone())
+        return original(self, z, colour)
+
+    monkeypatch.setattr(models.Generator, "forward", spy)
+    before = {k: _params(m) for k, m in trainer.nets.items()}
+    out = trainer.step(0)
+    assert all(np.isfinite(v) for v in out.values()), out
+    with torch.no_grad():
+        θ = _frozen_head(before["P"])(seen["z"])
+    assert float(θ.abs().min()) > 0.4
+    assert torch.allclose(seen["colour"], models.photo_texture(seen["x"], 16, θ), atol=1e-6)
+    assert all(_changed(before[k], trainer.nets[k]) for k in ("E", "G", "D", "P"))
+
+
+def _frozen_head(params):
+    """A pose head with the given parameters (its weights before a step)."""
+    from mitsuba_platonic.models import PoseHead
+    head = PoseHead(params["weight"].shape[0])
+    head.load_state_dict(params)
+    return head
+
+
 def _input_view_error(trainer, batch, distance):
     """The reconstruction error computed here, not by the trainer: render G(E(x)) from the input
     view with the Mitsuba ray marcher (the trainer renders with the closed form) and take the mean
