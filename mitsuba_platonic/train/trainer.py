@@ -278,7 +278,10 @@ class Trainer:
         z = E(x) if rec else self._shard(z_prior).to(self.device)
         if ring_k is None:
             if cfg.model.photo_colour:                       # G's colour offsets from x's (models.input_colour)
-                θ = self.modules["P"](z) if "P" in self.modules and cfg.model.photo_texture else None
+                θ = None
+                if "P" in self.nets and cfg.model.photo_texture:   # the head's θ̂, held constant: the
+                    with torch.no_grad():                           # plain module, so DDP sees one use of P
+                        θ = self.nets["P"](z.detach())
                 v = G(z, input_colour(x, cfg.model.photo_texture, cfg.model.resolution, θ))
             else:
                 v = G(z)
