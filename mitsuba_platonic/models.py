@@ -25,7 +25,7 @@ from __future__ import annotations
 import contextlib
 import math
 from dataclasses import dataclass
-from typing import ContextManager, List, Optional
+from typing import ContextManager, List, Optional, Tuple, Union
 
 import torch
 import torch.nn.functional as F
@@ -234,12 +234,15 @@ class Generator(nn.Module):
         """G's (transposed) convolutions, input first; the last one gives the volume."""
         return [m for m in self.net if isinstance(m, (nn.Conv3d, nn.ConvTranspose3d))]
 
-    def forward(self, z: torch.Tensor, colour: Optional[torch.Tensor] = None) -> torch.Tensor:
+    def forward(self, z: torch.Tensor, colour: Optional[torch.Tensor] = None,
+                offsets: bool = False) -> Union[torch.Tensor, Tuple[torch.Tensor, torch.Tensor]]:
         """The volume for codes ``z``. With ``photo_colour`` (and only then) ``colour`` is the input
-        photos' mean colour m ``(B, 3)`` (:func:`photo_colour`) or a colour per voxel m ``(B, 3, R, R, R)``
-        (:func:`photo_texture`), and G's colour logits are offsets from it: c = σ(ℓ + logit m) per channel, the density's σ(ℓ) as always. A colour the
-        encoder has not learnt (an orange tree among green ones) is then still the photo's, and
-        an untrained G's colour (ℓ ≈ 0) starts at m instead of grey."""
+        photos' mean colour m ``(B, 3)`` (:func:`photo_colour`) or a colour per voxel m
+        ``(B, 3, R, R, R)`` (:func:`photo_texture`), and G's colour logits are offsets from it:
+        c = σ(ℓ + logit m) per channel, the density's σ(ℓ) as always. A colour the encoder has not
+        learnt (an orange tree among green ones) is then still the photo's, and an untrained G's
+        colour (ℓ ≈ 0) starts at m instead of grey. With ``offsets`` it returns (volume, ℓ), the
+        colour offsets ``(B, 3, R, R, R)`` float32 (``train.colour_offset`` penalises them)."""
         n = self.cfg.latent + self.cfg.view_codes
         if z.dim() != 2 or z.shape[1] != n:
             what = f"z and a view code, (B, {self.cfg.latent} + {self.cfg.view_codes})" if self.cfg.view_codes \
@@ -256,12 +259,14 @@ class Generator(nn.Module):
         with arithmetic(self.cfg.precision, z):
             logits = self.net[:-1](x)                       # everything but the final sigmoid
         logits = logits.float()
+        ℓ = logits[:, :3]                                   # the colour offsets (models without colour: unused)
         if colour is not None:
             m = colour.to(logits).clamp(COLOUR_MIN, 1.0 - COLOUR_MIN)
             m = m[:, :, None, None, None] if m.dim() == 2 else m
             offset = torch.cat([torch.logit(m), m.new_zeros(m.shape[0], 1, *m.shape[2:])], dim=1)   # density: none
             logits = logits + offset
-        return torch.sigmoid(logits).contiguous()           # float32, in the usual layout for the renderers
+        v = torch.sigmoid(logits).contiguous()              # float32, in the usual layout for the renderers
+        return (v, ℓ) if offsets else v
 
 
 #: Where :func:`photo_colour` clamps a mean colour, so that its logit stays finite (≈ ±5.5).

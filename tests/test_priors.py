@@ -1,12 +1,13 @@
 """train.colour_tv: the density-weighted colour total variation (train/losses.colour_tv) on known
 volumes, its gradient (colour only, never density), and the trainer handing it to G; and
-train.colour_match (train/losses.colour_match): the mean colour of the object from every side."""
+train.colour_match (train/losses.colour_match): the mean colour of the object from every side; and
+train.colour_offset (train/losses.colour_offset): G's colour held to the photo's."""
 
 import pytest
 import torch
 
 from mitsuba_platonic.config import ConfigError, load_config
-from mitsuba_platonic.train.losses import colour_match, colour_tv, mean_colour
+from mitsuba_platonic.train.losses import colour_match, colour_offset, colour_tv, mean_colour
 
 
 def _volume(n=4, colour=(0.2, 0.5, 0.7), density=1.0):
@@ -177,3 +178,65 @@ def test_the_trainer_hands_g_the_colour_match_of_the_views_d_saw_against_the_pho
         c = lambda im: im[:, :3].sum((2, 3)) / im[:, 3].sum((1, 2))[:, None]
         expected = weight * (c(fakes) - c(x).repeat_interleave(2, 0)).abs().mean()
         assert float(terms["colour_match"].detach()) == pytest.approx(float(expected), rel=1e-5)
+
+
+def test_colour_offset_is_the_density_weighted_mean_offset_and_moves_colour_only():
+    """Two voxels of density 1 and ¼ (the rest empty) with offsets (1, 2, 3) and (−4, 0, 0):
+    L = (1 · 6 + ¼ · 4) / (3 · 1¼) = 7 / 3.75; offsets where nothing is cost nothing; the gradient
+    reaches the offsets (finite differences), never the density."""
+    v = torch.zeros(1, 4, 2, 2, 2, dtype=torch.float64)
+    ℓ = torch.zeros(1, 3, 2, 2, 2, dtype=torch.float64)
+    v[0, 3, 0, 0, 0], v[0, 3, 1, 1, 1] = 1.0, 0.25
+    ℓ[0, :, 0, 0, 0] = torch.tensor([1.0, 2.0, 3.0], dtype=torch.float64)
+    ℓ[0, :, 1, 1, 1] = torch.tensor([-4.0, 0.0, 0.0], dtype=torch.float64)
+    ℓ[0, :, 0, 1, 0] = 9.0                                      # an empty voxel's offset
+    assert float(colour_offset(v, ℓ)) == pytest.approx(7 / 3.75, rel=1e-12)
+    assert float(colour_offset(torch.zeros_like(v), ℓ)) == 0.0
+    torch.manual_seed(2)
+    v = torch.rand(2, 4, 3, 3, 3, dtype=torch.float64, requires_grad=True)
+    ℓ = torch.randn(2, 3, 3, 3, 3, dtype=torch.float64, requires_grad=True)
+    assert torch.autograd.gradcheck(lambda o: colour_offset(v, o), (ℓ,))
+    colour_offset(v, ℓ).backward()
+    assert v.grad is None or not v.grad.any()
+    with pytest.raises(ValueError, match=r"colour_offset: expected an EA volume .* got \(2, 4, 3, 3, 3\) and \(2, 4, 3, 3, 3\)"):
+        colour_offset(v, v)
+
+
+def test_the_config_refuses_colour_offset_without_a_photo_colour():
+    with pytest.raises(ConfigError, match="train.colour_offset: .*needs model.photo_colour: true"):
+        load_config(None, ["train.colour_offset=0.1"])
+    with pytest.raises(ConfigError, match=r"train.colour_offset: expected a non-negative value, got -1"):
+        load_config(None, ["train.colour_offset=-1", "model.photo_colour=true"])
+
+
+@pytest.mark.usefixtures("tiny_class")
+def test_the_trainer_hands_g_the_offsets_of_the_volume_it_made(tmp_path, monkeypatch):
+    """With weight w and model.photo_colour, G's 'colour_offset' term is w · L_off of the volume and
+    offsets G returned in the step (recorded here), and those offsets are logit c − logit m: the
+    colour G made, less the photo's mean colour it offset from."""
+    from mitsuba_platonic import models
+    from mitsuba_platonic.train.data import load_training_data
+    from mitsuba_platonic.train.trainer import Trainer
+    from tiny_shapes import TINY
+    cfg = load_config(None, [
+        f"data.cache={tmp_path}", f"data.shape_class={TINY}", "data.n_shapes=4", "data.views_per_shape=2",
+        "model.resolution=16", "model.width=4", "model.latent=8", "train.batch_size=2", "render.backend=closed_form",
+        "train.task=reconstruction", "model.photo_colour=true", "train.colour_offset=0.5"])
+    trainer = Trainer(cfg, load_training_data(cfg, progress=False), torch.device("cpu"))
+    seen, terms = {}, {}
+    original = models.Generator.forward
+
+    def spy(self, z, colour=None, offsets=False):
+        out = original(self, z, colour, offsets)
+        seen.update({"v": out[0].detach().clone(), "offsets": out[1].detach().clone(), "m": colour.detach().clone()})
+        return out
+
+    monkeypatch.setattr(models.Generator, "forward", spy)
+    original_objective = trainer._g_objective
+    trainer._g_objective = lambda t: terms.update(t) or original_objective(t)
+    trainer.step(0)
+    v, ℓ, m = seen["v"], seen["offsets"], seen["m"]
+    made = torch.logit(v[:, :3].double()) - torch.logit(m.double().clamp(1 / 255, 254 / 255))[:, :, None, None, None]
+    assert torch.allclose(made, ℓ.double(), atol=1e-3)
+    w = v[:, 3:]
+    assert float(terms["colour_offset"].detach()) == pytest.approx(float(0.5 * (w * ℓ.abs()).sum() / (3 * w.sum())), rel=1e-5)

@@ -7,6 +7,9 @@ R1 (optional, non-saturating): L_D += γ/2 · mean over reals of ‖∇_x l(x)�
 Colour TV (optional prior on G, EA volumes [r, g, b, ρ]): over every pair (i, j) of face-neighbouring
 voxels, w_ij = min(ρ_i, ρ_j) (held constant) and
                             L_tv = Σ w_ij ‖c_i − c_j‖₁ / (3 Σ w_ij)
+Colour offset (optional prior on G with model.photo_colour, offsets ℓ of its colour logits from the
+photo's): with w = ρ held constant,
+                            L_off = Σ w ‖ℓ‖₁ / (3 Σ w)
 Colour match (optional prior on G, premultiplied RGBA images): the mean colour of an image's
 object, c̄(I) = Σ_p rgb_p / Σ_p α_p, is the same from every side, so each random view I of the
 reconstruction of photo x answers to
@@ -30,7 +33,7 @@ from typing import Callable, Optional, Tuple
 import torch
 import torch.nn.functional as F
 
-__all__ = ["LOSSES", "d_loss", "g_loss", "gradient_penalty", "r1_penalty", "colour_tv", "mean_colour", "colour_match", "soft_accuracy_counts", "hard_accuracy_counts"]
+__all__ = ["LOSSES", "d_loss", "g_loss", "gradient_penalty", "r1_penalty", "colour_tv", "colour_offset", "mean_colour", "colour_match", "soft_accuracy_counts", "hard_accuracy_counts"]
 
 #: The GAN losses of :func:`d_loss` / :func:`g_loss` (anything but the first is WGAN-GP).
 LOSSES = ("nonsaturating", "wgan-gp")
@@ -96,6 +99,19 @@ def colour_tv(volume: torch.Tensor) -> torch.Tensor:
         num = num + (w * step).sum()
         den = den + w.sum()
     return num / (3.0 * den).clamp_min(1e-12)
+
+
+def colour_offset(volume: torch.Tensor, offsets: torch.Tensor) -> torch.Tensor:
+    """L_off (module docstring): the density-weighted mean |ℓ| of G's colour offsets ``offsets``
+    ``(B, 3, D, H, W)`` from the photo's colour, over an EA volume ``(B, 4, D, H, W)`` whose density
+    weighs each voxel (held constant: the term moves colour, never density). The colour of matter
+    stays the photo's unless the views need otherwise; a saturated fleck (|ℓ| large) costs most.
+    A volume without matter gives 0."""
+    if volume.dim() != 5 or volume.shape[1] != 4 or offsets.shape != (volume.shape[0], 3, *volume.shape[2:]):
+        raise ValueError(f"colour_offset: expected an EA volume (B, 4, D, H, W) and offsets (B, 3, D, H, W), got "
+                         f"{tuple(volume.shape)} and {tuple(offsets.shape)}")
+    w = volume[:, 3:].detach()
+    return (w * offsets.abs()).sum() / (3.0 * w.sum()).clamp_min(1e-12)
 
 
 def mean_colour(images: torch.Tensor) -> torch.Tensor:

@@ -98,8 +98,8 @@ from ..render.closed_form import rotate, tilt
 from ..views import DEFAULT_ELEVATION, from_angles, front_view, sample_views, to_angles
 from .augment import augment, augment_photos
 from .data import TrainingData
-from .losses import (colour_match, colour_tv, d_loss, g_loss, gradient_penalty, hard_accuracy_counts, r1_penalty,
-                     soft_accuracy_counts)
+from .losses import (colour_match, colour_offset, colour_tv, d_loss, g_loss, gradient_penalty, hard_accuracy_counts,
+                     r1_penalty, soft_accuracy_counts)
 from .renderer import make_renderer
 from .roll import input_frame_roll, roll
 from .settings import MODES, MODES_3D, POSES, REC_TARGETS, TASKS  # noqa: F401  (the choice lists, also named here)
@@ -282,7 +282,11 @@ class Trainer:
                 if "P" in self.nets and cfg.model.photo_texture:   # the head's θ̂, held constant: the
                     with torch.no_grad():                           # plain module, so DDP sees one use of P
                         θ = self.nets["P"](z.detach())
-                v = G(z, input_colour(x, cfg.model.photo_texture, cfg.model.resolution, θ))
+                colour = input_colour(x, cfg.model.photo_texture, cfg.model.resolution, θ)
+                if t.colour_offset > 0:                      # G's offsets from that colour, penalised
+                    v, ℓ = G(z, colour, offsets=True)
+                else:
+                    v = G(z, colour)
             else:
                 v = G(z)
             v_view, v_input = (v.repeat_interleave(K, 0) if K > 1 else v), v   # K = 1: no copy
@@ -336,6 +340,8 @@ class Trainer:
             terms["adv3d"] = t.weight_3d * loss_g3
         if t.colour_tv > 0:                                  # colour carried into the unseen body
             terms["colour_tv"] = t.colour_tv * colour_tv(v)
+        if t.colour_offset > 0:                              # the photo's colour unless the views need otherwise
+            terms["colour_offset"] = t.colour_offset * colour_offset(v, ℓ)
         if t.colour_match > 0:                               # the photo's mean colour from every side
             terms["colour_match"] = t.colour_match * colour_match(i_view, x)
         if rec and t.rec_target == "volume":
@@ -353,8 +359,8 @@ class Trainer:
     def _g_objective(self, terms: Dict[str, torch.Tensor]) -> torch.Tensor:
         """G's (and E's) loss: the sum of its weighted terms, named 'adv2d' (D on rendered views),
         'adv3d' (D3 on volumes), 'adv_input' (D on the input view), 'rec' (the input view), 'rec3d' (the input image's ground-truth
-        volume), 'pose' (the elevations of G's renders), 'colour_tv' and 'colour_match' (priors, when their
-        weights are set). One place that sees every term, so
+        volume), 'pose' (the elevations of G's renders), 'colour_tv', 'colour_match' and 'colour_offset'
+        (priors, when their weights are set). One place that sees every term, so
         the tests can check which of them reach G."""
         return sum(terms.values())
 
