@@ -411,10 +411,17 @@ def _ddp_worker(rank, world, port, cfg_overrides, tmp, result_file):
     os._exit(0)
 
 
-@pytest.mark.parametrize("pose", [[], ["train.pose=elevation", "train.pose_weight=1.0"]], ids=["input", "elevation"])
+PHOTO_TERMS = ["train.pose=elevation", "train.pose_weight=1.0", "model.photo_colour=true", "model.photo_texture=true",
+               "train.colour_offset=0.1", "train.colour_match=1.0", "train.adv_input=1.0"]
+
+
+@pytest.mark.parametrize("pose", [[], ["train.pose=elevation", "train.pose_weight=1.0"], PHOTO_TERMS],
+                         ids=["input", "elevation", "photo_terms"])
 def test_two_processes_with_half_the_batch_make_the_single_process_update(tmp_path, pose):
     """gloo, 2 processes, no batch-statistics layers (norm: none): same parameters after 2 steps,
-    also with the pose head, which E's and P's second forward pass (G's renders) reaches."""
+    also with the pose head, which E's and P's second forward pass (G's renders) reaches, and
+    with the photo config's terms (the texture read at P's elevation, the colour priors, D on the
+    input view)."""
     import torch.multiprocessing as mp
     overrides = ["model.norm=none", "train.batch_size=4", "train.task=reconstruction", *pose]
     cfg = _cfg(tmp_path, *overrides)
