@@ -77,6 +77,9 @@ class Config:
         self.train.validate()
         if self.train.colour_tv > 0 and self.render.model != "ea":
             raise ConfigError(f"train.colour_tv: colour needs render.model 'ea', got {self.render.model!r}")
+        if self.model.photo_texture and self.render.camera != "orthographic":
+            raise ConfigError("model.photo_texture: the photo is carried along the rays of an orthographic input "
+                              f"camera; expected render.camera 'orthographic', got {self.render.camera!r}")
         if self.train.colour_offset > 0 and not self.model.photo_colour:
             raise ConfigError("train.colour_offset: it penalises G's colour offsets from the photo's colour, so it "
                               "needs model.photo_colour: true")

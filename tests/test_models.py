@@ -610,3 +610,5 @@ def test_a_photo_texture_model_starts_from_the_photo_at_the_input_view():
         assert torch.allclose(v[:, :3] * inside, want * inside, atol=1e-5) == same
     with pytest.raises(ConfigError, match="model.photo_texture: .*needs model.photo_colour: true"):
         load_config(None, ["model.photo_texture=true"])
+    with pytest.raises(ConfigError, match="model.photo_texture: .*orthographic input camera.*got 'perspective'"):
+        load_config(None, ["model.photo_colour=true", "model.photo_texture=true", "render.camera=perspective"])
