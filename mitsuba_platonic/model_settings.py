@@ -22,7 +22,7 @@ __all__ = ["ModelConfig", "NET_KEYS"]
 
 #: The model keys that :class:`~mitsuba_platonic.models.NetConfig` takes as they are.
 NET_KEYS = ("resolution", "latent", "width", "norm", "encoder_hidden", "upsample", "precision", "photo_colour",
-            "photo_texture")
+            "photo_texture", "texture_surface")
 
 
 @dataclass
@@ -43,6 +43,8 @@ class ModelConfig:
     "A colour read from the photo").
     photo_texture: with photo_colour, the offset is from the photo's own colour at each voxel's pixel,
     carried along the input camera's rays, not from its mean (:func:`~mitsuba_platonic.models.photo_texture`).
+    texture_surface: with photo_texture, that colour only where the input camera's rays enter or leave
+    the object, the mean colour inside (:func:`~mitsuba_platonic.models.texture_on_surface`).
     """
 
     resolution: int = 32
@@ -57,6 +59,7 @@ class ModelConfig:
     precision: str = "fp32"
     photo_colour: bool = False
     photo_texture: bool = False
+    texture_surface: bool = False
 
     def validate(self) -> "ModelConfig":
         """Check this section's values; raise :class:`~mitsuba_platonic.settings_checks.ConfigError`
@@ -75,6 +78,9 @@ class ModelConfig:
         if self.photo_texture and not self.photo_colour:
             raise ConfigError("model.photo_texture: the offset per voxel is G's photo colour read per pixel, so it "
                               "needs model.photo_colour: true")
+        if self.texture_surface and not self.photo_texture:
+            raise ConfigError("model.texture_surface: it places the photo's texture on the surfaces, so it needs "
+                              "model.photo_texture: true")
         return self
 
     def net_config(self, channels: int, view_codes: int = 0, pose: bool = False) -> NetConfig:

@@ -31,8 +31,11 @@ import torch
 import torch.nn.functional as F
 from torch import nn
 
+from .render.closed_form import tilt
+
 __all__ = ["NORMS", "UPSAMPLES", "INITS", "PRECISIONS", "NetConfig", "Encoder", "Generator", "Discriminator",
-           "VolumeDiscriminator", "PoseHead", "ResizeConv3d", "photo_colour", "photo_texture", "input_colour", "COLOUR_MIN", "init_weights", "init_critic_he", "init_he"]
+           "VolumeDiscriminator", "PoseHead", "ResizeConv3d", "photo_colour", "photo_texture", "input_colour",
+           "surface_weight", "texture_on_surface", "COLOUR_MIN", "init_weights", "init_critic_he", "init_he"]
 
 NORMS = ("batch", "instance", "none")
 #: How G doubles its resolution: the paper's transposed convolution (k4, s2, p1), or a nearest
@@ -89,6 +92,7 @@ class NetConfig:
     precision: str = "fp32"
     photo_colour: bool = False
     photo_texture: bool = False
+    texture_surface: bool = False
 
     def validate(self) -> "NetConfig":
         if self.resolution not in RESOLUTIONS:
@@ -119,6 +123,9 @@ class NetConfig:
         if not isinstance(self.photo_texture, bool) or (self.photo_texture and not self.photo_colour):
             raise ValueError(f"photo_texture must be True or False, and True only with photo_colour; got "
                              f"{self.photo_texture!r} (photo_colour {self.photo_colour!r})")
+        if not isinstance(self.texture_surface, bool) or (self.texture_surface and not self.photo_texture):
+            raise ValueError(f"texture_surface must be True or False, and True only with photo_texture; got "
+                             f"{self.texture_surface!r} (photo_texture {self.photo_texture!r})")
         return self
 
     @property
@@ -316,6 +323,47 @@ def photo_texture(images: torch.Tensor, resolution: int, elevation: Optional[tor
     grid = grid.reshape(b, resolution, resolution * resolution, 2).to(c)
     out = F.grid_sample(c, grid.to(c.device), mode="bilinear", padding_mode="border", align_corners=False)
     return out.reshape(b, 3, resolution, resolution, resolution)
+
+
+def surface_weight(density: torch.Tensor, elevation: Optional[torch.Tensor] = None) -> torch.Tensor:
+    """s ``(B, 1, R, R, R)`` in [0, 1]: how much of each voxel the input camera's rays see from either
+    end, s = min(1, T_front + T_back), for a density ``(B, 1, R, R, R)`` in G's frame (held
+    constant) and the input camera at ``elevation`` θ (None: the volume in the camera's frame).
+
+    In the camera's frame (:func:`~mitsuba_platonic.render.closed_form.tilt` by θ, planes k = 0
+    nearest the camera), with τ_k = 1 − v_k the planes' transmittance (EA at one sample per voxel),
+
+        T_front,k = Π_{j<k} τ_j,     T_back,k = Π_{j>k} τ_j
+
+    then back into G's frame (tilt by −θ). 1 on the surfaces the input view sees and on the ones
+    a camera behind it would see, 0 deep inside."""
+    v = density.detach().clamp(0.0, 1.0)
+    if elevation is not None:
+        v = tilt(v, elevation.detach())
+    τ = 1.0 - v
+    ones = torch.ones_like(τ[:, :, :1])
+    front = torch.cumprod(torch.cat([ones, τ[:, :, :-1]], dim=2), dim=2)
+    back = torch.cumprod(torch.cat([ones, τ.flip(2)[:, :, :-1]], dim=2), dim=2).flip(2)
+    weight = (front + back).clamp(max=1.0)
+    if elevation is not None:
+        weight = tilt(weight, -elevation.detach()).clamp(0.0, 1.0)
+    return weight
+
+
+def texture_on_surface(volume: torch.Tensor, offsets: torch.Tensor, images: torch.Tensor,
+                       elevation: Optional[torch.Tensor] = None) -> torch.Tensor:
+    """``model.texture_surface``: the volume G made with offsets ℓ from the photos' texture,
+    recoloured so that the texture lies only where the input camera's rays enter or leave the
+    object: base = s t + (1 − s) m, s = :func:`surface_weight` of G's density, t the photos'
+    texture (:func:`photo_texture`), m their mean colour, and c = σ(ℓ + logit base). Inside, where
+    no view of the input camera's line reaches, G offsets from the mean colour, so the photo's
+    pixels do not run through the body as streaks seen from the side."""
+    r = volume.shape[-1]
+    s = surface_weight(volume[:, 3:], elevation)
+    m = photo_colour(images).to(volume)[:, :, None, None, None]
+    base = s * photo_texture(images, r, elevation).to(volume) + (1.0 - s) * m
+    base = base.clamp(COLOUR_MIN, 1.0 - COLOUR_MIN)
+    return torch.cat([torch.sigmoid(offsets + torch.logit(base)), volume[:, 3:]], dim=1).contiguous()
 
 
 def input_colour(images: torch.Tensor, texture: bool, resolution: int,

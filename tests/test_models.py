@@ -612,3 +612,43 @@ def test_a_photo_texture_model_starts_from_the_photo_at_the_input_view():
         load_config(None, ["model.photo_texture=true"])
     with pytest.raises(ConfigError, match="model.photo_texture: .*orthographic input camera.*got 'perspective'"):
         load_config(None, ["model.photo_colour=true", "model.photo_texture=true", "render.camera=perspective"])
+
+
+def test_surface_weight_is_one_where_the_input_cameras_rays_enter_or_leave_and_falls_off_inside():
+    """A slab of density v across planes 5–10 of the input camera's frame (θ None): s = 1 in the
+    empty planes and on the slab's first and last plane; inside, s_k = (1 − v)^(k−5) + (1 − v)^(10−k)
+    (the product of the planes in front, plus those behind), exactly 0 inside an opaque slab. At
+    θ = 0 the tilted computation gives the same."""
+    from mitsuba_platonic.models import surface_weight
+    n, v = 16, 0.5
+    density = torch.zeros(1, 1, n, n, n, dtype=torch.float64)
+    density[:, :, 5:11] = v
+    s = surface_weight(density)[0, 0, :, 8, 8]
+    want = torch.ones(n, dtype=torch.float64)
+    for k in range(5, 11):
+        want[k] = min(1.0, (1 - v) ** (k - 5) + (1 - v) ** (10 - k))
+    assert torch.allclose(s, want, atol=1e-12), s
+    density[:, :, 5:11] = 1.0
+    s = surface_weight(density)[0, 0, :, 8, 8]
+    assert s[5] == 1.0 and s[10] == 1.0 and torch.all(s[6:10] == 0.0) and torch.all(s[:5] == 1.0)
+    assert torch.allclose(surface_weight(density, torch.zeros(1, dtype=torch.float64)), surface_weight(density),
+                          atol=1e-6)
+
+
+def test_texture_on_surface_puts_the_photo_on_the_slabs_faces_and_the_mean_colour_inside():
+    """With G's offsets at 0, an opaque slab's first and last planes take the photo's texture and its
+    inside the photo's mean colour; the density is G's, untouched."""
+    from mitsuba_platonic.models import COLOUR_MIN, photo_colour, photo_texture, texture_on_surface
+    n = 16
+    x = _ramp_photo(n, b=1)
+    volume = torch.zeros(1, 4, n, n, n)
+    volume[:, 3, 5:11] = 1.0
+    out = texture_on_surface(volume, torch.zeros(1, 3, n, n, n), x)
+    tex = photo_texture(x, n).clamp(COLOUR_MIN, 1 - COLOUR_MIN)
+    m = photo_colour(x).clamp(COLOUR_MIN, 1 - COLOUR_MIN)[0]
+    for face in (5, 10):
+        assert torch.allclose(out[:, :3, face], tex[:, :, face], atol=1e-5)
+    assert torch.allclose(out[0, :3, 7], m[:, None, None].expand(3, n, n), atol=1e-5)
+    assert torch.equal(out[:, 3], volume[:, 3])
+    with pytest.raises(ConfigError, match="model.texture_surface: .*needs model.photo_texture: true"):
+        load_config(None, ["model.photo_colour=true", "model.texture_surface=true"])

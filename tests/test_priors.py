@@ -198,7 +198,7 @@ def test_colour_offset_is_the_density_weighted_mean_offset_and_moves_colour_only
     assert torch.autograd.gradcheck(lambda o: colour_offset(v, o), (ℓ,))
     colour_offset(v, ℓ).backward()
     assert v.grad is None or not v.grad.any()
-    with pytest.raises(ValueError, match=r"colour_offset: expected an EA volume .* got \(2, 4, 3, 3, 3\) and \(2, 4, 3, 3, 3\)"):
+    with pytest.raises(ValueError, match=r"colour_offset: expected an EA volume .* and \(2, 4, 3, 3, 3\)"):
         colour_offset(v, v)
 
 
@@ -239,4 +239,5 @@ def test_the_trainer_hands_g_the_offsets_of_the_volume_it_made(tmp_path, monkeyp
     made = torch.logit(v[:, :3].double()) - torch.logit(m.double().clamp(1 / 255, 254 / 255))[:, :, None, None, None]
     assert torch.allclose(made, ℓ.double(), atol=1e-3)
     w = v[:, 3:]
-    assert float(terms["colour_offset"].detach()) == pytest.approx(float(0.5 * (w * ℓ.abs()).sum() / (3 * w.sum())), rel=1e-5)
+    expected = 0.5 * (w * ℓ.abs()).sum() / (3 * w.sum())
+    assert float(terms["colour_offset"].detach()) == pytest.approx(float(expected), rel=1e-5)

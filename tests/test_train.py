@@ -251,7 +251,7 @@ def test_adv_input_is_refused_without_an_input_view_image_term(tmp_path):
     from mitsuba_platonic.settings_checks import ConfigError
     with pytest.raises(ConfigError, match=r"^train\.adv_input: expected"):
         _cfg(tmp_path, "train.adv_input=-1")
-    with pytest.raises(ConfigError, match=r"^train\.adv_input: D judges the render of the input view.*task 'generation'"):
+    with pytest.raises(ConfigError, match=r"^train\.adv_input: D judges the render of the input view.*'generation'"):
         _cfg(tmp_path, "train.task=generation", "train.adv_input=1")
     with pytest.raises(ConfigError, match=r"^train\.adv_input: .*d_roll 'uniform'"):
         _cfg(tmp_path, "train.task=reconstruction", "train.d_roll=uniform", "train.adv_input=1")
@@ -412,7 +412,7 @@ def _ddp_worker(rank, world, port, cfg_overrides, tmp, result_file):
 
 
 PHOTO_TERMS = ["train.pose=elevation", "train.pose_weight=1.0", "model.photo_colour=true", "model.photo_texture=true",
-               "train.colour_offset=0.1", "train.colour_match=1.0", "train.adv_input=1.0"]
+               "model.texture_surface=true", "train.colour_offset=0.1", "train.colour_match=1.0", "train.adv_input=1.0"]
 
 
 @pytest.mark.parametrize("pose", [[], ["train.pose=elevation", "train.pose_weight=1.0"], PHOTO_TERMS],

@@ -93,7 +93,8 @@ from torch.nn.parallel import DistributedDataParallel as DDP
 
 from ..config import Config, ConfigError
 from ..model import RING_VIEWS, Model, critic_config
-from ..models import Discriminator, VolumeDiscriminator, init_critic_he, init_he, init_weights, input_colour
+from ..models import (Discriminator, VolumeDiscriminator, init_critic_he, init_he, init_weights, input_colour,
+                      texture_on_surface)
 from ..render.closed_form import rotate, tilt
 from ..views import DEFAULT_ELEVATION, from_angles, front_view, sample_views, to_angles
 from .augment import augment, augment_photos
@@ -283,8 +284,10 @@ class Trainer:
                     with torch.no_grad():                           # plain module, so DDP sees one use of P
                         θ = self.nets["P"](z.detach())
                 colour = input_colour(x, cfg.model.photo_texture, cfg.model.resolution, θ)
-                if t.colour_offset > 0:                      # G's offsets from that colour, penalised
+                if t.colour_offset > 0 or cfg.model.texture_surface:   # G's offsets from that colour
                     v, ℓ = G(z, colour, offsets=True)
+                    if cfg.model.texture_surface:            # the texture on the surfaces only
+                        v = texture_on_surface(v, ℓ, x, θ)
                 else:
                     v = G(z, colour)
             else:
@@ -358,10 +361,10 @@ class Trainer:
 
     def _g_objective(self, terms: Dict[str, torch.Tensor]) -> torch.Tensor:
         """G's (and E's) loss: the sum of its weighted terms, named 'adv2d' (D on rendered views),
-        'adv3d' (D3 on volumes), 'adv_input' (D on the input view), 'rec' (the input view), 'rec3d' (the input image's ground-truth
-        volume), 'pose' (the elevations of G's renders), 'colour_tv', 'colour_match' and 'colour_offset'
-        (priors, when their weights are set). One place that sees every term, so
-        the tests can check which of them reach G."""
+        'adv3d' (D3 on volumes), 'adv_input' (D on the input view), 'rec' (the input view), 'rec3d'
+        (the input image's ground-truth volume), 'pose' (the elevations of G's renders), 'colour_tv',
+        'colour_match' and 'colour_offset' (priors, when their weights are set). One place that sees
+        every term, so the tests can check which of them reach G."""
         return sum(terms.values())
 
     def _pose_loss(self, i_view: torch.Tensor, views: torch.Tensor, out: Dict[str, float]) -> torch.Tensor:
