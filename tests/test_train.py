@@ -100,6 +100,30 @@ def test_a_bf16_step_with_r1_and_the_pose_head_changes_every_network(tmp_path):
     assert {k: _changed(before[k], m) for k, m in trainer.nets.items()} == {k: True for k in trainer.nets}
 
 
+def _colour_step(trainer, monkeypatch):
+    """One step of ``trainer``, recording what E read (``x``) and wrote (``z``) and the colour G got
+    first (``colour``); asserts finite scalars. Returns (what it saw, the parameters before)."""
+    from mitsuba_platonic import models
+    seen = {}
+
+    def keep(module, inputs, output):                        # returns None: E's output stays as it is
+        seen.setdefault("x", inputs[0].detach().clone())
+        seen.setdefault("z", output.detach().clone())
+
+    trainer.nets["E"].register_forward_hook(keep)
+    original = models.Generator.forward
+
+    def spy(self, z, colour=None, offsets=False):
+        seen.setdefault("colour", colour.detach().clone())
+        return original(self, z, colour, offsets)
+
+    monkeypatch.setattr(models.Generator, "forward", spy)
+    before = {k: _params(m) for k, m in trainer.nets.items()}
+    out = trainer.step(0)
+    assert all(np.isfinite(v) for v in out.values()), out
+    return seen, before
+
+
 def test_a_photo_colour_step_hands_g_the_mean_colour_of_es_own_input(tmp_path, monkeypatch):
     """``model.photo_colour``: in a step, G gets the mean colour of exactly the photos E read
     (after ``photo_augment``'s recolouring), and E, G and D all move."""
@@ -107,21 +131,7 @@ def test_a_photo_colour_step_hands_g_the_mean_colour_of_es_own_input(tmp_path, m
     cfg = _cfg(tmp_path, "model.photo_colour=true", "render.backend=mitsuba", "render.model=ea", "data.formation=ea",
                "train.task=reconstruction", "train.photo_augment=[flip, colour]")
     trainer = Trainer(cfg, load_training_data(cfg, progress=False), torch.device("cpu"))
-    seen = {}
-    def keep_input(module, inputs, output):                  # returns None: E's output stays as it is
-        seen.setdefault("x", inputs[0].detach().clone())
-
-    trainer.nets["E"].register_forward_hook(keep_input)
-    original = models.Generator.forward
-
-    def spy(self, z, colour=None):
-        seen.setdefault("colour", colour.detach().clone())
-        return original(self, z, colour)
-
-    monkeypatch.setattr(models.Generator, "forward", spy)
-    before = {k: _params(m) for k, m in trainer.nets.items()}
-    out = trainer.step(0)
-    assert all(np.isfinite(v) for v in out.values()), out
+    seen, before = _colour_step(trainer, monkeypatch)
     assert torch.allclose(seen["colour"], models.photo_colour(seen["x"]))
     assert all(_changed(before[k], trainer.nets[k]) for k in ("E", "G", "D"))
 
@@ -137,19 +147,7 @@ def test_a_photo_texture_step_hands_g_the_texture_of_es_input_at_the_heads_eleva
     trainer = Trainer(cfg, load_training_data(cfg, progress=False), torch.device("cpu"))
     with torch.no_grad():
         trainer.nets["P"].bias.fill_(0.3)                    # an elevation far from 0 from the first step
-    seen = {}
-    trainer.nets["E"].register_forward_hook(lambda m, i, o: [seen.setdefault("x", i[0].detach().clone()),
-                                                             seen.setdefault("z", o.detach().clone())] and None)
-    original = models.Generator.forward
-
-    def spy(self, z, colour=None):
-        seen.setdefault("colour", colour.detach().clone())
-        return original(self, z, colour)
-
-    monkeypatch.setattr(models.Generator, "forward", spy)
-    before = {k: _params(m) for k, m in trainer.nets.items()}
-    out = trainer.step(0)
-    assert all(np.isfinite(v) for v in out.values()), out
+    seen, before = _colour_step(trainer, monkeypatch)
     with torch.no_grad():
         θ = _frozen_head(before["P"])(seen["z"])
     assert float(θ.abs().min()) > 0.4
