@@ -38,7 +38,7 @@ from torch import nn
 
 from .data.photos import decode_image, prepare_image
 from .errors import UserError
-from .models import Encoder, Generator, NetConfig, PoseHead, init_weights, input_colour, texture_on_surface
+from .models import Encoder, Generator, NetConfig, PoseHead, init_weights, photo_volume
 from .render.closed_form import tilt
 from .render.settings import RenderSettings
 from .volume import CHANNELS
@@ -182,11 +182,8 @@ class Model(nn.Module):
             z = self.E(x)
             if self.net.photo_colour:                        # the colour G offsets from, read from x
                 θ = self.P(z) if self.P is not None and self.net.photo_texture else None
-                colour = input_colour(x, self.net.photo_texture, self.resolution, θ)
-                if self.net.texture_surface:                 # the texture on the surfaces only
-                    v = texture_on_surface(*self.G(self.code(z), colour, offsets=True), x, θ)
-                else:
-                    v = self.G(self.code(z), colour)
+                v, _ = photo_volume(self.G, self.code(z), x, self.net.photo_texture, self.net.texture_surface,
+                                    self.resolution, θ)
             else:
                 v = self.G(self.code(z))
             return v if self.P is None else tilt(v, self.P(z)).clamp(0.0, 1.0)

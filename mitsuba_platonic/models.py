@@ -35,7 +35,7 @@ from .render.closed_form import tilt
 
 __all__ = ["NORMS", "UPSAMPLES", "INITS", "PRECISIONS", "NetConfig", "Encoder", "Generator", "Discriminator",
            "VolumeDiscriminator", "PoseHead", "ResizeConv3d", "photo_colour", "photo_texture", "input_colour",
-           "surface_weight", "texture_on_surface", "COLOUR_MIN", "init_weights", "init_critic_he", "init_he"]
+           "photo_volume", "surface_weight", "texture_on_surface", "COLOUR_MIN", "init_weights", "init_critic_he", "init_he"]
 
 NORMS = ("batch", "instance", "none")
 #: How G doubles its resolution: the paper's transposed convolution (k4, s2, p1), or a nearest
@@ -364,6 +364,16 @@ def texture_on_surface(volume: torch.Tensor, offsets: torch.Tensor, images: torc
     base = s * photo_texture(images, r, elevation).to(volume) + (1.0 - s) * m
     base = base.clamp(COLOUR_MIN, 1.0 - COLOUR_MIN)
     return torch.cat([torch.sigmoid(offsets + torch.logit(base)), volume[:, 3:]], dim=1).contiguous()
+
+
+def photo_volume(G: nn.Module, code: torch.Tensor, images: torch.Tensor, texture: bool, surface: bool,
+                 resolution: int, elevation: Optional[torch.Tensor] = None) -> Tuple[torch.Tensor, torch.Tensor]:
+    """(volume, ℓ) of a ``photo_colour`` G (or its data-parallel wrapper) for ``code`` and the
+    ``images`` it encodes: G's colour offset from :func:`input_colour` (``texture``: the photos'
+    texture seen from ``elevation``), recoloured by :func:`texture_on_surface` with ``surface``; ℓ
+    the offsets. The one recipe of training and of :meth:`~mitsuba_platonic.model.Model.reconstruct`."""
+    v, ℓ = G(code, input_colour(images, texture, resolution, elevation), offsets=True)
+    return (texture_on_surface(v, ℓ, images, elevation) if surface else v), ℓ
 
 
 def input_colour(images: torch.Tensor, texture: bool, resolution: int,
