@@ -34,7 +34,7 @@ from torch import nn
 from .render.closed_form import tilt
 
 __all__ = ["NORMS", "UPSAMPLES", "INITS", "PRECISIONS", "NetConfig", "Encoder", "Generator", "Discriminator",
-           "VolumeDiscriminator", "PoseHead", "ResizeConv3d", "photo_colour", "photo_texture", "input_colour",
+           "VolumeDiscriminator", "PoseHead", "ResizeConv3d", "photo_colour", "photo_texture",
            "photo_volume", "surface_weight", "texture_on_surface", "COLOUR_MIN", "init_weights", "init_critic_he", "init_he"]
 
 NORMS = ("batch", "instance", "none")
@@ -350,18 +350,16 @@ def surface_weight(density: torch.Tensor, elevation: Optional[torch.Tensor] = No
     return weight
 
 
-def texture_on_surface(volume: torch.Tensor, offsets: torch.Tensor, images: torch.Tensor,
+def texture_on_surface(volume: torch.Tensor, offsets: torch.Tensor, texture: torch.Tensor, mean: torch.Tensor,
                        elevation: Optional[torch.Tensor] = None) -> torch.Tensor:
-    """``model.texture_surface``: the volume G made with offsets ℓ from the photos' texture,
-    recoloured so that the texture lies only where the input camera's rays enter or leave the
-    object: base = s t + (1 − s) m, s = :func:`surface_weight` of G's density, t the photos'
-    texture (:func:`photo_texture`), m their mean colour, and c = σ(ℓ + logit base). Inside, where
-    no view of the input camera's line reaches, G offsets from the mean colour, so the photo's
-    pixels do not run through the body as streaks seen from the side."""
-    r = volume.shape[-1]
+    """``model.texture_surface``: the volume G made with offsets ℓ from the photos' ``texture``
+    ``(B, 3, R, R, R)`` (:func:`photo_texture`), recoloured so that the texture lies only where the
+    input camera's rays enter or leave the object: base = s t + (1 − s) m, s = :func:`surface_weight`
+    of G's density, m the photos' ``mean`` colour ``(B, 3)``, and c = σ(ℓ + logit base). Inside,
+    where no view of the input camera's line reaches, G offsets from the mean colour, so the
+    photo's pixels do not run through the body as streaks seen from the side."""
     s = surface_weight(volume[:, 3:], elevation)
-    m = photo_colour(images).to(volume)[:, :, None, None, None]
-    base = s * photo_texture(images, r, elevation).to(volume) + (1.0 - s) * m
+    base = s * texture.to(volume) + (1.0 - s) * mean.to(volume)[:, :, None, None, None]
     base = base.clamp(COLOUR_MIN, 1.0 - COLOUR_MIN)
     return torch.cat([torch.sigmoid(offsets + torch.logit(base)), volume[:, 3:]], dim=1).contiguous()
 
@@ -369,18 +367,14 @@ def texture_on_surface(volume: torch.Tensor, offsets: torch.Tensor, images: torc
 def photo_volume(G: nn.Module, code: torch.Tensor, images: torch.Tensor, texture: bool, surface: bool,
                  resolution: int, elevation: Optional[torch.Tensor] = None) -> Tuple[torch.Tensor, torch.Tensor]:
     """(volume, ℓ) of a ``photo_colour`` G (or its data-parallel wrapper) for ``code`` and the
-    ``images`` it encodes: G's colour offset from :func:`input_colour` (``texture``: the photos'
-    texture seen from ``elevation``), recoloured by :func:`texture_on_surface` with ``surface``; ℓ
-    the offsets. The one recipe of training and of :meth:`~mitsuba_platonic.model.Model.reconstruct`."""
-    v, ℓ = G(code, input_colour(images, texture, resolution, elevation), offsets=True)
-    return (texture_on_surface(v, ℓ, images, elevation) if surface else v), ℓ
-
-
-def input_colour(images: torch.Tensor, texture: bool, resolution: int,
-                 elevation: Optional[torch.Tensor] = None) -> torch.Tensor:
-    """What G's colour offsets from (``model.photo_colour``): the photos' mean colour ``(B, 3)``, or
-    with ``texture`` (``model.photo_texture``) their colour per voxel (:func:`photo_texture`)."""
-    return photo_texture(images, resolution, elevation) if texture else photo_colour(images)
+    ``images`` it encodes: G's colour offset from the photos' mean colour (:func:`photo_colour`) or,
+    with ``texture`` (``model.photo_texture``), from their texture seen from ``elevation``
+    (:func:`photo_texture`), recoloured by :func:`texture_on_surface` with ``surface``; ℓ the
+    offsets. The one recipe of training and of :meth:`~mitsuba_platonic.model.Model.reconstruct`."""
+    mean = photo_colour(images)
+    t = photo_texture(images, resolution, elevation) if texture else None
+    v, ℓ = G(code, mean if t is None else t, offsets=True)
+    return (texture_on_surface(v, ℓ, t, mean, elevation) if surface else v), ℓ
 
 
 class Discriminator(nn.Module):

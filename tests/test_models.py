@@ -643,7 +643,7 @@ def test_texture_on_surface_puts_the_photo_on_the_slabs_faces_and_the_mean_colou
     x = _ramp_photo(n, b=1)
     volume = torch.zeros(1, 4, n, n, n)
     volume[:, 3, 5:11] = 1.0
-    out = texture_on_surface(volume, torch.zeros(1, 3, n, n, n), x)
+    out = texture_on_surface(volume, torch.zeros(1, 3, n, n, n), photo_texture(x, n), photo_colour(x))
     tex = photo_texture(x, n).clamp(COLOUR_MIN, 1 - COLOUR_MIN)
     m = photo_colour(x).clamp(COLOUR_MIN, 1 - COLOUR_MIN)[0]
     for face in (5, 10):
