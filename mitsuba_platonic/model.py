@@ -30,7 +30,7 @@ holds E, G (and P) under the same names, next to the critics D and D3 that only 
 from __future__ import annotations
 
 from pathlib import Path
-from typing import Any, Optional, Union
+from typing import Any, Optional, Tuple, Union
 
 import torch
 import torch.nn.functional as F
@@ -38,7 +38,8 @@ from torch import nn
 
 from .data.photos import decode_image, prepare_image
 from .errors import UserError
-from .models import Encoder, Generator, NetConfig, PoseHead, init_weights, photo_volume
+from .models import Encoder, Generator, NetConfig, PoseHead, init_weights
+from .photo_colours import photo_volume
 from .render.closed_form import tilt
 from .render.settings import RenderSettings
 from .volume import CHANNELS
@@ -172,23 +173,43 @@ class Model(nn.Module):
         mode is restored). A PrGAN-style model's G gets the code of ring view 0, the input view.
         With a pose head, G's upright volume is tilted by the estimated elevation θ̂ = P(z),
         ``tilt(G(z), θ̂)`` clamped to [0, 1] (trilinear round-off). With ``photo_colour``, G also
-        gets each image's mean colour (:func:`~mitsuba_platonic.models.photo_colour`), or with
+        gets each image's mean colour (:func:`~mitsuba_platonic.photo_colours.photo_colour`), or with
         ``photo_texture`` its colours along the rays of a camera at θ̂
-        (:func:`~mitsuba_platonic.models.photo_texture`)."""
-        self._needs_encoder()
-
+        (:func:`~mitsuba_platonic.photo_colours.photo_texture`)."""
         def run() -> torch.Tensor:
-            x = images.to(self.device)
-            z = self.E(x)
-            if self.net.photo_colour:                        # the colour G offsets from, read from x
-                θ = self.P(z) if self.P is not None and self.net.photo_texture else None
-                v, _ = photo_volume(self.G, self.code(z), x, self.net.photo_texture, self.net.texture_surface,
-                                    self.resolution, θ)
-            else:
-                v = self.G(self.code(z))
-            return v if self.P is None else tilt(v, self.P(z)).clamp(0.0, 1.0)
+            v, θ = self._upright(images)
+            return v if θ is None else tilt(v, θ).clamp(0.0, 1.0)
 
         return self._eval(run)
+
+    @torch.no_grad()
+    def reconstruct_upright(self, images: torch.Tensor) -> Tuple[torch.Tensor, torch.Tensor]:
+        """(volumes, θ̂): G(E(x)) in the object's own frame, ``(B, C, R, R, R)``, and the elevation
+        θ̂ ``(B,)`` in degrees at which the input camera sees it there. For a model with a pose head
+        these are G's upright volumes and P's estimates (:meth:`reconstruct` is them tilted by θ̂);
+        for one without, the input camera's frame is the only frame it knows, so the volumes are
+        :meth:`reconstruct`'s and θ̂ = 0. A turntable about the object's vertical axis at the input
+        camera's elevation, ω(φ, θ̂), is what the judge renders (:mod:`~mitsuba_platonic.evaluate.judge`):
+        at φ = 0 it is the input view, and a tree stays upright from every side."""
+        def run() -> Tuple[torch.Tensor, torch.Tensor]:
+            v, θ = self._upright(images)
+            return v, (torch.zeros(len(v), device=v.device) if θ is None else torch.rad2deg(θ))
+
+        return self._eval(run)
+
+    def _upright(self, images: torch.Tensor) -> Tuple[torch.Tensor, Optional[torch.Tensor]]:
+        """G's volumes for ``images`` in its own frame and P's elevations in radians (None without P)."""
+        self._needs_encoder()
+        x = images.to(self.device)
+        z = self.E(x)
+        θ = self.P(z) if self.P is not None else None
+        if self.net.photo_colour:                            # the colour G offsets from, read from x
+            v, _ = photo_volume(self.G, self.code(z), x, self.net.photo_texture, self.net.texture_surface,
+                                self.resolution, θ if self.net.photo_texture else None,
+                                sides=self.net.texture_sides)
+        else:
+            v = self.G(self.code(z))
+        return v, θ
 
     @torch.no_grad()
     def estimate_elevation(self, images: torch.Tensor) -> torch.Tensor:

@@ -22,7 +22,7 @@ __all__ = ["ModelConfig", "NET_KEYS"]
 
 #: The model keys that :class:`~mitsuba_platonic.models.NetConfig` takes as they are.
 NET_KEYS = ("resolution", "latent", "width", "norm", "encoder_hidden", "upsample", "precision", "photo_colour",
-            "photo_texture", "texture_surface")
+            "photo_texture", "texture_surface", "texture_sides")
 
 
 @dataclass
@@ -42,9 +42,11 @@ class ModelConfig:
     photo_colour: G's colour as an offset from the input photo's mean colour (reconstruction, EA:
     "A colour read from the photo").
     photo_texture: with photo_colour, the offset is from the photo's own colour at each voxel's pixel,
-    carried along the input camera's rays, not from its mean (:func:`~mitsuba_platonic.models.photo_texture`).
+    carried along the input camera's rays, not from its mean (:func:`~mitsuba_platonic.photo_colours.photo_texture`).
     texture_surface: with photo_texture, that colour only where the input camera's rays enter or leave
-    the object, the mean colour inside (:func:`~mitsuba_platonic.models.texture_on_surface`).
+    the object, the mean colour inside (:func:`~mitsuba_platonic.photo_colours.texture_on_surface`).
+    texture_sides: with photo_texture, the photo also on the object's left and right sides, where the
+    input camera's line does not see (:func:`~mitsuba_platonic.photo_colours.texture_on_sides`).
     """
 
     resolution: int = 32
@@ -60,6 +62,7 @@ class ModelConfig:
     photo_colour: bool = False
     photo_texture: bool = False
     texture_surface: bool = False
+    texture_sides: bool = False
 
     def validate(self) -> "ModelConfig":
         """Check this section's values; raise :class:`~mitsuba_platonic.settings_checks.ConfigError`
@@ -81,6 +84,12 @@ class ModelConfig:
         if self.texture_surface and not self.photo_texture:
             raise ConfigError("model.texture_surface: it places the photo's texture on the surfaces, so it needs "
                               "model.photo_texture: true")
+        if self.texture_sides and not self.photo_texture:
+            raise ConfigError("model.texture_sides: it places the photo's texture on the sides, so it needs "
+                              "model.photo_texture: true")
+        if self.texture_sides and self.texture_surface:
+            raise ConfigError("model.texture_sides: the sides' texture and model.texture_surface recolour the same "
+                              "volume two ways; set one of them")
         return self
 
     def net_config(self, channels: int, view_codes: int = 0, pose: bool = False) -> NetConfig:

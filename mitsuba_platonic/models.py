@@ -31,11 +31,10 @@ import torch
 import torch.nn.functional as F
 from torch import nn
 
-from .render.closed_form import tilt
+from .photo_colours import COLOUR_MIN
 
 __all__ = ["NORMS", "UPSAMPLES", "INITS", "PRECISIONS", "NetConfig", "Encoder", "Generator", "Discriminator",
-           "VolumeDiscriminator", "PoseHead", "ResizeConv3d", "photo_colour", "photo_texture",
-           "photo_volume", "surface_weight", "texture_on_surface", "COLOUR_MIN", "init_weights", "init_critic_he", "init_he"]
+           "VolumeDiscriminator", "PoseHead", "ResizeConv3d", "init_weights", "init_critic_he", "init_he"]
 
 NORMS = ("batch", "instance", "none")
 #: How G doubles its resolution: the paper's transposed convolution (k4, s2, p1), or a nearest
@@ -76,7 +75,8 @@ class NetConfig:
     whether a :class:`PoseHead` reads the input camera's elevation from z (``train.pose:
     elevation``); precision: the networks' arithmetic (:data:`PRECISIONS`); photo_colour: G's colour is an
     offset from the input photo's mean colour (:meth:`Generator.forward`); photo_texture: from the
-    photo's colour at each voxel's pixel instead (:func:`photo_texture`). A config's model section
+    photo's colour at each voxel's pixel instead (:func:`~mitsuba_platonic.photo_colours.photo_texture`);
+    texture_surface, texture_sides: that colour recoloured (:mod:`~mitsuba_platonic.photo_colours`). A config's model section
     builds it (:meth:`~mitsuba_platonic.model_settings.ModelConfig.net_config`, its keys of the same names)."""
 
     resolution: int = 32
@@ -93,6 +93,7 @@ class NetConfig:
     photo_colour: bool = False
     photo_texture: bool = False
     texture_surface: bool = False
+    texture_sides: bool = False
 
     def validate(self) -> "NetConfig":
         if self.resolution not in RESOLUTIONS:
@@ -126,6 +127,11 @@ class NetConfig:
         if not isinstance(self.texture_surface, bool) or (self.texture_surface and not self.photo_texture):
             raise ValueError(f"texture_surface must be True or False, and True only with photo_texture; got "
                              f"{self.texture_surface!r} (photo_texture {self.photo_texture!r})")
+        if not isinstance(self.texture_sides, bool) or (self.texture_sides and not self.photo_texture) \
+                or (self.texture_sides and self.texture_surface):
+            raise ValueError(f"texture_sides must be True or False, and True only with photo_texture and without "
+                             f"texture_surface; got {self.texture_sides!r} (photo_texture {self.photo_texture!r}, "
+                             f"texture_surface {self.texture_surface!r})")
         return self
 
     @property
@@ -244,8 +250,8 @@ class Generator(nn.Module):
     def forward(self, z: torch.Tensor, colour: Optional[torch.Tensor] = None,
                 offsets: bool = False) -> Union[torch.Tensor, Tuple[torch.Tensor, torch.Tensor]]:
         """The volume for codes ``z``. With ``photo_colour`` (and only then) ``colour`` is the input
-        photos' mean colour m ``(B, 3)`` (:func:`photo_colour`) or a colour per voxel m
-        ``(B, 3, R, R, R)`` (:func:`photo_texture`), and G's colour logits are offsets from it:
+        photos' mean colour m ``(B, 3)`` (:func:`~mitsuba_platonic.photo_colours.photo_colour`) or a colour
+        per voxel m ``(B, 3, R, R, R)`` (:func:`~mitsuba_platonic.photo_colours.photo_texture`), and G's colour logits are offsets from it:
         c = σ(ℓ + logit m) per channel, the density's σ(ℓ) as always. A colour the encoder has not
         learnt (an orange tree among green ones) is then still the photo's, and an untrained G's
         colour (ℓ ≈ 0) starts at m instead of grey. With ``offsets`` it returns (volume, ℓ), the
@@ -274,107 +280,6 @@ class Generator(nn.Module):
             logits = logits + offset
         v = torch.sigmoid(logits).contiguous()              # float32, in the usual layout for the renderers
         return (v, ℓ) if offsets else v
-
-
-#: Where :func:`photo_colour` clamps a mean colour, so that its logit stays finite (≈ ±5.5).
-COLOUR_MIN = 1.0 / 255.0
-
-
-def photo_colour(images: torch.Tensor) -> torch.Tensor:
-    """The mean colour of the covered pixels of premultiplied RGBA images ``(B, 4, R, R)``:
-    m = Σ_pixels (r, g, b) / Σ_pixels α, ``(B, 3)``; ½ (grey) for an image with nothing in it."""
-    if images.dim() != 4 or images.shape[1] != 4:
-        raise ValueError(f"photo_colour expects premultiplied RGBA images (B, 4, R, R), got {tuple(images.shape)}")
-    coverage = images[:, 3].sum(dim=(1, 2))
-    total = images[:, :3].sum(dim=(2, 3))
-    m = total / coverage.clamp_min(1e-8)[:, None]
-    return torch.where(coverage[:, None] > 1e-8, m, torch.full_like(m, 0.5)).clamp(0.0, 1.0)
-
-
-def photo_texture(images: torch.Tensor, resolution: int, elevation: Optional[torch.Tensor] = None) -> torch.Tensor:
-    """The photo's colour carried along the input camera's rays: ``(B, 3, R, R, R)``, a colour per
-    voxel of G's frame for premultiplied RGBA photos ``(B, 4, H, W)``.
-
-    The photo is first laid over its own mean colour m (:func:`photo_colour`), c = rgb + (1 − α) m,
-    so the background adds no colour of its own. A voxel centre p = (x, y, z) of G's frame
-    (docs/conventions.md: w along +x, h along −y, d along −z) is seen by an orthographic camera at
-    azimuth 0 and elevation θ (``elevation`` ``(B,)`` radians; None: 0, the volume in the input
-    camera's frame) at image coordinates
-
-        X = x,   Y = y cos θ − z sin θ        (right = +x, up = (0, cos θ, −sin θ))
-
-    and takes the colour there, read bilinearly (column X, row −Y; beyond the photo, its edge).
-    Every voxel along a ray gets that ray's pixel: the front of the object starts with the photo's
-    detail, the back with its mirror image, and G's offsets change what the views disagree with."""
-    if images.dim() != 4 or images.shape[1] != 4:
-        raise ValueError(f"photo_texture expects premultiplied RGBA images (B, 4, H, W), got {tuple(images.shape)}")
-    b = images.shape[0]
-    m = photo_colour(images)
-    c = images[:, :3] + (1.0 - images[:, 3:]) * m[:, :, None, None]
-    θ = torch.zeros(b, dtype=torch.float64) if elevation is None else elevation.detach().to("cpu", torch.float64)
-    if θ.shape != (b,):
-        raise ValueError(f"photo_texture: one elevation per photo expected, shape ({b},), got {tuple(θ.shape)}")
-    centres = -1.0 + (torch.arange(resolution, dtype=torch.float64) + 0.5) * (2.0 / resolution)
-    x = centres[None, None, None, :].expand(b, resolution, resolution, resolution)         # [b, d, h, w]
-    y = centres.flip(0)[None, None, :, None]                                               # h: along −y
-    z = centres.flip(0)[None, :, None, None]                                               # d: along −z
-    Y = y * torch.cos(θ)[:, None, None, None] - z * torch.sin(θ)[:, None, None, None]      # [b, d, h, 1]
-    grid = torch.stack([x, (-Y).expand(b, resolution, resolution, resolution)], dim=-1)    # (X, row) per voxel
-    grid = grid.reshape(b, resolution, resolution * resolution, 2).to(c)
-    out = F.grid_sample(c, grid.to(c.device), mode="bilinear", padding_mode="border", align_corners=False)
-    return out.reshape(b, 3, resolution, resolution, resolution)
-
-
-def surface_weight(density: torch.Tensor, elevation: Optional[torch.Tensor] = None) -> torch.Tensor:
-    """s ``(B, 1, R, R, R)`` in [0, 1]: how much of each voxel the input camera's rays see from either
-    end, s = min(1, T_front + T_back), for a density ``(B, 1, R, R, R)`` in G's frame (held
-    constant) and the input camera at ``elevation`` θ (None: the volume in the camera's frame).
-
-    In the camera's frame (:func:`~mitsuba_platonic.render.closed_form.tilt` by θ, planes k = 0
-    nearest the camera), with τ_k = 1 − v_k the planes' transmittance (EA at one sample per voxel),
-
-        T_front,k = Π_{j<k} τ_j,     T_back,k = Π_{j>k} τ_j
-
-    then back into G's frame (tilt by −θ). 1 on the surfaces the input view sees and on the ones
-    a camera behind it would see, 0 deep inside."""
-    v = density.detach().clamp(0.0, 1.0)
-    if elevation is not None:
-        v = tilt(v, elevation.detach())
-    τ = 1.0 - v
-    ones = torch.ones_like(τ[:, :, :1])
-    front = torch.cumprod(torch.cat([ones, τ[:, :, :-1]], dim=2), dim=2)
-    back = torch.cumprod(torch.cat([ones, τ.flip(2)[:, :, :-1]], dim=2), dim=2).flip(2)
-    weight = (front + back).clamp(max=1.0)
-    if elevation is not None:
-        weight = tilt(weight, -elevation.detach()).clamp(0.0, 1.0)
-    return weight
-
-
-def texture_on_surface(volume: torch.Tensor, offsets: torch.Tensor, texture: torch.Tensor, mean: torch.Tensor,
-                       elevation: Optional[torch.Tensor] = None) -> torch.Tensor:
-    """``model.texture_surface``: the volume G made with offsets ℓ from the photos' ``texture``
-    ``(B, 3, R, R, R)`` (:func:`photo_texture`), recoloured so that the texture lies only where the
-    input camera's rays enter or leave the object: base = s t + (1 − s) m, s = :func:`surface_weight`
-    of G's density, m the photos' ``mean`` colour ``(B, 3)``, and c = σ(ℓ + logit base). Inside,
-    where no view of the input camera's line reaches, G offsets from the mean colour, so the
-    photo's pixels do not run through the body as streaks seen from the side."""
-    s = surface_weight(volume[:, 3:], elevation)
-    base = s * texture.to(volume) + (1.0 - s) * mean.to(volume)[:, :, None, None, None]
-    base = base.clamp(COLOUR_MIN, 1.0 - COLOUR_MIN)
-    return torch.cat([torch.sigmoid(offsets + torch.logit(base)), volume[:, 3:]], dim=1).contiguous()
-
-
-def photo_volume(G: nn.Module, code: torch.Tensor, images: torch.Tensor, texture: bool, surface: bool,
-                 resolution: int, elevation: Optional[torch.Tensor] = None) -> Tuple[torch.Tensor, torch.Tensor]:
-    """(volume, ℓ) of a ``photo_colour`` G (or its data-parallel wrapper) for ``code`` and the
-    ``images`` it encodes: G's colour offset from the photos' mean colour (:func:`photo_colour`) or,
-    with ``texture`` (``model.photo_texture``), from their texture seen from ``elevation``
-    (:func:`photo_texture`), recoloured by :func:`texture_on_surface` with ``surface``; ℓ the
-    offsets. The one recipe of training and of :meth:`~mitsuba_platonic.model.Model.reconstruct`."""
-    mean = photo_colour(images)
-    t = photo_texture(images, resolution, elevation) if texture else None
-    v, ℓ = G(code, mean if t is None else t, offsets=True)
-    return (texture_on_surface(v, ℓ, t, mean, elevation) if surface else v), ℓ
 
 
 class Discriminator(nn.Module):

@@ -469,7 +469,7 @@ def test_precision_reaches_every_network_from_the_config():
 def test_photo_colour_is_the_mean_colour_of_the_covered_pixels():
     """Premultiplied RGBA: a half-covered patch of colour (0.8, 0.4, 0.1) at α ½ and a fully
     covered one of (0.2, 0.6, 1.0) average by coverage; an empty image is grey."""
-    from mitsuba_platonic.models import photo_colour
+    from mitsuba_platonic.photo_colours import photo_colour
     x = torch.zeros(2, 4, 8, 8)
     x[0, :3, :4] = torch.tensor([0.8, 0.4, 0.1])[:, None, None] * 0.5
     x[0, 3, :4] = 0.5
@@ -488,7 +488,7 @@ def test_a_photo_colour_generator_offsets_its_colour_logits_from_the_photos():
     colour is the photo's mean colour m, even at m's extremes (clamped to [1/255, 254/255]: finite
     logits); the density does not depend on m; G without photo_colour refuses a colour, and G with
     it needs one of shape (B, 3)."""
-    from mitsuba_platonic.models import COLOUR_MIN
+    from mitsuba_platonic.photo_colours import COLOUR_MIN
     torch.manual_seed(0)
     G = Generator(NetConfig(resolution=16, width=8, latent=16, norm="none", upsample="resize_last",
                             photo_colour=True))
@@ -561,7 +561,7 @@ def test_photo_texture_carries_each_pixel_along_the_input_cameras_ray():
     at elevation θ the texture tilted into the input camera's frame (the closed form's tilt, an
     independent resampling) is that same texture, exactly where both read a linear colour
     (a ramp photo, away from the cube's faces), and not the untilted one."""
-    from mitsuba_platonic.models import photo_colour, photo_texture
+    from mitsuba_platonic.photo_colours import photo_colour, photo_texture
     from mitsuba_platonic.render.closed_form import tilt
     x = _ramp_photo()
     flat = x[:, :3] + (1.0 - x[:, 3:]) * photo_colour(x)[:, :, None, None]
@@ -588,7 +588,7 @@ def test_a_photo_texture_model_starts_from_the_photo_at_the_input_view():
     that texture tilted by θ̂ into the input frame, and not the texture of a camera at 0°.
     model.photo_texture needs model.photo_colour."""
     from mitsuba_platonic.model import Model
-    from mitsuba_platonic.models import COLOUR_MIN, photo_texture
+    from mitsuba_platonic.photo_colours import COLOUR_MIN, photo_texture
     from mitsuba_platonic.render.closed_form import tilt
     cfg = load_config(None, ["model.photo_colour=true", "model.photo_texture=true", "model.resolution=16",
                              "model.width=4", "model.latent=8", "model.upsample=resize_last",
@@ -619,7 +619,7 @@ def test_surface_weight_is_one_where_the_input_cameras_rays_enter_or_leave_and_f
     empty planes and on the slab's first and last plane; inside, s_k = (1 − v)^(k−5) + (1 − v)^(10−k)
     (the product of the planes in front, plus those behind), exactly 0 inside an opaque slab. At
     θ = 0 the tilted computation gives the same."""
-    from mitsuba_platonic.models import surface_weight
+    from mitsuba_platonic.photo_colours import surface_weight
     n, v = 16, 0.5
     density = torch.zeros(1, 1, n, n, n, dtype=torch.float64)
     density[:, :, 5:11] = v
@@ -638,7 +638,7 @@ def test_surface_weight_is_one_where_the_input_cameras_rays_enter_or_leave_and_f
 def test_texture_on_surface_puts_the_photo_on_the_slabs_faces_and_the_mean_colour_inside():
     """With G's offsets at 0, an opaque slab's first and last planes take the photo's texture and its
     inside the photo's mean colour; the density is G's, untouched."""
-    from mitsuba_platonic.models import COLOUR_MIN, photo_colour, photo_texture, texture_on_surface
+    from mitsuba_platonic.photo_colours import COLOUR_MIN, photo_colour, photo_texture, texture_on_surface
     n = 16
     x = _ramp_photo(n, b=1)
     volume = torch.zeros(1, 4, n, n, n)
@@ -652,3 +652,106 @@ def test_texture_on_surface_puts_the_photo_on_the_slabs_faces_and_the_mean_colou
     assert torch.equal(out[:, 3], volume[:, 3])
     with pytest.raises(ConfigError, match="model.texture_surface: .*needs model.photo_texture: true"):
         load_config(None, ["model.photo_colour=true", "model.texture_surface=true"])
+
+
+# -- the photo on the object's sides (model.texture_sides) ----------------------------------------------------
+
+
+def test_photo_texture_sides_are_the_photo_seen_by_cameras_turned_left_and_right():
+    """At elevation 0 a voxel at depth z (G's d along −z) takes, from the camera turned right, the
+    photo's column at −z and, from the one turned left, its column at +z, in its own row: on a
+    photo whose colour is linear in the column, t_right along depth is the column ramp read
+    backwards from the front and t_left forwards, the same in every column x. At elevation θ a
+    colour linear in the row only reads the same row as photo_texture (both at Y)."""
+    from mitsuba_platonic.photo_colours import photo_colour, photo_texture, photo_texture_sides
+    n = 16
+    x = _ramp_photo(n, b=1)
+    x[:, :3], x[:, 3] = x[:, :3] / x[:, 3:].clamp_min(1.0), 1.0       # the whole photo covered
+    x[:, 0], x[:, 1] = torch.linspace(0.2, 0.8, n)[:, None], torch.linspace(0.2, 0.8, n)[None, :]
+    x[:, 2] = 0.5 * x[:, 0] + 0.3
+    left, right = photo_texture_sides(x, n)
+    assert left.shape == right.shape == (1, 3, n, n, n)
+    column = x[0, 1, 0]                                               # green: linear in the column
+    # plane d sits at z = 1 − (d + ½)·2/n; column at +z is n − 1 − d, at −z it is d
+    for d in range(n):
+        assert torch.allclose(left[0, 1, d], column[n - 1 - d].expand(n, n), atol=1e-6)
+        assert torch.allclose(right[0, 1, d], column[d].expand(n, n), atol=1e-6)
+    red = photo_texture(x, n)[:, 0]                                   # red: linear in the row
+    θ = torch.tensor([0.4], dtype=torch.float64)
+    for t in photo_texture_sides(x, n, θ):
+        assert torch.allclose(t[:, 0], photo_texture(x, n, θ)[:, 0], atol=1e-6)
+    assert (photo_texture_sides(x, n, θ)[0][:, 0] - red).abs().max() > 0.03
+    flat = x[:, :3] + (1.0 - x[:, 3:]) * photo_colour(x)[:, :, None, None]
+    assert torch.allclose(left[:, :, 0, :, 0], flat[:, :, :, -1], atol=1e-6)   # the front plane's edge column
+    with pytest.raises(ValueError, match=r"photo_texture_sides: one elevation per photo expected"):
+        photo_texture_sides(x, n, torch.zeros(2))
+
+
+def test_transmittances_out_of_a_slab_are_the_products_of_the_voxels_before():
+    """A slab of density v across planes 5–10 and columns 3–12 of the input camera's frame: out of
+    voxel (k, j) inside it the transmittance towards the camera is (1 − v)^(k−5), away from it
+    (1 − v)^(10−k), to the left (1 − v)^(j−3) and to the right (1 − v)^(12−j); 1 outside the slab
+    on the side it faces. With θ the weights are in the camera's frame: θ = 0 gives the same."""
+    from mitsuba_platonic.photo_colours import transmittances
+    n, v = 16, 0.3
+    density = torch.zeros(1, 1, n, n, n, dtype=torch.float64)
+    density[:, :, 5:11, :, 3:13] = v
+    front, back, left, right = (t[0, 0, :, 8, :] for t in transmittances(density))
+    for k in range(5, 11):
+        for j in range(3, 13):
+            assert front[k, j] == pytest.approx((1 - v) ** (k - 5), abs=1e-12)
+            assert back[k, j] == pytest.approx((1 - v) ** (10 - k), abs=1e-12)
+            assert left[k, j] == pytest.approx((1 - v) ** (j - 3), abs=1e-12)
+            assert right[k, j] == pytest.approx((1 - v) ** (12 - j), abs=1e-12)
+    assert torch.all(front[:5] == 1.0) and torch.all(back[11:] == 1.0)
+    assert torch.all(left[:, :4] == 1.0) and torch.all(right[:, 12:] == 1.0)
+    assert torch.allclose(front[11:, 3:13], torch.full_like(front[11:, 3:13], (1 - v) ** 6), atol=1e-12)
+    tilted = transmittances(density, torch.zeros(1, dtype=torch.float64))
+    for a, b in zip(tilted, transmittances(density)):
+        assert torch.allclose(a, b, atol=1e-6)
+
+
+def _ball(n: int, radius: float) -> torch.Tensor:
+    c = -1.0 + (torch.arange(n) + 0.5) * (2.0 / n)
+    inside = c[None, None, :] ** 2 + c.flip(0)[None, :, None] ** 2 + c.flip(0)[:, None, None] ** 2 < radius ** 2
+    return inside.float()[None, None]
+
+
+def test_texture_on_sides_gives_the_side_cameras_photo_where_only_they_see_and_keeps_the_input_views():
+    """An opaque ball (radius 0.75, 32³) with G's offsets at 0: where the input camera's line sees
+    a voxel (its front and back faces) it keeps photo_texture's colour, so the input view is
+    photo_texture's; its left and right faces at mid-depth, which only the side cameras see, take
+    t_left and t_right; its inside keeps photo_texture's. At an elevation the side weights stay
+    in [0, 1] and sum to at most 1 (the colour stays a blend of the three textures), the density is
+    G's, and model.texture_sides needs model.photo_texture and refuses model.texture_surface."""
+    from mitsuba_platonic.photo_colours import COLOUR_MIN, photo_texture, photo_texture_sides, texture_on_sides
+    n = 32
+    x = _ramp_photo(n, b=1)
+    ball = _ball(n, 0.75)
+    volume = torch.cat([torch.rand(1, 3, n, n, n), ball], dim=1)
+    zero = torch.zeros(1, 3, n, n, n)
+    t, (t_left, t_right) = photo_texture(x, n), photo_texture_sides(x, n)
+    out = texture_on_sides(volume, zero, t, (t_left, t_right))
+    clamp = (lambda c: c.clamp(COLOUR_MIN, 1 - COLOUR_MIN))
+    row = 16
+    columns = ball[0, 0, 16, row].nonzero()[:, 0]
+    first, last = columns.min().item(), columns.max().item()
+    assert torch.allclose(out[0, :3, 16, row, first], clamp(t_left)[0, :, 16, row, first], atol=1e-5)
+    assert torch.allclose(out[0, :3, 16, row, last], clamp(t_right)[0, :, 16, row, last], atol=1e-5)
+    assert (t_left[0, :, 16, row, first] - t[0, :, 16, row, first]).abs().max() > 0.05
+    planes = ball[0, 0, :, row, 16].nonzero()[:, 0]
+    for d in (planes.min().item(), planes.max().item()):             # the faces the input camera's line sees
+        assert torch.allclose(out[0, :3, d, row, 16], clamp(t)[0, :, d, row, 16], atol=1e-5)
+    assert torch.allclose(out[0, :3, 16, row, 16], clamp(t)[0, :, 16, row, 16], atol=1e-5)   # the centre
+    assert torch.equal(out[:, 3], volume[:, 3])
+    θ = torch.tensor([0.35])
+    sides = photo_texture_sides(x, n, θ)
+    tilted = texture_on_sides(volume, zero, photo_texture(x, n, θ), sides, θ)
+    textures = torch.stack([clamp(photo_texture(x, n, θ)), clamp(sides[0]), clamp(sides[1])])
+    assert torch.all(tilted[:, :3] >= textures.min(0).values - 1e-5)
+    assert torch.all(tilted[:, :3] <= textures.max(0).values + 1e-5)
+    with pytest.raises(ConfigError, match="model.texture_sides: .*needs model.photo_texture: true"):
+        load_config(None, ["model.photo_colour=true", "model.texture_sides=true"])
+    with pytest.raises(ConfigError, match="model.texture_sides: .*set one of them"):
+        load_config(None, ["model.photo_colour=true", "model.photo_texture=true", "model.texture_sides=true",
+                           "model.texture_surface=true"])

@@ -156,8 +156,9 @@ def test_without_the_pose_term_the_head_still_learns_from_the_input_view(cache):
 @pytest.mark.usefixtures("tiny_class")
 def test_a_model_read_from_a_run_reconstructs_in_the_input_frame_and_estimates_the_elevation(tmp_path):
     """Model.reconstruct = tilt(G(z), P(z)) clamped to [0, 1] with the run's trained P (not the
-    zero a fresh head gives), and estimate_elevation is P(z) in degrees; a view-space model
-    estimates nothing."""
+    zero a fresh head gives), and estimate_elevation is P(z) in degrees; reconstruct_upright is
+    (G(z), P(z) in degrees), the object in its own frame. A view-space model estimates nothing,
+    and its upright reconstruction is its reconstruction, seen from elevation 0."""
     cfg = load_config(None, [
         f"run.out_dir={tmp_path}/runs", "run.name=r", "run.steps=3", "run.sample_every=1000",
         "run.checkpoint_every=1000", f"data.cache={tmp_path}/data", f"data.shape_class={TINY}", "data.n_shapes=3",
@@ -173,10 +174,15 @@ def test_a_model_read_from_a_run_reconstructs_in_the_input_frame_and_estimates_t
         θ = torch.rad2deg(model.P(z))
     assert torch.equal(model.reconstruct(x), expected)
     assert torch.allclose(model.estimate_elevation(x), θ) and θ.abs().max() > 0
+    upright, elevation = model.reconstruct_upright(x)
+    with torch.no_grad():
+        assert torch.equal(upright, model.G(z)) and torch.allclose(elevation, θ)
     plain = Model.from_config(load_config(None, ["model.resolution=16", "model.width=4", "model.latent=8"]))
     assert plain.P is None
     with pytest.raises(UserError, match="estimates no elevation"):
         plain.estimate_elevation(torch.zeros(1, 4, 16, 16))
+    upright, elevation = plain.reconstruct_upright(x)
+    assert torch.equal(upright, plain.reconstruct(x)) and torch.equal(elevation, torch.zeros(3))
 
 
 @pytest.mark.parametrize("overrides, match", [

@@ -127,31 +127,43 @@ def _colour_step(trainer, monkeypatch):
 def test_a_photo_colour_step_hands_g_the_mean_colour_of_es_own_input(tmp_path, monkeypatch):
     """``model.photo_colour``: in a step, G gets the mean colour of exactly the photos E read
     (after ``photo_augment``'s recolouring), and E, G and D all move."""
-    from mitsuba_platonic import models
+    from mitsuba_platonic import photo_colours
     cfg = _cfg(tmp_path, "model.photo_colour=true", "render.backend=mitsuba", "render.model=ea", "data.formation=ea",
                "train.task=reconstruction", "train.photo_augment=[flip, colour]")
     trainer = Trainer(cfg, load_training_data(cfg, progress=False), torch.device("cpu"))
     seen, before = _colour_step(trainer, monkeypatch)
-    assert torch.allclose(seen["colour"], models.photo_colour(seen["x"]))
+    assert torch.allclose(seen["colour"], photo_colours.photo_colour(seen["x"]))
     assert all(_changed(before[k], trainer.nets[k]) for k in ("E", "G", "D"))
 
 
-def test_a_photo_texture_step_hands_g_the_texture_of_es_input_at_the_heads_elevation(tmp_path, monkeypatch):
+@pytest.mark.parametrize("sides", [[], ["model.texture_sides=true"]], ids=["texture", "texture_sides"])
+def test_a_photo_texture_step_hands_g_the_texture_of_es_input_at_the_heads_elevation(tmp_path, monkeypatch, sides):
     """``model.photo_texture`` with the pose head: in a step, G gets the colour per voxel of exactly
     the photos E read, as a camera at the elevation P reads from E's code sees them
-    (:func:`~mitsuba_platonic.models.photo_texture`), and E, G, D and P all move."""
-    from mitsuba_platonic import models
+    (:func:`~mitsuba_platonic.photo_colours.photo_texture`), and E, G, D and P all move; also
+    with the sides' texture recolouring G's volume at that elevation (``model.texture_sides``)."""
+    from mitsuba_platonic import photo_colours
     cfg = _cfg(tmp_path, "model.photo_colour=true", "model.photo_texture=true", "render.backend=mitsuba",
                "render.model=ea", "data.formation=ea", "train.task=reconstruction", "train.pose=elevation",
-               "train.pose_weight=1.0")
+               "train.pose_weight=1.0", *sides)
     trainer = Trainer(cfg, load_training_data(cfg, progress=False), torch.device("cpu"))
     with torch.no_grad():
         trainer.nets["P"].bias.fill_(0.3)                    # an elevation far from 0 from the first step
+    recoloured = []
+    original = photo_colours.texture_on_sides
+
+    def spy(volume, offsets, texture, sides, elevation=None):
+        recoloured.append(elevation.detach().clone())
+        return original(volume, offsets, texture, sides, elevation)
+
+    monkeypatch.setattr(photo_colours, "texture_on_sides", spy)
     seen, before = _colour_step(trainer, monkeypatch)
     with torch.no_grad():
         θ = _frozen_head(before["P"])(seen["z"])
     assert float(θ.abs().min()) > 0.4
-    assert torch.allclose(seen["colour"], models.photo_texture(seen["x"], 16, θ), atol=1e-6)
+    assert torch.allclose(seen["colour"], photo_colours.photo_texture(seen["x"], 16, θ), atol=1e-6)
+    assert len(recoloured) == (1 if sides else 0)            # once a step, at the head's elevation
+    assert not recoloured or torch.allclose(recoloured[0], θ, atol=1e-6)
     assert all(_changed(before[k], trainer.nets[k]) for k in ("E", "G", "D", "P"))
 
 

@@ -93,7 +93,8 @@ from torch.nn.parallel import DistributedDataParallel as DDP
 
 from ..config import Config, ConfigError
 from ..model import RING_VIEWS, Model, critic_config
-from ..models import Discriminator, VolumeDiscriminator, init_critic_he, init_he, init_weights, photo_volume
+from ..models import Discriminator, VolumeDiscriminator, init_critic_he, init_he, init_weights
+from ..photo_colours import photo_volume
 from ..render.closed_form import rotate, tilt
 from ..views import DEFAULT_ELEVATION, from_angles, front_view, sample_views, to_angles
 from .augment import augment, augment_photos
@@ -277,13 +278,13 @@ class Trainer:
         self.nets.train()
         z = E(x) if rec else self._shard(z_prior).to(self.device)
         if ring_k is None:
-            if cfg.model.photo_colour:                       # G's colour offsets from x's (models.photo_volume)
+            if cfg.model.photo_colour:                       # G's colour offsets from x's (photo_colours.photo_volume)
                 θ = None
                 if "P" in self.nets and cfg.model.photo_texture:   # the head's θ̂, held constant: the
                     with torch.no_grad():                           # plain module, so DDP sees one use of P
                         θ = self.nets["P"](z.detach())
                 v, ℓ = photo_volume(G, z, x, cfg.model.photo_texture, cfg.model.texture_surface,
-                                    cfg.model.resolution, θ)
+                                    cfg.model.resolution, θ, sides=cfg.model.texture_sides)
             else:
                 v = G(z)
             v_view, v_input = (v.repeat_interleave(K, 0) if K > 1 else v), v   # K = 1: no copy
