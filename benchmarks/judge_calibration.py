@@ -91,15 +91,17 @@ def main() -> None:
         if s < max(args.snapshots):
             trainer.step(s)
     print(f"trained {max(args.snapshots)} steps in {time.perf_counter() - t0:.0f} s", flush=True)
-    methods = [(name, m.reconstruct) for name, m in snaps.items()]
-    methods.append(("billboard", lambda x: torch.stack([billboard(i) for i in x])))
+    # (name, input-frame volumes for the truth, what the judge reconstructs with: upright volumes and elevations)
+    methods = [(name, m.reconstruct, m.reconstruct_upright) for name, m in snaps.items()]
+    billboards = (lambda x: torch.stack([billboard(i) for i in x]))
+    methods.append(("billboard", billboards, billboards))
     train_images = data.images[:256]
     held = data.held_out[:args.limit]
     rows = []
-    for name, fn in methods:
+    for name, fn, upright in methods:
         t0 = time.perf_counter()
         truth = truth_scores(fn, data, args.limit)
-        j = judge(fn, train_images, held, cfg.render, seed=args.seed, steps=args.judge_steps)
+        j = judge(upright, train_images, held, cfg.render, seed=args.seed, steps=args.judge_steps)
         summary = j.summary()
         summary["c2st_novel"] = float(np.mean([summary[f"c2st_{b}"] for b in ("near", "side", "back")]))
         rows.append((name, truth, j, summary))

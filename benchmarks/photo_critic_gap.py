@@ -50,7 +50,8 @@ def main() -> None:
         model = model_from_checkpoint(Model, ckpt, cfg)
         d = critic_of(ckpt, cfg)
         with torch.no_grad():
-            renders = _random_renders(model.reconstruct(held).clamp(0, 1), 8, cfg.render, seed=0)
+            volumes, elevations = model.reconstruct_upright(held)      # the turntable about the object's axis
+            renders = _random_renders(volumes.clamp(0, 1), elevations, 8, cfg.render, seed=0)
             lt, lh, lr = (float(d(x).mean()) for x in (train, held, renders))
         print(f"| {run.name} | {ckpt.step} | {lt:+.2f} | {lh:+.2f} | {lr:+.2f} | {lt - lh:+.2f} | {lh - lr:+.2f} |",
               flush=True)

@@ -144,7 +144,9 @@ def export_volume(volume: torch.Tensor, stem: PathLike, model: str, level: Optio
 
 def export_held_out(model: "Model", images: torch.Tensor, folder: PathLike, n: int = 4) -> List[Path]:
     """Up to ``n`` of the ``(M, C, R, R)`` held-out ``images``, spread over the set (different shapes
-    or photos), reconstructed by ``model`` and exported with :func:`export_volume` as
+    or photos), reconstructed by ``model`` in the object's frame (upright for a model with a pose
+    head, :meth:`~mitsuba_platonic.model.Model.reconstruct_upright`: its turntable turns about the
+    object's vertical axis, its mesh stands) and exported with :func:`export_volume` as
     ``folder/heldout_<i>.*`` beside ``heldout_<i>_input.png`` (the image over white); returns the
     turntables and meshes written."""
 
@@ -152,7 +154,7 @@ def export_held_out(model: "Model", images: torch.Tensor, folder: PathLike, n: i
     picks = torch.linspace(0, len(images) - 1, min(n, len(images))).long().tolist()
     for i, j in enumerate(picks):
         stem = Path(folder) / f"heldout_{i}"
-        done = export_volume(model.reconstruct(images[j:j + 1])[0], stem, model.formation)
+        done = export_volume(model.reconstruct_upright(images[j:j + 1])[0][0], stem, model.formation)
         written += [p for p in done.paths if p.suffix in (".gif", ".ply")]
         save_png(stem.with_name(stem.name + "_input.png"), linear_to_srgb(composite(to_hwc(images[j]), 1.0)))
     return written

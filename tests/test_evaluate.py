@@ -4,6 +4,7 @@ Tiny sizes only: 16³ volumes, 16² images, 1–4 samples per pixel.
 """
 
 import json
+from types import SimpleNamespace
 
 import numpy as np
 import pytest
@@ -337,7 +338,8 @@ def test_evaluate_runs_on_a_tiny_collection_with_a_stand_in_model(tmp_path, monk
             calls["n"] = len(images)
             assert torch.equal(images, load_training_data(cfg, progress=False).held_out[:1])   # held out, not trained on
             return P.truth_in_input_frame(vol, rec["view"], "ea")[None].expand(len(images), -1, -1, -1, -1)
-        return cfg, reconstruct, lambda: (lambda images: torch.full((len(images), 4, N, N, N), 0.05)), 123
+        grey = (lambda images: torch.full((len(images), 4, N, N, N), 0.05))
+        return (cfg, SimpleNamespace(reconstruct=reconstruct), lambda: SimpleNamespace(reconstruct=grey), 123)
 
     monkeypatch.setattr(R, "_load", fake_load)
     with pytest.raises(UserError, match="manifest.json"):       # the collection is not rendered yet

@@ -77,6 +77,24 @@ def test_a_render_set_against_itself_is_indistinguishable(data):
     assert out["train_accuracy"] == 0.5
 
 
+def test_each_critic_learns_from_its_own_render_set(data):
+    """With one render set per critic, critic r learns from the r-th: a critic whose set is the
+    photos themselves cannot tell them apart (training accuracy exactly ½), one whose set is grey
+    can (≥ 0.85), and the mean over the two lies between. A count of sets other than the critics'
+    is refused."""
+    _, train, _, test = data
+    grey = train.clone()
+    grey[:, :3] = grey[:, :3].mean(1, keepdim=True)
+    alike = J.two_sample_test(train, [train], test, {"input": test}, steps=300, repeats=1)
+    apart = J.two_sample_test(train, [grey], test, {"input": test}, steps=300, repeats=1)
+    both = J.two_sample_test(train, [train, grey], test, {"input": test}, steps=300, repeats=2)
+    assert alike["train_accuracy"] == 0.5 and apart["train_accuracy"] >= 0.85, (alike, apart)
+    assert both["train_accuracy"] == pytest.approx(0.5 * (alike["train_accuracy"] + apart["train_accuracy"]),
+                                                   abs=0.1)
+    with pytest.raises(UserError, match="3 render sets for 2 critics"):
+        J.two_sample_test(train, [train, train, grey], test, {"input": test}, steps=1, repeats=2)
+
+
 def test_a_perfect_reconstruction_is_near_chance_in_every_band(data):
     train_v, train, test_v, test = data
     j = J.judge(lookup(torch.cat([train_v, test_v]), torch.cat([train, test])), train, test, SETTINGS,
@@ -113,6 +131,41 @@ def test_an_empty_reconstruction_is_told_apart_everywhere(data):
     assert j.c2st["photo_pass"] >= 0.95                          # unseen photos of the class pass as photos
     assert min(j.c2st["auc"].values()) >= 0.95, j.c2st["auc"]
     assert j.means["coverage_side"] is None and j.means["roughness_side"] is None
+
+
+def test_the_turntable_turns_about_the_objects_vertical_axis_at_the_input_cameras_elevation():
+    """A vertical rod (x = 0.3, z = 0) seen from 30° above: given upright with its elevation, the
+    judge's side views show it upright (one column of pixels, the same in every covered row), and
+    at 0° its view is the input camera's (the rod tilted into that camera's frame, from the
+    front). Given the same rod tilted into the input camera's frame, with no elevation, the
+    turntable turns about that camera's vertical axis and the side view shows it leaning (its
+    column moves by rows). Elevations are checked: one per volume."""
+    from mitsuba_platonic.render.closed_form import tilt
+    p = voxel_centres(N)
+    rod = torch.exp(-((p[..., 0] - 0.3) ** 2 + p[..., 2] ** 2) / (2 * 0.08 ** 2)) * (p[..., 1].abs() < 0.7)
+    volume = torch.cat([torch.full((3, N, N, N), 0.5), rod[None].float()])[None].expand(2, -1, -1, -1, -1)
+    θ = torch.full((2,), 30.0)
+    leaning = tilt(volume, torch.deg2rad(θ)).clamp(0, 1)
+    photos = photos_of(leaning)
+
+    def side(answer):
+        j = J.judge(lambda x: answer, photos, photos, SETTINGS, steps=1, repeats=1, n_examples=1)
+        views = j.examples[0][2]                                  # at FIGURE_AZIMUTHS
+        return {a: views[i] for i, a in enumerate(J.FIGURE_AZIMUTHS)}
+
+    def columns(image):
+        """The alpha-weighted mean column of each row the rod covers."""
+        a = image[3]
+        rows = a.sum(1) > 0.5
+        return (a[rows] * torch.arange(N)).sum(1) / a[rows].sum(1)
+
+    upright = side((volume, θ))
+    assert torch.allclose(upright[0.0], photos[0], atol=0.05)
+    assert float(columns(upright[90.0]).std()) < 0.05            # upright: the same column in every row
+    tilted = side(leaning)
+    assert float(columns(tilted[90.0]).max() - columns(tilted[90.0]).min()) > 2.0    # leaning by 30°
+    with pytest.raises(UserError, match=r"one finite elevation per volume expected, shape \(2,\)"):
+        side((volume, torch.zeros(3)))
 
 
 def test_a_critic_whose_unseen_photos_look_like_renders_calls_them_renders_and_the_report_says_so(data):

@@ -6,9 +6,15 @@ renders of the run's reconstructions, seen from the side and the back, are told 
 photos, and measures what a person sees in the turntables (speckle, drifted colour, a vanishing
 silhouette). docs/evaluation.md ("Judging novel views without ground truth") explains the use.
 
-**Views.** In the reconstruction's frame (the input camera at ω₀ = (0, 0, 1)) the turntable views
-ω(φ, 0) = (sin φ, 0, cos φ) (:func:`~mitsuba_platonic.views.from_angles`): the camera turned by
-φ about the input camera's vertical axis. The angle from the input view is |φ|, grouped in
+**Views.** A turntable about the object's vertical axis, the camera keeping the input camera's
+elevation θ̂: ω(φ, θ̂) = (cos θ̂ sin φ, sin θ̂, cos θ̂ cos φ) (:func:`~mitsuba_platonic.views.from_angles`)
+in the object's frame. For a model with a pose head (``train.pose: elevation``) that frame is G's
+upright one and θ̂ the head's estimate per photo
+(:meth:`~mitsuba_platonic.model.Model.reconstruct_upright`); for one without, it is the input
+camera's frame and θ̂ = 0, ω(φ, 0) = (sin φ, 0, cos φ). At φ = 0 either is the input view. (Turning
+about the input camera's vertical axis instead shows an object seen from θ̂ above as leaning by θ̂
+at the side, its trunk slanted: no photo shows that, and it was the critic's main cue on the tree
+photos: docs/evaluation.md, "The turntable's axis".) The angle from the input view is |φ|, grouped in
 :data:`BANDS`: input (0°), near (15–45°), side (60–120°), back (135–180°), scored at
 :data:`SCORE_AZIMUTHS` (every 15°).
 
@@ -36,12 +42,15 @@ ROC curve per band (Mann–Whitney),
 0.5: photos and renders are ranked alike; 1: every photo above every render. It does not move with
 where the critic puts its threshold, only with how it orders unseen photos and renders.
 
-Every figure is averaged over :data:`CRITIC_REPEATS` critics (seeds ``seed``, ``seed + 1``, …) to
-lower the critic's own variance. With M held-out photos the accuracy moves in steps of 1/(2M);
-the report says M.
+Every figure is averaged over :data:`CRITIC_REPEATS` critics, critic r seeded with ``seed + r`` and
+trained on renders at its own random views (seeded likewise): a critic that memorises a few dozen
+photos decides the held-out ones almost by chance, and on the tree photos three critics sharing one set
+of views put one run's side accuracy anywhere in a range of 0.23 from one judge seed to the next;
+ten with their own views, within about 0.05 (docs/evaluation.md, "The judge's own noise"). With M
+held-out photos each critic's accuracy moves in steps of 1/(2M); the report says M.
 
 **Image statistics** (:mod:`.image_stats`), per held-out photo x with reconstruction V, renders
-I_φ = R(ω(φ, 0), V) with the run's renderer:
+I_φ = R(ω(φ, θ̂), V) with the run's renderer:
 
 - roughness ratio at the side (mean of φ = ±90°) and the back (φ = 180°):
   rough(I_φ) / rough(I_0); and the input view's own rough(I_0) / rough(x) (speckle the photo
@@ -56,7 +65,7 @@ I_φ = R(ω(φ, 0), V) with the run's renderer:
 from __future__ import annotations
 
 from dataclasses import dataclass, field
-from typing import Any, Callable, Dict, List, Optional, Sequence, Tuple
+from typing import Any, Callable, Dict, List, Optional, Sequence, Tuple, Union
 
 import numpy as np
 import torch
@@ -72,6 +81,10 @@ __all__ = ["BANDS", "SCORE_AZIMUTHS", "STAT_VIEWS", "CRITIC_STEPS", "CRITIC_REPE
            "band_of", "Critic", "two_sample_test", "view_statistics", "Judgement", "judge", "judge_table",
            "stats_table"]
 
+#: What a reconstruct function answers: volumes in the input camera's frame, or (volumes, the input
+#: cameras' elevations in degrees) in the object's frame (:func:`judge`).
+Reconstruction = Union[torch.Tensor, Tuple[torch.Tensor, torch.Tensor]]
+
 #: (name, lowest |φ|, highest |φ|) in degrees, inclusive.
 BANDS: Tuple[Tuple[str, float, float], ...] = (("input", 0.0, 0.0), ("near", 15.0, 45.0),
                                                ("side", 60.0, 120.0), ("back", 135.0, 180.0))
@@ -81,7 +94,7 @@ SCORE_AZIMUTHS: Tuple[float, ...] = tuple(float(a) for a in range(-165, 181, 15)
 STAT_VIEWS: Dict[str, Tuple[float, ...]] = {"side": (-90.0, 90.0), "back": (180.0,)}
 #: Adam steps of each critic, critics averaged, random views per training reconstruction.
 CRITIC_STEPS = 300
-CRITIC_REPEATS = 3
+CRITIC_REPEATS = 10
 TRAIN_VIEWS = 8
 
 
@@ -143,33 +156,39 @@ def _train_critic(photos: torch.Tensor, renders: torch.Tensor, seed: int, steps:
     return critic.eval()
 
 
-def two_sample_test(train_photos: torch.Tensor, train_renders: torch.Tensor, test_photos: torch.Tensor,
+def two_sample_test(train_photos: torch.Tensor, train_renders: Union[torch.Tensor, Sequence[torch.Tensor]],
+                    test_photos: torch.Tensor,
                     test_renders: Dict[str, torch.Tensor], seed: int = 0, steps: int = CRITIC_STEPS,
                     repeats: int = CRITIC_REPEATS, batch: int = 32) -> Dict[str, Any]:
     """The classifier two-sample test (module docstring).
 
     ``train_photos`` ``(N, C, R, R)`` and ``train_renders`` ``(N', C, R, R)`` train ``repeats``
-    critics (seeds ``seed`` …); each is scored on ``test_photos`` against every entry of
+    critics (seeds ``seed`` …), or with a sequence of ``repeats`` render sets, critic r learns from
+    the r-th (its own random views); each is scored on ``test_photos`` against every entry of
     ``test_renders`` (band name → ``(K, C, R, R)``). Returns ``accuracy`` (band → mean accuracy over
     the critics), ``spread`` (band → their standard deviation), ``train_accuracy`` (on the training
     sets, a check that the critic learnt at all), ``photo_pass`` (the share of held-out photos the
     critics call photos, mean over them), ``auc`` (band → mean AUC over the critics), ``photos`` (M) and
     ``renders`` (band → K)."""
     train_photos = _check_images(train_photos, "train_photos")
-    train_renders = _check_images(train_renders, "train_renders")
+    if isinstance(repeats, bool) or not isinstance(repeats, int) or repeats < 1:
+        raise UserError(f"repeats must be a positive int, got {repeats!r}")
+    if isinstance(train_renders, torch.Tensor):
+        train_renders = [train_renders] * repeats
+    elif len(train_renders) != repeats:
+        raise UserError(f"{len(train_renders)} render sets for {repeats} critics: one set each, or one tensor for all")
+    train_renders = [_check_images(x, f"train_renders[{i}]") for i, x in enumerate(train_renders)]
     test_photos = _check_images(test_photos, "test_photos")
     if not test_renders:
         raise UserError("test_renders must hold at least one band of renders")
     bands = {k: _check_images(v, f"test_renders[{k!r}]") for k, v in test_renders.items()}
     shape = train_photos.shape[1:]
-    for name, x in [("train_renders", train_renders), ("test_photos", test_photos)] + \
+    for name, x in [("train_renders", train_renders[0]), ("test_photos", test_photos)] + \
             [(f"test_renders[{k!r}]", v) for k, v in bands.items()]:
         if x.shape[1:] != shape:
             raise UserError(f"{name} has images of shape {tuple(x.shape[1:])}, the training photos {tuple(shape)}")
     if isinstance(steps, bool) or not isinstance(steps, int) or steps < 1:
         raise UserError(f"steps must be a positive int, got {steps!r}")
-    if isinstance(repeats, bool) or not isinstance(repeats, int) or repeats < 1:
-        raise UserError(f"repeats must be a positive int, got {repeats!r}")
     if isinstance(batch, bool) or not isinstance(batch, int) or batch < 2:
         raise UserError(f"batch must be an int ≥ 2, got {batch!r}")
     acc: Dict[str, List[float]] = {k: [] for k in bands}
@@ -192,14 +211,14 @@ def two_sample_test(train_photos: torch.Tensor, train_renders: torch.Tensor, tes
             "renders": {k: len(v) for k, v in bands.items()}}
 
 
-def _score_critics(train_photos: torch.Tensor, train_renders: torch.Tensor, test_photos: torch.Tensor,
+def _score_critics(train_photos: torch.Tensor, train_renders: Sequence[torch.Tensor], test_photos: torch.Tensor,
                    bands: Dict[str, torch.Tensor], seed: int, steps: int, repeats: int, batch: int,
                    acc: Dict[str, List[float]], train_acc: List[float], photo_pass: List[float],
                    auc: Dict[str, List[float]]) -> None:
     """Train ``repeats`` critics and append their accuracies to ``acc`` (per band) and ``train_acc``,
     the share of held-out photos each calls photos to ``photo_pass``, and their AUCs to ``auc``."""
     for r in range(repeats):
-        critic = _train_critic(train_photos, train_renders, seed + r, steps, batch)
+        critic = _train_critic(train_photos, train_renders[r], seed + r, steps, batch)
         with torch.no_grad():
             f_photo = critic(test_photos).flatten()
             real = float((f_photo > 0).float().mean())
@@ -210,7 +229,7 @@ def _score_critics(train_photos: torch.Tensor, train_renders: torch.Tensor, test
                 above = f_photo[:, None] - f_render[None, :]           # every (photo, render) pair
                 auc[k].append(float(((above > 0).double() + 0.5 * (above == 0).double()).mean()))
             train_acc.append(0.5 * (float((critic(train_photos) > 0).float().mean())
-                                    + float((critic(train_renders) <= 0).float().mean())))
+                                    + float((critic(train_renders[r]) <= 0).float().mean())))
 
 
 def _render_pairs(volumes: torch.Tensor, index: torch.Tensor, views: torch.Tensor, settings: RenderSettings,
@@ -225,20 +244,36 @@ def _render_pairs(volumes: torch.Tensor, index: torch.Tensor, views: torch.Tenso
     return torch.cat(out)
 
 
-def _turntable(volumes: torch.Tensor, azimuths: Sequence[float], settings: RenderSettings, seed: int) -> torch.Tensor:
-    """``(A, M, C, R, R)``: every volume rendered at every azimuth ω(φ, 0)."""
+def _turntable(volumes: torch.Tensor, elevations: torch.Tensor, azimuths: Sequence[float], settings: RenderSettings,
+               seed: int) -> torch.Tensor:
+    """``(A, M, C, R, R)``: every volume m rendered at every azimuth, ω(φ, θ̂_m) (``elevations`` in degrees)."""
     m = len(volumes)
-    views = from_angles(torch.tensor(list(azimuths), dtype=torch.float64), 0.0)      # (A, 3)
-    out = _render_pairs(volumes, torch.arange(m).repeat(len(azimuths)), views.repeat_interleave(m, 0), settings, seed)
+    phi = torch.tensor(list(azimuths), dtype=torch.float64).repeat_interleave(m)                 # (A M,)
+    views = from_angles(phi, elevations.double().repeat(len(azimuths)))
+    out = _render_pairs(volumes, torch.arange(m).repeat(len(azimuths)), views, settings, seed)
     return out.reshape(len(azimuths), m, *out.shape[1:])
 
 
-def _random_renders(volumes: torch.Tensor, k: int, settings: RenderSettings, seed: int) -> torch.Tensor:
-    """``(M k, C, R, R)``: each volume at ``k`` uniformly random turntable azimuths (seeded)."""
+def _random_renders(volumes: torch.Tensor, elevations: torch.Tensor, k: int, settings: RenderSettings,
+                    seed: int) -> torch.Tensor:
+    """``(M k, C, R, R)``: each volume m at ``k`` uniformly random turntable azimuths (seeded), ω(φ, θ̂_m)."""
     g = torch.Generator().manual_seed(seed)
     phi = torch.rand(len(volumes) * k, generator=g, dtype=torch.float64) * 360.0 - 180.0
-    return _render_pairs(volumes, torch.arange(len(volumes)).repeat_interleave(k), from_angles(phi, 0.0),
-                         settings, seed)
+    index = torch.arange(len(volumes)).repeat_interleave(k)
+    return _render_pairs(volumes, index, from_angles(phi, elevations.double()[index]), settings, seed)
+
+
+def _volumes_and_elevations(out: Any, n: int, what: str) -> Tuple[torch.Tensor, torch.Tensor]:
+    """A reconstruct function's answer for ``n`` photos, volumes or (volumes, elevations in degrees),
+    as float32 CPU volumes in [0, 1] and float64 elevations (0 where none are given)."""
+    v, θ = out if isinstance(out, tuple) else (out, None)
+    if not isinstance(v, torch.Tensor) or v.dim() != 5 or len(v) != n:
+        raise UserError(f"{what} must be (M, C, N, N, N) volumes with M = {n}, got "
+                        f"{tuple(v.shape) if isinstance(v, torch.Tensor) else type(v).__name__}")
+    θ = torch.zeros(n, dtype=torch.float64) if θ is None else torch.as_tensor(θ).detach().double().cpu()
+    if θ.shape != (n,) or not torch.isfinite(θ).all():
+        raise UserError(f"{what}: one finite elevation per volume expected, shape ({n},), got {tuple(θ.shape)}")
+    return v.detach().float().cpu().clamp(0.0, 1.0), θ
 
 
 def _mean(values: Sequence[Optional[float]]) -> Optional[float]:
@@ -302,36 +337,37 @@ class Judgement:
 FIGURE_AZIMUTHS: Tuple[float, ...] = (0.0, 45.0, 90.0, 135.0, 180.0, -90.0)
 
 
-def judge(reconstruct: Callable[[torch.Tensor], torch.Tensor], train_photos: torch.Tensor,
+def judge(reconstruct: Callable[[torch.Tensor], Reconstruction], train_photos: torch.Tensor,
           test_photos: torch.Tensor, settings: RenderSettings, files: Optional[Sequence[str]] = None,
           seed: int = 0, steps: int = CRITIC_STEPS, repeats: int = CRITIC_REPEATS,
           train_views: int = TRAIN_VIEWS, n_examples: int = 0, batch: int = 32,
-          test_volumes: Optional[torch.Tensor] = None) -> Judgement:
+          test_volumes: Optional[Reconstruction] = None) -> Judgement:
     """Judge a reconstruction model on photos (module docstring): ``reconstruct`` maps ``(B, C, R, R)``
-    photos to ``(B, C, N, N, N)`` volumes in the input frame; ``settings`` is the run's renderer.
+    photos to ``(B, C, N, N, N)`` volumes in the input frame, or to (volumes, elevations) in the
+    object's frame with the input cameras' elevations θ̂ ``(B,)`` in degrees there
+    (:meth:`~mitsuba_platonic.model.Model.reconstruct_upright`); ``settings`` is the run's renderer.
     ``train_photos`` train the critics (their reconstructions seen from ``train_views`` random
     azimuths each); ``test_photos`` (with their ``files``) are scored, through ``test_volumes``
-    where the caller has reconstructed them already."""
+    (the same kind of answer) where the caller has reconstructed them already."""
     train_photos = _check_images(train_photos, "train_photos")
     test_photos = _check_images(test_photos, "test_photos")
     files = [str(f) for f in files] if files is not None else [f"#{i}" for i in range(len(test_photos))]
     if len(files) != len(test_photos):
         raise UserError(f"{len(files)} file names for {len(test_photos)} test photos")
 
-    def volumes_of(x: torch.Tensor) -> torch.Tensor:
+    def volumes_of(x: torch.Tensor) -> Tuple[torch.Tensor, torch.Tensor]:
         with torch.no_grad():
-            return torch.cat([reconstruct(x[i:i + batch]).detach().float().cpu().clamp(0.0, 1.0)
-                              for i in range(0, len(x), batch)])
+            parts = [_volumes_and_elevations(reconstruct(x[i:i + batch]), len(x[i:i + batch]), "reconstruct")
+                     for i in range(0, len(x), batch)]
+        return torch.cat([p[0] for p in parts]), torch.cat([p[1] for p in parts])
 
-    train_renders = _random_renders(volumes_of(train_photos), train_views, settings, seed)
-    if test_volumes is None:
-        test_volumes = volumes_of(test_photos)
-    elif test_volumes.dim() != 5 or len(test_volumes) != len(test_photos):
-        raise UserError(f"test_volumes must be (M, C, N, N, N) with M = {len(test_photos)} test photos, got "
-                        f"{tuple(test_volumes.shape)}")
-    test_volumes = test_volumes.detach().float().cpu().clamp(0.0, 1.0)
+    train_volumes, train_elevations = volumes_of(train_photos)
+    train_renders = [_random_renders(train_volumes, train_elevations, train_views, settings, seed + r)
+                     for r in range(repeats)]                           # each critic its own random views
+    test_volumes, test_elevations = volumes_of(test_photos) if test_volumes is None else \
+        _volumes_and_elevations(test_volumes, len(test_photos), "test_volumes")
     azimuths = sorted(set(SCORE_AZIMUTHS) | set(FIGURE_AZIMUTHS))
-    table = _turntable(test_volumes, azimuths, settings, seed)               # (A, M, C, R, R)
+    table = _turntable(test_volumes, test_elevations, azimuths, settings, seed)     # (A, M, C, R, R)
     at = {a: table[i] for i, a in enumerate(azimuths)}
     bands = {name: torch.cat([at[a] for a in SCORE_AZIMUTHS if band_of(a) == name]) for name, _, _ in BANDS}
     result = Judgement(two_sample_test(train_photos, train_renders, test_photos, bands, seed, steps, repeats))

@@ -73,13 +73,14 @@ import torch
 
 from ..data.photos import PhotoCollection
 from ..errors import UserError
+from ..model import Model
 from ..render import RenderSettings, render_with
 from ..render.closed_form import rotate
 from ..views import from_angles, front_view, to_angles
 from ..volume import CHANNELS
 from . import metrics as M
 from .figures import save_image_grid
-from .judge import CRITIC_STEPS, FIGURE_AZIMUTHS, Judgement, judge, judge_table, stats_table
+from .judge import CRITIC_REPEATS, CRITIC_STEPS, FIGURE_AZIMUTHS, Judgement, judge, judge_table, stats_table
 from .protocol import billboard
 
 __all__ = ["ABOVE", "BESIDE", "CARD_FRACTION", "TARGET_SHARE", "novel_views", "held_out_photos", "card_check",
@@ -352,40 +353,48 @@ class PhotoSection:
     judge_figure: Optional[Path] = None
 
 
-def evaluate_photo_run(name: str, base: str, cfg: Any, reconstruct: Callable[[torch.Tensor], torch.Tensor],
-                       untrained: Optional[Callable[[], Callable[[torch.Tensor], torch.Tensor]]] = None,
+def evaluate_photo_run(name: str, base: str, cfg: Any, model: Model, untrained: Optional[Callable[[], Model]] = None,
                        limit: Optional[int] = None, seed: int = 0, data_path: Optional[PathLike] = None,
                        n_examples: int = 8, progress: bool = False,
                        judge_steps: int = CRITIC_STEPS) -> PhotoSection:
     """Reconstruct a folder run's held-out photos (:func:`held_out_photos`, at most ``limit``) with
-    ``reconstruct`` and score them (:func:`score_photos`) with the run's renderer ``cfg.render``
-    into a row named ``name``; with ``untrained`` (a factory of the untrained reconstruct
-    function) also the rows ``<base>: untrained`` and, for EA, ``<base>: billboard``. Each row is
-    also judged away from the input view (:func:`~.judge.judge`, critics of ``judge_steps`` steps
-    trained on the run's training photos; ``judge_steps=0`` skips the judge)."""
+    ``model`` (a :class:`~mitsuba_platonic.model.Model`: its ``reconstruct`` and
+    ``reconstruct_upright``) and score them (:func:`score_photos`) with the run's renderer
+    ``cfg.render`` into a row named ``name``; with ``untrained`` (a factory of the untrained model)
+    also the rows ``<base>: untrained`` and, for EA, ``<base>: billboard``. Each row is also judged
+    away from the input view (:func:`~.judge.judge`, on turntables about the object's vertical axis,
+    critics of ``judge_steps`` steps trained on the run's training photos; ``judge_steps=0`` skips
+    the judge)."""
     train, photos, files = photo_splits(cfg, data_path)
     if limit is not None:
         photos, files = photos[:limit], files[:limit]
     settings = cfg.render
     if progress:
         print(f"  {name}: {len(photos)} held-out photo(s), {len(train)} training photo(s) for the judge", flush=True)
-    methods: List[Tuple[str, Callable[[torch.Tensor], torch.Tensor]]] = [(name, reconstruct)]
+
+    def billboards(x: torch.Tensor) -> torch.Tensor:
+        return torch.stack([billboard(i) for i in x])
+
+    # (name, volumes in the input frame, what the judge reconstructs with): a model's upright volumes
+    # and elevations, the billboard's input-frame volumes
+    methods: List[Tuple[str, Callable[[torch.Tensor], torch.Tensor], Callable[[torch.Tensor], Any]]] = \
+        [(name, model.reconstruct, model.reconstruct_upright)]
     if untrained is not None:
-        methods.append((f"{base}: untrained", untrained()))
+        fresh = untrained()
+        methods.append((f"{base}: untrained", fresh.reconstruct, fresh.reconstruct_upright))
         if settings.model == "ea":
-            methods.append((f"{base}: billboard", lambda x: torch.stack([billboard(i) for i in x])))
-    volumes = [fn(photos).detach().cpu() for _, fn in methods]
+            methods.append((f"{base}: billboard", billboards, billboards))
+    volumes = [fn(photos).detach().cpu() for _, fn, _ in methods]
     rows = [score_photos(m, v, photos, files, settings, seed, n_examples if i == 0 else 0)
-            for i, ((m, _), v) in enumerate(zip(methods, volumes))]
+            for i, ((m, _, _), v) in enumerate(zip(methods, volumes))]
     folder = str(data_path if data_path is not None else cfg.data.path)
     section = PhotoSection(run=name, folder=folder, settings=settings, rows=rows)
     if len(train) and judge_steps:
-        for i, ((m, fn), v) in enumerate(zip(methods, volumes)):
+        for i, (m, _, upright) in enumerate(methods):
             if progress:
                 print(f"  judging {m} ({judge_steps} critic steps)", flush=True)
-            section.judgements.append((m, judge(fn, train, photos, settings, [str(f) for f in files], seed=seed,
-                                                steps=judge_steps, n_examples=n_examples if i == 0 else 0,
-                                                test_volumes=v)))
+            section.judgements.append((m, judge(upright, train, photos, settings, [str(f) for f in files], seed=seed,
+                                                steps=judge_steps, n_examples=n_examples if i == 0 else 0)))
     return section
 
 
@@ -425,9 +434,10 @@ def judge_markdown(section: PhotoSection) -> List[str]:
     """The report's lines for the judge of one folder run (docs/evaluation.md, :mod:`.judge`)."""
     j0 = section.judgements[0][1]
     lines = [f"### Judged from every side: {section.run}", "",
-             f"No ground truth, so a judge: a fresh critic (seeded, {CRITIC_STEPS} steps by default, 3 critics "
-             f"averaged) learns to tell the run's training photos from renders of their reconstructions at random "
-             f"turntable views, then tells the {j0.c2st['photos']} held-out photos from renders of theirs, per band of "
+             f"No ground truth, so a judge: a fresh critic (seeded, {CRITIC_STEPS} steps by default, "
+             f"{CRITIC_REPEATS} critics averaged, each with its own random views) learns to tell the run's training "
+             f"photos from renders of their reconstructions at random turntable views (about the object's vertical "
+             f"axis, at the input camera's elevation), then tells the {j0.c2st['photos']} held-out photos from renders of theirs, per band of "
              f"angle from the input view. Accuracy 0.5: the renders pass for photos; 1: they never do. In "
              f"brackets the AUC: how often the critic ranks a held-out photo above a render (0.5: alike), whatever "
              f"its threshold.", "",

@@ -253,18 +253,18 @@ def write_report(rows: Sequence[Row], out_dir: PathLike, notes: Sequence[str] = 
 
 # -- runs ------------------------------------------------------------------------------------
 
-def _load(run_dir: Path) -> Tuple[Any, Callable[[torch.Tensor], torch.Tensor], Callable[[], Callable], int]:
-    """A trained run: (config, reconstruct(images) → volumes, a factory of the untrained
-    reconstruct function, step), through :class:`mitsuba_platonic.model.Model`."""
+def _load(run_dir: Path) -> Tuple[Any, Model, Callable[[], Model], int]:
+    """A trained run: (config, its :class:`~mitsuba_platonic.model.Model`, a factory of the untrained
+    model, step)."""
     ckpt = read_checkpoint(run_dir)
     cfg = checkpoint_config(ckpt)
     model = model_from_checkpoint(Model, ckpt, cfg)
 
-    def untrained_model():
+    def untrained_model() -> Model:
         torch.manual_seed(cfg.run.seed)                    # the run's seed, fresh initialisation
-        return Model.from_config(cfg).reconstruct
+        return Model.from_config(cfg)
 
-    return cfg, model.reconstruct, untrained_model, ckpt.step
+    return cfg, model, untrained_model, ckpt.step
 
 
 def _held_out(cfg, run_dir: Path, data_cache: Optional[PathLike], progress: bool):
@@ -311,14 +311,14 @@ def evaluate_runs(run_dirs: Sequence[PathLike], out_dir: PathLike, n_views: int 
     kw = dict(n_views=n_views, seed=seed, spp=spp, max_depth=max_depth, vgg_network=vgg, fid_network=fidnet,
               progress=progress)
     for run_dir in map(Path, run_dirs):
-        cfg, reconstruct, untrained, step = _load(run_dir)
+        cfg, trained, untrained, step = _load(run_dir)
         if cfg.train.task != "reconstruction":
             raise UserError(f"{run_dir} was trained for {cfg.train.task!r}; evaluation reconstructs held-out "
                             f"images and needs an encoder (train.task: reconstruction)")
         model = cfg.render.model
         if cfg.data.source == "folder":
             name = f"{run_dir.name} ({cfg.train.mode}, step {step})"
-            sections.append(evaluate_photo_run(name, run_dir.name, cfg, reconstruct, untrained if baselines else None,
+            sections.append(evaluate_photo_run(name, run_dir.name, cfg, trained, untrained if baselines else None,
                                                limit=limit, seed=seed, data_path=data_path, progress=progress,
                                                judge_steps=judge_steps))
             notes.append(f"{name}: {len(sections[-1].rows[0].photos)} held-out photos, {cfg.model.resolution}³, "
@@ -330,7 +330,7 @@ def evaluate_runs(run_dirs: Sequence[PathLike], out_dir: PathLike, n_views: int 
         images, records = data.held_out[:m], data.held_out_records[:m]
         truths = held_out_truths(records, model)
         name = f"{run_dir.name} ({cfg.train.mode}, step {step})"
-        recon = reconstruct(images).cpu()
+        recon = trained.reconstruct(images).cpu()
         # IF is the run's own image formation: path traced (at its max_depth) for a run trained through light
         physical = cfg.render.backend == "physical"
         kw_run = dict(kw, backend="physical", if_max_depth=cfg.render.max_depth) if physical else kw
@@ -340,7 +340,7 @@ def evaluate_runs(run_dirs: Sequence[PathLike], out_dir: PathLike, n_views: int 
                      f"{cfg.model.resolution}³), {n_views} views per pair, {spp} spp"
                      + (f"; IF path traced (max depth {cfg.render.max_depth}), as it trained" if physical else ""))
         if baselines:
-            fresh = untrained()(images).cpu()
+            fresh = untrained().reconstruct(images).cpu()
             rows.append(score_pairs(f"{run_dir.name}: untrained", model, list(zip(images, fresh, truths)), **kw_run))
             if model == "ea":
                 boards = [billboard(x) for x in images]
