@@ -7,11 +7,13 @@ which weights the pose term trains, the model read back from a run, and the conf
 
 import math
 
+import numpy as np
 import pytest
 import torch
 
 from mitsuba_platonic.config import ConfigError, load_config
 from mitsuba_platonic.errors import UserError
+from mitsuba_platonic.export import export_held_out
 from mitsuba_platonic.model import Model
 from mitsuba_platonic.models import PoseHead, init_he, init_weights
 from mitsuba_platonic.render.closed_form import rotate, tilt
@@ -157,8 +159,9 @@ def test_without_the_pose_term_the_head_still_learns_from_the_input_view(cache):
 def test_a_model_read_from_a_run_reconstructs_in_the_input_frame_and_estimates_the_elevation(tmp_path):
     """Model.reconstruct = tilt(G(z), P(z)) clamped to [0, 1] with the run's trained P (not the
     zero a fresh head gives), and estimate_elevation is P(z) in degrees; reconstruct_upright is
-    (G(z), P(z) in degrees), the object in its own frame. A view-space model estimates nothing,
-    and its upright reconstruction is its reconstruction, seen from elevation 0."""
+    (G(z), P(z) in degrees), the object in its own frame, which export_held_out writes. A view-space
+    model estimates nothing, and its upright reconstruction is its reconstruction, seen from
+    elevation 0."""
     cfg = load_config(None, [
         f"run.out_dir={tmp_path}/runs", "run.name=r", "run.steps=3", "run.sample_every=1000",
         "run.checkpoint_every=1000", f"data.cache={tmp_path}/data", f"data.shape_class={TINY}", "data.n_shapes=3",
@@ -177,6 +180,9 @@ def test_a_model_read_from_a_run_reconstructs_in_the_input_frame_and_estimates_t
     upright, elevation = model.reconstruct_upright(x)
     with torch.no_grad():
         assert torch.equal(upright, model.G(z)) and torch.allclose(elevation, θ)
+    export_held_out(model, x[:1], tmp_path / "held", n=1)
+    saved = torch.from_numpy(np.load(tmp_path / "held" / "heldout_0.npz")["volume"])
+    assert torch.allclose(saved, upright[0], atol=1e-6) and not torch.allclose(saved, expected[0], atol=1e-3)
     plain = Model.from_config(load_config(None, ["model.resolution=16", "model.width=4", "model.latent=8"]))
     assert plain.P is None
     with pytest.raises(UserError, match="estimates no elevation"):
