@@ -204,9 +204,7 @@ class Model(nn.Module):
         z = self.E(x)
         θ = self.P(z) if self.P is not None else None
         if self.net.photo_colour:                            # the colour G offsets from, read from x
-            v, _ = photo_volume(self.G, self.code(z), x, self.net.photo_texture, self.net.texture_surface,
-                                self.resolution, θ if self.net.photo_texture else None,
-                                sides=self.net.texture_sides)
+            v, _ = photo_volume(self.G, self.code(z), x, self.net, θ if self.net.photo_texture else None)
         else:
             v = self.G(self.code(z))
         return v, θ

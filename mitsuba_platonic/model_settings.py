@@ -22,7 +22,7 @@ __all__ = ["ModelConfig", "NET_KEYS"]
 
 #: The model keys that :class:`~mitsuba_platonic.models.NetConfig` takes as they are.
 NET_KEYS = ("resolution", "latent", "width", "norm", "encoder_hidden", "upsample", "precision", "photo_colour",
-            "photo_texture", "texture_surface", "texture_sides")
+            "photo_texture", "texture_surface", "texture_sides", "texture_blur")
 
 
 @dataclass
@@ -47,6 +47,8 @@ class ModelConfig:
     the object, the mean colour inside (:func:`~mitsuba_platonic.photo_colours.texture_on_surface`).
     texture_sides: with photo_texture, the photo also on the object's left and right sides, where the
     input camera's line does not see (:func:`~mitsuba_platonic.photo_colours.texture_on_sides`).
+    texture_blur: with texture_surface, inside the photo blurred by this many of its pixels (a Gaussian's σ)
+    instead of its mean colour; 0: the mean colour.
     """
 
     resolution: int = 32
@@ -63,6 +65,7 @@ class ModelConfig:
     photo_texture: bool = False
     texture_surface: bool = False
     texture_sides: bool = False
+    texture_blur: float = 0.0
 
     def validate(self) -> "ModelConfig":
         """Check this section's values; raise :class:`~mitsuba_platonic.settings_checks.ConfigError`
@@ -90,6 +93,10 @@ class ModelConfig:
         if self.texture_sides and self.texture_surface:
             raise ConfigError("model.texture_sides: the sides' texture and model.texture_surface recolour the same "
                               "volume two ways; set one of them")
+        non_negative("model.texture_blur", self.texture_blur)
+        if self.texture_blur > 0 and not self.texture_surface:
+            raise ConfigError("model.texture_blur: it blurs the photo inside the surface, so it needs "
+                              "model.texture_surface: true")
         return self
 
     def net_config(self, channels: int, view_codes: int = 0, pose: bool = False) -> NetConfig:

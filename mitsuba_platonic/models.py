@@ -94,6 +94,7 @@ class NetConfig:
     photo_texture: bool = False
     texture_surface: bool = False
     texture_sides: bool = False
+    texture_blur: float = 0.0
 
     def validate(self) -> "NetConfig":
         if self.resolution not in RESOLUTIONS:
@@ -132,6 +133,10 @@ class NetConfig:
             raise ValueError(f"texture_sides must be True or False, and True only with photo_texture and without "
                              f"texture_surface; got {self.texture_sides!r} (photo_texture {self.photo_texture!r}, "
                              f"texture_surface {self.texture_surface!r})")
+        if isinstance(self.texture_blur, bool) or not isinstance(self.texture_blur, (int, float)) \
+                or not self.texture_blur >= 0 or (self.texture_blur > 0 and not self.texture_surface):
+            raise ValueError(f"texture_blur must be a number ≥ 0, and > 0 only with texture_surface; got "
+                             f"{self.texture_blur!r} (texture_surface {self.texture_surface!r})")
         return self
 
     @property

@@ -8,7 +8,7 @@ from the photo itself, c = σ(ℓ + logit base) (:meth:`~mitsuba_platonic.models
 - :func:`photo_texture`: base = the photo's pixel, carried along the input camera's rays
   (``model.photo_texture``);
 - :func:`texture_on_surface`: that pixel only where the input camera's line sees a voxel, the
-  mean colour inside (``model.texture_surface``);
+  mean colour inside (``model.texture_surface``), or the photo blurred (``model.texture_blur``);
 - :func:`texture_on_sides`: also the photo as seen from the input camera's left and right
   (:func:`photo_texture_sides`) where only those cameras see a voxel (``model.texture_sides``);
 
@@ -20,7 +20,8 @@ measurements behind each.
 
 from __future__ import annotations
 
-from typing import Optional, Tuple
+import math
+from typing import Any, Optional, Tuple
 
 import torch
 import torch.nn.functional as F
@@ -28,7 +29,7 @@ from torch import nn
 
 from .render.closed_form import tilt
 
-__all__ = ["COLOUR_MIN", "photo_colour", "photo_texture", "photo_texture_sides", "transmittances", "surface_weight",
+__all__ = ["COLOUR_MIN", "photo_colour", "blurred", "photo_texture", "photo_texture_sides", "transmittances", "surface_weight",
            "texture_on_surface", "texture_on_sides", "photo_volume"]
 
 
@@ -89,7 +90,18 @@ def _elevations(elevation: Optional[torch.Tensor], b: int, what: str) -> torch.T
     return θ
 
 
-def photo_texture(images: torch.Tensor, resolution: int, elevation: Optional[torch.Tensor] = None) -> torch.Tensor:
+def blurred(colour: torch.Tensor, sigma: float) -> torch.Tensor:
+    """Images ``(B, 3, H, W)`` convolved with a normalised Gaussian of ``sigma`` pixels, separably
+    (radius ⌈3σ⌉, edges replicated): G_σ * c."""
+    r = max(1, math.ceil(3.0 * sigma))
+    k = torch.exp(-torch.arange(-r, r + 1, dtype=colour.dtype, device=colour.device) ** 2 / (2.0 * sigma ** 2))
+    k = (k / k.sum()).expand(colour.shape[1], 1, -1)
+    x = F.conv2d(F.pad(colour, (r, r, 0, 0), mode="replicate"), k[:, :, None, :], groups=colour.shape[1])
+    return F.conv2d(F.pad(x, (0, 0, r, r), mode="replicate"), k[:, :, :, None], groups=colour.shape[1])
+
+
+def photo_texture(images: torch.Tensor, resolution: int, elevation: Optional[torch.Tensor] = None,
+                  blur: float = 0.0) -> torch.Tensor:
     """The photo's colour carried along the input camera's rays: ``(B, 3, R, R, R)``, a colour per
     voxel of G's frame for premultiplied RGBA photos ``(B, 4, H, W)``.
 
@@ -103,8 +115,11 @@ def photo_texture(images: torch.Tensor, resolution: int, elevation: Optional[tor
 
     and takes the colour there, read bilinearly (column X, row −Y; beyond the photo, its edge).
     Every voxel along a ray gets that ray's pixel: the front of the object starts with the photo's
-    detail, the back with its mirror image, and G's offsets change what the views disagree with."""
+    detail, the back with its mirror image, and G's offsets change what the views disagree with.
+    With ``blur`` σ > 0 the photo is first blurred by a Gaussian of σ of its pixels (:func:`blurred`)."""
     c = _over_mean(images, "photo_texture")
+    if blur > 0:
+        c = blurred(c, blur)
     X, Y, _ = _camera_coordinates(resolution, _elevations(elevation, images.shape[0], "photo_texture"))
     return _read(c, X, Y, resolution)
 
@@ -175,16 +190,19 @@ def _coloured(volume: torch.Tensor, offsets: torch.Tensor, base: torch.Tensor) -
     return torch.cat([torch.sigmoid(offsets + torch.logit(base)), volume[:, 3:]], dim=1).contiguous()
 
 
-def texture_on_surface(volume: torch.Tensor, offsets: torch.Tensor, texture: torch.Tensor, mean: torch.Tensor,
+def texture_on_surface(volume: torch.Tensor, offsets: torch.Tensor, texture: torch.Tensor, inner: torch.Tensor,
                        elevation: Optional[torch.Tensor] = None) -> torch.Tensor:
     """``model.texture_surface``: the volume G made with offsets ℓ from the photos' ``texture``
     ``(B, 3, R, R, R)`` (:func:`photo_texture`), recoloured so that the texture lies only where the
     input camera's rays enter or leave the object: base = s t + (1 − s) m, s = :func:`surface_weight`
-    of G's density, m the photos' ``mean`` colour ``(B, 3)``, and c = σ(ℓ + logit base). Inside,
-    where no view of the input camera's line reaches, G offsets from the mean colour, so the
-    photo's pixels do not run through the body as streaks seen from the side."""
+    of G's density, m the ``inner`` colour, and c = σ(ℓ + logit base). ``inner`` is the photos' mean
+    colour ``(B, 3)`` or, with ``model.texture_blur``, a colour per voxel ``(B, 3, R, R, R)``: the
+    photo blurred, carried along the same rays (:func:`photo_texture`). Inside, where no view of the
+    input camera's line reaches, G offsets from it, so the photo's pixels do not run through the
+    body as streaks seen from the side."""
     s = surface_weight(volume[:, 3:], elevation)
-    return _coloured(volume, offsets, s * texture.to(volume) + (1.0 - s) * mean.to(volume)[:, :, None, None, None])
+    m = inner.to(volume)
+    return _coloured(volume, offsets, s * texture.to(volume) + (1.0 - s) * (m[:, :, None, None, None] if m.dim() == 2 else m))
 
 
 def texture_on_sides(volume: torch.Tensor, offsets: torch.Tensor, texture: torch.Tensor,
@@ -216,20 +234,23 @@ def texture_on_sides(volume: torch.Tensor, offsets: torch.Tensor, texture: torch
                      + w_right * t_right)
 
 
-def photo_volume(G: nn.Module, code: torch.Tensor, images: torch.Tensor, texture: bool, surface: bool,
-                 resolution: int, elevation: Optional[torch.Tensor] = None,
-                 sides: bool = False) -> Tuple[torch.Tensor, torch.Tensor]:
+def photo_volume(G: nn.Module, code: torch.Tensor, images: torch.Tensor, recipe: Any,
+                 elevation: Optional[torch.Tensor] = None) -> Tuple[torch.Tensor, torch.Tensor]:
     """(volume, ℓ) of a ``photo_colour`` G (or its data-parallel wrapper) for ``code`` and the
-    ``images`` it encodes: G's colour offset from the photos' mean colour (:func:`photo_colour`) or,
-    with ``texture`` (``model.photo_texture``), from their texture seen from ``elevation``
-    (:func:`photo_texture`), recoloured by :func:`texture_on_surface` with ``surface`` or by
-    :func:`texture_on_sides` with ``sides``; ℓ the offsets. The one recipe of training and of
-    :meth:`~mitsuba_platonic.model.Model.reconstruct`."""
+    ``images`` it encodes, by ``recipe`` (the model section of a config, or a
+    :class:`~mitsuba_platonic.models.NetConfig`: its ``photo_texture``, ``texture_surface``,
+    ``texture_blur``, ``texture_sides`` and ``resolution``): G's colour offset from the photos'
+    mean colour (:func:`photo_colour`) or, with ``photo_texture``, from their texture seen from
+    ``elevation`` (:func:`photo_texture`), recoloured by :func:`texture_on_surface` (inside: the
+    mean colour, or the photo blurred by ``texture_blur`` pixels) or by :func:`texture_on_sides`; ℓ
+    the offsets. The one recipe of training and of :meth:`~mitsuba_platonic.model.Model.reconstruct`."""
     mean = photo_colour(images)
-    t = photo_texture(images, resolution, elevation) if texture else None
+    r = recipe.resolution
+    t = photo_texture(images, r, elevation) if recipe.photo_texture else None
     v, ℓ = G(code, mean if t is None else t, offsets=True)
-    if surface:
-        v = texture_on_surface(v, ℓ, t, mean, elevation)
-    elif sides:
-        v = texture_on_sides(v, ℓ, t, photo_texture_sides(images, resolution, elevation), elevation)
+    if recipe.texture_surface:
+        inner = photo_texture(images, r, elevation, blur=recipe.texture_blur) if recipe.texture_blur > 0 else mean
+        v = texture_on_surface(v, ℓ, t, inner, elevation)
+    elif recipe.texture_sides:
+        v = texture_on_sides(v, ℓ, t, photo_texture_sides(images, r, elevation), elevation)
     return v, ℓ

@@ -755,3 +755,42 @@ def test_texture_on_sides_gives_the_side_cameras_photo_where_only_they_see_and_k
     with pytest.raises(ConfigError, match="model.texture_sides: .*set one of them"):
         load_config(None, ["model.photo_colour=true", "model.photo_texture=true", "model.texture_sides=true",
                            "model.texture_surface=true"])
+
+
+def test_blurred_is_a_normalised_gaussian_of_sigma_pixels():
+    """A constant image stays itself; a single bright pixel in the middle spreads into weights that
+    sum to its value, symmetric, with variance σ² along each axis (within 3 %: it stops at 3σ)."""
+    from mitsuba_platonic.photo_colours import blurred
+    flat = torch.full((1, 3, 16, 16), 0.3, dtype=torch.float64)
+    assert torch.allclose(blurred(flat, 1.5), flat, atol=1e-12)
+    x = torch.zeros(1, 3, 33, 33, dtype=torch.float64)
+    x[:, :, 16, 16] = 1.0
+    for σ in (1.0, 2.0):
+        y = blurred(x, σ)[0, 0]
+        assert float(y.sum()) == pytest.approx(1.0, abs=1e-9)
+        assert torch.allclose(y, y.flip(0)) and torch.allclose(y, y.t())
+        d = torch.arange(33, dtype=torch.float64) - 16
+        assert float((y.sum(0) * d ** 2).sum()) == pytest.approx(σ ** 2, rel=0.03)
+
+
+def test_texture_on_surface_with_a_blurred_inside_takes_the_blurred_photo_inside():
+    """``model.texture_blur``: an opaque slab's faces keep the photo's texture, its inside takes the
+    photo blurred (carried along the same rays), not the mean colour; the config needs
+    texture_surface for it and refuses a negative σ."""
+    from mitsuba_platonic.photo_colours import COLOUR_MIN, photo_colour, photo_texture, texture_on_surface
+    n = 16
+    x = _ramp_photo(n, b=1)
+    x[:, 0, 5:9, 5:9] = 1.0                                  # a bright square: blurring changes it
+    volume = torch.zeros(1, 4, n, n, n)
+    volume[:, 3, 5:11] = 1.0
+    sharp, soft = photo_texture(x, n), photo_texture(x, n, blur=2.0)
+    out = texture_on_surface(volume, torch.zeros(1, 3, n, n, n), sharp, soft)
+    clamp = (lambda c: c.clamp(COLOUR_MIN, 1 - COLOUR_MIN))
+    assert torch.allclose(out[:, :3, 5], clamp(sharp)[:, :, 5], atol=1e-5)
+    assert torch.allclose(out[:, :3, 7], clamp(soft)[:, :, 7], atol=1e-5)
+    assert (soft - sharp).abs().max() > 0.1 and (soft[0, :, 7] - photo_colour(x)[0, :, None, None]).abs().max() > 0.05
+    with pytest.raises(ConfigError, match="model.texture_blur: .*needs model.texture_surface: true"):
+        load_config(None, ["model.photo_colour=true", "model.photo_texture=true", "model.texture_blur=2.0"])
+    with pytest.raises(ConfigError, match="model.texture_blur: expected a non-negative"):
+        load_config(None, ["model.photo_colour=true", "model.photo_texture=true", "model.texture_surface=true",
+                           "model.texture_blur=-1"])

@@ -283,8 +283,7 @@ class Trainer:
                 if "P" in self.nets and cfg.model.photo_texture:   # the head's θ̂, held constant: the
                     with torch.no_grad():                           # plain module, so DDP sees one use of P
                         θ = self.nets["P"](z.detach())
-                v, ℓ = photo_volume(G, z, x, cfg.model.photo_texture, cfg.model.texture_surface,
-                                    cfg.model.resolution, θ, sides=cfg.model.texture_sides)
+                v, ℓ = photo_volume(G, z, x, cfg.model, θ)
             else:
                 v = G(z)
             v_view, v_input = (v.repeat_interleave(K, 0) if K > 1 else v), v   # K = 1: no copy
