@@ -76,7 +76,8 @@ class NetConfig:
     elevation``); precision: the networks' arithmetic (:data:`PRECISIONS`); photo_colour: G's colour is an
     offset from the input photo's mean colour (:meth:`Generator.forward`); photo_texture: from the
     photo's colour at each voxel's pixel instead (:func:`~mitsuba_platonic.photo_colours.photo_texture`);
-    texture_surface, texture_sides: that colour recoloured (:mod:`~mitsuba_platonic.photo_colours`). A config's model section
+    texture_surface, texture_sides, texture_blur: that colour recoloured
+    (:mod:`~mitsuba_platonic.photo_colours`). A config's model section
     builds it (:meth:`~mitsuba_platonic.model_settings.ModelConfig.net_config`, its keys of the same names)."""
 
     resolution: int = 32
@@ -255,8 +256,9 @@ class Generator(nn.Module):
     def forward(self, z: torch.Tensor, colour: Optional[torch.Tensor] = None,
                 offsets: bool = False) -> Union[torch.Tensor, Tuple[torch.Tensor, torch.Tensor]]:
         """The volume for codes ``z``. With ``photo_colour`` (and only then) ``colour`` is the input
-        photos' mean colour m ``(B, 3)`` (:func:`~mitsuba_platonic.photo_colours.photo_colour`) or a colour
-        per voxel m ``(B, 3, R, R, R)`` (:func:`~mitsuba_platonic.photo_colours.photo_texture`), and G's colour logits are offsets from it:
+        photos' mean colour m ``(B, 3)`` (:func:`~mitsuba_platonic.photo_colours.photo_colour`) or a
+        colour per voxel m ``(B, 3, R, R, R)`` (:func:`~mitsuba_platonic.photo_colours.photo_texture`),
+        and G's colour logits are offsets from it:
         c = σ(ℓ + logit m) per channel, the density's σ(ℓ) as always. A colour the encoder has not
         learnt (an orange tree among green ones) is then still the photo's, and an untrained G's
         colour (ℓ ≈ 0) starts at m instead of grey. With ``offsets`` it returns (volume, ℓ), the

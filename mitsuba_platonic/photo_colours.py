@@ -29,8 +29,8 @@ from torch import nn
 
 from .render.closed_form import tilt
 
-__all__ = ["COLOUR_MIN", "photo_colour", "blurred", "photo_texture", "photo_texture_sides", "transmittances", "surface_weight",
-           "texture_on_surface", "texture_on_sides", "photo_volume"]
+__all__ = ["COLOUR_MIN", "photo_colour", "blurred", "photo_texture", "photo_texture_sides", "transmittances",
+           "surface_weight", "texture_on_surface", "texture_on_sides", "photo_volume"]
 
 
 #: Where :func:`photo_colour` clamps a mean colour, so that its logit stays finite (≈ ±5.5).
@@ -153,7 +153,8 @@ def transmittances(density: torch.Tensor,
     nearest the camera, columns j = 0 at its left), with τ = 1 − v each voxel's transmittance
     (EA at one sample per voxel),
 
-        T_front,k = Π_{k'<k} τ_k',   T_back,k = Π_{k'>k} τ_k',   T_left,j = Π_{j'<j} τ_j',   T_right,j = Π_{j'>j} τ_j'
+        T_front,k = Π_{k'<k} τ_k',   T_back,k = Π_{k'>k} τ_k'        (along the camera's rays)
+        T_left,j = Π_{j'<j} τ_j',    T_right,j = Π_{j'>j} τ_j'       (across them)
 
     A weight made of them goes back into G's frame with :func:`_in_g_frame`."""
     v = density.detach().clamp(0.0, 1.0)
@@ -202,11 +203,13 @@ def texture_on_surface(volume: torch.Tensor, offsets: torch.Tensor, texture: tor
     body as streaks seen from the side."""
     s = surface_weight(volume[:, 3:], elevation)
     m = inner.to(volume)
-    return _coloured(volume, offsets, s * texture.to(volume) + (1.0 - s) * (m[:, :, None, None, None] if m.dim() == 2 else m))
+    m = m[:, :, None, None, None] if m.dim() == 2 else m                # one colour per photo, or per voxel
+    return _coloured(volume, offsets, s * texture.to(volume) + (1.0 - s) * m)
 
 
 def texture_on_sides(volume: torch.Tensor, offsets: torch.Tensor, texture: torch.Tensor,
-                     sides: Tuple[torch.Tensor, torch.Tensor], elevation: Optional[torch.Tensor] = None) -> torch.Tensor:
+                     sides: Tuple[torch.Tensor, torch.Tensor],
+                     elevation: Optional[torch.Tensor] = None) -> torch.Tensor:
     """``model.texture_sides``: the volume G made with offsets ℓ from the photos' ``texture`` t
     (:func:`photo_texture`), recoloured so that the object's left and right sides carry the photo
     as seen from there, ``sides`` = (t_left, t_right) (:func:`photo_texture_sides`). With the
@@ -221,9 +224,8 @@ def texture_on_sides(volume: torch.Tensor, offsets: torch.Tensor, texture: torch
     view is :func:`photo_texture`'s; one that only a side camera sees takes that side's photo
     (w_left + w_right = 1 where f = 0 and u = 1); inside (u = 0) the input rays' colour stays.
     The weights are made in the input camera's frame and tilted back into G's (trilinear, so
-    w_left + w_right ≤ 1 still). Why: seen from
-    90°, the input rays' colour runs across the object as horizontal streaks (docs/training.md,
-    "The photo on the sides")."""
+    w_left + w_right ≤ 1 still). Why: seen from 90°, the input rays' colour runs across the object
+    as horizontal streaks (docs/training.md, "The photo on the sides")."""
     front, back, left, right = transmittances(volume[:, 3:], elevation)
     f = (front + back).clamp(max=1.0)
     u = (left + right).clamp(max=1.0)

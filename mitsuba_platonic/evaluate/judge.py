@@ -7,8 +7,8 @@ photos, and measures what a person sees in the turntables (speckle, drifted colo
 silhouette). docs/evaluation.md ("Judging novel views without ground truth") explains the use.
 
 **Views.** A turntable about the object's vertical axis, the camera keeping the input camera's
-elevation θ̂: ω(φ, θ̂) = (cos θ̂ sin φ, sin θ̂, cos θ̂ cos φ) (:func:`~mitsuba_platonic.views.from_angles`)
-in the object's frame. For a model with a pose head (``train.pose: elevation``) that frame is G's
+elevation θ̂: ω(φ, θ̂) = (cos θ̂ sin φ, sin θ̂, cos θ̂ cos φ)
+(:func:`~mitsuba_platonic.views.from_angles`) in the object's frame. For a model with a pose head (``train.pose: elevation``) that frame is G's
 upright one and θ̂ the head's estimate per photo
 (:meth:`~mitsuba_platonic.model.Model.reconstruct_upright`); for one without, it is the input
 camera's frame and θ̂ = 0, ω(φ, 0) = (sin φ, 0, cos φ). At φ = 0 either is the input view. (Turning

@@ -437,8 +437,8 @@ def judge_markdown(section: PhotoSection) -> List[str]:
              f"No ground truth, so a judge: a fresh critic (seeded, {CRITIC_STEPS} steps by default, "
              f"{CRITIC_REPEATS} critics averaged, each with its own random views) learns to tell the run's training "
              f"photos from renders of their reconstructions at random turntable views (about the object's vertical "
-             f"axis, at the input camera's elevation), then tells the {j0.c2st['photos']} held-out photos from renders of theirs, per band of "
-             f"angle from the input view. Accuracy 0.5: the renders pass for photos; 1: they never do. In "
+             f"axis, at the input camera's elevation), then tells the {j0.c2st['photos']} held-out photos from "
+             f"renders of theirs, per band of angle from the input view. Accuracy 0.5: the renders pass for photos; 1: they never do. In "
              f"brackets the AUC: how often the critic ranks a held-out photo above a render (0.5: alike), whatever "
              f"its threshold.", "",
              judge_table(section.judgements), ""]
