@@ -1,0 +1,437 @@
+"""Single scattering at the marcher's speed: every (volume, view, light) triple of a call in one
+Dr.Jit launch, primal and adjoint, deterministic.
+
+The formation is :mod:`.single_scatter`'s (its medium, its :class:`~.single_scatter.SunAndSky`,
+its exposure), with the light near each camera sample modelled locally instead of continued
+plane by plane:
+
+    L(ray) = ∫ T(t) σ(x_t) a(x_t) S(x_t) dt,     S(x) = p E_s T_s(x) + L_sky V(x),   p = 1/4π
+
+Light volumes (torch, differentiable; :func:`light_packet`). Per pair, at the voxel centres p:
+
+    A_s(p) = 1 − T_sweep(p + ℓ ω_s)           the sun's sweep (:func:`.single_scatter.sweep`), read ℓ ahead
+    σ_s(p) = σ(p + ℓ ω_s)                       σ where that read is
+    O(p)   = 1 − Σ_k w_k λ_k(p) T_k(p + ℓ ω_k) / Σ_k w_k λ_k(p)      the sky's far occlusion
+
+with the 14 sky directions ω_k and weights w_k of :mod:`.single_scatter`, ℓ = ``reach`` voxels,
+and λ_k(p) the local factor below at p (σ's gradient there by central differences). The camera
+pass reads σ, the albedo a, A_s, σ_s and O as one 8-float packet per voxel, trilinearly.
+
+The local light (the reason for this design). Near a camera sample x, σ is taken as the linear
+field of its trilinear cell, σ(x + s ω) ≈ σ + s b with b = ∇σ(x)·ω, clamped at zero: its optical
+depth over the reach ℓ towards a light is
+
+    τ_ℓ(σ, b) = ∫_0^ℓ max(σ + s b, 0) ds = σ ℓ + b ℓ²/2     (σ + b ℓ ≥ 0)
+                                         = σ² / (2 |b|)       (otherwise: the field reaches 0 first)
+
+which is exact on the ramp of trilinear σ in front of an opaque surface, where the camera sees
+the light it scatters (docs/rendering.md, "Single scattering at the marcher's speed"). Then
+
+    T_s(x) = exp(−τ_s) (1 − A_s(x)),   τ_s = τ_ℓ(σ, b_s) + ½ ℓ (σ_s(x) − e) u,   e = max(σ + b_s ℓ, 0)
+    V(x)   = (1 − O(x)) Σ_k w_k exp(−τ_ℓ(σ, b_k))
+
+with u = min(e/σ, 1) (u = 1 for b_s ≥ 0). The correction turns the sun's linear extrapolation
+into the trapezoid rule between σ(x) and the σ actually read at x + ℓ ω_s where σ does not fall
+towards the sun (inside a soft medium lit from behind), and fades out, continuously, as the
+field reaches zero within the reach: at a surface under a grazing sun the point ℓ ahead still
+lies in the surface's own ramp, whose σ the ramp term has already counted. The sky's ℓ_k is its
+far read's distance (:func:`sky_offsets`).
+
+Camera (orthographic): ``spp`` rays per pixel on a regular sub-pixel grid, m = ``steps_per_voxel``
+samples per voxel at the midpoints of steps h = Δ/m, front to back, in the extinction domain:
+
+    C = Σ_k T_k (1 − τ_k) a_k S_k,   τ_k = e^{−σ_k h},   T_k = Π_{j<k} τ_j,   α = 1 − T_K
+
+Adjoint (one launch, no record, no division by τ). Each ray is marched front to back again with
+its forward totals C and α: since dτ_k/dσ_k = −h τ_k,
+
+    ∂C/∂σ_k (through T) = h (T_{k+1} c_k − (C − C_{≤k})),     ∂α/∂σ_k = h (1 − α)
+
+and the local light's partial derivatives (module source, :meth:`_Rays.shade_backward`) reach
+the 8 voxels of the lookup by its weights and their derivatives (σ's gradient is a sum of
+corner values times ∂w/∂q). Scatter-adds: ``Expand`` on the LLVM backend (exact), atomics on CUDA.
+
+Left out: what :mod:`.single_scatter` leaves out (multiple scattering, sky directions beyond
+14, the perspective camera), and the field's curvature within the reach (measured against
+``volpath`` in docs/rendering.md).
+"""
+
+from __future__ import annotations
+
+import math
+from typing import Any, Tuple
+
+import torch
+import torch.nn.functional as F
+
+from ..errors import UserError
+from ..volume import voxel_size
+from .grids import extinction
+from .marcher import _MODE, _frames, _image_to_per_ray, _per_ray_to_image, _shared, _spread_over_threads
+from .single_scatter import SKY_DIRECTIONS, SKY_WEIGHTS, EXPOSURES, LightBatch, _check, mean_luminance, sweep
+from .variant import ensure_variant, variant_device
+
+mi = ensure_variant()
+import drjit as dr  # noqa: E402  (after the variant is set)
+
+__all__ = ["render_scatter_march", "light_packet", "local_depth", "axis_sweep", "sky_offsets", "REACH", "PACKET"]
+
+#: The local light's reach ℓ, in voxels (module docstring; docs/rendering.md measures 1–3).
+REACH = 2.0
+
+#: Floats per voxel in the camera pass's packet: σ, a (3), A_s, σ_s, O, unused.
+PACKET = 8
+
+
+def _grid_dirs(d: torch.Tensor) -> torch.Tensor:
+    """World directions ``(…, 3)`` → grid index units [d, h, w] per voxel (d along −z, h along −y, w along +x)."""
+    return torch.stack([-d[..., 2], -d[..., 1], d[..., 0]], dim=-1)
+
+
+def local_depth(σ: torch.Tensor, b: torch.Tensor, ℓ: float) -> torch.Tensor:
+    """τ_ℓ(σ, b) = ∫_0^ℓ max(σ + s b, 0) ds for σ ≥ 0 (module docstring), elementwise."""
+    reaches = σ + b * ℓ >= 0
+    return torch.where(reaches, σ * ℓ + 0.5 * b * ℓ * ℓ, σ * σ / torch.where(reaches, 1.0, -2.0 * b))
+
+
+def _read(volume: torch.Tensor, offset: torch.Tensor) -> torch.Tensor:
+    """``volume`` ``(B, C, N, N, N)`` read trilinearly at every voxel centre moved by ``offset``
+    ``(B, 3)`` voxels [d, h, w] (zero outside the cube)."""
+    b, n = volume.shape[0], volume.shape[-1]
+    c = (torch.arange(n, dtype=volume.dtype, device=volume.device) + 0.5) * (2.0 / n) - 1.0
+    d, h, w = torch.meshgrid(c, c, c, indexing="ij")
+    base = torch.stack([w, h, d], dim=-1)[None]                   # grid_sample's (x, y, z) ← (w, h, d)
+    shift = (offset.flip(-1) * (2.0 / n)).to(volume)[:, None, None, None, :]
+    return F.grid_sample(volume, base + shift, mode="bilinear", padding_mode="zeros", align_corners=False)
+
+
+def axis_sweep(σ: torch.Tensor, direction: Tuple[float, float, float]) -> torch.Tensor:
+    """1 − T towards an axis ``direction`` at the voxel centres of ``σ`` ``(B, 1, N, N, N)``: the
+    transmittance volume of :func:`.single_scatter.sweep` for the sky's six axes, where each ray
+    towards the light is one column of voxels and the trapezoid sums are one cumulative sum along
+    it (log domain, exact as σ ≤ ln 1000 / Δ is finite):
+
+        τ_i = τ_{i−1} + Δ (σ_i + σ_{i−1}) / 2,    τ_0 = Δ σ_0 / 2     (plane 0 nearest the light)
+    """
+    g = (-direction[2], -direction[1], direction[0])              # [d, h, w]
+    axis = max(range(3), key=lambda a: abs(g[a]))
+    if sorted(abs(x) for x in g) != [0.0, 0.0, 1.0]:
+        raise ValueError(f"axis_sweep: {direction} is not along an axis")
+    dim = axis + 2
+    planes = σ.flip(dim) if g[axis] > 0 else σ                    # plane 0 on the light's side
+    Δ = voxel_size(σ.shape[-1])
+    term = 0.5 * Δ * (planes + F.pad(planes.narrow(dim, 0, planes.shape[dim] - 1),
+                                      [0, 0] * (2 - axis) + [1, 0]))   # σ_i + σ_{i−1} (σ_{−1} = 0)
+    opacity = -torch.expm1(-torch.cumsum(term, dim=dim))
+    return opacity.flip(dim) if g[axis] > 0 else opacity
+
+
+def _shift(volume: torch.Tensor, offset: Tuple[int, int, int]) -> torch.Tensor:
+    """``volume`` ``(…, N, N, N)`` read at every voxel moved by whole voxels ``offset`` [d, h, w] (zero outside)."""
+    n = volume.shape[-1]
+    pad = []
+    for o in reversed(offset):                                    # F.pad lists the last dimension first
+        pad += [0, o] if o > 0 else [-o, 0]
+    padded = F.pad(volume, pad)
+    return padded[..., max(offset[0], 0):max(offset[0], 0) + n, max(offset[1], 0):max(offset[1], 0) + n,
+                  max(offset[2], 0):max(offset[2], 0) + n]
+
+
+def sky_offsets(reach: float) -> list:
+    """Each sky direction's far read: the whole-voxel move [d, h, w] nearest ``reach`` voxels along it
+    (2 voxels along an axis and (1, 1, 1) along a diagonal at the default reach), so that the sky's
+    far transmittance is read without interpolation."""
+    out = []
+    for d in SKY_DIRECTIONS:
+        g = (-d[2], -d[1], d[0])
+        out.append(tuple(int(max(1, round(reach * abs(x)))) * (1 if x > 0 else -1) if abs(x) > 1e-9 else 0
+                         for x in g))
+    return out
+
+
+def light_packet(volume: torch.Tensor, lights: LightBatch, reach: float = REACH) -> torch.Tensor:
+    """The camera pass's per-voxel packet ``(B, N, N, N, 8)``, channels last: σ, a_r, a_g, a_b, A_s,
+    σ_s, O, 0 (module docstring, "Light volumes"); differentiable w.r.t. ``volume``."""
+    b_, n = volume.shape[0], volume.shape[-1]
+    Δ = voxel_size(n)
+    σ = extinction(volume[:, 3:])
+    # -- the sun: its sweep and σ, read ``reach`` voxels towards it
+    ω_s = _grid_dirs(lights.direction.to(volume))
+    sun = _read(torch.cat([sweep(σ, lights.direction).opacity, σ], dim=1), reach * ω_s)
+    # -- the sky: far transmittance per direction, weighted by the local factor at the centre
+    k = len(SKY_DIRECTIONS)
+    dirs = torch.tensor(SKY_DIRECTIONS, dtype=torch.float64)
+    ω_k = _grid_dirs(dirs.to(volume))                             # (14, 3)
+    axes = torch.stack([axis_sweep(σ, d) for d in SKY_DIRECTIONS[:6]], dim=1)        # (B, 6, 1, N, N, N)
+    diagonals = sweep(σ.repeat_interleave(8, dim=0), dirs[6:].repeat(b_, 1)).opacity.reshape(b_, 8, 1, n, n, n)
+    opacity = torch.cat([axes, diagonals], dim=1).reshape(b_ * k, 1, n, n, n)
+    offsets = sky_offsets(reach)
+    opacity = opacity.reshape(b_, k, n, n, n)
+    far = 1.0 - torch.stack([_shift(opacity[:, i], o) for i, o in enumerate(offsets)], dim=1)
+    σ_p = F.pad(σ[:, 0], (1, 1, 1, 1, 1, 1))
+    grad = torch.stack([σ_p[:, 2:, 1:-1, 1:-1] - σ_p[:, :-2, 1:-1, 1:-1],
+                        σ_p[:, 1:-1, 2:, 1:-1] - σ_p[:, 1:-1, :-2, 1:-1],
+                        σ_p[:, 1:-1, 1:-1, 2:] - σ_p[:, 1:-1, 1:-1, :-2]], dim=-1) / (2.0 * Δ)   # ∂σ/∂(world, per axis)
+    slope = torch.einsum("bdhwx,kx->bkdhw", grad, ω_k)            # b_k = ∇σ·ω_k
+    w = torch.tensor(SKY_WEIGHTS, dtype=volume.dtype, device=volume.device)[None, :, None, None, None]
+    ℓ_k = torch.tensor([math.sqrt(sum(x * x for x in o)) * Δ for o in offsets], dtype=volume.dtype,
+                       device=volume.device)[None, :, None, None, None]            # each far read's distance
+    λ = w * torch.exp(-local_depth(σ, slope, ℓ_k))
+    visible = ((λ * far.reshape(b_, k, n, n, n)).sum(1, keepdim=True) + 1e-6) / (λ.sum(1, keepdim=True) + 1e-6)
+    packet = torch.cat([σ, volume[:, :3], sun[:, :1], sun[:, 1:], 1.0 - visible, torch.zeros_like(σ)], dim=1)
+    return packet.permute(0, 2, 3, 4, 1).contiguous()
+
+
+# -- The Dr.Jit pass ------------------------------------------------------------------------------
+
+
+def _sky_constants(Δ: float, reach: float) -> list:
+    """(w_k, ω_k in the kernel's index order (w, h, d) per world unit, ℓ_k in world units) of the 14
+    sky directions, ℓ_k the distance of the far read (:func:`sky_offsets`)."""
+    return [(w, (d[0] / Δ, -d[1] / Δ, -d[2] / Δ), math.sqrt(sum(x * x for x in o)) * Δ)
+            for w, d, o in zip(SKY_WEIGHTS, SKY_DIRECTIONS, sky_offsets(reach))]
+
+
+class _Rays:
+    """One call's rays (lane r: pair r // (N²·spp), pixel, sub-sample), their samples and lookups."""
+
+    def __init__(self, data: Any, frames: Any, light: Any, b: int, n: int, m: int, spp: int, reach: float):
+        self.data, self.N, self.m, self.B = data, n, m, b
+        self.Δ = 2.0 / n
+        self.h = self.Δ / m                                       # a step, in world units
+        self.ℓ = reach * self.Δ                                   # the reach, in world units
+        self.n_rays = b * n * n * spp
+        self.n_steps = n * m
+        r = dr.arange(mi.UInt32, self.n_rays)
+        pixel = r // spp
+        sub = r - pixel * spp
+        pair = pixel // (n * n)
+        ij = pixel - pair * (n * n)
+        i, j = ij // n, ij % n
+        s = math.isqrt(spp)
+        self.x = -1.0 + (mi.Float(j) + (mi.Float(sub % s) + 0.5) / s) * self.Δ
+        self.y = 1.0 - (mi.Float(i) + (mi.Float(sub // s) + 0.5) / s) * self.Δ
+        f = [dr.gather(mi.Float, frames, pair * 9 + k) for k in range(9)]
+        self.right, self.up, self.ω = mi.Vector3f(*f[0:3]), mi.Vector3f(*f[3:6]), mi.Vector3f(*f[6:9])
+        g = [dr.gather(mi.Float, light, pair * 9 + k) for k in range(9)]
+        # the sun's direction in index units (w, h, d) per world unit; p E_s and L_sky, exposed
+        self.ω_s = mi.Vector3f(g[0] / self.Δ, -g[1] / self.Δ, -g[2] / self.Δ)
+        self.E_s, self.L_sky = mi.Color3f(*g[3:6]), mi.Color3f(*g[6:9])
+        self.base = pair * (n * n * n)
+        self.sky = _sky_constants(self.Δ, reach)
+
+    def sample(self, k: Any) -> Any:
+        """The continuous voxel index q (w, h, d) of sample k of each ray."""
+        z = 1.0 - (mi.Float(k) + 0.5) * self.h
+        p = self.x * self.right + self.y * self.up + z * self.ω
+        half = self.N / 2.0
+        return mi.Vector3f((p.x + 1.0) * half - 0.5, (1.0 - p.y) * half - 0.5, (1.0 - p.z) * half - 0.5)
+
+    def corners(self, q: Any) -> list:
+        """[(packet index, inside, weight, ∂weight/∂q)] of the 8 voxels around q. Indices are
+        clamped into the cube (the albedo reads its edge values, as Mitsuba's grid does); σ, A_s,
+        σ_s and O count only where ``inside``."""
+        N = self.N
+        i0 = mi.Vector3i(dr.floor(q))
+        t = q - mi.Vector3f(i0)
+        out = []
+        for oz in (0, 1):
+            for oy in (0, 1):
+                for ox in (0, 1):
+                    i = i0 + mi.Vector3i(ox, oy, oz)
+                    inside = dr.all((i >= 0) & (i < N))
+                    c = dr.clip(i, 0, N - 1)
+                    idx = self.base + mi.UInt32((c.z * N + c.y) * N + c.x)
+                    wx, wy, wz = (t.x if ox else 1.0 - t.x), (t.y if oy else 1.0 - t.y), (t.z if oz else 1.0 - t.z)
+                    sx, sy, sz = (1.0 if ox else -1.0), (1.0 if oy else -1.0), (1.0 if oz else -1.0)
+                    out.append((idx, inside, wx * wy * wz, mi.Vector3f(sx * wy * wz, wx * sy * wz, wx * wy * sz)))
+        return out
+
+    def lookup(self, corners: list) -> Tuple[Any, ...]:
+        """σ, ∇_q σ, a, A_s, σ_s, O at the lookup (two 4-float packets per voxel)."""
+        σ, gq, a = mi.Float(0.0), mi.Vector3f(0.0), mi.Color3f(0.0)
+        A, σ_s, O = mi.Float(0.0), mi.Float(0.0), mi.Float(0.0)
+        for idx, inside, w, dw in corners:
+            lo = dr.gather(mi.Vector4f, self.data, 2 * idx)
+            hi = dr.gather(mi.Vector4f, self.data, 2 * idx + 1)
+            σ_c = dr.select(inside, lo.x, 0.0)
+            σ += w * σ_c
+            gq += dw * σ_c
+            a += w * mi.Color3f(lo.y, lo.z, lo.w)
+            wi = dr.select(inside, w, 0.0)
+            A += wi * hi.x
+            σ_s += wi * hi.y
+            O += wi * hi.z
+        return σ, gq, a, A, σ_s, O
+
+    def _sun_depth(self, σ: Any, b: Any, σ_s: Any) -> Tuple[Any, Any, Any, Any]:
+        """τ_s and its partial derivatives ∂/∂σ, ∂/∂b, ∂/∂σ_s (module docstring, "The local light"):
+
+            b ≥ 0:             τ_s = ℓ (σ + σ_s) / 2
+            b < 0, e > 0:      τ_s = σ ℓ + b ℓ²/2 + ℓ (σ_s − e) u / 2,    e = σ + b ℓ,  u = e / σ
+            e ≤ 0:             τ_s = σ² / (2 |b|)
+        """
+        ℓ = self.ℓ
+        e = σ + b * ℓ
+        rising, ramp = b >= 0, e <= 0
+        σ_ = dr.select(rising | ramp, 1.0, σ)                        # σ > 0 in the middle case
+        b_ = dr.select(ramp & ~rising, b, -1.0)                      # b < 0 in the ramp case
+        u = e / σ_
+        middle = σ * ℓ + 0.5 * b * ℓ * ℓ + 0.5 * ℓ * (σ_s - e) * u
+        τ = dr.select(rising, 0.5 * ℓ * (σ + σ_s), dr.select(ramp, σ * σ / (-2.0 * b_), middle))
+        dσ = dr.select(rising, 0.5 * ℓ, dr.select(ramp, σ / -b_, ℓ + 0.5 * ℓ * (-u - (σ_s - e) * b * ℓ / (σ_ * σ_))))
+        db = dr.select(rising, 0.0, dr.select(ramp, σ * σ / (2.0 * b_ * b_),
+                                              0.5 * ℓ * ℓ + 0.5 * ℓ * (-ℓ * u + (σ_s - e) * ℓ / σ_)))
+        dσ_s = dr.select(rising, 0.5 * ℓ, dr.select(ramp, 0.0, 0.5 * ℓ * u))
+        return τ, dσ, db, dσ_s
+
+    def shade(self, σ: Any, gq: Any, a: Any, A: Any, σ_s: Any, O: Any) -> Tuple[Any, Any, Any]:
+        """c = a S at a sample (module docstring, "The local light"), with S and T_s."""
+        ℓ = self.ℓ
+        T_s = dr.exp(-self._sun_depth(σ, dr.dot(gq, self.ω_s), σ_s)[0]) * (1.0 - A)
+        Λ = mi.Float(0.0)
+        for w, d, ℓ_k in self.sky:
+            b_k = dr.dot(gq, mi.Vector3f(*d))
+            reaches = σ + b_k * ℓ_k >= 0
+            τ_k = dr.select(reaches, σ * ℓ_k + 0.5 * b_k * ℓ_k * ℓ_k, σ * σ / dr.select(reaches, 1.0, -2.0 * b_k))
+            Λ += w * dr.exp(-τ_k)
+        S = self.E_s * T_s + self.L_sky * ((1.0 - O) * Λ)
+        return a * S, S, Λ
+
+    def shade_backward(self, gc: Any, σ: Any, gq: Any, a: Any, A: Any, σ_s: Any, O: Any, S: Any,
+                       Λ: Any) -> Tuple[Any, ...]:
+        """∂L/∂(σ, ∇_q σ, a, A_s, σ_s, O) at a sample from ∂L/∂c = ``gc`` (the chain rule through
+        :meth:`shade`, branch by branch of τ_ℓ)."""
+        ℓ = self.ℓ
+        ga = gc * S
+        gS = gc * a
+        gT_s, gV = dr.sum(gS * self.E_s), dr.sum(gS * self.L_sky)
+        # the sun: T_s = e^{−τ_s} (1 − A_s)
+        τ_s, dσ, db, dσ_s = self._sun_depth(σ, dr.dot(gq, self.ω_s), σ_s)
+        e_s = dr.exp(-τ_s)
+        gA = -e_s * gT_s
+        gτ = -e_s * (1.0 - A) * gT_s
+        gσ, gσ_s = gτ * dσ, gτ * dσ_s
+        ggq = (gτ * db) * self.ω_s
+        # the sky: V = (1 − O) Σ_k w_k e^{−τ_k}
+        gO = -Λ * gV
+        gΛ = (1.0 - O) * gV
+        for w, d, ℓ_k in self.sky:
+            ω = mi.Vector3f(*d)
+            b_k = dr.dot(gq, ω)
+            reaches = σ + b_k * ℓ_k >= 0
+            safe = dr.select(reaches, -1.0, b_k)
+            τ_k = dr.select(reaches, σ * ℓ_k + 0.5 * b_k * ℓ_k * ℓ_k, σ * σ / (-2.0 * safe))
+            gτ_k = -w * dr.exp(-τ_k) * gΛ
+            gσ += gτ_k * dr.select(reaches, ℓ_k, σ / -safe)
+            ggq += ω * (gτ_k * dr.select(reaches, 0.5 * ℓ_k * ℓ_k, σ * σ / (2.0 * safe * safe)))
+        return gσ, ggq, ga, gA, gσ_s, gO
+
+    def scatter(self, grad: Any, corners: list, gσ: Any, ggq: Any, ga: Any, gA: Any, gσ_s: Any, gO: Any) -> None:
+        """Scatter-add a sample's partial derivatives into the 8 voxels of its lookup."""
+        for idx, inside, w, dw in corners:
+            pσ = dr.select(inside, w * gσ + dr.dot(dw, ggq), 0.0)
+            wi = dr.select(inside, w, 0.0)
+            dr.scatter_reduce(dr.ReduceOp.Add, grad, mi.Vector4f(pσ, w * ga.x, w * ga.y, w * ga.z), 2 * idx,
+                              mode=_MODE)
+            dr.scatter_reduce(dr.ReduceOp.Add, grad, mi.Vector4f(wi * gA, wi * gσ_s, wi * gO, 0.0), 2 * idx + 1,
+                              mode=_MODE)
+
+    @dr.syntax
+    def forward(self) -> Tuple[Any, Any]:
+        """Front to back: (C, T) per ray."""
+        k = mi.UInt32(0)
+        T = mi.Float(1.0)
+        C = mi.Color3f(0.0)
+        while k < self.n_steps:
+            σ, gq, a, A, σ_s, O = self.lookup(self.corners(self.sample(k)))
+            c, _, _ = self.shade(σ, gq, a, A, σ_s, O)
+            τ = dr.exp(-σ * self.h)
+            C += T * (1.0 - τ) * c
+            T *= τ
+            k += 1
+        return C, T
+
+    @dr.syntax
+    def backward(self, grad: Any, C_total: Any, α: Any, δC: Any, δα: Any) -> None:
+        """Front to back again with the forward's totals (module docstring, "Adjoint")."""
+        k = mi.UInt32(0)
+        T = mi.Float(1.0)
+        C = mi.Color3f(0.0)                                       # C_{<k}
+        gσ_α = δα * self.h * (1.0 - α)                            # ∂α/∂σ_k δα, the same at every sample
+        while k < self.n_steps:
+            corners = self.corners(self.sample(k))
+            σ, gq, a, A, σ_s, O = self.lookup(corners)
+            c, S, Λ = self.shade(σ, gq, a, A, σ_s, O)
+            τ = dr.exp(-σ * self.h)
+            C += T * (1.0 - τ) * c                                # C_{≤k}
+            T_next = T * τ
+            gσ_T = self.h * dr.sum(δC * (T_next * c - (C_total - C))) + gσ_α
+            gσ, ggq, ga, gA, gσ_s, gO = self.shade_backward(δC * T * (1.0 - τ), σ, gq, a, A, σ_s, O, S, Λ)
+            self.scatter(grad, corners, gσ + gσ_T, ggq, ga, gA, gσ_s, gO)
+            T = T_next
+            k += 1
+
+
+class _ScatterMarch(torch.autograd.Function):
+    """torch ↔ Dr.Jit: the forward launch, and the adjoint launch with the forward's totals."""
+
+    @staticmethod
+    def forward(ctx, packet: torch.Tensor, views: torch.Tensor, light: torch.Tensor, m: int, spp: int,
+                reach: float) -> torch.Tensor:
+        b, n = packet.shape[0], packet.shape[1]
+        keep: list = []
+        data = _shared(packet.detach().contiguous(), keep)
+        frames = _frames(views, keep)
+        light_arr = _shared(light.detach().to(torch.float32).contiguous(), keep)
+        rays = _Rays(data, frames, light_arr, b, n, m, spp, reach)
+        _spread_over_threads(rays.n_rays, 4)
+        C, T = rays.forward()
+        values = [C.x, C.y, C.z, 1.0 - T]
+        dr.eval(values)
+        image = _per_ray_to_image(values, b, n, spp)
+        ctx.args = (data, frames, light_arr, values, (b, n, m, spp, reach))
+        ctx.keep = keep
+        return image
+
+    @staticmethod
+    def backward(ctx, grad_image: torch.Tensor):
+        data, frames, light_arr, values, (b, n, m, spp, reach) = ctx.args
+        δ = _image_to_per_ray(grad_image.to(torch.float32).contiguous(), spp, ctx.keep)
+        rays = _Rays(data, frames, light_arr, b, n, m, spp, reach)
+        _spread_over_threads(rays.n_rays, 1)
+        grad = dr.zeros(mi.Float, b * n ** 3 * PACKET)
+        rays.backward(grad, mi.Color3f(*values[:3]), values[3], mi.Color3f(*δ[:3]), δ[3])
+        dr.eval(grad)
+        out = grad.torch().view(b, n, n, n, PACKET)
+        dr.sync_thread()                                          # nothing in flight reads ``keep``
+        return out, None, None, None, None, None
+
+
+def render_scatter_march(volume: torch.Tensor, views: torch.Tensor, lights: Any, exposure: str = "metered",
+                         steps_per_voxel: int = 2, spp: int = 1, reach: float = REACH) -> torch.Tensor:
+    """Render ``(B, 4, N, N, N)`` RGBA volumes from ``(B, 3)`` views (orthographic), lit by single
+    scattering of one :class:`~.single_scatter.SunAndSky` each, in one Dr.Jit launch per pass.
+
+    Returns ``(B, 4, N, N)``: premultiplied linear RGB radiance (times the exposure) and
+    α = 1 − exp(−∫σ), differentiable w.r.t. ``volume``. ``steps_per_voxel``: camera samples per
+    voxel (≥ 2: one sample per voxel lands on voxel centres and never sees a surface's ramp);
+    ``spp``: rays per pixel, a square number; ``reach``: the local light's ℓ in voxels (module
+    docstring). Accuracy and cost against ``volpath`` and the EA marcher: docs/rendering.md.
+    """
+    batch = _check(volume, views, lights, exposure)
+    for name, value, least in (("steps_per_voxel", steps_per_voxel, 2), ("spp", spp, 1)):
+        if isinstance(value, bool) or not isinstance(value, int) or value < least:
+            raise UserError(f"{name}: expected an int ≥ {least}, got {value!r}")
+    if math.isqrt(spp) ** 2 != spp:
+        raise UserError(f"spp: expected a square number of rays per pixel (1, 4, 9, …), got {spp}")
+    if isinstance(reach, bool) or not isinstance(reach, (int, float)) or not 0.5 <= reach <= 4.0:
+        raise UserError(f"reach: expected a number of voxels in [0.5, 4], got {reach!r}")
+    device = variant_device()
+    packet = light_packet(volume.to(device=device, dtype=torch.float32), batch, float(reach))
+    scale = 1.0 / mean_luminance(batch) if exposure == "metered" else torch.ones(len(batch), dtype=torch.float64)
+    light = torch.cat([batch.direction, batch.irradiance / (4.0 * math.pi) * scale[:, None],
+                       batch.sky * scale[:, None]], dim=1)
+    out = _ScatterMarch.apply(packet, views.detach().to(torch.float64).cpu(), light, steps_per_voxel, spp,
+                              float(reach))
+    return out.to(volume.device)
