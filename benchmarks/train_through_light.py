@@ -1,6 +1,6 @@
 """Benchmark: the cost of a training step through each renderer on a path-traced collection.
 
-    .venv/bin/python benchmarks/train_through_light.py [--steps 10] [--shapes 60] [--cache data]
+    .venv/bin/python benchmarks/train_through_light.py [--steps 10] [--shapes 60] [--cache data] [--width 32]
 
 One process, one collection (``configs/procedural_physical.yaml``: mushrooms at 32³ path-traced
 under random skies, metered exposure, ``--shapes`` × 4 views), the same seed and batch (8) for
@@ -9,6 +9,8 @@ warm-up step (kernel compilation, scene loading) and then times ``--steps`` step
 
 - EA through the Mitsuba ray marcher (``render.backend: mitsuba``), the project's fast path;
 - EA through the closed-form layer (``render.backend: closed_form``), the reference;
+- single scattering of the same kind of sky in Dr.Jit (``render.backend: scatter_march``, a
+  random sun and sky per pair from the backend's light prior) at 2 and 4 camera samples per voxel;
 - the differentiable path tracer (``render.backend: physical``, prbvolpath under a random sun per
   pair) at spp 1 / max depth 2 (the setting ``docs/training.md``, "Training through light",
   trained with) and at the config's spp 4 / max depth 4.
@@ -41,14 +43,16 @@ CONFIG = Path(__file__).resolve().parents[1] / "configs" / "procedural_physical.
 ROWS = {
     "EA, Mitsuba ray marcher": ["render.backend=mitsuba"],
     "EA, closed form": ["render.backend=closed_form"],
+    "single scattering, Dr.Jit, m = 2": ["render.backend=scatter_march", "render.steps_per_voxel=2"],
+    "single scattering, Dr.Jit, m = 4": ["render.backend=scatter_march", "render.steps_per_voxel=4"],
     "path tracer, spp 1, depth 2": ["render.physical_spp=1", "render.max_depth=2"],
     "path tracer, spp 4, depth 4": [],
 }
 
 
-def seconds_per_step(overrides, shapes: int, cache: str, steps: int) -> Tuple[float, float, float]:
+def seconds_per_step(overrides, shapes: int, cache: str, steps: int, width: int) -> Tuple[float, float, float]:
     """(wall seconds, Dr.Jit kernel seconds, Dr.Jit launches) per step of a fresh trainer."""
-    cfg = load_config(CONFIG, [f"data.n_shapes={shapes}", f"data.cache={cache}", *overrides])
+    cfg = load_config(CONFIG, [f"data.n_shapes={shapes}", f"data.cache={cache}", f"model.width={width}", *overrides])
     trainer = Trainer(cfg, load_training_data(cfg, progress=True), torch.device("cpu"))
     trainer.step(1)                                                  # warm-up: compilation, scene loading
     t0 = time.perf_counter()
@@ -64,12 +68,13 @@ def main() -> None:
     p.add_argument("--steps", type=int, default=10, help="timed steps per row (default: %(default)s)")
     p.add_argument("--shapes", type=int, default=60, help="shapes in the collection (default: %(default)s)")
     p.add_argument("--cache", default="data", help="collection cache folder (default: %(default)s)")
+    p.add_argument("--width", type=int, default=32, help="the networks' width (default: %(default)s, the config's)")
     args = p.parse_args()
     print("| training step through | s / step | images / s | × the marcher's time | Dr.Jit kernels, s / step | "
           "the rest of the step | Dr.Jit launches / step |\n|---|---|---|---|---|---|---|")
     base = None
     for name, overrides in ROWS.items():
-        t, k, n = seconds_per_step(overrides, args.shapes, args.cache, args.steps)
+        t, k, n = seconds_per_step(overrides, args.shapes, args.cache, args.steps, args.width)
         base = base or t
         print(f"| {name} | {t:.3f} | {16 / t:.1f} | {t / base:.1f} | {k:.3f} | {max(t - k, 0.0):.3f} | {n:.0f} |",
               flush=True)

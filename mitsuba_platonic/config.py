@@ -36,7 +36,7 @@ from pydantic_core import SchemaValidator, core_schema
 
 from .data.settings import DataConfig
 from .model_settings import ModelConfig
-from .render.settings import RenderSettings as RenderConfig
+from .render.settings import LIT, RenderSettings as RenderConfig
 from .resources import config_names, config_path
 from .settings_checks import ConfigError
 from .train.run_settings import RunConfig
@@ -111,7 +111,7 @@ class Config:
                     raise ConfigError(f"data.elevation: {PRGAN} needs a collection on its ring at {ring:g}°; "
                                       f"got {data_ring!r}")
         if self.data.source == "procedural" and self.data.formation != "physical" \
-                and self.render.backend not in ("physical", "single_scatter") \
+                and self.render.backend not in LIT \
                 and self.data.formation != self.render.model:
             raise ConfigError(f"render.model: {self.render.model!r} differs from data.formation "
                               f"{self.data.formation!r}; the renderer must match how the images were formed")

@@ -7,8 +7,8 @@ import math
 
 import torch
 
-from mitsuba_platonic.render.scatter_march import local_depth, sky_offsets
-from mitsuba_platonic.render.single_scatter import SKY_DIRECTIONS, SKY_WEIGHTS
+from mitsuba_platonic.render.sky_light import EPSILON, local_depth, sky_offsets
+from mitsuba_platonic.render.single_scatter import SKY_DIRECTIONS, SKY_WEIGHTS, sweep
 from mitsuba_platonic.views import camera_frames
 
 
@@ -68,3 +68,25 @@ def reference_scatter_march(packet, views, light, m, spp, reach):
     alpha = -torch.expm1(-opt.sum(1))
     image = torch.cat([rgb.permute(0, 3, 1, 2), alpha[:, None]], 1)
     return torch.nn.functional.avg_pool2d(image, s)
+
+
+def reference_sky_occlusion(σ, reach):
+    """O (B, 1, N, N, N) of render/sky_light.py from σ (B, 1, N, N, N), in torch: the 14 sweeps of
+    single_scatter.sweep (plane by plane, bilinear in-plane reads), the far reads as padded slices,
+    the local factors from central differences."""
+    b, n = σ.shape[0], σ.shape[-1]
+    Δ = 2.0 / n
+    p = torch.nn.functional.pad(σ[:, 0], (1, 1, 1, 1, 1, 1))
+    grad = torch.stack([p[:, 2:, 1:-1, 1:-1] - p[:, :-2, 1:-1, 1:-1], p[:, 1:-1, 2:, 1:-1] - p[:, 1:-1, :-2, 1:-1],
+                        p[:, 1:-1, 1:-1, 2:] - p[:, 1:-1, 1:-1, :-2]], -1) / (2 * Δ)
+    num = den = EPSILON
+    for w, d, o in zip(SKY_WEIGHTS, SKY_DIRECTIONS, sky_offsets(reach)):
+        T = 1 - sweep(σ, torch.tensor([d] * b, dtype=torch.float64)).opacity[:, 0]
+        padded = torch.nn.functional.pad(T, (2, 2, 2, 2, 2, 2), value=1.0)       # T = 1 outside the cube
+        far = padded[:, 2 + o[0]:2 + o[0] + n, 2 + o[1]:2 + o[1] + n, 2 + o[2]:2 + o[2] + n]
+        ω = torch.tensor([-d[2], -d[1], d[0]], dtype=σ.dtype)
+        ℓ = math.sqrt(sum(x * x for x in o)) * Δ
+        λ = w * torch.exp(-local_depth(σ[:, 0], (grad * ω).sum(-1), ℓ))
+        num = num + λ * far
+        den = den + λ
+    return (1 - num / den)[:, None]

@@ -11,11 +11,12 @@ import pytest
 import torch
 
 from mitsuba_platonic.errors import UserError
-from mitsuba_platonic.render.scatter_march import (_ScatterMarch, axis_sweep, light_packet, local_depth,
-                                                   render_scatter_march)
-from mitsuba_platonic.render.single_scatter import (SKY_DIRECTIONS, LightBatch, SunAndSky, reference_render,
-                                                    sample_sun_and_sky, sweep)
-from scatter_reference import reference_scatter_march
+from mitsuba_platonic.render import render
+from mitsuba_platonic.render.scatter_march import _ScatterMarch, light_packet, local_depth, render_scatter_march
+from mitsuba_platonic.render.single_scatter import (LightBatch, SunAndSky, reference_render, sample_lights,
+                                                    sample_sun_and_sky)
+from mitsuba_platonic.render.sky_light import sky_occlusion
+from scatter_reference import reference_scatter_march, reference_sky_occlusion
 from test_single_scatter import FRONT, SKY, SUN_ABOVE, _coords, _scene, _sun
 
 
@@ -59,17 +60,32 @@ def test_the_reference_camera_pass_matches_finite_differences():
 
 
 def test_the_light_packet_matches_finite_differences():
+    """σ, the albedo and the sun's volumes (float64 through torch); the sky's O is float32 Dr.Jit, checked
+    against its reference below, and that reference here."""
     volume, lights, _, _ = _random_case(n=4, b=1, seed=5)
     volume = (volume.double() * 0.8 + 0.1).requires_grad_()
-    assert torch.autograd.gradcheck(lambda v: light_packet(v, lights)[..., :7], (volume,), eps=1e-6, atol=1e-5,
+    assert torch.autograd.gradcheck(lambda v: light_packet(v, lights)[..., :6], (volume,), eps=1e-6, atol=1e-5,
                                     rtol=1e-3)
+    σ = (torch.rand(1, 1, 4, 4, 4, dtype=torch.float64, generator=torch.Generator().manual_seed(6)) * 20 + 1)
+    assert torch.autograd.gradcheck(lambda x: reference_sky_occlusion(x, 2.0), (σ.requires_grad_(),), eps=1e-6,
+                                    atol=1e-6, rtol=1e-4)
 
 
-@pytest.mark.parametrize("direction", SKY_DIRECTIONS[:6])
-def test_an_axis_sweep_is_the_plane_by_plane_sweep(direction):
-    σ = torch.rand(2, 1, 6, 6, 6, dtype=torch.float64, generator=torch.Generator().manual_seed(0)) * 40
-    expected = sweep(σ, torch.tensor([direction] * 2, dtype=torch.float64)).opacity
-    assert torch.allclose(axis_sweep(σ, direction), expected, atol=1e-12)
+@pytest.mark.parametrize("reach", [2.0, 1.0])
+def test_the_sky_occlusion_matches_its_torch_reference_in_value_and_gradient(reach):
+    """Dr.Jit's line sweeps and per-voxel ratio against tests/scatter_reference.py (the sweeps of
+    single_scatter.sweep, plane by plane), on a soft volume with an opaque block and exact zeros."""
+    g = torch.Generator().manual_seed(0)
+    σ = torch.rand(2, 1, 7, 7, 7, generator=g, dtype=torch.float64) * 20
+    σ[0, 0, 2:5, 2:5, 2:5] = 60.0
+    σ[1, 0, :, :3] = 0.0
+    ours_in, ref_in = σ.float().requires_grad_(), σ.clone().requires_grad_()
+    ours, ref = sky_occlusion(ours_in, reach), reference_sky_occlusion(ref_in, reach)
+    assert torch.allclose(ours.double(), ref, atol=1e-5), float((ours.double() - ref).abs().max())
+    weights = torch.randn(ref.shape, generator=g, dtype=torch.float64)
+    (ours * weights.float()).sum().backward()
+    (ref * weights).sum().backward()
+    assert torch.allclose(ours_in.grad.double(), ref_in.grad, atol=1e-5 * float(ref_in.grad.abs().max()))
 
 
 def test_the_local_depth_is_the_integral_of_the_clamped_linear_field():
@@ -144,3 +160,20 @@ def test_opaque_voxels_and_extreme_suns_give_finite_images_and_gradients(sun):
 def test_bad_settings_are_user_errors_naming_them(kwargs, message):
     with pytest.raises(UserError, match=message):
         render_scatter_march(torch.zeros(1, 4, 4, 4, 4), torch.tensor([[0.0, 0.0, 1.0]]), [SunAndSky()], **kwargs)
+
+
+def test_the_scatter_march_backend_draws_its_lights_from_the_seed():
+    volume = _scene().repeat(2, 1, 1, 1, 1)
+    views = torch.tensor([[0.0, 0.0, 1.0], [0.6, 0.0, 0.8]])
+    image = render(volume, views, "ea", "scatter_march", seed=7, steps_per_voxel=2)
+    assert torch.equal(image, render_scatter_march(volume, views, sample_lights(2, 7), steps_per_voxel=2))
+    assert not torch.equal(image, render(volume, views, "ea", "scatter_march", seed=8, steps_per_voxel=2))
+
+
+@pytest.mark.parametrize("options, message", [({"model": "vh"}, "renders colour"), ({"steps_per_voxel": 1}, "≥ 2"),
+                                              ({"shadow_planes": 1}, "unknown option")])
+def test_the_scatter_march_backend_refuses_what_it_does_not_render(options, message):
+    model = options.pop("model", "ea")
+    volume = torch.zeros(1, 1 if model == "vh" else 4, 4, 4, 4)
+    with pytest.raises(UserError, match=message):
+        render(volume, torch.tensor([[0.0, 0.0, 1.0]]), model, "scatter_march", **options)

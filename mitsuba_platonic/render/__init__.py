@@ -31,8 +31,9 @@ def render(volume: torch.Tensor, views: torch.Tensor, model: str = "ea",
         views: ``(B, 3)`` unit vectors from the object towards the camera.
         model: image formation, 'vh' | 'ao' | 'ea'.
         backend: 'closed_form' (the paper's layers, reference mode), 'mitsuba' (the batched ray
-            marcher), 'physical' (the differentiable path tracer under a random sky; 'ea' only) or
-            'single_scatter' (single scattering of a random sun and sky; 'ea' only).
+            marcher), 'physical' (the differentiable path tracer under a random sky; 'ea' only),
+            'single_scatter' (single scattering of a random sun and sky; 'ea' only) or
+            'scatter_march' (the same light at the marcher's speed; 'ea' only).
         seed: random numbers of this call (the marcher's jitter, the path tracer's and single
             scattering's skies).
         options: the :class:`RenderSettings` the backend reads: ``filter`` ('nearest' |
@@ -40,7 +41,8 @@ def render(volume: torch.Tensor, views: torch.Tensor, model: str = "ea",
             trilinearly); 'mitsuba': ``step`` (voxels, default 1), ``spp`` (default 1), ``jitter``
             (default False), ``termination`` (default 0); 'physical': ``lighting``,
             ``physical_spp``, ``max_depth``; 'single_scatter': ``spp`` (default 1),
-            ``steps_per_voxel`` (4), ``shadow_planes`` (2).
+            ``steps_per_voxel`` (4), ``shadow_planes`` (2); 'scatter_march': ``spp`` (1),
+            ``steps_per_voxel`` (4).
 
     Returns:
         ``(B, 1, N, N)`` opacity for VH/AO, ``(B, 4, N, N)`` premultiplied RGB + alpha for EA.
@@ -80,6 +82,11 @@ def render_with(volume: torch.Tensor, views: torch.Tensor, settings: RenderSetti
         return render_single_scatter(volume, views.to(volume.device), sample_lights(volume.shape[0], seed),
                                      steps_per_voxel=settings.steps_per_voxel, shadow_planes=settings.shadow_planes,
                                      spp=settings.spp)
+    if settings.backend == "scatter_march":
+        from .scatter_march import render_scatter_march       # imports Dr.Jit: on first use
+        from .single_scatter import sample_lights             # torch only; kept off the import path
+        return render_scatter_march(volume, views, sample_lights(volume.shape[0], seed),
+                                    steps_per_voxel=settings.steps_per_voxel, spp=settings.spp)
     from .physical import render_physical_ad    # the path tracer (its scene files, Mitsuba): on first use
     return render_physical_ad(volume, views, lighting=settings.lighting, spp=settings.physical_spp,
                               max_depth=settings.max_depth, seed=seed, filter=settings.filter)

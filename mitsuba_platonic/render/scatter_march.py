@@ -7,15 +7,16 @@ plane by plane:
 
     L(ray) = ∫ T(t) σ(x_t) a(x_t) S(x_t) dt,     S(x) = p E_s T_s(x) + L_sky V(x),   p = 1/4π
 
-Light volumes (torch, differentiable; :func:`light_packet`). Per pair, at the voxel centres p:
+Light volumes (differentiable; :func:`light_packet`). Per pair, at the voxel centres p:
 
     A_s(p) = 1 − T_sweep(p + ℓ ω_s)           the sun's sweep (:func:`.single_scatter.sweep`), read ℓ ahead
     σ_s(p) = σ(p + ℓ ω_s)                       σ where that read is
-    O(p)   = 1 − Σ_k w_k λ_k(p) T_k(p + ℓ ω_k) / Σ_k w_k λ_k(p)      the sky's far occlusion
+    O(p)   = 1 − Σ_k w_k λ_k(p) T_k(p + o_k) / Σ_k w_k λ_k(p)        the sky's far occlusion
 
-with the 14 sky directions ω_k and weights w_k of :mod:`.single_scatter`, ℓ = ``reach`` voxels,
-and λ_k(p) the local factor below at p (σ's gradient there by central differences). The camera
-pass reads σ, the albedo a, A_s, σ_s and O as one 8-float packet per voxel, trilinearly.
+the sun's in torch, the sky's in Dr.Jit (:mod:`.sky_light`, which defines it), with the 14 sky
+directions ω_k and weights w_k of :mod:`.single_scatter`, ℓ = ``reach`` voxels, o_k the sky's
+whole-voxel far reads (:func:`~.sky_light.sky_offsets`) and λ_k(p) the local factor below at p.
+The camera pass reads σ, the albedo a, A_s, σ_s and O as one 8-float packet per voxel, trilinearly.
 
 The local light (the reason for this design). Near a camera sample x, σ is taken as the linear
 field of its trilinear cell, σ(x + s ω) ≈ σ + s b with b = ∇σ(x)·ω, clamped at zero: its optical
@@ -65,16 +66,16 @@ import torch
 import torch.nn.functional as F
 
 from ..errors import UserError
-from ..volume import voxel_size
 from .grids import extinction
 from .marcher import _MODE, _frames, _image_to_per_ray, _per_ray_to_image, _shared, _spread_over_threads
-from .single_scatter import SKY_DIRECTIONS, SKY_WEIGHTS, EXPOSURES, LightBatch, _check, mean_luminance, sweep
+from .single_scatter import SKY_DIRECTIONS, SKY_WEIGHTS, LightBatch, _check, mean_luminance, sweep
+from .sky_light import local_depth, sky_occlusion, sky_offsets
 from .variant import ensure_variant, variant_device
 
 mi = ensure_variant()
 import drjit as dr  # noqa: E402  (after the variant is set)
 
-__all__ = ["render_scatter_march", "light_packet", "local_depth", "axis_sweep", "sky_offsets", "REACH", "PACKET"]
+__all__ = ["render_scatter_march", "light_packet", "local_depth", "sky_offsets", "REACH", "PACKET"]
 
 #: The local light's reach ℓ, in voxels (module docstring; docs/rendering.md measures 1–3).
 REACH = 2.0
@@ -88,12 +89,6 @@ def _grid_dirs(d: torch.Tensor) -> torch.Tensor:
     return torch.stack([-d[..., 2], -d[..., 1], d[..., 0]], dim=-1)
 
 
-def local_depth(σ: torch.Tensor, b: torch.Tensor, ℓ: float) -> torch.Tensor:
-    """τ_ℓ(σ, b) = ∫_0^ℓ max(σ + s b, 0) ds for σ ≥ 0 (module docstring), elementwise."""
-    reaches = σ + b * ℓ >= 0
-    return torch.where(reaches, σ * ℓ + 0.5 * b * ℓ * ℓ, σ * σ / torch.where(reaches, 1.0, -2.0 * b))
-
-
 def _read(volume: torch.Tensor, offset: torch.Tensor) -> torch.Tensor:
     """``volume`` ``(B, C, N, N, N)`` read trilinearly at every voxel centre moved by ``offset``
     ``(B, 3)`` voxels [d, h, w] (zero outside the cube)."""
@@ -105,80 +100,16 @@ def _read(volume: torch.Tensor, offset: torch.Tensor) -> torch.Tensor:
     return F.grid_sample(volume, base + shift, mode="bilinear", padding_mode="zeros", align_corners=False)
 
 
-def axis_sweep(σ: torch.Tensor, direction: Tuple[float, float, float]) -> torch.Tensor:
-    """1 − T towards an axis ``direction`` at the voxel centres of ``σ`` ``(B, 1, N, N, N)``: the
-    transmittance volume of :func:`.single_scatter.sweep` for the sky's six axes, where each ray
-    towards the light is one column of voxels and the trapezoid sums are one cumulative sum along
-    it (log domain, exact as σ ≤ ln 1000 / Δ is finite):
-
-        τ_i = τ_{i−1} + Δ (σ_i + σ_{i−1}) / 2,    τ_0 = Δ σ_0 / 2     (plane 0 nearest the light)
-    """
-    g = (-direction[2], -direction[1], direction[0])              # [d, h, w]
-    axis = max(range(3), key=lambda a: abs(g[a]))
-    if sorted(abs(x) for x in g) != [0.0, 0.0, 1.0]:
-        raise ValueError(f"axis_sweep: {direction} is not along an axis")
-    dim = axis + 2
-    planes = σ.flip(dim) if g[axis] > 0 else σ                    # plane 0 on the light's side
-    Δ = voxel_size(σ.shape[-1])
-    term = 0.5 * Δ * (planes + F.pad(planes.narrow(dim, 0, planes.shape[dim] - 1),
-                                      [0, 0] * (2 - axis) + [1, 0]))   # σ_i + σ_{i−1} (σ_{−1} = 0)
-    opacity = -torch.expm1(-torch.cumsum(term, dim=dim))
-    return opacity.flip(dim) if g[axis] > 0 else opacity
-
-
-def _shift(volume: torch.Tensor, offset: Tuple[int, int, int]) -> torch.Tensor:
-    """``volume`` ``(…, N, N, N)`` read at every voxel moved by whole voxels ``offset`` [d, h, w] (zero outside)."""
-    n = volume.shape[-1]
-    pad = []
-    for o in reversed(offset):                                    # F.pad lists the last dimension first
-        pad += [0, o] if o > 0 else [-o, 0]
-    padded = F.pad(volume, pad)
-    return padded[..., max(offset[0], 0):max(offset[0], 0) + n, max(offset[1], 0):max(offset[1], 0) + n,
-                  max(offset[2], 0):max(offset[2], 0) + n]
-
-
-def sky_offsets(reach: float) -> list:
-    """Each sky direction's far read: the whole-voxel move [d, h, w] nearest ``reach`` voxels along it
-    (2 voxels along an axis and (1, 1, 1) along a diagonal at the default reach), so that the sky's
-    far transmittance is read without interpolation."""
-    out = []
-    for d in SKY_DIRECTIONS:
-        g = (-d[2], -d[1], d[0])
-        out.append(tuple(int(max(1, round(reach * abs(x)))) * (1 if x > 0 else -1) if abs(x) > 1e-9 else 0
-                         for x in g))
-    return out
-
-
 def light_packet(volume: torch.Tensor, lights: LightBatch, reach: float = REACH) -> torch.Tensor:
     """The camera pass's per-voxel packet ``(B, N, N, N, 8)``, channels last: σ, a_r, a_g, a_b, A_s,
     σ_s, O, 0 (module docstring, "Light volumes"); differentiable w.r.t. ``volume``."""
-    b_, n = volume.shape[0], volume.shape[-1]
-    Δ = voxel_size(n)
     σ = extinction(volume[:, 3:])
     # -- the sun: its sweep and σ, read ``reach`` voxels towards it
     ω_s = _grid_dirs(lights.direction.to(volume))
     sun = _read(torch.cat([sweep(σ, lights.direction).opacity, σ], dim=1), reach * ω_s)
-    # -- the sky: far transmittance per direction, weighted by the local factor at the centre
-    k = len(SKY_DIRECTIONS)
-    dirs = torch.tensor(SKY_DIRECTIONS, dtype=torch.float64)
-    ω_k = _grid_dirs(dirs.to(volume))                             # (14, 3)
-    axes = torch.stack([axis_sweep(σ, d) for d in SKY_DIRECTIONS[:6]], dim=1)        # (B, 6, 1, N, N, N)
-    diagonals = sweep(σ.repeat_interleave(8, dim=0), dirs[6:].repeat(b_, 1)).opacity.reshape(b_, 8, 1, n, n, n)
-    opacity = torch.cat([axes, diagonals], dim=1).reshape(b_ * k, 1, n, n, n)
-    offsets = sky_offsets(reach)
-    opacity = opacity.reshape(b_, k, n, n, n)
-    far = 1.0 - torch.stack([_shift(opacity[:, i], o) for i, o in enumerate(offsets)], dim=1)
-    σ_p = F.pad(σ[:, 0], (1, 1, 1, 1, 1, 1))
-    grad = torch.stack([σ_p[:, 2:, 1:-1, 1:-1] - σ_p[:, :-2, 1:-1, 1:-1],
-                        σ_p[:, 1:-1, 2:, 1:-1] - σ_p[:, 1:-1, :-2, 1:-1],
-                        σ_p[:, 1:-1, 1:-1, 2:] - σ_p[:, 1:-1, 1:-1, :-2]], dim=-1) / (2.0 * Δ)   # ∂σ/∂(world, per axis)
-    slope = torch.einsum("bdhwx,kx->bkdhw", grad, ω_k)            # b_k = ∇σ·ω_k
-    w = torch.tensor(SKY_WEIGHTS, dtype=volume.dtype, device=volume.device)[None, :, None, None, None]
-    ℓ_k = torch.tensor([math.sqrt(sum(x * x for x in o)) * Δ for o in offsets], dtype=volume.dtype,
-                       device=volume.device)[None, :, None, None, None]            # each far read's distance
-    λ = w * torch.exp(-local_depth(σ, slope, ℓ_k))
-    visible = ((λ * far.reshape(b_, k, n, n, n)).sum(1, keepdim=True) + 1e-6) / (λ.sum(1, keepdim=True) + 1e-6)
-    packet = torch.cat([σ, volume[:, :3], sun[:, :1], sun[:, 1:], 1.0 - visible, torch.zeros_like(σ)], dim=1)
+    # -- the sky: its far occlusion (:mod:`.sky_light`, in Dr.Jit)
+    O = sky_occlusion(σ, reach)
+    packet = torch.cat([σ, volume[:, :3], sun[:, :1], sun[:, 1:], O, torch.zeros_like(σ)], dim=1)
     return packet.permute(0, 2, 3, 4, 1).contiguous()
 
 

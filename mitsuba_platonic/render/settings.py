@@ -18,12 +18,14 @@ from ..views import CAMERAS, lens
 from ..volume import MODELS
 from .closed_form import FILTERS as GRID_SAMPLE_MODES
 
-__all__ = ["RenderSettings", "BACKENDS", "MODELS", "FILTERS", "LIGHTINGS", "FORMATIONS", "CAMERAS", "OPTIONS_OF"]
+__all__ = ["RenderSettings", "BACKENDS", "LIT", "MODELS", "FILTERS", "LIGHTINGS", "FORMATIONS", "CAMERAS", "OPTIONS_OF"]
 
 #: Backends: the paper's closed-form layers (reference), the batched Dr.Jit ray marcher,
 #: Mitsuba's differentiable volumetric path tracer under natural light, and single scattering of
-#: a sun and a sky (:mod:`.single_scatter`, torch).
-BACKENDS = ("closed_form", "mitsuba", "physical", "single_scatter")
+#: a sun and a sky: in torch (:mod:`.single_scatter`, the reference) and in Dr.Jit (:mod:`.scatter_march`).
+BACKENDS = ("closed_form", "mitsuba", "physical", "single_scatter", "scatter_march")
+#: The backends that light what they render (colour only, the orthographic camera).
+LIT = ("physical", "single_scatter", "scatter_march")
 FILTERS = tuple(GRID_SAMPLE_MODES)                          # trilinear, nearest
 LIGHTINGS = ("sunsky", "envmap", "mixed")
 #: How a collection's images are formed: the renderer's image formations, or path-traced (make-dataset).
@@ -35,6 +37,7 @@ OPTIONS_OF: Dict[str, tuple] = {
     "mitsuba": ("filter", "camera", "fov", "distance", "step", "spp", "jitter", "termination"),
     "physical": ("filter", "lighting", "physical_spp", "max_depth"),
     "single_scatter": ("spp", "steps_per_voxel", "shadow_planes"),
+    "scatter_march": ("spp", "steps_per_voxel"),
 }
 
 
@@ -43,7 +46,8 @@ class RenderSettings:
     """How volumes become images.
 
     backend: 'closed_form' | 'mitsuba' (ray marcher) | 'physical' (path tracer under natural light) |
-        'single_scatter' (single scattering of a random sun and sky per image; EA-style RGBA).
+        'single_scatter' (single scattering of a random sun and sky per image; EA-style RGBA) |
+        'scatter_march' (the same light in one Dr.Jit launch per pass; docs/rendering.md).
     model: image formation, 'vh' | 'ao' | 'ea' (the physical backend renders EA-style RGBA).
     filter: 'trilinear' | 'nearest' grid lookups (every backend).
     camera: 'orthographic' (the paper's) | 'perspective' (a pinhole; closed form and marcher).
@@ -55,8 +59,9 @@ class RenderSettings:
     termination: the marcher stops a ray once its transmittance is ≤ this (0 = exact).
     lighting: the path tracer's light, 'sunsky' (differentiable) | 'envmap' | 'mixed'.
     physical_spp, max_depth: the path tracer's samples per pixel and path depth.
-    steps_per_voxel, shadow_planes: single scattering's samples per voxel along a camera ray and
-        the sun's shadow ray in planes (docs/rendering.md, "Single scattering").
+    steps_per_voxel, shadow_planes: single scattering's samples per voxel along a camera ray (both
+        single-scattering backends; ≥ 2 for 'scatter_march') and the torch formation's shadow ray
+        for the sun, in planes (docs/rendering.md, "Single scattering").
 
     ``docs/speed_accuracy.md`` says what each option costs and buys.
     """
@@ -102,12 +107,15 @@ class RenderSettings:
         if isinstance(self.termination, bool) or not isinstance(self.termination, (int, float)) \
                 or not 0.0 <= self.termination < 1.0:
             raise ValueError(f"termination: expected a number in [0, 1), got {self.termination!r}")
-        if self.backend in ("physical", "single_scatter") and self.model != "ea":
+        if self.backend in LIT and self.model != "ea":
             raise ValueError(f"model: the {self.backend} backend renders colour; use 'ea' images")
-        if self.backend in ("physical", "single_scatter") and self.camera != "orthographic":
+        if self.backend in LIT and self.camera != "orthographic":
             raise ValueError(f"camera: the {self.backend} backend renders with the orthographic camera only")
-        if self.backend == "single_scatter" and (self.filter != "trilinear" or self.jitter):
-            raise ValueError("filter, jitter: the single_scatter backend reads trilinearly on a regular sub-pixel grid")
+        if self.backend in ("single_scatter", "scatter_march") and (self.filter != "trilinear" or self.jitter):
+            raise ValueError(f"filter, jitter: the {self.backend} backend reads trilinearly on a regular sub-pixel grid")
+        if self.backend == "scatter_march" and self.steps_per_voxel < 2:
+            raise ValueError(f"steps_per_voxel: the scatter_march backend needs ≥ 2 (one sample per voxel lands on "
+                             f"voxel centres and never sees a surface's ramp), got {self.steps_per_voxel}")
         if self.backend == "physical" and self.lighting != "sunsky":
             raise ValueError(f"lighting: the physical backend renders differentiably under 'sunsky' only, got "
                              f"{self.lighting!r} (environment maps light path-traced collections: make-dataset "
