@@ -205,13 +205,15 @@ class _Rays:
         ℓ = self.ℓ
         e = σ + b * ℓ
         rising, ramp = b >= 0, e <= 0
-        σ_ = dr.select(rising | ramp, 1.0, σ)                        # σ > 0 in the middle case
+        # σ > 0 in the middle case; floored so that 1/σ stays finite where σ is denormal
+        σ_ = dr.select(rising | ramp, 1.0, dr.maximum(σ, 1e-30))
         b_ = dr.select(ramp & ~rising, b, -1.0)                      # b < 0 in the ramp case
         u = e / σ_
         middle = σ * ℓ + 0.5 * b * ℓ * ℓ + 0.5 * ℓ * (σ_s - e) * u
         τ = dr.select(rising, 0.5 * ℓ * (σ + σ_s), dr.select(ramp, σ * σ / (-2.0 * b_), middle))
-        dσ = dr.select(rising, 0.5 * ℓ, dr.select(ramp, σ / -b_, ℓ + 0.5 * ℓ * (-u - (σ_s - e) * b * ℓ / (σ_ * σ_))))
-        db = dr.select(rising, 0.0, dr.select(ramp, σ * σ / (2.0 * b_ * b_),
+        # ratios first (σ/b, bℓ/σ are bounded here): σ² and b² underflow to 0/0 where both are tiny
+        dσ = dr.select(rising, 0.5 * ℓ, dr.select(ramp, σ / -b_, ℓ + 0.5 * ℓ * (-u - (σ_s - e) * (b * ℓ / σ_) / σ_)))
+        db = dr.select(rising, 0.0, dr.select(ramp, 0.5 * dr.square(σ / b_),
                                               0.5 * ℓ * ℓ + 0.5 * ℓ * (-ℓ * u + (σ_s - e) * ℓ / σ_)))
         dσ_s = dr.select(rising, 0.5 * ℓ, dr.select(ramp, 0.0, 0.5 * ℓ * u))
         return τ, dσ, db, dσ_s
@@ -255,7 +257,7 @@ class _Rays:
             τ_k = dr.select(reaches, σ * ℓ_k + 0.5 * b_k * ℓ_k * ℓ_k, σ * σ / (-2.0 * safe))
             gτ_k = -w * dr.exp(-τ_k) * gΛ
             gσ += gτ_k * dr.select(reaches, ℓ_k, σ / -safe)
-            ggq += ω * (gτ_k * dr.select(reaches, 0.5 * ℓ_k * ℓ_k, σ * σ / (2.0 * safe * safe)))
+            ggq += ω * (gτ_k * dr.select(reaches, 0.5 * ℓ_k * ℓ_k, 0.5 * dr.square(σ / safe)))
         return gσ, ggq, ga, gA, gσ_s, gO
 
     def scatter(self, grad: Any, corners: list, gσ: Any, ggq: Any, ga: Any, gA: Any, gσ_s: Any, gO: Any) -> None:

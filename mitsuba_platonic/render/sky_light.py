@@ -60,7 +60,8 @@ def _local_depth_partials(σ: Any, b: Any, ℓ: float) -> Tuple[Any, Any, Any]:
     reaches = σ + b * ℓ >= 0
     safe = dr.select(reaches, -1.0, b)                        # b < 0 where the field reaches zero
     τ = dr.select(reaches, σ * ℓ + 0.5 * b * ℓ * ℓ, σ * σ / (-2.0 * safe))
-    return τ, dr.select(reaches, ℓ, σ / -safe), dr.select(reaches, 0.5 * ℓ * ℓ, σ * σ / (2.0 * safe * safe))
+    # σ/b first: it is bounded (|σ/b| < ℓ) where σ² and b² could both underflow to 0/0
+    return τ, dr.select(reaches, ℓ, σ / -safe), dr.select(reaches, 0.5 * ℓ * ℓ, 0.5 * dr.square(σ / safe))
 
 
 def sky_offsets(reach: float) -> List[Tuple[int, int, int]]:
