@@ -69,7 +69,7 @@ from ..errors import UserError
 from .grids import extinction
 from .marcher import _MODE, _frames, _image_to_per_ray, _per_ray_to_image, _shared, _spread_over_threads
 from .single_scatter import SKY_DIRECTIONS, SKY_WEIGHTS, LightBatch, _check, mean_luminance, sweep
-from .sky_light import local_depth, sky_occlusion, sky_offsets
+from .sky_light import local_depth, local_depth_partials, sky_occlusion, sky_offsets
 from .variant import ensure_variant, variant_device
 
 mi = ensure_variant()
@@ -220,14 +220,10 @@ class _Rays:
 
     def shade(self, σ: Any, gq: Any, a: Any, A: Any, σ_s: Any, O: Any) -> Tuple[Any, Any, Any]:
         """c = a S at a sample (module docstring, "The local light"), with S and T_s."""
-        ℓ = self.ℓ
         T_s = dr.exp(-self._sun_depth(σ, dr.dot(gq, self.ω_s), σ_s)[0]) * (1.0 - A)
         Λ = mi.Float(0.0)
         for w, d, ℓ_k in self.sky:
-            b_k = dr.dot(gq, mi.Vector3f(*d))
-            reaches = σ + b_k * ℓ_k >= 0
-            τ_k = dr.select(reaches, σ * ℓ_k + 0.5 * b_k * ℓ_k * ℓ_k, σ * σ / dr.select(reaches, 1.0, -2.0 * b_k))
-            Λ += w * dr.exp(-τ_k)
+            Λ += w * dr.exp(-local_depth(σ, dr.dot(gq, mi.Vector3f(*d)), ℓ_k))
         S = self.E_s * T_s + self.L_sky * ((1.0 - O) * Λ)
         return a * S, S, Λ
 
@@ -235,7 +231,6 @@ class _Rays:
                        Λ: Any) -> Tuple[Any, ...]:
         """∂L/∂(σ, ∇_q σ, a, A_s, σ_s, O) at a sample from ∂L/∂c = ``gc`` (the chain rule through
         :meth:`shade`, branch by branch of τ_ℓ)."""
-        ℓ = self.ℓ
         ga = gc * S
         gS = gc * a
         gT_s, gV = dr.sum(gS * self.E_s), dr.sum(gS * self.L_sky)
@@ -251,13 +246,10 @@ class _Rays:
         gΛ = (1.0 - O) * gV
         for w, d, ℓ_k in self.sky:
             ω = mi.Vector3f(*d)
-            b_k = dr.dot(gq, ω)
-            reaches = σ + b_k * ℓ_k >= 0
-            safe = dr.select(reaches, -1.0, b_k)
-            τ_k = dr.select(reaches, σ * ℓ_k + 0.5 * b_k * ℓ_k * ℓ_k, σ * σ / (-2.0 * safe))
+            τ_k, dσ_k, db_k = local_depth_partials(σ, dr.dot(gq, ω), ℓ_k)
             gτ_k = -w * dr.exp(-τ_k) * gΛ
-            gσ += gτ_k * dr.select(reaches, ℓ_k, σ / -safe)
-            ggq += ω * (gτ_k * dr.select(reaches, 0.5 * ℓ_k * ℓ_k, 0.5 * dr.square(σ / safe)))
+            gσ += gτ_k * dσ_k
+            ggq += ω * (gτ_k * db_k)
         return gσ, ggq, ga, gA, gσ_s, gO
 
     def scatter(self, grad: Any, corners: list, gσ: Any, ggq: Any, ga: Any, gA: Any, gσ_s: Any, gO: Any) -> None:

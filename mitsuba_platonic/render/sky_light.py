@@ -39,7 +39,7 @@ from .variant import ensure_variant
 mi = ensure_variant()
 import drjit as dr  # noqa: E402  (after the variant is set)
 
-__all__ = ["local_depth", "sky_offsets", "sky_occlusion", "EPSILON"]
+__all__ = ["local_depth", "local_depth_partials", "sky_offsets", "sky_occlusion", "EPSILON"]
 
 #: ε of O's ratio: where no direction is locally open (Σ λ_k ≈ 0), O → 0.
 EPSILON = 1e-6
@@ -55,7 +55,7 @@ def local_depth(σ: Any, b: Any, ℓ: Any) -> Any:
     return dr.select(reaches, σ * ℓ + 0.5 * b * ℓ * ℓ, σ * σ / dr.select(reaches, 1.0, -2.0 * b))
 
 
-def _local_depth_partials(σ: Any, b: Any, ℓ: float) -> Tuple[Any, Any, Any]:
+def local_depth_partials(σ: Any, b: Any, ℓ: float) -> Tuple[Any, Any, Any]:
     """τ_ℓ(σ, b), ∂τ_ℓ/∂σ and ∂τ_ℓ/∂b (Dr.Jit arrays)."""
     reaches = σ + b * ℓ >= 0
     safe = dr.select(reaches, -1.0, b)                        # b < 0 where the field reaches zero
@@ -108,15 +108,12 @@ class _Lines:
         self.pair = lane // self.per_pair
         local = mi.Int32(lane - self.pair * self.per_pair)
         stride = (n * n, n, 1)
-        table = lambda values, kind=mi.Int32: kind(values)
+        starts = [sum(counts[:i]) for i in range(len(dirs))]      # each direction's first line
         k = mi.Int32(0)
-        start = 0
-        for i, c in enumerate(counts[:-1]):                       # which direction: the first whose range holds the lane
-            start += c
+        for start in starts[1:]:                                  # which direction: how many starts the lane is past
             k += dr.select(local >= start, 1, 0)
-        starts = [sum(counts[:i]) for i in range(14)]
         self.k = mi.UInt32(k)
-        pick = lambda values, kind=mi.Int32: dr.gather(kind, table(values, kind), self.k)
+        pick = lambda values, kind=mi.Int32: dr.gather(kind, kind(values), self.k)   # this lane's direction's value
         line = local - pick(starts)
         # ≥ 1 in every lane: idle lanes of a packet's padding read 0, and an integer division by 0 traps
         count_c = dr.maximum(pick([d.count[1] for d in dirs]), 1)
@@ -195,27 +192,28 @@ class _Voxels:
         at = (self.pair * 14 + k) * n ** 3 + mi.UInt32(dr.clip((q.x * n + q.y) * n + q.z, 0, n ** 3 - 1))
         return dr.exp(-dr.gather(mi.Float, τ, at, inside)), at, inside
 
-    def occlusion(self, τ: Any) -> Any:
-        """O(p) (module docstring)."""
+    def _sums(self, τ: Any) -> Tuple[Any, Any]:
+        """Σ_k λ_k F_k + ε and Σ_k λ_k + ε."""
         num, den = mi.Float(EPSILON), mi.Float(EPSILON)
         for k, (w, ω, ℓ, o) in enumerate(self.terms):
             λ = w * dr.exp(-local_depth(self.σ, dr.dot(self.g, ω), ℓ))
             num += λ * self.far(τ, k, o)[0]
             den += λ
+        return num, den
+
+    def occlusion(self, τ: Any) -> Any:
+        """O(p) (module docstring)."""
+        num, den = self._sums(τ)
         return 1.0 - num / den
 
     def occlusion_backward(self, τ: Any, gO: Any, gτ: Any) -> Tuple[Any, Any]:
         """∂L/∂σ(p), ∂L/∂∇σ(p) from ∂L/∂O = ``gO``; ∂L/∂τ_k(p + o_k) scattered into ``gτ``."""
-        num, den = mi.Float(EPSILON), mi.Float(EPSILON)
-        for k, (w, ω, ℓ, o) in enumerate(self.terms):             # the sums again
-            λ = w * dr.exp(-local_depth(self.σ, dr.dot(self.g, ω), ℓ))
-            num += λ * self.far(τ, k, o)[0]
-            den += λ
+        num, den = self._sums(τ)
         R = num / den
         gR = -gO
         gσ, gg = mi.Float(0.0), mi.Vector3f(0.0)
         for k, (w, ω, ℓ, o) in enumerate(self.terms):
-            τ_loc, dσ, db = _local_depth_partials(self.σ, dr.dot(self.g, ω), ℓ)
+            τ_loc, dσ, db = local_depth_partials(self.σ, dr.dot(self.g, ω), ℓ)
             λ = w * dr.exp(-τ_loc)
             F_k, at, inside = self.far(τ, k, o)
             dr.scatter_reduce(dr.ReduceOp.Add, gτ, -F_k * λ / den * gR, at, inside, mode=dr.ReduceMode.Direct)   # ∂R/∂F_k = λ_k / den; ∂F/∂τ = −F
