@@ -14,7 +14,8 @@ Prints three tables (figures only; tests/test_scatter_march.py asserts the agree
    this one at several settings.
 3. Seconds per forward + backward of 8 pairs at 32³ and 64³ (random volumes, views and lights):
    the EA marcher, the torch formation (32³ only) and this one, with the light volumes' share;
-   interleaved, median of 3, one run.
+   interleaved, median of 3, one run, on the variant's device (the GPU under cuda_ad_rgb), each
+   timing waiting for queued CUDA work and Dr.Jit launches.
 """
 
 from __future__ import annotations
@@ -34,7 +35,9 @@ sys.path.insert(0, str(Path(__file__).resolve().parent.parent / "tests"))
 from test_single_scatter import (FRONT, HORIZON, OBLIQUE, SKY, SUN_ABOVE, SUN_OBLIQUE, _coords,  # noqa: E402
                                  _scene, _sun)
 
+from mitsuba_platonic.compare import _sync  # noqa: E402
 from mitsuba_platonic.render import render  # noqa: E402
+from mitsuba_platonic.render.variant import ensure_variant, variant_device  # noqa: E402
 from mitsuba_platonic.render.scatter_march import light_packet, render_scatter_march  # noqa: E402
 from mitsuba_platonic.render.single_scatter import (LightBatch, SunAndSky, reference_render,  # noqa: E402
                                                     render_single_scatter, sample_sun_and_sky)
@@ -90,19 +93,23 @@ def blob_and_box() -> None:
 
 
 def cost() -> None:
-    print("\n### Seconds per forward + backward, 8 pairs (median of 3, interleaved, one run)\n")
+    device = variant_device()                                 # cuda under cuda_ad_rgb: every formation there
+    print(f"\n### Seconds per forward + backward, 8 pairs (median of 3, interleaved, one run; variant "
+          f"{ensure_variant().variant()}, on {device})\n")
     print("| N | EA marcher | torch formation | this (m = 2, spp 1) | of which light volumes | ratio to the EA marcher |")
     print("|---|---|---|---|---|---|")
     for n in (32, 64):
         g = torch.Generator().manual_seed(n)
-        volume = torch.rand(8, 4, n, n, n, generator=g) * 0.5
+        volume = (torch.rand(8, 4, n, n, n, generator=g) * 0.5).to(device)
         views = F.normalize(torch.randn(8, 3, generator=g), dim=-1)
         lights = LightBatch.of([sample_sun_and_sky(np.random.default_rng([n, i])) for i in range(8)])
 
         def step(f):
             v = volume.clone().requires_grad_()
+            _sync()
             t0 = time.perf_counter()
             f(v).sum().backward()                             # both backward passes end in torch
+            _sync()                                           # queued CUDA work and Dr.Jit launches
             return time.perf_counter() - t0
 
         runs = {"ea": lambda v: render(v, views, "ea", "mitsuba"),

@@ -16,6 +16,7 @@ from mitsuba_platonic.render.scatter_march import _ScatterMarch, light_packet, l
 from mitsuba_platonic.render.single_scatter import (LightBatch, SunAndSky, reference_render, sample_lights,
                                                     sample_sun_and_sky)
 from mitsuba_platonic.render.sky_light import sky_occlusion
+from mitsuba_platonic.render.variant import variant_device
 from scatter_reference import reference_scatter_march, reference_sky_occlusion
 from test_single_scatter import FRONT, SKY, SUN_ABOVE, _coords, _scene, _sun
 
@@ -36,18 +37,18 @@ def _random_case(n=8, b=3, seed=0):
 def test_the_camera_pass_matches_the_per_sample_reference_in_image_and_gradient(m, spp, reach):
     volume, lights, views, light = _random_case()
     packet = light_packet(volume, lights, reach).detach()
-    ours_in = packet.clone().requires_grad_()
+    ours_in = packet.to(variant_device(), copy=True).requires_grad_()   # the kernel's device (a GPU's, too)
     ours = _ScatterMarch.apply(ours_in, views, light, m, spp, reach)
     ref_in = packet.double().requires_grad_()
     ref = reference_scatter_march(ref_in, views, light, m, spp, reach)
-    assert torch.allclose(ours.double(), ref, atol=2e-6), float((ours.double() - ref).abs().max())
+    assert torch.allclose(ours.double().cpu(), ref, atol=2e-6), float((ours.double().cpu() - ref).abs().max())
     weights = torch.randn(ref.shape, generator=torch.Generator().manual_seed(1), dtype=torch.float64)
-    (ours * weights.float()).sum().backward()
+    (ours * weights.float().to(ours.device)).sum().backward()
     (ref * weights).sum().backward()
     for c in range(7):                                                # the unused eighth channel has none
         scale = float(ref_in.grad[..., c].abs().max())
         assert scale > 0
-        assert float((ours_in.grad[..., c].double() - ref_in.grad[..., c]).abs().max()) < 2e-5 * scale, c
+        assert float((ours_in.grad[..., c].double().cpu() - ref_in.grad[..., c]).abs().max()) < 2e-5 * scale, c
 
 
 def test_the_reference_camera_pass_matches_finite_differences():

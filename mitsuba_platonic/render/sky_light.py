@@ -34,7 +34,7 @@ import torch
 
 from .marcher import _MODE, _shared, _spread_over_threads
 from .single_scatter import SKY_DIRECTIONS, SKY_WEIGHTS
-from .variant import ensure_variant
+from .variant import ensure_variant, variant_device
 
 mi = ensure_variant()
 import drjit as dr  # noqa: E402  (after the variant is set)
@@ -268,8 +268,9 @@ def sky_occlusion(σ: torch.Tensor, reach: float) -> torch.Tensor:
     differentiable w.r.t. ``σ``: ∇σ by central differences (zero outside the cube), in torch."""
     b, n = σ.shape[0], σ.shape[-1]
     Δ = 2.0 / n
-    p = torch.nn.functional.pad(σ[:, 0], (1, 1, 1, 1, 1, 1))
+    p = torch.nn.functional.pad(σ[:, 0].to(variant_device()), (1, 1, 1, 1, 1, 1))   # where Dr.Jit's arrays live
     grad = torch.stack([p[:, 2:, 1:-1, 1:-1] - p[:, :-2, 1:-1, 1:-1], p[:, 1:-1, 2:, 1:-1] - p[:, 1:-1, :-2, 1:-1],
                         p[:, 1:-1, 1:-1, 2:] - p[:, 1:-1, 1:-1, :-2]], dim=-1) / (2.0 * Δ)   # ∂σ/∂[d, h, w]
-    O = _SkyOcclusion.apply(σ.reshape(b, -1).to(torch.float32), grad.reshape(b, -1, 3).to(torch.float32), reach)
-    return O.view(b, 1, n, n, n).to(σ.dtype)
+    O = _SkyOcclusion.apply(σ.reshape(b, -1).to(p.device, torch.float32), grad.reshape(b, -1, 3).to(torch.float32),
+                            reach)
+    return O.view(b, 1, n, n, n).to(σ.device, σ.dtype)
