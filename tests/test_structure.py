@@ -133,7 +133,7 @@ LAYERS = [
     ("foundation", ["errors", "fileio", "backend", "resources", "progress", "_data"]),
     ("conventions: views, volume (and its files), images", ["views", "volume", "volume_io", "images"]),
     ("the checks every settings section shares", ["settings_checks"]),
-    ("renderer", ["render", "compare", "frames"]),
+    ("renderer", ["render", "compare", "compare_light", "frames"]),
     ("data: collections, photos, the data section", ["data"]),
     ("networks, the colour they read from a photo, the model section and the model",
      ["models", "photo_colours", "model_settings", "model"]),

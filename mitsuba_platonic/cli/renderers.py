@@ -1,7 +1,8 @@
 """``platonic compare`` and ``platonic bench``: the renderers measured against each other.
 
 - ``compare``: render a volume with the closed-form layers and the Mitsuba ray marcher from a
-  few views and report how far apart and how fast they are (:mod:`mitsuba_platonic.compare`).
+  few views and report how far apart and how fast they are (:mod:`mitsuba_platonic.compare`);
+  with ``--light``, single scattering against Mitsuba's volpath (:mod:`mitsuba_platonic.compare_light`).
 - ``bench``: the renderers' speed/accuracy trade: times, memory, image and gradient errors,
   JSON, Markdown and Pareto plots (:mod:`mitsuba_platonic.bench`).
 """
@@ -9,6 +10,7 @@
 from __future__ import annotations
 
 import argparse
+import math
 import sys
 from pathlib import Path
 
@@ -34,11 +36,47 @@ def _check_compare_settings(args: argparse.Namespace) -> None:
         raise CLIError(str(e)) from None
 
 
+def _cmd_compare_light(args: argparse.Namespace, volume, views) -> int:
+    """``--light``: single scattering (scatter_march) against volpath at depth 2, the extremes included."""
+    from ..compare_light import compare_light, format_light_table, light_cases, light_figure, write_light_summary
+
+    if volume.shape[1] != 4:
+        raise CLIError(f"--light: the volume needs colour ([r, g, b, density], C = 4), got C = {volume.shape[1]}")
+    if args.jitter or args.step != 1.0 or args.filter != "trilinear":
+        raise CLIError("--light: --step, --jitter and --filter set the EA marcher; single scattering marches "
+                       "--steps-per-voxel samples per voxel with trilinear lookups")
+    for flag, value, least in (("--steps-per-voxel", args.steps_per_voxel, 2), ("--ref-renders", args.ref_renders, 4)):
+        if value < least:
+            raise CLIError(f"{flag}: expected an int ≥ {least}, got {value}")
+    if math.isqrt(args.spp) ** 2 != args.spp:
+        raise CLIError(f"--spp: single scattering's rays per pixel: expected a square number (1, 4, 9, …), "
+                       f"got {args.spp}")
+    out = Path(args.out)
+    check_out_folder(out)
+    out.mkdir(parents=True, exist_ok=True)
+    cases = light_cases(volume, views, seed=args.seed)
+    results = compare_light(cases, spp=args.ref_spp, renders=args.ref_renders, steps_per_voxel=args.steps_per_voxel,
+                            ours_spp=args.spp, seed=args.seed)
+    n = volume.shape[-1]
+    settings = {"steps_per_voxel": args.steps_per_voxel, "spp": args.spp, "ref_spp": args.ref_spp,
+                "ref_renders": args.ref_renders, "seed": args.seed}
+    print(f"single scattering (scatter_march, {args.steps_per_voxel} samples per voxel, spp {args.spp}) vs "
+          f"volpath at max_depth 2 ({args.ref_renders} renders of {args.ref_spp} spp): {args.volume} at {n}³, "
+          f"exposure none; z per {4} × {4} block against the renders' standard error")
+    print(format_light_table(results))
+    png = light_figure(results, out / "compare_light.png",
+                       f"{args.volume} at {n}³: scatter_march vs volpath (max_depth 2)")
+    summary = write_light_summary(out / "compare_light.json", args.volume, settings, results)
+    print(f"wrote:\n  {png}\n  {summary}")
+    return 0
+
+
 def _cmd_compare(args: argparse.Namespace) -> int:
     from ..compare import check_memory, compare, comparison_views, format_table, write_summary
     from ..volume_io import BUILTIN_PREFIX, load_volume
 
-    _check_compare_settings(args)
+    if not args.light:
+        _check_compare_settings(args)
     if args.volume.startswith(BUILTIN_PREFIX):              # before building it: refuse what cannot fit
         n = 32 if args.resolution is None else args.resolution
         check_memory(n, args.views, builtin=True,
@@ -46,6 +84,8 @@ def _cmd_compare(args: argparse.Namespace) -> int:
     volume = load_volume(args.volume, args.resolution)
     if not args.volume.startswith(BUILTIN_PREFIX):
         check_memory(volume.shape[-1], args.views, what=f"--volume {args.volume}")
+    if args.light:
+        return _cmd_compare_light(args, volume, comparison_views(args.views, seed=args.seed))
     models = parse_models(args.models)
     if volume.shape[1] == 1 and "ea" in models:
         models.remove("ea")
@@ -101,6 +141,18 @@ def add_compare(sub: "argparse._SubParsersAction") -> None:
                    help="Mitsuba samples per pixel; a perfect square unless --jitter (default: %(default)s)")
     p.add_argument("--jitter", action="store_true",
                    help="Mitsuba: random sub-pixel positions and sample depths")
+    p.add_argument("--light", action="store_true",
+                   help="compare single scattering under a sun and sky (the scatter_march backend) with "
+                        "Mitsuba's volpath at max_depth 2 instead, the extremes included (opaque voxels, an "
+                        "empty volume, suns at the horizon, behind the camera and behind the object, the sky "
+                        "alone); writes compare_light.png and compare_light.json")
+    p.add_argument("--steps-per-voxel", type=positive_int, default=2,
+                   help="--light: single scattering's samples per voxel, ≥ 2 (default: %(default)s)")
+    p.add_argument("--ref-spp", type=positive_int, default=128,
+                   help="--light: volpath's samples per pixel per render (default: %(default)s)")
+    p.add_argument("--ref-renders", type=positive_int, default=8,
+                   help="--light: independent volpath renders, ≥ 4; their spread is the standard error "
+                        "(default: %(default)s)")
     p.add_argument("--out", default="compare", help="output folder (default: %(default)s/)")
     p.add_argument("--seed", type=non_negative_int, default=0,
                    help="seed of the random views and of Mitsuba's sampler (default: %(default)s)")
