@@ -92,6 +92,10 @@ def test_rows_have_the_fields(quick):
             assert {"single scattering", "single scattering m 2"} <= set(rows)
             assert rows["single scattering"]["formation"] == "single_scatter"
             assert rows["single scattering"]["grad_cosine"] > 0.9     # against 8 samples per voxel
+            marches = {"scatter march (m 2, spp 1)", "scatter march m 4", "scatter march spp 4"}
+            assert marches <= set(rows) and {rows[c]["formation"] for c in marches} == {"scatter_march"}
+            assert "volpath max_depth 2" in rows["scatter march m 4"]["reference"]
+            assert rows["scatter march m 4"]["grad_cosine"] > 0.9      # against 8 samples per voxel, spp 4
         for r in rows.values():
             assert set(LABELS) <= set(r)
             assert r["skipped"] is None, r["skipped"]
@@ -106,7 +110,7 @@ def test_rows_have_the_fields(quick):
         shares = (t["renderer_share"], t["networks_share"], t["optimiser_share"])
         assert all(0.0 <= x <= 1.0 for x in shares) and sum(shares) == pytest.approx(1.0, abs=1e-6), shares
         assert 0.0 < t["renderer_backward_share"] <= t["renderer_share"] and t["optimiser_share"] > 0
-    assert [t["renderer"] for t in result["train"]] == ["closed_form", "mitsuba", "physical"]
+    assert [t["renderer"] for t in result["train"]] == ["closed_form", "mitsuba", "scatter_march", "physical"]
 
 
 def test_traffic_bound_is_bytes_over_bandwidth(quick):
@@ -168,6 +172,38 @@ def test_reported_gradient_error_matches(quick):
     assert row["grad_cosine"] == pytest.approx(float(g @ ref / (g.norm() * ref.norm())), abs=1e-6)
     assert row["grad_rel_err"] == pytest.approx(float((g - ref).norm() / ref.norm()), rel=1e-4)
     assert row["grad_norm_ratio"] == pytest.approx(float(g.norm() / ref.norm()), rel=1e-5)
+
+
+def test_the_scatter_march_rows_are_measured_against_volpath(quick):
+    """The default row's RGB error recomputed: volpath at max_depth 2 (the bench's quick spp, 16, and
+    seeds) under the lights the backend draws from the seed; α from the converged march."""
+    import drjit as dr
+    import numpy as np
+
+    from mitsuba_platonic.render.scatter_march import render_scatter_march
+    from mitsuba_platonic.render.single_scatter import reference_render, sample_lights, sample_sun_and_sky
+
+    _, result, _ = quick
+    row = rows_of(result, "ea")["scatter march (m 2, spp 1)"]
+    views = torch.tensor(result["views"][str(N)])
+    seed = result["meta"]["settings"]["seed"]
+    vol = the_volume("ea")
+    lights = sample_lights(BATCH, seed)
+    suns = [sample_sun_and_sky(np.random.default_rng([seed, i])) for i in range(BATCH)]
+    threads = dr.thread_count()
+    dr.set_thread_count(1)                   # as the bench ran (--threads 1): volpath's samples follow the threads
+    try:
+        with torch.no_grad():
+            ref = torch.cat([reference_render(vol[i:i + 1], views[i:i + 1], suns[i:i + 1], spp=16, seed=seed + i)
+                             for i in range(BATCH)])
+    finally:
+        dr.set_thread_count(threads)
+    with torch.no_grad():
+        ref[:, 3] = render_scatter_march(vol, views, lights, steps_per_voxel=8, spp=4)[:, 3]
+        ours = render_scatter_march(vol, views, lights)
+    rmse, mx = rmse_max(ours, ref)
+    assert row["rmse"] == pytest.approx(rmse, rel=1e-3) and row["max_abs"] == pytest.approx(mx, rel=1e-3)
+    assert row["rmse"] < 0.2 * float(ref[:, :3].abs().max())
 
 
 # --------------------------------------------------------------------------- the extra EA layers

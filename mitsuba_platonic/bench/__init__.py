@@ -15,7 +15,9 @@ pairs (the built-in test volume, B random views) is rendered by:
   (``backend="physical"``, :func:`~mitsuba_platonic.render.physical.render_physical_ad`: its own
   image formation under a random sky) at spp {1, 4}, and single scattering of a sun and a sky
   (:func:`~mitsuba_platonic.render.single_scatter.render_single_scatter`, up to 32³) at its
-  defaults and at 2 samples per voxel.
+  defaults and at 2 samples per voxel, and the same light in Dr.Jit
+  (:func:`~mitsuba_platonic.render.scatter_march.render_scatter_march`, up to 64³) at its defaults
+  (2 samples per voxel, spp 1), at 4 samples per voxel and at spp 4.
 
 Every row records (all times per image, the best of ``repeats`` timed calls after an untimed
 warm-up call):
@@ -32,7 +34,9 @@ warm-up call):
   measured against their own reference: the path tracer against itself at ``physical_ref_spp``
   (the same scene, views and sky, whose sun is drawn from the seed and not from the spp); single
   scattering against itself at 8 samples per voxel and a shadow ray of 4 planes (the same suns
-  and skies); the authors' layer against *our* reference (for information: it renders a
+  and skies); single scattering in Dr.Jit in RGB against Mitsuba's ``volpath`` at ``max_depth`` 2
+  (the physical truth of the formation, at ``scatter_ref_spp``; its noise is part of the error),
+  in α and gradient against itself at 8 samples per voxel and spp 4; the authors' layer against *our* reference (for information: it renders a
   different image).
 - ``grad_cosine``, ``grad_norm_ratio`` (‖g‖ / ‖g_ref‖) and ``grad_rel_err`` (‖g − g_ref‖ / ‖g_ref‖):
   the gradient of L w.r.t. the volume against the reference's gradient of the same L.
@@ -43,7 +47,8 @@ warm-up call):
   counting its read and its write); ``bound_fwd_ms``, ``bound_fwd_bwd_ms`` and the measured time
   over the bound, ``fwd_over_bound`` / ``fwd_bwd_over_bound``.
 
-Plus training images/s per renderer (closed form, the marcher, the path tracer at spp 1 depth 2)
+Plus training images/s per renderer (closed form, the marcher, single scattering in Dr.Jit, the
+path tracer at spp 1 depth 2)
 for one small reconstruction configuration (:func:`_bench_train`).
 
 Outputs (:func:`write_outputs`): ``bench.json`` (every measured row and the run's settings),

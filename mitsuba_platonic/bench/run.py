@@ -11,10 +11,12 @@ from dataclasses import asdict
 from datetime import datetime, timezone
 from typing import Any, Callable, Dict, List, Optional, Tuple
 
+import numpy as np
 import torch
 
 from ..render import render
-from ..render.single_scatter import LightBatch, render_single_scatter, sample_lights
+from ..render.single_scatter import LightBatch, reference_render, render_single_scatter, sample_lights, \
+    sample_sun_and_sky
 from ..render.variant import ensure_variant
 from ..views import sample_views
 from ..volume import CHANNELS, test_volume
@@ -52,6 +54,18 @@ SINGLE_SCATTER_REFERENCE = {"steps_per_voxel": 8, "shadow_planes": 4}
 
 def _single_scatter(lights: LightBatch, options: Dict[str, Any]) -> RenderFn:
     return lambda v, w: render_single_scatter(v, w, lights, **options)
+
+
+#: The rows of single scattering in Dr.Jit (label, options) and the converged options of its gradient
+#: reference (its image reference is volpath at max_depth 2).
+SCATTER_MARCH_CONFIGS = (("scatter march (m 2, spp 1)", {}), ("scatter march m 4", {"steps_per_voxel": 4}),
+                         ("scatter march spp 4", {"spp": 4}))
+SCATTER_MARCH_REFERENCE = {"steps_per_voxel": 8, "spp": 4}
+
+
+def _scatter_march(lights: LightBatch, options: Dict[str, Any]) -> RenderFn:
+    from ..render.scatter_march import render_scatter_march  # imports Dr.Jit: on first use
+    return lambda v, w: render_scatter_march(v, w, lights, **options)
 
 
 def _reference(fn: RenderFn, volume: torch.Tensor, views: torch.Tensor,
@@ -214,6 +228,8 @@ def _bench_model(s: BenchSettings, n: int, model: str, views: torch.Tensor, repe
         _path_tracer_rows(s, n, b, model, volume, views, weights, ref_spp, add, log)
     if n <= s.single_scatter_max_resolution:
         _single_scatter_rows(s, n, b, model, volume, views, weights, add, log)
+    if n <= s.scatter_march_max_resolution:
+        _scatter_march_rows(s, n, b, model, volume, views, weights, add, log)
     return rows
 
 
@@ -252,3 +268,34 @@ def _single_scatter_rows(s: BenchSettings, n: int, b: int, model: str, volume: t
                  formation="single_scatter",
                  reference="single scattering, 8 samples per voxel, shadow ray 4 planes; same views and suns"),
             _single_scatter(lights, options), (torch.cat(images), torch.cat(grads)), vs_closed=False)
+
+
+def _scatter_march_rows(s: BenchSettings, n: int, b: int, model: str, volume: torch.Tensor, views: torch.Tensor,
+                        weights: torch.Tensor, add: Callable, log: Callable[[str], None]) -> None:
+    """Single scattering in Dr.Jit (``add`` measures and records one row): its RGB against Mitsuba's
+    volpath at max_depth 2 (the same suns and skies, ``scatter_ref_spp``), its α and gradients
+    against itself at :data:`SCATTER_MARCH_REFERENCE`."""
+    t0 = time.perf_counter()
+    lights = sample_lights(b, s.seed)                         # as the scatter_march backend draws them
+    suns = [sample_sun_and_sky(np.random.default_rng([s.seed, i])) for i in range(b)]   # the same, one by one
+    spp = min(s.scatter_ref_spp, 16) if s.quick else s.scatter_ref_spp
+    images = torch.cat([reference_render(volume[i:i + 1], views[i:i + 1], suns[i:i + 1], spp=spp, seed=s.seed + i)
+                        for i in range(b)])
+    alphas, grads = [], []
+    for i in range(b):                                        # pair by pair: bounded memory
+        light = LightBatch(lights.direction[i:i + 1], lights.irradiance[i:i + 1], lights.sky[i:i + 1])
+        img, g = _forward_backward(_scatter_march(light, SCATTER_MARCH_REFERENCE), volume[i:i + 1],
+                                   views[i:i + 1], weights[i:i + 1])
+        alphas.append(img[:, 3])
+        grads.append(g)
+        _release_memory()
+    grad = torch.cat(grads)
+    images[:, 3] = torch.cat(alphas)                            # volpath's alpha is not α = 1 − e^{−τ}
+    log(f"{n}³ ea: volpath (max_depth 2, spp {spp}) and scatter-march references in "
+        f"{time.perf_counter() - t0:.1f} s")
+    for label, options in SCATTER_MARCH_CONFIGS:
+        add(_row(n, b, model, "scatter_march", label, {"steps_per_voxel": 2, "spp": 1, **options},
+                 formation="scatter_march",
+                 reference=f"RGB: volpath max_depth 2 at spp {spp}, same views, suns and skies; α and "
+                           f"gradients: scatter march at 8 samples per voxel, spp 4"),
+            _scatter_march(lights, options), (images, grad), vs_closed=False)

@@ -33,6 +33,8 @@ class BenchSettings:
     physical: bool = True                       # the path-tracer rows (the slowest part of a run)
     physical_max_resolution: int = 64           # … measured up to this N (128³ path tracing: most of an hour)
     single_scatter_max_resolution: int = 32     # the single-scattering rows (with the path tracer's) up to this N
+    scatter_march_max_resolution: int = 64      # the rows of single scattering in Dr.Jit up to this N
+    scatter_ref_spp: int = 256                  # … their image reference: volpath at max_depth 2, this spp
     train: bool = True
     train_width: int = 16
     train_batch: int = 8
@@ -46,7 +48,7 @@ class BenchSettings:
         if not self.resolutions:
             raise ValueError("resolutions: give at least one")
         for name in ("batch", "repeats", "physical_ref_spp", "physical_max_depth", "physical_max_resolution",
-                     "single_scatter_max_resolution", "train_width", "train_batch", "train_steps"):
+                     "single_scatter_max_resolution", "scatter_march_max_resolution", "scatter_ref_spp", "train_width", "train_batch", "train_steps"):
             v = getattr(self, name)
             if not isinstance(v, int) or isinstance(v, bool) or v < 1:
                 raise ValueError(f"{name} must be a positive int, got {v!r}")

@@ -34,6 +34,7 @@ __all__ = ["StepClock", "RENDERERS"]
 
 #: The renderers a training row is measured for: (backend, label, extra overrides).
 RENDERERS = [("closed_form", "closed form", []), ("mitsuba", "marcher", []),
+             ("scatter_march", "single scattering, Dr.Jit (m 2)", ["render.steps_per_voxel=2"]),
              ("physical", "path tracer spp 1, depth 2", ["render.physical_spp=1", "render.max_depth=2"])]
 
 
