@@ -22,7 +22,7 @@ from .augment import AUGMENTS, PHOTO_AUGMENTS
 from .losses import LOSSES
 from .roll import ROLLS
 
-__all__ = ["TrainConfig", "TASKS", "MODES", "MODES_3D", "REC_TARGETS", "REC_LOSSES", "POSES", "PRGAN"]
+__all__ = ["TrainConfig", "TASKS", "MODES", "MODES_3D", "REC_TARGETS", "REC_LOSSES", "REC_CHANNELS", "POSES", "PRGAN"]
 
 #: What E/G learn: reconstruct the input image, or generate from z ~ N(0, I).
 TASKS = ("reconstruction", "generation")
@@ -36,6 +36,10 @@ REC_TARGETS = ("image", "volume")
 #: train.rec_loss: the input-view term's distance, the paper's mean squared error or the mean
 #: absolute error (docs/training.md, "Tried on top of photos.yaml")
 REC_LOSSES = ("l2", "l1")
+#: train.rec_channels: what of the input image the image term compares, all its channels or its
+#: opacity alone (for a lit renderer whose light is not the photo's: docs/training.md, "Training
+#: through light")
+REC_CHANNELS = ("all", "alpha")
 #: train.pose: G's volume in the input camera's frame, or upright and tilted by an elevation E reads
 POSES = ("input", "elevation")
 #: How messages name ``train.mode: prgan``.
@@ -56,7 +60,10 @@ class TrainConfig:
     (v with the input image's ground-truth volume in its camera's frame: 3D supervision, the 3D
     modes only; the 3D-GAN baseline's, which renders nothing); rec_loss: the image term's distance,
     'l2' (mean (I_front − x)², the paper's) or 'l1' (mean |I_front − x|: the median, not the mean, of
-    what the code cannot tell apart; image targets only); adv_input: weight of a second adversarial
+    what the code cannot tell apart; image targets only); rec_channels: what the image term compares,
+    'all' channels (the paper's) or 'alpha' (the opacity alone, EA images: the silhouette and its
+    soft edge; colour and shading answer to D only, as they must where the renderer's light is drawn
+    from a prior and not the photo's); adv_input: weight of a second adversarial
     term on the render of the input view, which D also learns to tell from the photos (0: none, the
     paper's: the input view answers to the reconstruction term alone; image targets, mode
     'platonic'); weight_3d: weight of the 3D adversarial term;
@@ -110,6 +117,7 @@ class TrainConfig:
     rec_weight: float = 5.0
     rec_target: str = "image"
     rec_loss: str = "l2"
+    rec_channels: str = "all"
     adv_input: float = 0.0
     weight_3d: float = 1.0
     lr_g: float = 1e-3
@@ -204,6 +212,10 @@ class TrainConfig:
             raise ConfigError(f"train.d_gate: expected null or a number in (0, 1], got {self.d_gate!r}")
         choice("train.rec_target", self.rec_target, REC_TARGETS)
         choice("train.rec_loss", self.rec_loss, REC_LOSSES)
+        choice("train.rec_channels", self.rec_channels, REC_CHANNELS)
+        if self.rec_channels != "all" and self.rec_target != "image":
+            raise ConfigError(f"train.rec_channels: {self.rec_channels!r} applies to the input-view image term; "
+                              f"rec_target {self.rec_target!r} compares volumes")
         if self.rec_loss != "l2" and self.rec_target != "image":
             raise ConfigError(f"train.rec_loss: {self.rec_loss!r} applies to the input-view image term; "
                               f"rec_target {self.rec_target!r} compares volumes by their mean squared error")

@@ -12,7 +12,8 @@ uninterrupted one would:
    of G's adversarial term too), with ``matched`` the reals turned by the tilt of a right
    volume's view (:mod:`.roll`);
 5. G (and E) update on  L_G = adv(D(I_view)) + λ_rec ‖x − I_front‖² (+ w₃ adv₃(D3(v))), the mean
-   squared difference; with ``rec_loss: l1`` the mean absolute one, λ_rec mean |x − I_front|.
+   squared difference; with ``rec_loss: l1`` the mean absolute one, λ_rec mean |x − I_front|;
+   with ``rec_channels: alpha`` on the opacity channel alone.
    With ``colour_match`` = w > 0, L_G adds w · mean |c̄(I_view) − c̄(x)|, c̄ the mean colour of an
    image's object (:func:`.losses.colour_match`). With ``adv_input`` = w > 0, D's fakes also hold
    I_front and L_G adds w · adv(D(I_front)): the input view answers to D as well as to the photo.
@@ -344,7 +345,8 @@ class Trainer:
         if rec and t.rec_target == "volume":
             terms["rec3d"] = t.rec_weight * self._volume_rec(v_input, idx, out)
         elif rec:
-            loss_rec = F.mse_loss(i_front, x) if t.rec_loss == "l2" else F.l1_loss(i_front, x)
+            a, y = (i_front, x) if t.rec_channels == "all" else (i_front[:, -1:], x[:, -1:])   # 'alpha': the opacity
+            loss_rec = F.mse_loss(a, y) if t.rec_loss == "l2" else F.l1_loss(a, y)
             terms["rec"] = t.rec_weight * loss_rec
             out["loss_rec"] = float(self._all_sum(loss_rec.detach().cpu()) / self.world)
         if t.pose_weight > 0:                                # P learns the elevations of G's renders
