@@ -1,6 +1,7 @@
 """Benchmark: the cost of a training step through each renderer on a path-traced collection.
 
     .venv/bin/python benchmarks/train_through_light.py [--steps 10] [--shapes 60] [--cache data] [--width 32]
+        [--device cuda|cpu] [--rows marcher,m = 2]
 
 One process, one collection (``configs/procedural_physical.yaml``: mushrooms at 32³ path-traced
 under random skies, metered exposure, ``--shapes`` × 4 views), the same seed and batch (8) for
@@ -50,10 +51,12 @@ ROWS = {
 }
 
 
-def seconds_per_step(overrides, shapes: int, cache: str, steps: int, width: int) -> Tuple[float, float, float]:
-    """(wall seconds, Dr.Jit kernel seconds, Dr.Jit launches) per step of a fresh trainer."""
+def seconds_per_step(overrides, shapes: int, cache: str, steps: int, width: int,
+                     device: str = "cpu") -> Tuple[float, float, float]:
+    """(wall seconds, Dr.Jit kernel seconds, Dr.Jit launches) per step of a fresh trainer on ``device``
+    (each step reads its losses back, so a GPU's queued work is inside the timing)."""
     cfg = load_config(CONFIG, [f"data.n_shapes={shapes}", f"data.cache={cache}", f"model.width={width}", *overrides])
-    trainer = Trainer(cfg, load_training_data(cfg, progress=True), torch.device("cpu"))
+    trainer = Trainer(cfg, load_training_data(cfg, progress=True), torch.device(device))
     trainer.step(1)                                                  # warm-up: compilation, scene loading
     t0 = time.perf_counter()
     for s in range(2, steps + 2):
@@ -69,12 +72,18 @@ def main() -> None:
     p.add_argument("--shapes", type=int, default=60, help="shapes in the collection (default: %(default)s)")
     p.add_argument("--cache", default="data", help="collection cache folder (default: %(default)s)")
     p.add_argument("--width", type=int, default=32, help="the networks' width (default: %(default)s, the config's)")
+    p.add_argument("--device", default="cuda" if torch.cuda.is_available() else "cpu",
+                   help="where the networks train (default: %(default)s; the renderers follow the Mitsuba variant)")
+    p.add_argument("--rows", default=None,
+                   help="only the rows whose names contain one of these comma-separated parts (default: all)")
     args = p.parse_args()
+    rows = {k: v for k, v in ROWS.items() if args.rows is None or any(part in k for part in args.rows.split(","))}
+    print(f"(networks on {args.device})\n")
     print("| training step through | s / step | images / s | × the marcher's time | Dr.Jit kernels, s / step | "
           "the rest of the step | Dr.Jit launches / step |\n|---|---|---|---|---|---|---|")
     base = None
-    for name, overrides in ROWS.items():
-        t, k, n = seconds_per_step(overrides, args.shapes, args.cache, args.steps, args.width)
+    for name, overrides in rows.items():
+        t, k, n = seconds_per_step(overrides, args.shapes, args.cache, args.steps, args.width, args.device)
         base = base or t
         print(f"| {name} | {t:.3f} | {16 / t:.1f} | {t / base:.1f} | {k:.3f} | {max(t - k, 0.0):.3f} | {n:.0f} |",
               flush=True)

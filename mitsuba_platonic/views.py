@@ -195,7 +195,7 @@ def validate_views(views: torch.Tensor, batch: Optional[int] = None) -> None:
 
 
 def camera_frames(views: torch.Tensor) -> Tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
-    """Orthonormal camera frames ``(right, up, ω)``, each ``(B, 3)`` float64.
+    """Orthonormal camera frames ``(right, up, ω)``, each ``(B, 3)`` float64 on the views' device.
 
     ``right = normalize((ω_z, 0, −ω_x))`` (= (cos φ, 0, −sin φ)), falling back to +x at the
     poles (|(ω_x, ω_z)| ≤ 1e-12); ``up = ω × right``. The camera looks along −ω; image
@@ -206,7 +206,7 @@ def camera_frames(views: torch.Tensor) -> Tuple[torch.Tensor, torch.Tensor, torc
     horiz = torch.stack([w[..., 2], torch.zeros_like(w[..., 0]), -w[..., 0]], dim=-1)
     hn = horiz.norm(dim=-1, keepdim=True)
     pole = hn <= POLE_EPS
-    x_axis = torch.tensor([1.0, 0.0, 0.0], dtype=torch.float64).expand_as(w)
+    x_axis = torch.tensor([1.0, 0.0, 0.0], dtype=torch.float64, device=w.device).expand_as(w)
     right = torch.where(pole, x_axis, horiz / torch.where(pole, torch.ones_like(hn), hn))
     up = torch.linalg.cross(w, right, dim=-1)
     up = up / up.norm(dim=-1, keepdim=True)

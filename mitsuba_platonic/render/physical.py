@@ -296,7 +296,7 @@ def render_physical_ad(volume: torch.Tensor, views: torch.Tensor, lighting: str 
     scene, params = _ad_scene(n, spp, max_depth, filter)
     σ = extinction(volume[:, 3:])
     alpha = _alpha(volume[:, 3:].clamp(0.0, V_MAX_PHYSICAL), views, filter)
-    right, up, w = camera_frames(views)
+    right, up, w = camera_frames(views.detach().cpu())                 # read into Mitsuba's sensors
     rng = np.random.default_rng(seed)
     images = []
     for b in range(volume.shape[0]):
