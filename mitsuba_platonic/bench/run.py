@@ -52,6 +52,11 @@ SINGLE_SCATTER_CONFIGS = (("single scattering", {}), ("single scattering m 2", {
 SINGLE_SCATTER_REFERENCE = {"steps_per_voxel": 8, "shadow_planes": 4}
 
 
+def _pair_light(lights: LightBatch, i: int) -> LightBatch:
+    """Pair i's light alone (a reference renders pair by pair)."""
+    return LightBatch(lights.direction[i:i + 1], lights.irradiance[i:i + 1], lights.sky[i:i + 1])
+
+
 def _single_scatter(lights: LightBatch, options: Dict[str, Any]) -> RenderFn:
     return lambda v, w: render_single_scatter(v, w, lights, **options)
 
@@ -256,7 +261,7 @@ def _single_scatter_rows(s: BenchSettings, n: int, b: int, model: str, volume: t
     lights = sample_lights(b, s.seed)                         # as the single_scatter backend draws them
     images, grads = [], []
     for i in range(b):                                        # pair by pair: the reference's samples are many
-        light = LightBatch(lights.direction[i:i + 1], lights.irradiance[i:i + 1], lights.sky[i:i + 1])
+        light = _pair_light(lights, i)
         img, g = _forward_backward(_single_scatter(light, SINGLE_SCATTER_REFERENCE), volume[i:i + 1],
                                    views[i:i + 1], weights[i:i + 1])
         images.append(img)
@@ -283,7 +288,7 @@ def _scatter_march_rows(s: BenchSettings, n: int, b: int, model: str, volume: to
                         for i in range(b)])
     alphas, grads = [], []
     for i in range(b):                                        # pair by pair: bounded memory
-        light = LightBatch(lights.direction[i:i + 1], lights.irradiance[i:i + 1], lights.sky[i:i + 1])
+        light = _pair_light(lights, i)
         img, g = _forward_backward(_scatter_march(light, SCATTER_MARCH_REFERENCE), volume[i:i + 1],
                                    views[i:i + 1], weights[i:i + 1])
         alphas.append(img[:, 3])

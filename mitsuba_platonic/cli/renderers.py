@@ -38,7 +38,8 @@ def _check_compare_settings(args: argparse.Namespace) -> None:
 
 def _cmd_compare_light(args: argparse.Namespace, volume, views) -> int:
     """``--light``: single scattering (scatter_march) against volpath at depth 2, the extremes included."""
-    from ..compare_light import compare_light, format_light_table, light_cases, light_figure, write_light_summary
+    from ..compare_light import (BLOCK, compare_light, format_light_table, light_cases, light_figure,
+                                 write_light_summary)
 
     if volume.shape[1] != 4:
         raise CLIError(f"--light: the volume needs colour ([r, g, b, density], C = 4), got C = {volume.shape[1]}")
@@ -62,7 +63,7 @@ def _cmd_compare_light(args: argparse.Namespace, volume, views) -> int:
                 "ref_renders": args.ref_renders, "seed": args.seed}
     print(f"single scattering (scatter_march, {args.steps_per_voxel} samples per voxel, spp {args.spp}) vs "
           f"volpath at max_depth 2 ({args.ref_renders} renders of {args.ref_spp} spp): {args.volume} at {n}³, "
-          f"exposure none; z per {4} × {4} block against the renders' standard error")
+          f"exposure none; z per {BLOCK} × {BLOCK} block against the renders' standard error")
     print(format_light_table(results))
     png = light_figure(results, out / "compare_light.png",
                        f"{args.volume} at {n}³: scatter_march vs volpath (max_depth 2)")
