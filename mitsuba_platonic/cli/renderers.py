@@ -57,10 +57,10 @@ def _cmd_compare_light(args: argparse.Namespace, volume, views) -> int:
     out.mkdir(parents=True, exist_ok=True)
     cases = light_cases(volume, views, seed=args.seed)
     results = compare_light(cases, spp=args.ref_spp, renders=args.ref_renders, steps_per_voxel=args.steps_per_voxel,
-                            ours_spp=args.spp, seed=args.seed)
+                            ours_spp=args.spp, seed=args.seed, repeats=args.repeats)
     n = volume.shape[-1]
     settings = {"steps_per_voxel": args.steps_per_voxel, "spp": args.spp, "ref_spp": args.ref_spp,
-                "ref_renders": args.ref_renders, "seed": args.seed}
+                "ref_renders": args.ref_renders, "seed": args.seed, "repeats": args.repeats}
     print(f"single scattering (scatter_march, {args.steps_per_voxel} samples per voxel, spp {args.spp}) vs "
           f"volpath at max_depth 2 ({args.ref_renders} renders of {args.ref_spp} spp): {args.volume} at {n}³, "
           f"exposure none; z per {BLOCK} × {BLOCK} block against the renders' standard error")
