@@ -75,6 +75,10 @@ class Config:
         except ValueError as e:
             raise ConfigError(f"render.{e}") from None
         self.train.validate()
+        if (self.train.light_warmup or self.train.light_fade) and self.render.backend not in LIT:
+            raise ConfigError(f"train.light_warmup, train.light_fade: they enter a lit renderer through "
+                              f"emission–absorption; expected render.backend one of {list(LIT)}, got "
+                              f"{self.render.backend!r}")
         if self.train.colour_tv > 0 and self.render.model != "ea":
             raise ConfigError(f"train.colour_tv: colour needs render.model 'ea', got {self.render.model!r}")
         if self.model.photo_texture and self.render.camera != "orthographic":

@@ -63,7 +63,11 @@ class TrainConfig:
     what the code cannot tell apart; image targets only); rec_channels: what the image term compares,
     'all' channels (the paper's) or 'alpha' (the opacity alone, EA images: the silhouette and its
     soft edge; colour and shading answer to D only, as they must where the renderer's light is drawn
-    from a prior and not the photo's); adv_input: weight of a second adversarial
+    from a prior and not the photo's); light_warmup, light_fade: a lit renderer (render.backend
+    'single_scatter', 'scatter_march' or 'physical') entered from emission–absorption: the first
+    ``light_warmup`` steps render through the EA marcher, the next ``light_fade`` blend the two
+    images linearly towards the lit one (0, 0: lit from the start;
+    :mod:`mitsuba_platonic.train.renderer`, docs/training.md, "Training through light"); adv_input: weight of a second adversarial
     term on the render of the input view, which D also learns to tell from the photos (0: none, the
     paper's: the input view answers to the reconstruction term alone; image targets, mode
     'platonic'); weight_3d: weight of the 3D adversarial term;
@@ -118,6 +122,8 @@ class TrainConfig:
     rec_target: str = "image"
     rec_loss: str = "l2"
     rec_channels: str = "all"
+    light_warmup: int = 0
+    light_fade: int = 0
     adv_input: float = 0.0
     weight_3d: float = 1.0
     lr_g: float = 1e-3
@@ -219,6 +225,10 @@ class TrainConfig:
         if self.rec_loss != "l2" and self.rec_target != "image":
             raise ConfigError(f"train.rec_loss: {self.rec_loss!r} applies to the input-view image term; "
                               f"rec_target {self.rec_target!r} compares volumes by their mean squared error")
+        for key in ("light_warmup", "light_fade"):
+            value = getattr(self, key)
+            if isinstance(value, bool) or not isinstance(value, int) or value < 0:
+                raise ConfigError(f"train.{key}: expected a number of steps ≥ 0, got {value!r}")
         non_negative("train.adv_input", self.adv_input)
         if self.adv_input > 0 and (self.task != "reconstruction" or self.mode != "platonic"
                                    or self.rec_target != "image" or self.d_roll != "none"):

@@ -173,7 +173,7 @@ class Trainer:
         self.opt_d = torch.optim.Adam(self.nets["D"].parameters(), lr=t.lr_d, betas=betas)
         self.opt_d3 = (torch.optim.Adam(self.nets["D3"].parameters(), lr=t.lr_d, betas=betas)
                        if "D3" in self.nets else None)
-        self.render = make_renderer(cfg.render)
+        self.render = make_renderer(cfg.render, cfg.train.light_warmup, cfg.train.light_fade)
         self.images = data.images.to(device)
         self.volumes = data.volumes.to(device) if needs_3d else None
         #: 'prgan': the 8 ring views (train.elevation, default 0°)
@@ -299,10 +299,10 @@ class Trainer:
             v = G(codes)
             v_view, v_input = v[:b * K], v[b * K:]
         seed = int(np.random.SeedSequence([cfg.run.seed, step, 7, self.rank]).generate_state(1)[0] >> 2)
-        i_view = self.render(v_view, views.to(self.device), seed)
+        i_view = self.render(v_view, views.to(self.device), seed, step)
         i_front = None
         if rec and t.rec_target == "image":                  # the input view (rendered before D: adv_input)
-            i_front = self.render(v_input, front_view(b).to(self.device), seed + 1)
+            i_front = self.render(v_input, front_view(b).to(self.device), seed + 1, step)
         out: Dict[str, float] = {}
 
         # -- D: real photos vs rendered views, gated by its soft accuracy -----------------------
