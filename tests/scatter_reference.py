@@ -7,6 +7,7 @@ import math
 
 import torch
 
+from mitsuba_platonic.render.grids import extinction
 from mitsuba_platonic.render.sky_light import EPSILON, local_depth, sky_offsets
 from mitsuba_platonic.render.single_scatter import SKY_DIRECTIONS, SKY_WEIGHTS, sweep
 from mitsuba_platonic.views import camera_frames
@@ -90,3 +91,26 @@ def reference_sky_occlusion(σ, reach):
         num = num + λ * far
         den = den + λ
     return (1 - num / den)[:, None]
+
+
+def _read(volume, offset):
+    """volume (B, C, N, N, N) read trilinearly at every voxel centre moved by offset (B, 3) voxels
+    [d, h, w], zero outside the cube: torch's grid_sample."""
+    b, n = volume.shape[0], volume.shape[-1]
+    c = (torch.arange(n, dtype=volume.dtype) + 0.5) * (2.0 / n) - 1.0
+    d, h, w = torch.meshgrid(c, c, c, indexing="ij")
+    base = torch.stack([w, h, d], dim=-1)[None]                   # grid_sample's (x, y, z) ← (w, h, d)
+    shift = (offset.flip(-1) * (2.0 / n)).to(volume)[:, None, None, None, :]
+    return torch.nn.functional.grid_sample(volume, base + shift, mode="bilinear", padding_mode="zeros",
+                                           align_corners=False)
+
+
+def reference_light_packet(volume, lights, reach):
+    """The camera pass's packet (B, N, N, N, 8) of render/scatter_march.py in torch: σ, the albedo,
+    the sun's sweep and σ read by grid_sample ``reach`` voxels towards the sun, the sky's O of
+    :func:`reference_sky_occlusion`, a zero."""
+    σ = extinction(volume[:, 3:])
+    d = lights.direction.to(volume.dtype)
+    sun = _read(torch.cat([sweep(σ, lights.direction).opacity, σ], 1), reach * torch.stack([-d[:, 2], -d[:, 1], d[:, 0]], -1))
+    O = reference_sky_occlusion(σ, reach)
+    return torch.cat([σ, volume[:, :3], sun, O, torch.zeros_like(σ)], 1).permute(0, 2, 3, 4, 1)

@@ -13,10 +13,13 @@ Light volumes (differentiable; :func:`light_packet`). Per pair, at the voxel cen
     σ_s(p) = σ(p + ℓ ω_s)                       σ where that read is
     O(p)   = 1 − Σ_k w_k λ_k(p) T_k(p + o_k) / Σ_k w_k λ_k(p)        the sky's far occlusion
 
-the sun's in torch, the sky's in Dr.Jit (:mod:`.sky_light`, which defines it), with the 14 sky
-directions ω_k and weights w_k of :mod:`.single_scatter`, ℓ = ``reach`` voxels, o_k the sky's
+the sun's sweep in torch, the sky's O in Dr.Jit (:mod:`.sky_light`, which defines it), with the 14
+sky directions ω_k and weights w_k of :mod:`.single_scatter`, ℓ = ``reach`` voxels, o_k the sky's
 whole-voxel far reads (:func:`~.sky_light.sky_offsets`) and λ_k(p) the local factor below at p.
-The camera pass reads σ, the albedo a, A_s, σ_s and O as one 8-float packet per voxel, trilinearly.
+One Dr.Jit launch per pass assembles the packet (:class:`_Packet`): the sun's two reads ℓ ahead
+are trilinear with 8 weights that every voxel of a pair shares (ℓ ω_s is one offset per pair), so
+the adjoint gathers them back from p − o instead of scattering. The camera pass reads σ, the
+albedo a, A_s, σ_s and O as one 8-float packet per voxel, trilinearly.
 
 The local light (the reason for this design). Near a camera sample x, σ is taken as the linear
 field of its trilinear cell, σ(x + s ω) ≈ σ + s b with b = ∇σ(x)·ω, clamped at zero: its optical
@@ -63,13 +66,12 @@ import math
 from typing import Any, Tuple
 
 import torch
-import torch.nn.functional as F
 
 from ..errors import UserError
 from .grids import extinction
-from .marcher import _MODE, _frames, _image_to_per_ray, _per_ray_to_image, _shared, _spread_over_threads
+from .marcher import _MODE, FREEZE, _frames, _image_to_per_ray, _per_ray_to_image, _shared, _spread_over_threads
 from .single_scatter import SKY_DIRECTIONS, SKY_WEIGHTS, LightBatch, _check, mean_luminance, sweep
-from .sky_light import local_depth, local_depth_partials, sky_occlusion, sky_offsets
+from .sky_light import _Key, local_depth, local_depth_partials, sky_occlusion, sky_offsets
 from .variant import ensure_variant, variant_device
 
 mi = ensure_variant()
@@ -89,28 +91,97 @@ def _grid_dirs(d: torch.Tensor) -> torch.Tensor:
     return torch.stack([-d[..., 2], -d[..., 1], d[..., 0]], dim=-1)
 
 
-def _read(volume: torch.Tensor, offset: torch.Tensor) -> torch.Tensor:
-    """``volume`` ``(B, C, N, N, N)`` read trilinearly at every voxel centre moved by ``offset``
-    ``(B, 3)`` voxels [d, h, w] (zero outside the cube)."""
-    b, n = volume.shape[0], volume.shape[-1]
-    c = (torch.arange(n, dtype=volume.dtype, device=volume.device) + 0.5) * (2.0 / n) - 1.0
-    d, h, w = torch.meshgrid(c, c, c, indexing="ij")
-    base = torch.stack([w, h, d], dim=-1)[None]                   # grid_sample's (x, y, z) ← (w, h, d)
-    shift = (offset.flip(-1) * (2.0 / n)).to(volume)[:, None, None, None, :]
-    return F.grid_sample(volume, base + shift, mode="bilinear", padding_mode="zeros", align_corners=False)
+class _Assembly:
+    """The packet's lanes: one per voxel p of every pair, and the sun's read at p + o (o = ℓ ω_s in
+    voxels [d, h, w], one per pair): trilinear, with the same 8 weights at every voxel of a pair."""
+
+    def __init__(self, offsets: Any, b: int, n: int):
+        self.n = n
+        lane = dr.arange(mi.UInt32, b * n ** 3)
+        self.pair, voxel = lane // n ** 3, lane % n ** 3
+        self.lane = lane
+        self.p = mi.Vector3i(mi.Int32(voxel // (n * n)), mi.Int32((voxel // n) % n), mi.Int32(voxel % n))
+        o = mi.Vector3f(*(dr.gather(mi.Float, offsets, self.pair * 3 + a) for a in range(3)))
+        self.i0 = mi.Vector3i(dr.floor(o))
+        self.t = o - mi.Vector3f(self.i0)
+
+    def corners(self, sign: int) -> list:
+        """[(index, inside, weight)] of the 8 voxels p + i0 + c (``sign`` 1: the read) or p − i0 − c
+        (``sign`` −1: its adjoint, which gathers what the read's lanes would have scattered)."""
+        n, out = self.n, []
+        for c in ((0, 0, 0), (0, 0, 1), (0, 1, 0), (0, 1, 1), (1, 0, 0), (1, 0, 1), (1, 1, 0), (1, 1, 1)):
+            q = self.p + sign * (self.i0 + mi.Vector3i(*c))
+            inside = dr.all((q >= 0) & (q < n))
+            w = mi.Float(1.0)
+            for a in range(3):
+                w *= self.t[a] if c[a] else 1.0 - self.t[a]
+            out.append((self.pair * n ** 3 + mi.UInt32(dr.clip((q.x * n + q.y) * n + q.z, 0, n ** 3 - 1)), inside, w))
+        return out
+
+    def read(self, values: Any) -> Any:
+        """Σ_c w_c values(p + i0 + c), zero outside the cube."""
+        return sum(w * dr.gather(mi.Float, values, idx, inside) for idx, inside, w in self.corners(1))
+
+    def read_adjoint(self, grads: Any) -> Any:
+        """Σ_c w_c grads(p − i0 − c): the read's transpose, by gathers (no scatter)."""
+        return sum(w * dr.gather(mi.Float, grads, idx, inside) for idx, inside, w in self.corners(-1))
+
+
+class _Packet(torch.autograd.Function):
+    """torch ↔ Dr.Jit: the camera pass's packet from σ, the volume's albedo, the sun's sweep A and the
+    sky's O (each ``(B, N³)``, the albedo ``(B, 3, N³)``), in one launch per pass."""
+
+    @staticmethod
+    def forward(ctx, σ: torch.Tensor, rgb: torch.Tensor, A: torch.Tensor, O: torch.Tensor,
+                offsets: torch.Tensor) -> torch.Tensor:
+        b, n3 = σ.shape
+        n = round(n3 ** (1.0 / 3.0))
+        keep: list = []
+        σ_d, A_d, O_d = (_shared(x.detach().contiguous(), keep) for x in (σ, A, O))
+        rgb_d = _shared(rgb.detach().contiguous(), keep)
+        o_d = _shared(offsets.to(torch.float32).contiguous(), keep)
+        _spread_over_threads(b * n3, 4)
+        at = _Assembly(o_d, b, n)
+        lane = at.lane
+        colour = [dr.gather(mi.Float, rgb_d, (at.pair * 3 + c) * n3 + (lane - at.pair * n3)) for c in range(3)]
+        packet = dr.empty(mi.Float, b * n3 * PACKET)
+        dr.scatter(packet, mi.Vector4f(dr.gather(mi.Float, σ_d, lane), *colour), 2 * lane)
+        dr.scatter(packet, mi.Vector4f(at.read(A_d), at.read(σ_d), dr.gather(mi.Float, O_d, lane), 0.0), 2 * lane + 1)
+        dr.eval(packet)
+        ctx.saved = (o_d, b, n)
+        ctx.keep = keep
+        out = packet.torch().view(b, n3, PACKET).clone()
+        dr.sync_thread()
+        return out
+
+    @staticmethod
+    def backward(ctx, g: torch.Tensor):
+        o_d, b, n = ctx.saved
+        g = g.to(torch.float32).contiguous()
+        keep = ctx.keep
+        g_A_s, g_σ_s = _shared(g[..., 4].contiguous(), keep), _shared(g[..., 5].contiguous(), keep)
+        _spread_over_threads(b * n ** 3, 4)
+        at = _Assembly(o_d, b, n)
+        g_A, g_σ = at.read_adjoint(g_A_s), at.read_adjoint(g_σ_s)
+        dr.eval(g_A, g_σ)
+        g_A_t, g_σ_t = g_A.torch().view(b, -1).clone(), g_σ.torch().view(b, -1).clone()
+        dr.sync_thread()
+        return g[..., 0] + g_σ_t, g[..., 1:4].transpose(1, 2), g_A_t, g[..., 6], None
 
 
 def light_packet(volume: torch.Tensor, lights: LightBatch, reach: float = REACH) -> torch.Tensor:
     """The camera pass's per-voxel packet ``(B, N, N, N, 8)``, channels last: σ, a_r, a_g, a_b, A_s,
     σ_s, O, 0 (module docstring, "Light volumes"); differentiable w.r.t. ``volume``."""
+    b, n = volume.shape[0], volume.shape[-1]
+    device = variant_device()                                     # where Dr.Jit's arrays live
+    flat = lambda x: x.reshape(b, -1).to(device, torch.float32)
     σ = extinction(volume[:, 3:])
-    # -- the sun: its sweep and σ, read ``reach`` voxels towards it
-    ω_s = _grid_dirs(lights.direction.to(volume))
-    sun = _read(torch.cat([sweep(σ, lights.direction).opacity, σ], dim=1), reach * ω_s)
-    # -- the sky: its far occlusion (:mod:`.sky_light`, in Dr.Jit)
-    O = sky_occlusion(σ, reach)
-    packet = torch.cat([σ, volume[:, :3], sun[:, :1], sun[:, 1:], O, torch.zeros_like(σ)], dim=1)
-    return packet.permute(0, 2, 3, 4, 1).contiguous()
+    A = sweep(σ, lights.direction).opacity                       # the sun's sweep (torch)
+    O = sky_occlusion(σ, reach)                                   # the sky's far occlusion (Dr.Jit)
+    offsets = reach * _grid_dirs(lights.direction.to(torch.float64))   # where the sun's volumes are read
+    packet = _Packet.apply(flat(σ), volume[:, :3].reshape(b, 3, -1).to(device, torch.float32), flat(A), flat(O),
+                           offsets.to(device))
+    return packet.view(b, n, n, n, PACKET).to(volume.device, volume.dtype)
 
 
 # -- The Dr.Jit pass ------------------------------------------------------------------------------
@@ -298,8 +369,32 @@ class _Rays:
             k += 1
 
 
+def _camera_forward(data: Any, frames: Any, light: Any, key: _Key) -> list:
+    """The forward launch: [r, g, b, α] per ray."""
+    rays = _Rays(data, frames, light, *key.values)
+    C, T = rays.forward()
+    values = [C.x, C.y, C.z, 1.0 - T]
+    dr.eval(values)
+    return values
+
+
+def _camera_backward(data: Any, frames: Any, light: Any, values: list, δ: list, key: _Key) -> Any:
+    """The adjoint launch: ∂L/∂packet from the per-ray gradients δ and the forward's totals."""
+    b, n = key.values[:2]
+    rays = _Rays(data, frames, light, *key.values)
+    grad = dr.zeros(mi.Float, b * n ** 3 * PACKET)
+    rays.backward(grad, mi.Color3f(*values[:3]), values[3], mi.Color3f(*δ[:3]), δ[3])
+    dr.eval(grad)
+    return grad
+
+
+_frozen_camera_forward = dr.freeze(_camera_forward, limit=64, warn_after=10_000)
+_frozen_camera_backward = dr.freeze(_camera_backward, limit=64, warn_after=10_000)
+
+
 class _ScatterMarch(torch.autograd.Function):
-    """torch ↔ Dr.Jit: the forward launch, and the adjoint launch with the forward's totals."""
+    """torch ↔ Dr.Jit: the forward launch, and the adjoint launch with the forward's totals (each
+    replayed by ``dr.freeze`` after its first call with the same sizes)."""
 
     @staticmethod
     def forward(ctx, packet: torch.Tensor, views: torch.Tensor, light: torch.Tensor, m: int, spp: int,
@@ -309,11 +404,9 @@ class _ScatterMarch(torch.autograd.Function):
         data = _shared(packet.detach().contiguous(), keep)
         frames = _frames(views, keep)
         light_arr = _shared(light.detach().to(torch.float32).contiguous(), keep)
-        rays = _Rays(data, frames, light_arr, b, n, m, spp, reach)
-        _spread_over_threads(rays.n_rays, 4)
-        C, T = rays.forward()
-        values = [C.x, C.y, C.z, 1.0 - T]
-        dr.eval(values)
+        _spread_over_threads(b * n * n * spp, 4)
+        run = _frozen_camera_forward if FREEZE else _camera_forward
+        values = run(data, frames, light_arr, _Key(b, n, m, spp, reach))
         image = _per_ray_to_image(values, b, n, spp)
         ctx.args = (data, frames, light_arr, values, (b, n, m, spp, reach))
         ctx.keep = keep
@@ -322,12 +415,10 @@ class _ScatterMarch(torch.autograd.Function):
     @staticmethod
     def backward(ctx, grad_image: torch.Tensor):
         data, frames, light_arr, values, (b, n, m, spp, reach) = ctx.args
-        δ = _image_to_per_ray(grad_image.to(torch.float32).contiguous(), spp, ctx.keep)
-        rays = _Rays(data, frames, light_arr, b, n, m, spp, reach)
-        _spread_over_threads(rays.n_rays, 1)
-        grad = dr.zeros(mi.Float, b * n ** 3 * PACKET)
-        rays.backward(grad, mi.Color3f(*values[:3]), values[3], mi.Color3f(*δ[:3]), δ[3])
-        dr.eval(grad)
+        δ = list(_image_to_per_ray(grad_image.to(torch.float32).contiguous(), spp, ctx.keep))
+        _spread_over_threads(b * n * n * spp, 1)
+        run = _frozen_camera_backward if FREEZE else _camera_backward
+        grad = run(data, frames, light_arr, values, δ, _Key(b, n, m, spp, reach))
         out = grad.torch().view(b, n, n, n, PACKET)
         dr.sync_thread()                                          # nothing in flight reads ``keep``
         return out, None, None, None, None, None

@@ -9,7 +9,9 @@ direction in grid units):
 
     τ_k(i) = τ_k(i − 1) + ℓ (σ_i + σ_{i−1}) / 2,     σ_{−1} = 0     (i: plane from the light's side)
 
-one lane per line, each line of each direction of each pair (launch 1). Then per voxel p (launch 2)
+one lane per line that crosses the cube, each direction's of each pair, over the planes where it
+is inside, longest lines first so that a SIMD packet's lanes take about as many steps (launch 1).
+Then per voxel p (launch 2)
 
     λ_k = w_k exp(−τ_{ℓ_k}(σ(p), ∇σ(p)·ω_k)),       F_k = exp(−τ_k(p + o_k))     (1 outside the cube)
     O(p) = 1 − (Σ_k λ_k F_k + ε) / (Σ_k λ_k + ε),    ε = 10⁻⁶
@@ -20,19 +22,21 @@ differences in torch).
 
 Adjoint: launch 2 backwards gives ∂L/∂σ(p), ∂L/∂∇σ(p) and ∂L/∂τ_k at p + o_k (a move is one to
 one, so plain scatters); launch 1 backwards marches each line from its far end with the suffix
-sums G_i = Σ_{j ≥ i} ∂L/∂τ_k(j), and ∂L/∂σ_i = ℓ (G_i + G_{i+1}) / 2, added into σ's gradient
-(``Expand`` on the LLVM backend: exact; atomics on CUDA), since every voxel lies on one line of
-each of the 14 directions.
+sums G_i = Σ_{j ≥ i} ∂L/∂τ_k(j), and ∂L/∂σ_i = ℓ (G_i + G_{i+1}) / 2. Every voxel lies on exactly
+one line of each of the 14 directions, so each direction's ∂L/∂σ is written by plain scatters into
+its own volume, and the 14 are summed in torch: no atomics anywhere.
 """
 
 from __future__ import annotations
 
+import functools
 import math
 from typing import Any, List, Tuple
 
+import numpy as np
 import torch
 
-from .marcher import _MODE, _shared, _spread_over_threads
+from .marcher import FREEZE, _shared, _spread_over_threads
 from .single_scatter import SKY_DIRECTIONS, SKY_WEIGHTS
 from .variant import ensure_variant, variant_device
 
@@ -78,7 +82,7 @@ def sky_offsets(reach: float) -> List[Tuple[int, int, int]]:
 
 class _Direction:
     """A sky direction's lines: its sweep axis, whether the light is at the high-index end, the
-    in-plane move per plane away from the light, ℓ, and the lines' range of sheared coordinates."""
+    in-plane move per plane away from the light and ℓ."""
 
     def __init__(self, d: Tuple[float, float, float], n: int):
         g = (-d[2], -d[1], d[0])                                  # [d, h, w]
@@ -89,84 +93,113 @@ class _Direction:
         # moving one plane away from the light moves −g_⊥/|g_a| in the plane
         self.move = [-int(round(g[a] / ga)) for a in self.across]
         self.ℓ = (2.0 / n) / ga
-        # a line: plane i at (R + i m_r, C + i m_c); R from −(N−1) where the line moves up, else 0
-        self.lo = [-(n - 1) if m > 0 else 0 for m in self.move]
-        self.hi = [n - 1 if m >= 0 else 2 * (n - 1) for m in self.move]
-        self.count = [h - l + 1 for l, h in zip(self.lo, self.hi)]
+
+    def lines(self, n: int) -> Tuple[np.ndarray, np.ndarray]:
+        """(first voxel, voxel count) of every line that crosses the cube. A line is plane i at
+        (R + i m_r, C + i m_c), planes counted from the light's side; it lies in the cube for the
+        planes i where both stay in [0, N)."""
+        stride = (n * n, n, 1)
+        spans = []                                                 # per in-plane coordinate: bases, planes [lo, hi]
+        for m in self.move:
+            base = np.arange(-(n - 1), 2 * n - 1) if m else np.arange(n)
+            lo = np.clip(-base if m > 0 else base - (n - 1) if m < 0 else 0 * base, 0, None)
+            hi = np.clip((n - 1) - base if m > 0 else base if m < 0 else (n - 1) + 0 * base, None, n - 1)
+            spans.append((base, lo, hi))
+        (R, lo_r, hi_r), (C, lo_c, hi_c) = spans
+        R, C = np.meshgrid(R, C, indexing="ij")
+        i0 = np.maximum(lo_r[:, None], lo_c[None, :])             # the first plane in the cube
+        i1 = np.minimum(hi_r[:, None], hi_c[None, :])             # the last
+        keep = i0 <= i1
+        R, C, i0, i1 = R[keep], C[keep], i0[keep], i1[keep]
+        plane = (n - 1) - i0 if self.flip else i0
+        first = plane * stride[self.axis] + (R + i0 * self.move[0]) * stride[self.across[0]] \
+            + (C + i0 * self.move[1]) * stride[self.across[1]]
+        return first, i1 - i0 + 1
+
+    def step(self, n: int) -> int:
+        """The voxel-number step from one plane to the next along the lines (away from the light)."""
+        stride = (n * n, n, 1)
+        return (-1 if self.flip else 1) * stride[self.axis] + self.move[0] * stride[self.across[0]] \
+            + self.move[1] * stride[self.across[1]]
+
+
+@functools.lru_cache(maxsize=8)
+def _line_table(n: int) -> Tuple[np.ndarray, ...]:
+    """Every line of the 14 directions that crosses an N³ cube, longest first (a SIMD packet's lanes
+    then take about as many steps): direction k, first voxel, voxel count."""
+    k, first, count = [], [], []
+    for i, d in enumerate(SKY_DIRECTIONS):
+        f, c = _Direction(d, n).lines(n)
+        k.append(np.full(len(f), i)), first.append(f), count.append(c)
+    k, first, count = np.concatenate(k), np.concatenate(first), np.concatenate(count)
+    order = np.argsort(-count, kind="stable")
+    return k[order].astype(np.uint32), first[order].astype(np.uint32), count[order].astype(np.uint32)
+
+
+def _line_arrays(n: int) -> Tuple[Any, ...]:
+    """:func:`_line_table` and the 14 directions' voxel steps and ℓ/2 as Dr.Jit arrays, made once per N
+    (a frozen launch takes them as inputs)."""
+    if n not in _LINE_ARRAYS:
+        dirs = [_Direction(d, n) for d in SKY_DIRECTIONS]
+        k, first, count = _line_table(n)
+        _LINE_ARRAYS[n] = (mi.UInt32(k), mi.UInt32(first), mi.UInt32(count), mi.Int32([d.step(n) for d in dirs]),
+                           mi.Float([0.5 * d.ℓ for d in dirs]))
+    return _LINE_ARRAYS[n]
+
+
+_LINE_ARRAYS: dict = {}
 
 
 class _Lines:
-    """The lines of all 14 directions of every pair in one launch: lane → (pair, direction k, line
-    (R, C)), and per lane its direction's strides, flip, in-plane move and ℓ (read from small tables)."""
+    """The lines of all 14 directions of every pair in one launch: lane → (pair, line), and per lane
+    its direction k, first voxel, voxel count, voxel step per plane and ℓ/2 (from :func:`_line_arrays`).
+    Every voxel lies on exactly one line of each direction, so each lane's reads and writes are
+    its own: plain scatters, no atomics."""
 
-    def __init__(self, b: int, n: int):
-        dirs = [_Direction(d, n) for d in SKY_DIRECTIONS]
-        counts = [d.count[0] * d.count[1] for d in dirs]
-        self.per_pair = sum(counts)
-        self.n, self.lanes = n, b * self.per_pair
+    def __init__(self, b: int, n: int, tables: Tuple[Any, ...]):
+        k, first, count, step, half = tables
+        self.n, self.per_pair = n, dr.width(k)
+        self.lanes = b * self.per_pair
         lane = dr.arange(mi.UInt32, self.lanes)
         self.pair = lane // self.per_pair
-        local = mi.Int32(lane - self.pair * self.per_pair)
-        stride = (n * n, n, 1)
-        starts = [sum(counts[:i]) for i in range(len(dirs))]      # each direction's first line
-        k = mi.Int32(0)
-        for start in starts[1:]:                                  # which direction: how many starts the lane is past
-            k += dr.select(local >= start, 1, 0)
-        self.k = mi.UInt32(k)
-        pick = lambda values, kind=mi.Int32: dr.gather(kind, kind(values), self.k)   # this lane's direction's value
-        line = local - pick(starts)
-        # ≥ 1 in every lane: idle lanes of a packet's padding read 0, and an integer division by 0 traps
-        count_c = dr.maximum(pick([d.count[1] for d in dirs]), 1)
-        self.R = line // count_c + pick([d.lo[0] for d in dirs])
-        self.C = line % count_c + pick([d.lo[1] for d in dirs])
-        self.s_a = pick([stride[d.axis] for d in dirs])
-        self.s_r = pick([stride[d.across[0]] for d in dirs])
-        self.s_c = pick([stride[d.across[1]] for d in dirs])
-        self.flip = pick([int(d.flip) for d in dirs]) == 1
-        self.m_r = pick([d.move[0] for d in dirs])
-        self.m_c = pick([d.move[1] for d in dirs])
-        self.half = 0.5 * pick([d.ℓ for d in dirs], mi.Float)
+        line = lane - self.pair * self.per_pair
+        self.k = dr.gather(mi.UInt32, k, line)
+        self.first = mi.Int32(dr.gather(mi.UInt32, first, line))
+        self.count = mi.Int32(dr.gather(mi.UInt32, count, line))
+        self.step = dr.gather(mi.Int32, step, self.k)
+        self.half = dr.gather(mi.Float, half, self.k)
 
-    def voxel(self, i: Any) -> Tuple[Any, Any]:
-        """(voxel number within a pair, inside) of plane i of each lane's line."""
-        n = self.n
-        plane = dr.select(self.flip, (n - 1) - i, i)
-        row, col = self.R + i * self.m_r, self.C + i * self.m_c
-        inside = (row >= 0) & (row < n) & (col >= 0) & (col < n)
-        return mi.UInt32(dr.clip(plane * self.s_a + row * self.s_r + col * self.s_c, 0, n ** 3 - 1)), inside
-
-    def at(self, voxel: Any) -> Any:
-        """Index of (pair, k, voxel) in a τ array ``(B, 14, N³)``."""
-        return (self.pair * 14 + self.k) * self.n ** 3 + voxel
+    def at(self, i: Any) -> Any:
+        """Index of (pair, k, voxel j of the line) in a ``(B, 14, N³)`` array, and the pair's σ index."""
+        voxel = mi.UInt32(self.first + i * self.step)
+        return (self.pair * 14 + self.k) * self.n ** 3 + voxel, self.pair * self.n ** 3 + voxel
 
 
 @dr.syntax
 def _sweep_lines(σ: Any, τ: Any, lines: _Lines) -> None:
-    """Launch 1: τ along each line, into τ (B, 14, N³)."""
-    n = lines.n
+    """Launch 1: τ along each line, from the light's side, into τ (B, 14, N³)."""
     i = mi.Int32(0)
     depth = mi.Float(0.0)
-    σ_prev = mi.Float(0.0)
-    while i < n:
-        voxel, inside = lines.voxel(i)
-        σ_i = dr.gather(mi.Float, σ, lines.pair * n ** 3 + voxel, inside)
+    σ_prev = mi.Float(0.0)                                        # outside the cube, before the line enters
+    while i < lines.count:
+        at, at_σ = lines.at(i)
+        σ_i = dr.gather(mi.Float, σ, at_σ)
         depth += lines.half * (σ_i + σ_prev)
-        dr.scatter(τ, depth, lines.at(voxel), inside)
+        dr.scatter(τ, depth, at)
         σ_prev = σ_i
         i += 1
 
 
 @dr.syntax
 def _sweep_lines_backward(gτ: Any, gσ: Any, lines: _Lines) -> None:
-    """Launch 1's adjoint: each line from its far end, ∂L/∂σ_i = ℓ (G_i + G_{i+1}) / 2."""
-    n = lines.n
-    i = mi.Int32(n - 1)
+    """Launch 1's adjoint: each line from its far end, ∂L/∂σ_i = ℓ (G_i + G_{i+1}) / 2, into gσ
+    (B, 14, N³), one entry per (direction, voxel)."""
+    i = lines.count - 1
     G_next = mi.Float(0.0)                                        # G_{i+1}
     while i >= 0:
-        voxel, inside = lines.voxel(i)
-        G = G_next + dr.gather(mi.Float, gτ, lines.at(voxel), inside)
-        dr.scatter_reduce(dr.ReduceOp.Add, gσ, lines.half * (G + G_next), lines.pair * n ** 3 + voxel, inside,
-                          mode=_MODE)
+        at, _ = lines.at(i)
+        G = G_next + dr.gather(mi.Float, gτ, at)
+        dr.scatter(gσ, lines.half * (G + G_next), at)
         G_next = G
         i -= 1
 
@@ -216,11 +249,71 @@ class _Voxels:
             τ_loc, dσ, db = local_depth_partials(self.σ, dr.dot(self.g, ω), ℓ)
             λ = w * dr.exp(-τ_loc)
             F_k, at, inside = self.far(τ, k, o)
-            dr.scatter_reduce(dr.ReduceOp.Add, gτ, -F_k * λ / den * gR, at, inside, mode=dr.ReduceMode.Direct)   # ∂R/∂F_k = λ_k / den; ∂F/∂τ = −F
+            dr.scatter(gτ, -F_k * λ / den * gR, at, inside)       # one to one; ∂R/∂F_k = λ_k / den, ∂F/∂τ = −F
             gτ_loc = -λ * (F_k - R) / den * gR                    # ∂R/∂λ_k = (F_k − R) / den; ∂λ/∂τ_loc = −λ
             gσ += gτ_loc * dσ
             gg += ω * (gτ_loc * db)
         return gσ, gg
+
+
+class _Key:
+    """The Python values a launch depends on (sizes, settings) and Dr.Jit's thread count (``Expand``
+    scatters size their per-thread copies when a kernel is recorded), as one hashable argument:
+    ``dr.freeze`` records a launch once per key and replays it after (:data:`.marcher.FREEZE`)."""
+
+    def __init__(self, *values: Any):
+        self.values = values
+        self.key = (values, dr.thread_count())
+
+    def __hash__(self) -> int:
+        return hash(self.key)
+
+    def __eq__(self, other: object) -> bool:
+        return isinstance(other, _Key) and self.key == other.key
+
+
+def _lines_forward(σ: Any, tables: Tuple[Any, ...], key: _Key) -> Any:
+    """Launch 1: τ (B, 14, N³)."""
+    b, n = key.values
+    τ = dr.empty(mi.Float, b * 14 * n ** 3)                       # every entry is written by one line
+    _sweep_lines(σ, τ, _Lines(b, n, tables))
+    dr.eval(τ)
+    return τ
+
+
+def _voxels_forward(σ: Any, g: Any, τ: Any, key: _Key) -> Any:
+    """Launch 2: O per voxel."""
+    O = _Voxels(σ, g, *key.values).occlusion(τ)
+    dr.eval(O)
+    return O
+
+
+def _voxels_backward(σ: Any, g: Any, τ: Any, gO: Any, key: _Key) -> Tuple[Any, ...]:
+    """Launch 2's adjoint: ∂L/∂σ(p), ∂L/∂∇σ(p) (three Floats) and ∂L/∂τ (B, 14, N³)."""
+    b, n, _ = key.values
+    gτ = dr.zeros(mi.Float, b * 14 * n ** 3)                      # entries no voxel reads stay 0
+    gσ, gg = _Voxels(σ, g, *key.values).occlusion_backward(τ, gO, gτ)
+    out = (mi.Float(gσ), gg.x, gg.y, gg.z, gτ)
+    dr.eval(out)
+    return out
+
+
+def _lines_backward(gτ: Any, tables: Tuple[Any, ...], key: _Key) -> Any:
+    """Launch 1's adjoint: ∂L/∂σ per direction (B, 14, N³)."""
+    b, n = key.values
+    gσ_k = dr.empty(mi.Float, b * 14 * n ** 3)                    # every entry is written by one line
+    _sweep_lines_backward(gτ, gσ_k, _Lines(b, n, tables))
+    dr.eval(gσ_k)
+    return gσ_k
+
+
+#: The four launches, replayed after their first call with the same key (:data:`.marcher.FREEZE`).
+_FROZEN = {f.__name__: dr.freeze(f, limit=64, warn_after=10_000)
+           for f in (_lines_forward, _voxels_forward, _voxels_backward, _lines_backward)}
+
+
+def _run(f: Any, *args: Any) -> Any:
+    return (_FROZEN[f.__name__] if FREEZE else f)(*args)
 
 
 class _SkyOcclusion(torch.autograd.Function):
@@ -232,33 +325,28 @@ class _SkyOcclusion(torch.autograd.Function):
         n = round(n3 ** (1.0 / 3.0))
         keep: list = []
         σ_d, g_d = _shared(σ.detach().contiguous(), keep), _shared(grad.detach().contiguous(), keep)
-        τ = dr.empty(mi.Float, b * 14 * n3)                        # every entry is written by one line
-        lines = _Lines(b, n)
-        _spread_over_threads(lines.lanes, 4)
-        _sweep_lines(σ_d, τ, lines)
-        dr.eval(τ)
+        tables = _line_arrays(n)
+        _spread_over_threads(b * dr.width(tables[0]), 4)
+        τ = _run(_lines_forward, σ_d, tables, _Key(b, n))
         _spread_over_threads(b * n3, 4)
-        O = _Voxels(σ_d, g_d, b, n, reach).occlusion(τ)
-        dr.eval(O)
+        O = _run(_voxels_forward, σ_d, g_d, τ, _Key(b, n, reach))
         ctx.saved = (σ_d, g_d, τ, b, n, reach)
         ctx.keep = keep
-        return O.torch().view(b, n3).clone()
+        out = O.torch().view(b, n3).clone()
+        dr.sync_thread()
+        return out
 
     @staticmethod
     def backward(ctx, gO: torch.Tensor):
         σ_d, g_d, τ, b, n, reach = ctx.saved
         gO_d = _shared(gO.to(torch.float32).contiguous(), ctx.keep)
-        gτ = dr.zeros(mi.Float, b * 14 * n ** 3)
-        _spread_over_threads(b * n ** 3, 1)
-        gσ, gg = _Voxels(σ_d, g_d, b, n, reach).occlusion_backward(τ, gO_d, gτ)
-        gσ = mi.Float(gσ)
-        dr.eval(gσ, gg, gτ)
-        lines = _Lines(b, n)
-        _spread_over_threads(lines.lanes, 1)
-        _sweep_lines_backward(gτ, gσ, lines)
-        dr.eval(gσ)
-        out_σ = gσ.torch().view(b, n ** 3).clone()
-        out_g = torch.stack([gg.x.torch(), gg.y.torch(), gg.z.torch()], dim=-1).view(b, n ** 3, 3).clone()
+        _spread_over_threads(b * n ** 3, 4)
+        gσ, gx, gy, gz, gτ = _run(_voxels_backward, σ_d, g_d, τ, gO_d, _Key(b, n, reach))
+        tables = _line_arrays(n)
+        _spread_over_threads(b * dr.width(tables[0]), 4)
+        gσ_k = _run(_lines_backward, gτ, tables, _Key(b, n))
+        out_σ = gσ.torch().view(b, n ** 3) + gσ_k.torch().view(b, 14, n ** 3).sum(1)
+        out_g = torch.stack([gx.torch(), gy.torch(), gz.torch()], dim=-1).view(b, n ** 3, 3).clone()
         dr.sync_thread()
         return out_σ, out_g, None
 
