@@ -109,14 +109,15 @@ def test_the_sky_occlusion_matches_its_torch_reference_in_value_and_gradient(rea
 
 def test_steady_state_replays_the_frozen_launches_without_retracing(monkeypatch):
     """A second call with new volumes, views and lights (same batch, resolution and settings)
-    replays every frozen launch (camera pass and sky, both ways): no new recording, and the same
+    replays every frozen launch (camera pass, packet and sky, both ways): no new recording, and the same
     images and gradients as freshly traced launches."""
     import importlib
     SM = importlib.import_module("mitsuba_platonic.render.scatter_march")
     SL = importlib.import_module("mitsuba_platonic.render.sky_light")
     if not SM.FREEZE:
         pytest.skip("MITSUBA_PLATONIC_FREEZE=0")
-    frozen = [SM._frozen_camera_forward, SM._frozen_camera_backward, *SL._FROZEN.values()]
+    frozen = [SM._frozen_camera_forward, SM._frozen_camera_backward, SM._frozen_assemble,
+              SM._frozen_assemble_backward, *SL._FROZEN.values()]
     first, lights_a, views_a, _ = _random_case(n=8, b=2, seed=11)
     x = first.clone().requires_grad_()
     render_scatter_march(x, views_a, lights_a, steps_per_voxel=3, spp=4).sum().backward()

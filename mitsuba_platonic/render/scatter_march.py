@@ -127,6 +127,31 @@ class _Assembly:
         return sum(w * dr.gather(mi.Float, grads, idx, inside) for idx, inside, w in self.corners(-1))
 
 
+def _assemble(σ: Any, rgb: Any, A: Any, O: Any, offsets: Any, key: _Key) -> Any:
+    """The packet's launch: (σ, a, A_s, σ_s, O, 0) per voxel, two 4-float halves."""
+    b, n = key.values
+    at = _Assembly(offsets, b, n)
+    lane, n3 = at.lane, n ** 3
+    colour = [dr.gather(mi.Float, rgb, (at.pair * 3 + c) * n3 + (lane - at.pair * n3)) for c in range(3)]
+    packet = dr.empty(mi.Float, b * n3 * PACKET)
+    dr.scatter(packet, mi.Vector4f(dr.gather(mi.Float, σ, lane), *colour), 2 * lane)
+    dr.scatter(packet, mi.Vector4f(at.read(A), at.read(σ), dr.gather(mi.Float, O, lane), 0.0), 2 * lane + 1)
+    dr.eval(packet)
+    return packet
+
+
+def _assemble_backward(g_A_s: Any, g_σ_s: Any, offsets: Any, key: _Key) -> Tuple[Any, Any]:
+    """Its adjoint for the sun's reads: ∂L/∂A and ∂L/∂σ through them (the other channels pass through)."""
+    at = _Assembly(offsets, *key.values)
+    out = (at.read_adjoint(g_A_s), at.read_adjoint(g_σ_s))
+    dr.eval(out)
+    return out
+
+
+_frozen_assemble = dr.freeze(_assemble, limit=64, warn_after=10_000)
+_frozen_assemble_backward = dr.freeze(_assemble_backward, limit=64, warn_after=10_000)
+
+
 class _Packet(torch.autograd.Function):
     """torch ↔ Dr.Jit: the camera pass's packet from σ, the volume's albedo, the sun's sweep A and the
     sky's O (each ``(B, N³)``, the albedo ``(B, 3, N³)``), in one launch per pass."""
@@ -137,20 +162,13 @@ class _Packet(torch.autograd.Function):
         b, n3 = σ.shape
         n = round(n3 ** (1.0 / 3.0))
         keep: list = []
-        σ_d, A_d, O_d = (_shared(x.detach().contiguous(), keep) for x in (σ, A, O))
-        rgb_d = _shared(rgb.detach().contiguous(), keep)
+        inputs = [_shared(x.detach().contiguous(), keep) for x in (σ, rgb, A, O)]
         o_d = _shared(offsets.to(torch.float32).contiguous(), keep)
         _spread_over_threads(b * n3, 4)
-        at = _Assembly(o_d, b, n)
-        lane = at.lane
-        colour = [dr.gather(mi.Float, rgb_d, (at.pair * 3 + c) * n3 + (lane - at.pair * n3)) for c in range(3)]
-        packet = dr.empty(mi.Float, b * n3 * PACKET)
-        dr.scatter(packet, mi.Vector4f(dr.gather(mi.Float, σ_d, lane), *colour), 2 * lane)
-        dr.scatter(packet, mi.Vector4f(at.read(A_d), at.read(σ_d), dr.gather(mi.Float, O_d, lane), 0.0), 2 * lane + 1)
-        dr.eval(packet)
+        packet = (_frozen_assemble if FREEZE else _assemble)(*inputs, o_d, _Key(b, n))
         ctx.saved = (o_d, b, n)
         ctx.keep = keep
-        out = packet.torch().view(b, n3, PACKET).clone()
+        out = packet.torch().view(b, n3, PACKET)                  # in Dr.Jit's memory, no copy
         dr.sync_thread()
         return out
 
@@ -158,15 +176,13 @@ class _Packet(torch.autograd.Function):
     def backward(ctx, g: torch.Tensor):
         o_d, b, n = ctx.saved
         g = g.to(torch.float32).contiguous()
-        keep = ctx.keep
-        g_A_s, g_σ_s = _shared(g[..., 4].contiguous(), keep), _shared(g[..., 5].contiguous(), keep)
+        g_A_s, g_σ_s = _shared(g[..., 4].contiguous(), ctx.keep), _shared(g[..., 5].contiguous(), ctx.keep)
         _spread_over_threads(b * n ** 3, 4)
-        at = _Assembly(o_d, b, n)
-        g_A, g_σ = at.read_adjoint(g_A_s), at.read_adjoint(g_σ_s)
-        dr.eval(g_A, g_σ)
-        g_A_t, g_σ_t = g_A.torch().view(b, -1).clone(), g_σ.torch().view(b, -1).clone()
+        g_A, g_σ = (_frozen_assemble_backward if FREEZE else _assemble_backward)(g_A_s, g_σ_s, o_d, _Key(b, n))
+        g_A_t, g_σ_t = g_A.torch().view(b, -1), g_σ.torch().view(b, -1)
+        out = (g[..., 0] + g_σ_t, g[..., 1:4].transpose(1, 2), g_A_t, g[..., 6], None)
         dr.sync_thread()
-        return g[..., 0] + g_σ_t, g[..., 1:4].transpose(1, 2), g_A_t, g[..., 6], None
+        return out
 
 
 def light_packet(volume: torch.Tensor, lights: LightBatch, reach: float = REACH) -> torch.Tensor:
