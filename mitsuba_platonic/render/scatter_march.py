@@ -127,12 +127,12 @@ class _Assembly:
         return sum(w * dr.gather(mi.Float, grads, idx, inside) for idx, inside, w in self.corners(-1))
 
 
-def _assemble(σ: Any, rgb: Any, A: Any, O: Any, offsets: Any, key: _Key) -> Any:
+def _assemble(σ: Any, rgba: Any, A: Any, O: Any, offsets: Any, key: _Key) -> Any:
     """The packet's launch: (σ, a, A_s, σ_s, O, 0) per voxel, two 4-float halves."""
     b, n = key.values
     at = _Assembly(offsets, b, n)
     lane, n3 = at.lane, n ** 3
-    colour = [dr.gather(mi.Float, rgb, (at.pair * 3 + c) * n3 + (lane - at.pair * n3)) for c in range(3)]
+    colour = [dr.gather(mi.Float, rgba, (at.pair * 4 + c) * n3 + (lane - at.pair * n3)) for c in range(3)]
     packet = dr.empty(mi.Float, b * n3 * PACKET)
     dr.scatter(packet, mi.Vector4f(dr.gather(mi.Float, σ, lane), *colour), 2 * lane)
     dr.scatter(packet, mi.Vector4f(at.read(A), at.read(σ), dr.gather(mi.Float, O, lane), 0.0), 2 * lane + 1)
@@ -153,16 +153,16 @@ _frozen_assemble_backward = dr.freeze(_assemble_backward, limit=64, warn_after=1
 
 
 class _Packet(torch.autograd.Function):
-    """torch ↔ Dr.Jit: the camera pass's packet from σ, the volume's albedo, the sun's sweep A and the
-    sky's O (each ``(B, N³)``, the albedo ``(B, 3, N³)``), in one launch per pass."""
+    """torch ↔ Dr.Jit: the camera pass's packet from σ, the volume (its albedo), the sun's sweep A and
+    the sky's O (each ``(B, N³)``, the volume ``(B, 4, N³)``), in one launch per pass."""
 
     @staticmethod
-    def forward(ctx, σ: torch.Tensor, rgb: torch.Tensor, A: torch.Tensor, O: torch.Tensor,
+    def forward(ctx, σ: torch.Tensor, rgba: torch.Tensor, A: torch.Tensor, O: torch.Tensor,
                 offsets: torch.Tensor) -> torch.Tensor:
         b, n3 = σ.shape
         n = round(n3 ** (1.0 / 3.0))
         keep: list = []
-        inputs = [_shared(x.detach().contiguous(), keep) for x in (σ, rgb, A, O)]
+        inputs = [_shared(x.detach().contiguous(), keep) for x in (σ, rgba, A, O)]
         o_d = _shared(offsets.to(torch.float32).contiguous(), keep)
         _spread_over_threads(b * n3, 4)
         packet = (_frozen_assemble if FREEZE else _assemble)(*inputs, o_d, _Key(b, n))
@@ -180,7 +180,9 @@ class _Packet(torch.autograd.Function):
         _spread_over_threads(b * n ** 3, 4)
         g_A, g_σ = (_frozen_assemble_backward if FREEZE else _assemble_backward)(g_A_s, g_σ_s, o_d, _Key(b, n))
         g_A_t, g_σ_t = g_A.torch().view(b, -1), g_σ.torch().view(b, -1)
-        out = (g[..., 0] + g_σ_t, g[..., 1:4].transpose(1, 2), g_A_t, g[..., 6], None)
+        g_rgba = torch.zeros(b, 4, n ** 3, device=g.device)         # the opacity's gradient comes through σ
+        g_rgba[:, :3] = g[..., 1:4].transpose(1, 2)
+        out = (g[..., 0] + g_σ_t, g_rgba, g_A_t, g[..., 6], None)
         dr.sync_thread()
         return out
 
@@ -195,7 +197,7 @@ def light_packet(volume: torch.Tensor, lights: LightBatch, reach: float = REACH)
     A = sweep(σ, lights.direction).opacity                       # the sun's sweep (torch)
     O = sky_occlusion(σ, reach)                                   # the sky's far occlusion (Dr.Jit)
     offsets = reach * _grid_dirs(lights.direction.to(torch.float64))   # where the sun's volumes are read
-    packet = _Packet.apply(flat(σ), volume[:, :3].reshape(b, 3, -1).to(device, torch.float32), flat(A), flat(O),
+    packet = _Packet.apply(flat(σ), volume.reshape(b, 4, -1).to(device, torch.float32), flat(A), flat(O),
                            offsets.to(device))
     return packet.view(b, n, n, n, PACKET).to(volume.device, volume.dtype)
 

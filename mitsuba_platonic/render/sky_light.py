@@ -16,8 +16,8 @@ is inside (launch 1). Then per voxel p (launch 2)
     O(p) = 1 − (Σ_k λ_k F_k + ε) / (Σ_k λ_k + ε),    ε = 10⁻⁶
 
 with τ_ℓ the local depth of the clamped linear field (:func:`local_depth`), o_k the far read's
-whole-voxel move (:func:`sky_offsets`) and ℓ_k = |o_k| Δ; ∇σ(p) comes from the caller (central
-differences in torch).
+whole-voxel move (:func:`sky_offsets`) and ℓ_k = |o_k| Δ; ∇σ(p) by central differences (in torch,
+its transpose too).
 
 Adjoint: launch 2 backwards gives ∂L/∂σ(p), ∂L/∂∇σ(p) and c(p) = ∂L/∂R / Σ_k λ_k (R = 1 − O);
 launch 1 backwards marches each line from its far end with the suffix sums G_i = Σ_{j ≥ i}
@@ -352,15 +352,41 @@ def _run(f: Any, *args: Any) -> Any:
     return (_FROZEN[f.__name__] if FREEZE else f)(*args)
 
 
+def _central_differences(σ: torch.Tensor) -> torch.Tensor:
+    """∇σ ``(B, N, N, N, 3)`` (∂σ/∂[d, h, w], world units) of ``σ`` ``(B, N, N, N)`` by central
+    differences, σ = 0 outside the cube: g_a(p) = (σ(p + e_a) − σ(p − e_a)) / 2Δ."""
+    Δ = 2.0 / σ.shape[-1]
+    p = torch.nn.functional.pad(σ, (1, 1, 1, 1, 1, 1))
+    return torch.stack([p[:, 2:, 1:-1, 1:-1] - p[:, :-2, 1:-1, 1:-1], p[:, 1:-1, 2:, 1:-1] - p[:, 1:-1, :-2, 1:-1],
+                        p[:, 1:-1, 1:-1, 2:] - p[:, 1:-1, 1:-1, :-2]], dim=-1) / (2.0 * Δ)
+
+
+def _central_differences_adjoint(gg: torch.Tensor) -> torch.Tensor:
+    """The transpose of :func:`_central_differences`: ∂L/∂σ(q) = Σ_a (gg_a(q − e_a) − gg_a(q + e_a)) / 2Δ,
+    gg = 0 outside the cube (in-place slices: no autograd, no padded copy)."""
+    Δ = 2.0 / gg.shape[-2]
+    g = gg / (2.0 * Δ)
+    out = torch.zeros(g.shape[:-1], dtype=g.dtype, device=g.device)
+    out[:, 1:] += g[:, :-1, :, :, 0]                               # q − e_d inside: + g_d(q − e_d)
+    out[:, :-1] -= g[:, 1:, :, :, 0]                               # q + e_d inside: − g_d(q + e_d)
+    out[:, :, 1:] += g[:, :, :-1, :, 1]
+    out[:, :, :-1] -= g[:, :, 1:, :, 1]
+    out[:, :, :, 1:] += g[:, :, :, :-1, 2]
+    out[:, :, :, :-1] -= g[:, :, :, 1:, 2]
+    return out
+
+
 class _SkyOcclusion(torch.autograd.Function):
-    """torch ↔ Dr.Jit: O from σ ``(B, N³)`` and ∇σ ``(B, N³, 3)``, float32."""
+    """torch ↔ Dr.Jit: O from σ ``(B, N, N, N)``, float32 (∇σ by central differences, formed and
+    transposed here)."""
 
     @staticmethod
-    def forward(ctx, σ: torch.Tensor, grad: torch.Tensor, reach: float) -> torch.Tensor:
-        b, n3 = σ.shape
-        n = round(n3 ** (1.0 / 3.0))
+    def forward(ctx, σ: torch.Tensor, reach: float) -> torch.Tensor:
+        b, n = σ.shape[0], σ.shape[-1]
+        n3 = n ** 3
         keep: list = []
-        σ_d, g_d = _shared(σ.detach().contiguous(), keep), _shared(grad.detach().contiguous(), keep)
+        σ_d = _shared(σ.detach().contiguous(), keep)
+        g_d = _shared(_central_differences(σ.detach()).contiguous(), keep)
         tables = _line_arrays(n)
         _spread_over_threads(b * dr.width(tables[0]), 4)
         τ = _run(_lines_forward, σ_d, tables, _Key(b, n))
@@ -368,7 +394,7 @@ class _SkyOcclusion(torch.autograd.Function):
         O = _run(_voxels_forward, σ_d, g_d, τ, _Key(b, n, reach))
         ctx.saved = (σ_d, g_d, τ, b, n, reach)
         ctx.keep = keep
-        out = O.torch().view(b, n3).clone()
+        out = O.torch().view(b, n, n, n).clone()
         dr.sync_thread()
         return out
 
@@ -381,20 +407,15 @@ class _SkyOcclusion(torch.autograd.Function):
         tables = _line_arrays(n)
         _spread_over_threads(b * dr.width(tables[0]), 4)
         gσ_k = _run(_lines_backward, τ, σ_d, g_d, c, tables, _term_arrays(n, reach), _Key(b, n))
-        out_σ = gσ.torch().view(b, n ** 3) + gσ_k.torch().view(b, 14, n ** 3).sum(1)
-        out_g = torch.stack([gx.torch(), gy.torch(), gz.torch()], dim=-1).view(b, n ** 3, 3).clone()
+        gg = torch.stack([gx.torch(), gy.torch(), gz.torch()], dim=-1).view(b, n, n, n, 3)
+        out = (gσ.torch().view(b, n, n, n) + gσ_k.torch().view(b, 14, n, n, n).sum(1)
+               + _central_differences_adjoint(gg))
         dr.sync_thread()
-        return out_σ, out_g, None
+        return out, None
 
 
 def sky_occlusion(σ: torch.Tensor, reach: float) -> torch.Tensor:
     """O ``(B, 1, N, N, N)`` of an extinction volume ``σ`` ``(B, 1, N, N, N)`` (module docstring),
-    differentiable w.r.t. ``σ``: ∇σ by central differences (zero outside the cube), in torch."""
-    b, n = σ.shape[0], σ.shape[-1]
-    Δ = 2.0 / n
-    p = torch.nn.functional.pad(σ[:, 0].to(variant_device()), (1, 1, 1, 1, 1, 1))   # where Dr.Jit's arrays live
-    grad = torch.stack([p[:, 2:, 1:-1, 1:-1] - p[:, :-2, 1:-1, 1:-1], p[:, 1:-1, 2:, 1:-1] - p[:, 1:-1, :-2, 1:-1],
-                        p[:, 1:-1, 1:-1, 2:] - p[:, 1:-1, 1:-1, :-2]], dim=-1) / (2.0 * Δ)   # ∂σ/∂[d, h, w]
-    O = _SkyOcclusion.apply(σ.reshape(b, -1).to(p.device, torch.float32), grad.reshape(b, -1, 3).to(torch.float32),
-                            reach)
-    return O.view(b, 1, n, n, n).to(σ.device, σ.dtype)
+    differentiable w.r.t. ``σ``: ∇σ by central differences (zero outside the cube)."""
+    O = _SkyOcclusion.apply(σ[:, 0].to(variant_device(), torch.float32), reach)
+    return O[:, None].to(σ.device, σ.dtype)
