@@ -1,7 +1,7 @@
 """Benchmark: single scattering at the marcher's speed (render/scatter_march.py) against Mitsuba's
 volpath and the torch formation (render/single_scatter.py), and its cost beside the EA marcher.
 
-    .venv/bin/python benchmarks/scatter_march.py [--cost-only]
+    .venv/bin/python benchmarks/scatter_march.py [--cost-only] [--repeats R]
 
 Prints three tables (figures only; tests/test_scatter_march.py asserts the agreement):
 
@@ -14,7 +14,7 @@ Prints three tables (figures only; tests/test_scatter_march.py asserts the agree
    this one at several settings.
 3. Seconds per forward + backward of 8 pairs at 32³ and 64³ (random volumes, views and lights):
    the EA marcher, the torch formation (32³ only) and this one, with the light volumes' share;
-   interleaved, median of 3, one run, on the variant's device (the GPU under cuda_ad_rgb), each
+   interleaved, median of --repeats (7), one run, on the variant's device (the GPU under cuda_ad_rgb), each
    timing waiting for queued CUDA work and Dr.Jit launches.
 """
 
@@ -92,9 +92,9 @@ def blob_and_box() -> None:
         print(f"| {name} | " + " | ".join(cells) + " |")
 
 
-def cost() -> None:
+def cost(repeats: int) -> None:
     device = variant_device()                                 # cuda under cuda_ad_rgb: every formation there
-    print(f"\n### Seconds per forward + backward, 8 pairs (median of 3, interleaved, one run; variant "
+    print(f"\n### Seconds per forward + backward, 8 pairs (median of {repeats}, interleaved, one run; variant "
           f"{ensure_variant().variant()}, on {device})\n")
     print("| N | EA marcher | torch formation | this (m = 2, spp 1) | of which light volumes | ratio to the EA marcher |")
     print("|---|---|---|---|---|---|")
@@ -120,7 +120,7 @@ def cost() -> None:
         for f in runs.values():
             step(f)                                            # warm-up: kernels, allocator
         times = {k: [] for k in runs}
-        for _ in range(3):
+        for _ in range(repeats):
             for k, f in runs.items():
                 times[k].append(step(f))
         t = {k: statistics.median(v) for k, v in times.items()}
@@ -132,11 +132,12 @@ def cost() -> None:
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--cost-only", action="store_true", help="only the third table (seconds)")
+    ap.add_argument("--repeats", type=int, default=7, help="timings per formation and size (their median)")
     args = ap.parse_args()
     if not args.cost_only:
         half_space()
         blob_and_box()
-    cost()
+    cost(args.repeats)
 
 
 if __name__ == "__main__":
