@@ -14,9 +14,8 @@ from mitsuba_platonic.errors import UserError
 from mitsuba_platonic.render import render
 from mitsuba_platonic.render.scatter_march import _ScatterMarch, light_packet, local_depth, render_scatter_march
 from mitsuba_platonic.render.single_scatter import (LightBatch, SunAndSky, reference_render, sample_lights,
-                                                    sample_sun_and_sky, sweep)
+                                                    sample_sun_and_sky)
 from mitsuba_platonic.render.sky_light import sky_occlusion
-from mitsuba_platonic.render.sun_light import sun_sweep
 from mitsuba_platonic.render.variant import variant_device
 from scatter_reference import reference_light_packet, reference_scatter_march, reference_sky_occlusion
 from test_single_scatter import FRONT, SKY, SUN_ABOVE, _coords, _scene, _sun
@@ -89,26 +88,6 @@ def test_the_light_packet_matches_its_torch_reference_in_value_and_gradient():
     σ = (torch.rand(1, 1, 4, 4, 4, dtype=torch.float64, generator=torch.Generator().manual_seed(6)) * 20 + 1)
     assert torch.autograd.gradcheck(lambda x: reference_sky_occlusion(x, 2.0), (σ.requires_grad_(),), eps=1e-6,
                                     atol=1e-6, rtol=1e-4)
-
-
-def test_the_suns_plane_launches_match_the_torch_sweep_in_value_and_gradient():
-    """render/sun_light.py against single_scatter.sweep (torch's plane loop, its autograd) on an
-    opaque block, exact zeros and random σ, under suns along an axis (δ = 0), a diagonal (δ = ±1
-    exactly), and oblique from either side (negative δ: ⌊δ⌋ = −1), float32."""
-    g = torch.Generator().manual_seed(0)
-    σ = torch.rand(6, 1, 7, 7, 7, generator=g, dtype=torch.float64) * 8
-    σ[0, 0, 2:5, 2:5, 2:5] = 60.0
-    σ[1, 0, :, :3] = 0.0
-    dirs = torch.tensor([[0.3, 0.8, 0.5], [0.0, 1.0, 0.0], [1.0, 1.0, 1.0], [-0.2, -0.9, 0.3], [0.7, -0.1, -0.7],
-                         [0.0, 0.0, -1.0]], dtype=torch.float64)
-    dirs = dirs / dirs.norm(dim=1, keepdim=True)
-    ours_in, ref_in = σ.float().requires_grad_(), σ.clone().requires_grad_()
-    ours, ref = sun_sweep(ours_in, dirs), sweep(ref_in, dirs).opacity
-    assert torch.allclose(ours.double(), ref, atol=1e-6), float((ours.double() - ref).abs().max())
-    w = torch.randn(ref.shape, generator=g, dtype=torch.float64)
-    (ours * w.float()).sum().backward()
-    (ref * w).sum().backward()
-    assert torch.allclose(ours_in.grad.double(), ref_in.grad, atol=1e-6 * float(ref_in.grad.abs().max()))
 
 
 @pytest.mark.parametrize("reach", [2.0, 1.0])

@@ -9,12 +9,11 @@ plane by plane:
 
 Light volumes (differentiable; :func:`light_packet`). Per pair, at the voxel centres p:
 
-    A_s(p) = 1 − T_sweep(p + ℓ ω_s)           the sun's sweep (:mod:`.sun_light`), read ℓ ahead
+    A_s(p) = 1 − T_sweep(p + ℓ ω_s)           the sun's sweep (:func:`.single_scatter.sweep`), read ℓ ahead
     σ_s(p) = σ(p + ℓ ω_s)                       σ where that read is
     O(p)   = 1 − Σ_k w_k λ_k(p) T_k(p + o_k) / Σ_k w_k λ_k(p)        the sky's far occlusion
 
-the sun's sweep plane by plane (:mod:`.sun_light`: :func:`.single_scatter.sweep`'s rule in one
-Dr.Jit launch per plane), the sky's O (:mod:`.sky_light`, which defines it), with the 14
+the sun's sweep in torch, the sky's O in Dr.Jit (:mod:`.sky_light`, which defines it), with the 14
 sky directions ω_k and weights w_k of :mod:`.single_scatter`, ℓ = ``reach`` voxels, o_k the sky's
 whole-voxel far reads (:func:`~.sky_light.sky_offsets`) and λ_k(p) the local factor below at p.
 One Dr.Jit launch per pass assembles the packet (:class:`_Packet`): the sun's two reads ℓ ahead
@@ -71,9 +70,8 @@ import torch
 from ..errors import UserError
 from .grids import extinction
 from .marcher import _MODE, FREEZE, _frames, _image_to_per_ray, _per_ray_to_image, _shared, _spread_over_threads
-from .single_scatter import SKY_DIRECTIONS, SKY_WEIGHTS, LightBatch, _check, mean_luminance
+from .single_scatter import SKY_DIRECTIONS, SKY_WEIGHTS, LightBatch, _check, mean_luminance, sweep
 from .sky_light import _Key, local_depth, local_depth_partials, sky_occlusion, sky_offsets
-from .sun_light import sun_sweep
 from .variant import ensure_variant, variant_device
 
 mi = ensure_variant()
@@ -196,7 +194,7 @@ def light_packet(volume: torch.Tensor, lights: LightBatch, reach: float = REACH)
     device = variant_device()                                     # where Dr.Jit's arrays live
     flat = lambda x: x.reshape(b, -1).to(device, torch.float32)
     σ = extinction(volume[:, 3:])
-    A = sun_sweep(σ, lights.direction)                            # the sun's sweep (Dr.Jit, plane by plane)
+    A = sweep(σ, lights.direction).opacity                       # the sun's sweep (torch)
     O = sky_occlusion(σ, reach)                                   # the sky's far occlusion (Dr.Jit)
     offsets = reach * _grid_dirs(lights.direction.to(torch.float64))   # where the sun's volumes are read
     packet = _Packet.apply(flat(σ), volume.reshape(b, 4, -1).to(device, torch.float32), flat(A), flat(O),
