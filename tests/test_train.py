@@ -232,52 +232,53 @@ def test_light_share_holds_ea_through_the_warmup_then_ramps_linearly_over_the_fa
     assert [light_share(s, 3, 4) for s in (0, 2, 3, 4, 5, 7, 100)] == [0.0, 0.0, 0.0, 0.25, 0.5, 1.0, 1.0]
     assert [light_share(s, 2, 0) for s in (0, 1, 2, 3)] == [0.0, 0.0, 1.0, 1.0]       # no fade: a switch
     assert light_share(0, 0, 0) == 1.0                                                  # lit from the start
+    with pytest.raises(ValueError, match="warmup, fade"):
+        light_share(0, -1, 0)
 
 
-def test_light_warmup_renders_ea_then_blends_the_lit_image_in_with_gradients_through_both():
-    """make_renderer(lit, warmup 2, fade 2): steps 0–1 are the EA marcher's image exactly, step 3
-    is ½ EA + ½ lit (each rendered on its own), step 4 on the lit image exactly; a loss on the
-    blend has the gradient of the same blend of both renderers' losses."""
-    from mitsuba_platonic.render import RenderSettings, render_with
-    from mitsuba_platonic.train.renderer import EA_WARMUP, make_renderer
+def test_the_blend_is_ea_then_both_then_the_lit_image_with_gradients_through_both():
+    """blend(EA, lit, λ): at λ 0 the EA marcher's image exactly, at 1 the lit one exactly, at ½
+    ½ EA + ½ lit (each rendered on its own); a loss on the blend has the gradient of the same blend
+    of both renderers' losses."""
+    from mitsuba_platonic.render import RenderSettings
+    from mitsuba_platonic.train.renderer import EA_WARMUP, blend, make_renderer
     from mitsuba_platonic.views import sample_views
     g = torch.Generator().manual_seed(0)
     v = (torch.rand(2, 4, 8, 8, 8, generator=g) * 0.6).requires_grad_()
     views = sample_views(2, seed=1)
-    lit = RenderSettings(backend="scatter_march", model="ea", steps_per_voxel=2)
-    fn = make_renderer(lit, warmup=2, fade=2)
-    ea, ss = render_with(v, views, EA_WARMUP, 5), render_with(v, views, lit, 5)
+    ea_fn = make_renderer(EA_WARMUP)
+    lit_fn = make_renderer(RenderSettings(backend="scatter_march", model="ea", steps_per_voxel=2))
+    ea, ss = ea_fn(v, views, 5), lit_fn(v, views, 5)
     assert not torch.allclose(ea, ss, atol=1e-3)                                         # two different images
-    for step in (0, 1):
-        assert torch.equal(fn(v, views, 5, step), ea)
-    assert torch.equal(fn(v, views, 5, 4), ss) and torch.equal(fn(v, views, 5), ss)
-    half = fn(v, views, 5, 3)
+    assert torch.equal(blend(ea_fn, lit_fn, 0.0)(v, views, 5), ea)
+    assert torch.equal(blend(ea_fn, lit_fn, 1.0)(v, views, 5), ss)
+    half = blend(ea_fn, lit_fn, 0.5)(v, views, 5)
     torch.testing.assert_close(half, 0.5 * ea + 0.5 * ss, rtol=0, atol=1e-6)
     w = torch.randn(half.shape, generator=g)
     (grad,) = torch.autograd.grad((half * w).sum(), v)
     (g_ea,) = torch.autograd.grad((ea * w).sum(), v)
     (g_ss,) = torch.autograd.grad((ss * w).sum(), v)
     torch.testing.assert_close(grad, 0.5 * g_ea + 0.5 * g_ss, rtol=1e-5, atol=1e-7)
-    with pytest.raises(ValueError, match="warmup, fade"):
-        make_renderer(lit, warmup=-1)
 
 
 def test_trainer_renders_through_ea_for_the_light_warmup(tmp_path, monkeypatch):
-    """train.light_warmup 2 with a lit backend: the trainer's renders of steps 0–1 (random views and
-    the input view) go through the EA marcher, those of steps 2–3 through the lit renderer."""
+    """train.light_warmup 2, light_fade 2 with a lit backend: the trainer's renders (random views
+    and the input view) of steps 0–2 go through the EA marcher alone (λ 0, 0, 0), of step 3 through
+    both (λ ½), of steps 4–5 through the lit renderer alone."""
     import mitsuba_platonic.train.renderer as renderer
     cfg = _cfg(tmp_path, "render.backend=scatter_march", "render.steps_per_voxel=2", "train.task=reconstruction",
-               "train.light_warmup=2")
+               "train.light_warmup=2", "train.light_fade=2", "run.steps=6")
     trainer = Trainer(cfg, load_training_data(cfg, progress=False), torch.device("cpu"))
     seen = []
     real = renderer.render_with
     monkeypatch.setattr(renderer, "render_with", lambda v, w, s, seed: seen.append(s.backend) or real(v, w, s, seed))
     per_step = []
-    for step in range(4):
+    for step in range(6):
         trainer.step(step)
         per_step.append(sorted(set(seen)))
         seen.clear()
-    assert per_step == [["mitsuba"], ["mitsuba"], ["scatter_march"], ["scatter_march"]]
+    lit = ["scatter_march"]
+    assert per_step == [["mitsuba"]] * 3 + [["mitsuba", "scatter_march"], lit, lit], per_step
 
 
 def test_light_warmup_is_refused_without_a_lit_renderer_or_below_zero(tmp_path):

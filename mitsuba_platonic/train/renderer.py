@@ -20,36 +20,36 @@ import torch
 
 from ..render import RenderSettings, render_with
 
-__all__ = ["make_renderer", "light_share", "RenderFn", "EA_WARMUP"]
+__all__ = ["make_renderer", "light_share", "blend", "RenderFn", "EA_WARMUP"]
 
-#: ``fn(volume, views, seed, step=None) → images`` (:func:`make_renderer`)
-RenderFn = Callable[..., torch.Tensor]
+#: ``fn(volume, views, seed) → images`` (:func:`make_renderer`)
+RenderFn = Callable[[torch.Tensor, torch.Tensor, int], torch.Tensor]
 
 #: The emission–absorption renderer of a warm-up: the batched marcher, one ray per pixel.
 EA_WARMUP = RenderSettings(backend="mitsuba", model="ea")
 
 
+def make_renderer(settings: RenderSettings) -> RenderFn:
+    """``fn(volume, views, seed) → images``, differentiable w.r.t. ``volume``: the config's
+    ``render`` section (a :class:`~mitsuba_platonic.render.RenderSettings`) with a per-step seed."""
+    settings = settings.validate()
+    return lambda v, w, seed: render_with(v, w, settings, seed)
+
+
 def light_share(step: int, warmup: int, fade: int) -> float:
     """λ_s of the module docstring: 0 during the warm-up, 1 once the fade is over."""
+    if warmup < 0 or fade < 0:
+        raise ValueError(f"warmup, fade: expected numbers of steps ≥ 0, got {warmup!r}, {fade!r}")
     if step < warmup:
         return 0.0
     return 1.0 if fade == 0 else min(1.0, (step - warmup) / fade)
 
 
-def make_renderer(settings: RenderSettings, warmup: int = 0, fade: int = 0) -> RenderFn:
-    """``fn(volume, views, seed, step=None) → images``, differentiable w.r.t. ``volume``: the
-    config's ``render`` section (a :class:`~mitsuba_platonic.render.RenderSettings`) with a
-    per-step seed, entered through EA for ``warmup`` steps and a ``fade`` (module docstring; a
-    ``step`` of None: the renderer itself, as after the schedule)."""
-    settings = settings.validate()
-    if warmup < 0 or fade < 0:
-        raise ValueError(f"warmup, fade: expected numbers of steps ≥ 0, got {warmup!r}, {fade!r}")
-
-    def render(v: torch.Tensor, w: torch.Tensor, seed: int, step: "int | None" = None) -> torch.Tensor:
-        λ = 1.0 if step is None else light_share(step, warmup, fade)
-        if λ == 1.0:
-            return render_with(v, w, settings, seed)
-        ea = render_with(v, w, EA_WARMUP, seed)
-        return ea if λ == 0.0 else (1.0 - λ) * ea + λ * render_with(v, w, settings, seed)
-
-    return render
+def blend(ea: RenderFn, lit: RenderFn, λ: float) -> RenderFn:
+    """The renderer of a step with light share λ (module docstring): ``lit`` itself at 1, ``ea`` at
+    0, else both, blended."""
+    if λ == 1.0:
+        return lit
+    if λ == 0.0:
+        return ea
+    return lambda v, w, seed: (1.0 - λ) * ea(v, w, seed) + λ * lit(v, w, seed)

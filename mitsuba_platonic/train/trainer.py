@@ -102,7 +102,7 @@ from .augment import augment, augment_photos
 from .data import TrainingData
 from .losses import (colour_match, colour_offset, colour_tv, d_loss, g_loss, gradient_penalty, hard_accuracy_counts,
                      r1_penalty, soft_accuracy_counts)
-from .renderer import make_renderer
+from .renderer import EA_WARMUP, blend, light_share, make_renderer
 from .roll import input_frame_roll, roll
 from .settings import MODES, MODES_3D, POSES, REC_TARGETS, TASKS  # noqa: F401  (the choice lists, also named here)
 
@@ -173,7 +173,9 @@ class Trainer:
         self.opt_d = torch.optim.Adam(self.nets["D"].parameters(), lr=t.lr_d, betas=betas)
         self.opt_d3 = (torch.optim.Adam(self.nets["D3"].parameters(), lr=t.lr_d, betas=betas)
                        if "D3" in self.nets else None)
-        self.render = make_renderer(cfg.render, cfg.train.light_warmup, cfg.train.light_fade)
+        self.render = make_renderer(cfg.render)
+        #: the EA marcher of an emissive start (train.light_warmup, light_fade), else None
+        self.render_ea = make_renderer(EA_WARMUP) if cfg.train.light_warmup or cfg.train.light_fade else None
         self.images = data.images.to(device)
         self.volumes = data.volumes.to(device) if needs_3d else None
         #: 'prgan': the 8 ring views (train.elevation, default 0°)
@@ -299,10 +301,12 @@ class Trainer:
             v = G(codes)
             v_view, v_input = v[:b * K], v[b * K:]
         seed = int(np.random.SeedSequence([cfg.run.seed, step, 7, self.rank]).generate_state(1)[0] >> 2)
-        i_view = self.render(v_view, views.to(self.device), seed, step)
+        render = self.render if self.render_ea is None else \
+            blend(self.render_ea, self.render, light_share(step, t.light_warmup, t.light_fade))
+        i_view = render(v_view, views.to(self.device), seed)
         i_front = None
         if rec and t.rec_target == "image":                  # the input view (rendered before D: adv_input)
-            i_front = self.render(v_input, front_view(b).to(self.device), seed + 1, step)
+            i_front = render(v_input, front_view(b).to(self.device), seed + 1)
         out: Dict[str, float] = {}
 
         # -- D: real photos vs rendered views, gated by its soft accuracy -----------------------
