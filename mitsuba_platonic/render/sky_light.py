@@ -138,34 +138,25 @@ def _line_table(n: int) -> Tuple[np.ndarray, ...]:
     return k.astype(np.uint32), first.astype(np.uint32), count.astype(np.uint32)
 
 
+@functools.lru_cache(maxsize=8)
 def _line_arrays(n: int) -> Tuple[Any, ...]:
     """:func:`_line_table` and the 14 directions' voxel steps and ℓ/2 as Dr.Jit arrays, made once per N
     (a frozen launch takes them as inputs)."""
-    if n not in _LINE_ARRAYS:
-        dirs = [_Direction(d, n) for d in SKY_DIRECTIONS]
-        k, first, count = _line_table(n)
-        _LINE_ARRAYS[n] = (mi.UInt32(k), mi.UInt32(first), mi.UInt32(count), mi.Int32([d.step(n) for d in dirs]),
-                           mi.Float([0.5 * d.ℓ for d in dirs]))
-    return _LINE_ARRAYS[n]
+    dirs = [_Direction(d, n) for d in SKY_DIRECTIONS]
+    k, first, count = _line_table(n)
+    return (mi.UInt32(k), mi.UInt32(first), mi.UInt32(count), mi.Int32([d.step(n) for d in dirs]),
+            mi.Float([0.5 * d.ℓ for d in dirs]))
 
 
-_LINE_ARRAYS: dict = {}
-
-
+@functools.lru_cache(maxsize=8)
 def _term_arrays(n: int, reach: float) -> Tuple[Any, ...]:
     """Per sky direction k, for the lines' adjoint: w_k, ω_k (d, h, w components, world units),
     ℓ_k (world units) and the far read's move o_k (d, h, w), as Dr.Jit arrays, made once per (N, ℓ)."""
-    if (n, reach) not in _TERM_ARRAYS:
-        Δ, offsets = 2.0 / n, sky_offsets(reach)
-        _TERM_ARRAYS[(n, reach)] = (
-            mi.Float(list(SKY_WEIGHTS)),
+    Δ, offsets = 2.0 / n, sky_offsets(reach)
+    return (mi.Float(list(SKY_WEIGHTS)),
             *(mi.Float([(-d[2], -d[1], d[0])[a] for d in SKY_DIRECTIONS]) for a in range(3)),
             mi.Float([math.sqrt(sum(x * x for x in o)) * Δ for o in offsets]),
             *(mi.Int32([o[a] for o in offsets]) for a in range(3)))
-    return _TERM_ARRAYS[(n, reach)]
-
-
-_TERM_ARRAYS: dict = {}
 
 
 class _Lines:
@@ -255,20 +246,20 @@ class _Voxels:
         self.terms = [(w, mi.Vector3f(-d[2], -d[1], d[0]), math.sqrt(sum(x * x for x in o)) * self.Δ, o)
                       for w, d, o in zip(SKY_WEIGHTS, SKY_DIRECTIONS, sky_offsets(reach))]
 
-    def far(self, τ: Any, k: int, o: Tuple[int, int, int]) -> Tuple[Any, Any, Any]:
-        """F_k = exp(−τ_k(p + o_k)) (1 outside the cube), the τ index read and whether it is inside."""
+    def far(self, τ: Any, k: int, o: Tuple[int, int, int]) -> Any:
+        """F_k = exp(−τ_k(p + o_k)) (1 outside the cube)."""
         n = self.n
         q = self.p + mi.Vector3i(*o)
         inside = dr.all((q >= 0) & (q < n))
         at = (self.pair * 14 + k) * n ** 3 + mi.UInt32(dr.clip((q.x * n + q.y) * n + q.z, 0, n ** 3 - 1))
-        return dr.exp(-dr.gather(mi.Float, τ, at, inside)), at, inside
+        return dr.exp(-dr.gather(mi.Float, τ, at, inside))
 
     def _sums(self, τ: Any) -> Tuple[Any, Any]:
         """Σ_k λ_k F_k + ε and Σ_k λ_k + ε."""
         num, den = mi.Float(EPSILON), mi.Float(EPSILON)
         for k, (w, ω, ℓ, o) in enumerate(self.terms):
             λ = w * dr.exp(-local_depth(self.σ, dr.dot(self.g, ω), ℓ))
-            num += λ * self.far(τ, k, o)[0]
+            num += λ * self.far(τ, k, o)
             den += λ
         return num, den
 
@@ -287,7 +278,7 @@ class _Voxels:
         for k, (w, ω, ℓ, o) in enumerate(self.terms):
             τ_loc, dσ, db = local_depth_partials(self.σ, dr.dot(self.g, ω), ℓ)
             λ = w * dr.exp(-τ_loc)
-            gτ_loc = -λ * (self.far(τ, k, o)[0] - R) * c           # ∂R/∂λ_k = (F_k − R) / Σλ; ∂λ/∂τ_loc = −λ
+            gτ_loc = -λ * (self.far(τ, k, o) - R) * c           # ∂R/∂λ_k = (F_k − R) / Σλ; ∂λ/∂τ_loc = −λ
             gσ += gτ_loc * dσ
             gg += ω * (gτ_loc * db)
         return gσ, gg, c
