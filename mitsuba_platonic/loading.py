@@ -69,7 +69,7 @@ def model_from_checkpoint(cls: Type[M], ckpt: Checkpoint, cfg: Optional[Config] 
     if "ema" in trainer:
         load_weights(model, trainer["ema"], ckpt.path, what)
     else:
-        load_weights(model, {k: v for k, v in nets.items() if k.startswith(("E.", "G.", "P."))}, ckpt.path, what)
+        load_weights(model, {k: v for k, v in nets.items() if k.startswith(("E.", "G.", "P.", "L."))}, ckpt.path, what)
     model.step, model.origin = ckpt.step, ckpt.path
     device = next(iter(nets.values())).device if nets else torch.device("cpu")
     return model.to(device)

@@ -23,8 +23,12 @@ an object frame, and :meth:`Model.reconstruct` turns that volume into the input 
 θ̂ (:func:`~mitsuba_platonic.render.closed_form.tilt`), so every model's reconstructions live in
 the frame of their input view (docs/training.md, "An elevation read from the photo").
 
-Its state dict keys are the checkpoint's (``E.*``, ``G.*``, ``P.*``): a checkpoint's ``nets``
-holds E, G (and P) under the same names, next to the critics D and D3 that only training needs.
+A model trained with ``train.light: head`` has a light head L (z → the photo's sun direction
+and sky share, :class:`~mitsuba_platonic.models.LightHead`; docs/training.md, "A light read from
+the photo").
+
+Its state dict keys are the checkpoint's (``E.*``, ``G.*``, ``P.*``, ``L.*``): a checkpoint's ``nets``
+holds E, G (and P, L) under the same names, next to the critics D and D3 that only training needs.
 """
 
 from __future__ import annotations
@@ -38,7 +42,7 @@ from torch import nn
 
 from .data.photos import decode_image, prepare_image
 from .errors import UserError
-from .models import Encoder, Generator, NetConfig, PoseHead, init_weights
+from .models import Encoder, Generator, LightHead, NetConfig, PoseHead, init_weights
 from .photo_colours import photo_volume
 from .render.closed_form import tilt
 from .render.settings import RenderSettings
@@ -58,9 +62,9 @@ def view_codes(cfg: Any) -> int:
 def net_config(cfg: Any) -> NetConfig:
     """The networks' shapes for a config: its model section's
     (:meth:`~mitsuba_platonic.model_settings.ModelConfig.net_config`), with the channels of its
-    image formation, the PrGAN view code and the pose head its train section asks for."""
+    image formation, the PrGAN view code and the pose and light heads its train section asks for."""
     return cfg.model.net_config(CHANNELS[cfg.render.model], view_codes=view_codes(cfg),
-                                pose=cfg.train.pose == "elevation")
+                                pose=cfg.train.pose == "elevation", light=cfg.train.light == "head")
 
 
 def critic_config(cfg: Any) -> NetConfig:
@@ -87,6 +91,8 @@ class Model(nn.Module):
         self.G = Generator(net)
         #: the pose head (``train.pose: elevation``), else None
         self.P: Optional[PoseHead] = PoseHead(net.latent) if net.pose else None
+        #: the light head (``train.light: head``), else None
+        self.L: Optional[LightHead] = LightHead(net.latent) if net.light else None
         if init:
             self.apply(init_weights)
 

@@ -32,9 +32,10 @@ import torch.nn.functional as F
 from torch import nn
 
 from .photo_colours import COLOUR_MIN
+from .render.single_scatter import SKY_SHARE
 
 __all__ = ["NORMS", "UPSAMPLES", "INITS", "PRECISIONS", "NetConfig", "Encoder", "Generator", "Discriminator",
-           "VolumeDiscriminator", "PoseHead", "ResizeConv3d", "init_weights", "init_critic_he", "init_he"]
+           "VolumeDiscriminator", "PoseHead", "LightHead", "ResizeConv3d", "init_weights", "init_critic_he", "init_he"]
 
 NORMS = ("batch", "instance", "none")
 #: How G doubles its resolution: the paper's transposed convolution (k4, s2, p1), or a nearest
@@ -73,7 +74,8 @@ class NetConfig:
     PrGAN-style baseline, ``train.mode: prgan``: a one-hot of one of 8 ring views; 0: none, G
     sees z only); upsample: how G's stages double the resolution (:data:`UPSAMPLES`); pose:
     whether a :class:`PoseHead` reads the input camera's elevation from z (``train.pose:
-    elevation``); precision: the networks' arithmetic (:data:`PRECISIONS`); photo_colour: G's colour is an
+    elevation``); light: whether a :class:`LightHead` reads the photo's light from z (``train.light:
+    head``); precision: the networks' arithmetic (:data:`PRECISIONS`); photo_colour: G's colour is an
     offset from the input photo's mean colour (:meth:`Generator.forward`); photo_texture: from the
     photo's colour at each voxel's pixel instead (:func:`~mitsuba_platonic.photo_colours.photo_texture`);
     texture_surface, texture_sides, texture_blur: that colour recoloured
@@ -90,6 +92,7 @@ class NetConfig:
     upsample: str = "transposed"
     view_codes: int = 0
     pose: bool = False
+    light: bool = False
     precision: str = "fp32"
     photo_colour: bool = False
     photo_texture: bool = False
@@ -117,6 +120,8 @@ class NetConfig:
             raise ValueError(f"view_codes must be a non-negative int, got {self.view_codes!r}")
         if not isinstance(self.pose, bool):
             raise ValueError(f"pose must be True or False, got {self.pose!r}")
+        if not isinstance(self.light, bool):
+            raise ValueError(f"light must be True or False, got {self.light!r}")
         if self.precision not in PRECISIONS:
             raise ValueError(f"precision must be one of {PRECISIONS}, got {self.precision!r}")
         if not isinstance(self.photo_colour, bool):
@@ -374,6 +379,36 @@ class PoseHead(nn.Module):
             raise ValueError(f"P expects codes (B, {self.weight.shape[0]}), got {tuple(z.shape)}")
         return (math.pi / 2) * torch.tanh(z @ self.weight + self.bias)
 
+
+
+class LightHead(nn.Module):
+    """L: E's code z ``(B, latent)`` → the light of the photo it encodes, as the single-scattering
+    formation's grey daylight (:func:`~mitsuba_platonic.render.single_scatter.daylights`): the sun's
+    direction in the *camera's* frame (right, up, ω: the input camera's frame is the world's) and the
+    sky's share of the mean luminance,
+
+        ω̂_s = u / |u|,   u = W_d z + b_d;        ŝ = s₀ + (s₁ − s₀) · sigmoid(w_s · z + b_s)
+
+    with [s₀, s₁] the prior's range of shares (:data:`~mitsuba_platonic.render.single_scatter.SKY_SHARE`).
+    W and w start at 0 and b_d at (0, 1, 0), b_s at 0: every estimate starts as a sun straight
+    above the camera and the prior's middle share. Plain parameters, as :class:`PoseHead`'s, so no
+    network initialisation redraws them. ``train.light: head`` (:mod:`mitsuba_platonic.train.trainer`)
+    teaches it the lights of G's own renders, whose lights are drawn from the prior and known.
+    """
+
+    def __init__(self, latent: int):
+        super().__init__()
+        self.weight = nn.Parameter(torch.zeros(latent, 4))
+        self.bias = nn.Parameter(torch.tensor([0.0, 1.0, 0.0, 0.0]))
+
+    def forward(self, z: torch.Tensor) -> Tuple[torch.Tensor, torch.Tensor]:
+        """(ω̂_s ``(B, 3)`` unit vectors in the camera's frame, ŝ ``(B,)``)."""
+        if z.dim() != 2 or z.shape[1] != self.weight.shape[0]:
+            raise ValueError(f"L expects codes (B, {self.weight.shape[0]}), got {tuple(z.shape)}")
+        u = z @ self.weight + self.bias
+        d = u[:, :3] / u[:, :3].norm(dim=1, keepdim=True).clamp_min(1e-6)
+        lo, hi = SKY_SHARE
+        return d, lo + (hi - lo) * torch.sigmoid(u[:, 3])
 
 def init_weights(m: nn.Module) -> None:
     """DCGAN initialisation: N(0, 0.02) weights, norm scales N(1, 0.02); G's output starts from

@@ -18,7 +18,7 @@ from ..views import CAMERAS, lens
 from ..volume import MODELS
 from .closed_form import FILTERS as GRID_SAMPLE_MODES
 
-__all__ = ["RenderSettings", "BACKENDS", "LIT", "MODELS", "FILTERS", "LIGHTINGS", "FORMATIONS", "CAMERAS", "OPTIONS_OF"]
+__all__ = ["RenderSettings", "BACKENDS", "LIT", "SINGLE_SCATTERING", "MODELS", "FILTERS", "LIGHTINGS", "FORMATIONS", "CAMERAS", "OPTIONS_OF"]
 
 #: Backends: the paper's closed-form layers (reference), the batched Dr.Jit ray marcher,
 #: Mitsuba's differentiable volumetric path tracer under natural light, and single scattering of
@@ -26,6 +26,8 @@ __all__ = ["RenderSettings", "BACKENDS", "LIT", "MODELS", "FILTERS", "LIGHTINGS"
 BACKENDS = ("closed_form", "mitsuba", "physical", "single_scatter", "scatter_march")
 #: The backends that light what they render (colour only, the orthographic camera).
 LIT = ("physical", "single_scatter", "scatter_march")
+#: The lit backends whose light is a sun and a sky (:class:`~.single_scatter.LightBatch`).
+SINGLE_SCATTERING = ("single_scatter", "scatter_march")
 FILTERS = tuple(GRID_SAMPLE_MODES)                          # trilinear, nearest
 LIGHTINGS = ("sunsky", "envmap", "mixed")
 #: How a collection's images are formed: the renderer's image formations, or path-traced (make-dataset).

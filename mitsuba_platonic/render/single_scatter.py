@@ -69,7 +69,7 @@ from .grids import extinction
 
 __all__ = ["SunAndSky", "LightBatch", "sample_sun_and_sky", "sample_lights", "SKY_DIRECTIONS", "SKY_WEIGHTS",
            "Sweep", "sweep", "transmittance", "render_single_scatter", "reference_render", "mean_luminance",
-           "EXPOSURES"]
+           "EXPOSURES", "SKY_SHARE", "daylights", "sky_share"]
 
 #: Rec. 709 / sRGB luminance weights of linear RGB.
 _Y = (0.2126, 0.7152, 0.0722)
@@ -138,6 +138,10 @@ class LightBatch:
         return self.direction.shape[0]
 
 
+#: The range of the sky's share of the mean luminance in :func:`sample_sun_and_sky`'s prior.
+SKY_SHARE = (0.2, 0.6)
+
+
 def sample_sun_and_sky(rng: np.random.Generator) -> SunAndSky:
     """A random daylight: the sun's azimuth uniform, its elevation uniform in [10°, 75°] (as
     :func:`.physical.sample_lighting` draws Mitsuba's suns), the sky's share of the mean
@@ -145,10 +149,29 @@ def sample_sun_and_sky(rng: np.random.Generator) -> SunAndSky:
     φ = rng.uniform(0.0, 2.0 * math.pi)
     θ = math.radians(rng.uniform(10.0, 75.0))
     d = (math.cos(θ) * math.sin(φ), math.sin(θ), math.cos(θ) * math.cos(φ))
-    share = rng.uniform(0.2, 0.6)
-    sky = 0.5 * share
-    sun = 0.5 * (1.0 - share) * 4.0 * math.pi                  # E_s / 4π is the sun's share of L̄
+    share = rng.uniform(*SKY_SHARE)
+    sun, sky = _grey_daylight(share)
     return SunAndSky(d, (sun, sun, sun), (sky, sky, sky))
+
+
+def _grey_daylight(share):
+    """(E_s, L_sky) of a grey daylight of mean luminance L̄ = ½ whose sky holds ``share`` of it:
+    L_sky = ½ share, E_s / 4π = ½ (1 − share) (a float, or a tensor of shares)."""
+    return 0.5 * (1.0 - share) * 4.0 * math.pi, 0.5 * share
+
+
+def daylights(directions: torch.Tensor, shares: torch.Tensor) -> LightBatch:
+    """Grey daylights of the prior's kind (:func:`sample_sun_and_sky`) with the given sun
+    ``directions`` ``(B, 3)`` (unit vectors, normalised here) and sky ``shares`` ``(B,)``: what a
+    light read from a photo (:class:`~mitsuba_platonic.models.LightHead`) renders with. Detached,
+    float64, on the CPU, as :class:`LightBatch` holds its lights."""
+    d = directions.detach().to("cpu", torch.float64)
+    if d.dim() != 2 or d.shape[1] != 3 or shares.shape != (d.shape[0],):
+        raise UserError(f"daylights: expected directions (B, 3) and shares (B,), got {tuple(d.shape)} and "
+                        f"{tuple(shares.shape)}")
+    sun, sky = _grey_daylight(shares.detach().to("cpu", torch.float64))
+    return LightBatch(d / d.norm(dim=1, keepdim=True), sun[:, None].expand(-1, 3).clone(),
+                      sky[:, None].expand(-1, 3).clone())
 
 
 def sample_lights(b: int, seed: int) -> LightBatch:
@@ -161,6 +184,12 @@ def mean_luminance(lights: LightBatch) -> torch.Tensor:
     """L̄ = Y(E_s) / 4π + Y(L_sky) per pair ``(B,)``: the light's mean luminance over the sphere."""
     y = lights.irradiance.new_tensor(_Y)
     return (lights.irradiance @ y) / (4.0 * math.pi) + lights.sky @ y
+
+
+def sky_share(lights: LightBatch) -> torch.Tensor:
+    """Y(L_sky) / L̄ per pair ``(B,)``: the sky's share of the mean luminance (the prior draws it
+    from :data:`SKY_SHARE`; :func:`daylights` builds a light from it)."""
+    return (lights.sky @ lights.sky.new_tensor(_Y)) / mean_luminance(lights)
 
 
 # -- Light: transmittance volumes -----------------------------------------------------------------

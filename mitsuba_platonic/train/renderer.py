@@ -1,5 +1,6 @@
-"""The rendering layer R(ω, v) a run trains through, chosen by ``config.render``, and the schedule
-that can start a lit run through emission–absorption (``train.light_warmup``, ``train.light_fade``).
+"""The rendering layer R(ω, v) a run trains through, chosen by ``config.render``, the schedule
+that can start a lit run through emission–absorption (``train.light_warmup``, ``train.light_fade``),
+and single scattering under a given light (``train.light: head``).
 
 A lit renderer (single scattering, the path tracer) can be entered from an emissive start, as
 Nimier-David et al. (2022) start dense scattering volumes, and ShadeGAN fades its shading in: at
@@ -10,6 +11,15 @@ step s the image G's volume is judged by is
 with W = ``light_warmup`` steps through the EA marcher alone and F = ``light_fade`` steps of the
 blend (both renderers run only while 0 < λ_s < 1). What it does to shape: docs/training.md,
 "Training through light".
+
+A light read from the photo (``train.light: head``, docs/training.md, "A light read from the
+photo"): the random views are rendered under lights drawn from the prior, pair i's from the step's
+seed as :func:`~mitsuba_platonic.render.render_with` draws them
+(:func:`~mitsuba_platonic.render.single_scatter.sample_lights`), so the
+trainer knows them; a light head learns to read them from those renders, in each view's camera
+frame (:func:`in_camera`: the sun direction's components along the camera's right, up and ω), and
+the input view, whose camera frame is the world's, is rendered under the light it reads from the
+photo (:func:`make_lit_renderer`).
 """
 
 from __future__ import annotations
@@ -19,11 +29,17 @@ from typing import Callable
 import torch
 
 from ..render import RenderSettings, render_with
+from ..render.settings import SINGLE_SCATTERING
+from ..render.single_scatter import LightBatch, render_single_scatter
+from ..views import camera_frames
 
-__all__ = ["make_renderer", "light_share", "blend", "RenderFn", "EA_WARMUP"]
+__all__ = ["make_renderer", "light_share", "blend", "RenderFn", "LitRenderFn", "EA_WARMUP", "make_lit_renderer",
+           "in_camera"]
 
 #: ``fn(volume, views, seed) → images`` (:func:`make_renderer`)
 RenderFn = Callable[[torch.Tensor, torch.Tensor, int], torch.Tensor]
+#: ``fn(volume, views, lights) → images`` (:func:`make_lit_renderer`)
+LitRenderFn = Callable[[torch.Tensor, torch.Tensor, LightBatch], torch.Tensor]
 
 #: The emission–absorption renderer of a warm-up: the batched marcher, one ray per pixel.
 EA_WARMUP = RenderSettings(backend="mitsuba", model="ea")
@@ -53,3 +69,28 @@ def blend(ea: RenderFn, lit: RenderFn, λ: float) -> RenderFn:
     if λ == 0.0:
         return ea
     return lambda v, w, seed: (1.0 - λ) * ea(v, w, seed) + λ * lit(v, w, seed)
+
+
+def make_lit_renderer(settings: RenderSettings) -> LitRenderFn:
+    """``fn(volume, views, lights) → images``, differentiable w.r.t. ``volume``: single scattering
+    (``settings.backend`` 'single_scatter' or 'scatter_march', with its steps and samples) under the
+    given :class:`~mitsuba_platonic.render.single_scatter.LightBatch`, one light per pair, in place
+    of the prior's."""
+    settings = settings.validate()
+    if settings.backend not in SINGLE_SCATTERING:
+        raise ValueError(f"make_lit_renderer: expected a backend of {list(SINGLE_SCATTERING)}, got {settings.backend!r}")
+    if settings.backend == "single_scatter":
+        return lambda v, w, lights: render_single_scatter(v, w.to(v.device), lights, steps_per_voxel=settings.steps_per_voxel,
+                                                          shadow_planes=settings.shadow_planes, spp=settings.spp)
+    from ..render.scatter_march import render_scatter_march        # imports Dr.Jit: on first use
+    return lambda v, w, lights: render_scatter_march(v, w, lights, steps_per_voxel=settings.steps_per_voxel,
+                                                     spp=settings.spp)
+
+
+def in_camera(directions: torch.Tensor, views: torch.Tensor) -> torch.Tensor:
+    """World ``directions`` ``(B, 3)`` in the frames of the cameras of ``views`` ``(B, 3)``
+    (:func:`~mitsuba_platonic.views.camera_frames`): ``(d · right, d · up, d · ω)``, float64. The input
+    view ω₀ = (0, 0, 1) has right = +x and up = +y, so there camera and world coordinates agree."""
+    right, up, ω = camera_frames(views)
+    d = directions.to(right.device, torch.float64)
+    return torch.stack([(d * right).sum(1), (d * up).sum(1), (d * ω).sum(1)], dim=1)

@@ -22,7 +22,7 @@ from .augment import AUGMENTS, PHOTO_AUGMENTS
 from .losses import LOSSES
 from .roll import ROLLS
 
-__all__ = ["TrainConfig", "TASKS", "MODES", "MODES_3D", "REC_TARGETS", "REC_LOSSES", "REC_CHANNELS", "POSES", "PRGAN"]
+__all__ = ["TrainConfig", "TASKS", "MODES", "MODES_3D", "REC_TARGETS", "REC_LOSSES", "REC_CHANNELS", "POSES", "LIGHTS", "PRGAN"]
 
 #: What E/G learn: reconstruct the input image, or generate from z ~ N(0, I).
 TASKS = ("reconstruction", "generation")
@@ -42,6 +42,8 @@ REC_LOSSES = ("l2", "l1")
 REC_CHANNELS = ("all", "alpha")
 #: train.pose: G's volume in the input camera's frame, or upright and tilted by an elevation E reads
 POSES = ("input", "elevation")
+#: train.light: where the light of the input view's render comes from
+LIGHTS = ("prior", "head")
 #: How messages name ``train.mode: prgan``.
 PRGAN = "the PrGAN-style baseline ('prgan')"
 
@@ -67,7 +69,12 @@ class TrainConfig:
     'single_scatter', 'scatter_march' or 'physical') entered from emission–absorption: the first
     ``light_warmup`` steps render through the EA marcher, the next ``light_fade`` blend the two
     images linearly towards the lit one (0, 0: lit from the start;
-    :mod:`mitsuba_platonic.train.renderer`, docs/training.md, "Training through light"); adv_input: weight of a second adversarial
+    :mod:`mitsuba_platonic.train.renderer`, docs/training.md, "Training through light"); light: the
+    light of the input view's render under single scattering (render.backend 'single_scatter' or
+    'scatter_march'), 'prior' (drawn from the prior, as every random view's is) or 'head': a light
+    head reads the photo's sun direction and sky share from E's code, learnt from G's renders under
+    the prior's lights, and the input view is rendered under it, so that the image term can compare
+    colour and shading (rec_channels 'all'; docs/training.md, "A light read from the photo"); adv_input: weight of a second adversarial
     term on the render of the input view, which D also learns to tell from the photos (0: none, the
     paper's: the input view answers to the reconstruction term alone; image targets, mode
     'platonic'); weight_3d: weight of the 3D adversarial term;
@@ -124,6 +131,7 @@ class TrainConfig:
     rec_channels: str = "all"
     light_warmup: int = 0
     light_fade: int = 0
+    light: str = "prior"
     adv_input: float = 0.0
     weight_3d: float = 1.0
     lr_g: float = 1e-3
@@ -229,6 +237,13 @@ class TrainConfig:
             value = getattr(self, key)
             if isinstance(value, bool) or not isinstance(value, int) or value < 0:
                 raise ConfigError(f"train.{key}: expected a number of steps ≥ 0, got {value!r}")
+        choice("train.light", self.light, LIGHTS)
+        if self.light == "head" and (self.task != "reconstruction" or self.mode != "platonic"
+                                     or self.rec_target != "image" or self.rec_channels != "all"):
+            raise ConfigError("train.light: 'head' renders the input view under the light read from the photo so that "
+                              "the image term compares its colour; it needs train.task 'reconstruction', mode "
+                              f"'platonic', rec_target 'image' and rec_channels 'all', got task {self.task!r}, mode "
+                              f"{self.mode!r}, rec_target {self.rec_target!r}, rec_channels {self.rec_channels!r}")
         non_negative("train.adv_input", self.adv_input)
         if self.adv_input > 0 and (self.task != "reconstruction" or self.mode != "platonic"
                                    or self.rec_target != "image" or self.d_roll != "none"):

@@ -39,6 +39,17 @@ and a reconstruction is ``tilt(G(z), P(z))`` (:meth:`~mitsuba_platonic.model.Mod
 Only the elevation is estimated: an azimuth turns an upright object into an upright object, so G
 is free to build it already turned to the input's azimuth.
 
+A light read from the photo (``train.light: head``, single scattering): the random views are lit
+by lights ℓ_i drawn from the prior (sun direction ω_s, sky share s), known to the trainer, and a
+light head L learns to read them from those renders in each view's camera frame, as P learns
+elevations:
+
+    L_light = mean (1 − L_ω(E(I_view)) · ω_s^cam) + mean ((L_s(E(I_view)) − s) / (s₁ − s₀))²     (I_view detached)
+
+((s₀, s₁) the prior's range of shares); the input view is then rendered under L(z), held constant,
+so the input-view term compares colour and shading under the photo's light, not a random one
+(docs/training.md, "A light read from the photo").
+
 The reconstruction term compares images by default (``train.rec_target: image``, as above). With
 ``rec_target: volume`` (the 3D modes) it compares volumes instead: λ_rec ‖v − v*‖², where v* is
 the input image's ground-truth volume resampled into its camera's frame (where v lives, the frame
@@ -96,13 +107,14 @@ from ..config import Config, ConfigError
 from ..model import RING_VIEWS, Model, critic_config
 from ..models import Discriminator, VolumeDiscriminator, init_critic_he, init_he, init_weights
 from ..photo_colours import photo_volume
+from ..render.single_scatter import SKY_SHARE, daylights, sample_lights, sky_share
 from ..render.closed_form import rotate, tilt
 from ..views import DEFAULT_ELEVATION, from_angles, front_view, sample_views, to_angles
 from .augment import augment, augment_photos
 from .data import TrainingData
 from .losses import (colour_match, colour_offset, colour_tv, d_loss, g_loss, gradient_penalty, hard_accuracy_counts,
                      r1_penalty, soft_accuracy_counts)
-from .renderer import EA_WARMUP, blend, light_share, make_renderer
+from .renderer import EA_WARMUP, blend, in_camera, light_share, make_lit_renderer, make_renderer
 from .roll import input_frame_roll, roll
 from .settings import MODES, MODES_3D, POSES, REC_TARGETS, TASKS  # noqa: F401  (the choice lists, also named here)
 
@@ -141,6 +153,8 @@ class Trainer:
         nets = {"E": self.model.E, "G": self.model.G, "D": Discriminator(critic)}
         if self.model.P is not None:                         # train.pose: elevation (starts at 0°)
             nets["P"] = self.model.P
+        if self.model.L is not None:                         # train.light: head (starts at a sun overhead)
+            nets["L"] = self.model.L
         if needs_3d:
             nets["D3"] = VolumeDiscriminator(critic)
         self.nets = nn.ModuleDict(nets)
@@ -167,8 +181,9 @@ class Trainer:
         groups = [{"params": self.nets["G"].parameters(), "lr": t.lr_g}]
         if t.task == "reconstruction":
             groups.append({"params": self.nets["E"].parameters(), "lr": t.lr_e})
-        if "P" in self.nets:                                 # the pose head learns with E
-            groups.append({"params": self.nets["P"].parameters(), "lr": t.lr_e})
+        for head in ("P", "L"):                              # the pose and light heads learn with E
+            if head in self.nets:
+                groups.append({"params": self.nets[head].parameters(), "lr": t.lr_e})
         self.opt_g = torch.optim.Adam(groups, betas=betas)
         self.opt_d = torch.optim.Adam(self.nets["D"].parameters(), lr=t.lr_d, betas=betas)
         self.opt_d3 = (torch.optim.Adam(self.nets["D3"].parameters(), lr=t.lr_d, betas=betas)
@@ -176,6 +191,8 @@ class Trainer:
         self.render = make_renderer(cfg.render)
         #: the EA marcher of an emissive start (train.light_warmup, light_fade), else None
         self.render_ea = make_renderer(EA_WARMUP) if cfg.train.light_warmup or cfg.train.light_fade else None
+        #: train.light: head: single scattering under a given light, for the input view; else None
+        self.render_lit = make_lit_renderer(cfg.render) if cfg.train.light == "head" else None
         self.images = data.images.to(device)
         self.volumes = data.volumes.to(device) if needs_3d else None
         #: 'prgan': the 8 ring views (train.elevation, default 0°)
@@ -305,7 +322,11 @@ class Trainer:
             blend(self.render_ea, self.render, light_share(step, t.light_warmup, t.light_fade))
         i_view = render(v_view, views.to(self.device), seed)
         i_front = None
-        if rec and t.rec_target == "image":                  # the input view (rendered before D: adv_input)
+        if rec and t.rec_target == "image" and self.render_lit is not None:
+            with torch.no_grad():                            # the photo's light as L reads it, held constant
+                ω_s, share = self.nets["L"](z.detach())      # (the plain module: DDP sees one use of L)
+            i_front = self.render_lit(v_input, front_view(b).to(self.device), daylights(ω_s, share))
+        elif rec and t.rec_target == "image":                # the input view (rendered before D: adv_input)
             i_front = render(v_input, front_view(b).to(self.device), seed + 1)
         out: Dict[str, float] = {}
 
@@ -355,6 +376,8 @@ class Trainer:
             out["loss_rec"] = float(self._all_sum(loss_rec.detach().cpu()) / self.world)
         if t.pose_weight > 0:                                # P learns the elevations of G's renders
             terms["pose"] = t.pose_weight * self._pose_loss(i_view, views, out)
+        if self.render_lit is not None:                      # L learns the lights of G's renders
+            terms["light"] = self._light_loss(i_view, views, seed, out)
         self._update_g(self._g_objective(terms), step)
         out["loss_g"] = float(self._all_sum(loss_adv.detach().cpu()) / self.world)
         return out
@@ -363,7 +386,8 @@ class Trainer:
         """G's (and E's) loss: the sum of its weighted terms, named 'adv2d' (D on rendered views),
         'adv3d' (D3 on volumes), 'adv_input' (D on the input view), 'rec' (the input view), 'rec3d'
         (the input image's ground-truth volume), 'pose' (the elevations of G's renders), 'colour_tv',
-        'colour_match' and 'colour_offset' (priors, when their weights are set). One place that sees
+        'colour_match' and 'colour_offset' (priors, when their weights are set), 'light' (the lights of
+        G's renders). One place that sees
         every term, so the tests can check which of them reach G."""
         return sum(terms.values())
 
@@ -374,6 +398,22 @@ class Trainer:
         θ = to_angles(views, degrees=False)[1].to(self.device, i_view.dtype)
         loss = F.mse_loss(self.modules["P"](self.modules["E"](i_view.detach())), θ)
         out["loss_pose"] = float(self._all_sum(loss.detach().cpu()) / self.world)
+        return loss
+
+    def _light_loss(self, i_view: torch.Tensor, views: torch.Tensor, seed: int,
+                    out: Dict[str, float]) -> torch.Tensor:
+        """L_light (module docstring) over G's renders ``i_view`` (detached) from ``views`` (this
+        process's rows), lit by the prior's lights for ``seed`` (the renderer's own draw,
+        :func:`~mitsuba_platonic.render.single_scatter.sample_lights`): the light head learns the sun's
+        direction in each view's camera frame and the sky's share. Logs ``loss_light``."""
+        lights = sample_lights(len(i_view), seed)
+        ω_cam = in_camera(lights.direction, views).to(self.device, i_view.dtype)
+        share = sky_share(lights)
+        ω_hat, s_hat = self.modules["L"](self.modules["E"](i_view.detach()))
+        lo, hi = SKY_SHARE
+        loss = (1.0 - (ω_hat * ω_cam).sum(1)).mean() + \
+            (((s_hat - share.to(self.device, s_hat.dtype)) / (hi - lo)) ** 2).mean()
+        out["loss_light"] = float(self._all_sum(loss.detach().cpu()) / self.world)
         return loss
 
     def _update_g(self, loss: torch.Tensor, step: int) -> None:
