@@ -226,6 +226,17 @@ class Model(nn.Module):
                             "(its reconstructions are in the input camera's frame as they come)")
         return self._eval(lambda: torch.rad2deg(self.P(self.E(images.to(self.device)))))
 
+    @torch.no_grad()
+    def estimate_light(self, images: torch.Tensor) -> Tuple[torch.Tensor, torch.Tensor]:
+        """The light a model trained with ``train.light: head`` reads from ``(B, C, R, R)`` images:
+        the sun's direction in each input camera's frame (right, up, ω) ``(B, 3)`` and the sky's
+        share of the mean luminance ``(B,)`` (:class:`~mitsuba_platonic.models.LightHead`); a
+        :class:`~mitsuba_platonic.errors.UserError` for a model without a light head."""
+        self._needs_encoder()
+        if self.L is None:
+            raise UserError("this model estimates no light: it was trained with train.light: prior")
+        return self._eval(lambda: self.L(self.E(images.to(self.device))))
+
     def _needs_encoder(self) -> None:
         if self.task != "reconstruction":
             where = self.origin.parent.parent if self.origin is not None else "this model"

@@ -7,6 +7,7 @@ import pytest
 import torch
 
 from mitsuba_platonic.config import ConfigError, load_config
+from mitsuba_platonic.errors import UserError
 from mitsuba_platonic.model import Model
 from mitsuba_platonic.models import LightHead, init_he, init_weights
 from mitsuba_platonic.render import RenderSettings, render_with
@@ -173,4 +174,12 @@ def test_a_model_read_from_a_run_keeps_its_trained_light_head(tmp_path, cache):
     run_dir = R.train(cfg, progress=False)
     model = Model.from_checkpoint(run_dir)
     assert model.L is not None and float(model.L.weight.detach().abs().sum()) > 0
-    assert Model.from_config(_cfg(cache, "train.light=prior")).L is None
+    x = load_training_data(cfg, progress=False).images[:3]
+    d, s = model.estimate_light(x)
+    with torch.no_grad():
+        d_ref, s_ref = model.L(model.E(x))
+    assert torch.equal(d, d_ref) and torch.equal(s, s_ref) and d.shape == (3, 3) and s.shape == (3,)
+    plain = Model.from_config(_cfg(cache, "train.light=prior"))
+    assert plain.L is None
+    with pytest.raises(UserError, match="this model estimates no light: it was trained with train.light: prior"):
+        plain.estimate_light(x)
