@@ -59,6 +59,17 @@ def test_daylights_are_the_priors_kind_of_light_and_give_back_their_share():
         daylights(torch.zeros(2, 3), torch.zeros(3))
 
 
+def _in_frame(d: torch.Tensor, views: torch.Tensor) -> torch.Tensor:
+    """``d`` ``(B, 3)`` along the camera's right (cos φ, 0, −sin φ), up (−sin θ sin φ, cos θ,
+    −sin θ cos φ) and ω, for views at azimuth φ and elevation θ: written out from the angles, not
+    read from views.camera_frames."""
+    φ, θ = (a.double() for a in to_angles(views, degrees=False))
+    right = torch.stack([φ.cos(), torch.zeros_like(φ), -φ.sin()], 1)
+    up = torch.stack([-θ.sin() * φ.sin(), θ.cos(), -θ.sin() * φ.cos()], 1)
+    d = d.double()
+    return torch.stack([(d * right).sum(1), (d * up).sum(1), (d * views.double()).sum(1)], 1)
+
+
 def test_in_camera_is_the_world_at_the_input_view_and_the_turned_frame_elsewhere():
     """At ω₀ camera and world coordinates agree; at azimuth φ, elevation θ the camera's right is
     (cos φ, 0, −sin φ) and its up (−sin θ sin φ, cos θ, −sin θ cos φ) (written out here, not read
@@ -66,10 +77,7 @@ def test_in_camera_is_the_world_at_the_input_view_and_the_turned_frame_elsewhere
     d = torch.randn(4, 3, generator=torch.Generator().manual_seed(2), dtype=torch.float64)
     torch.testing.assert_close(in_camera(d, front_view(4)), d)
     views = sample_views(4, seed=3)
-    φ, θ = (a.double() for a in to_angles(views, degrees=False))
-    right = torch.stack([φ.cos(), torch.zeros_like(φ), -φ.sin()], 1)
-    up = torch.stack([-θ.sin() * φ.sin(), θ.cos(), -θ.sin() * φ.cos()], 1)
-    expected = torch.stack([(d * right).sum(1), (d * up).sum(1), (d * views.double()).sum(1)], 1)
+    expected = _in_frame(d, views)
     torch.testing.assert_close(in_camera(d, views), expected, rtol=1e-6, atol=1e-6)
     torch.testing.assert_close(in_camera(views.double(), views), torch.tensor([[0.0, 0.0, 1.0]] * 4, dtype=torch.float64),
                                rtol=0, atol=1e-6)
@@ -131,11 +139,7 @@ def test_a_step_renders_the_input_view_under_the_heads_light_and_teaches_the_hea
                 torch.testing.assert_close(a, b)
             views, seed = seen["view"]
             prior = sample_lights(len(views), seed)
-            φ, θ = (a.double() for a in to_angles(views, degrees=False))
-            right = torch.stack([φ.cos(), torch.zeros_like(φ), -φ.sin()], 1)
-            up = torch.stack([-θ.sin() * φ.sin(), θ.cos(), -θ.sin() * φ.cos()], 1)
-            ω = prior.direction
-            target = torch.stack([(ω * right).sum(1), (ω * up).sum(1), (ω * views.double()).sum(1)], 1).float()
+            target = _in_frame(prior.direction, views).float()
             share = (prior.sky[:, 1] / 0.5).float()              # L_sky = ½ s for a grey daylight of L̄ = ½
             d_hat, s_hat = L(E(seen["i_view"]))
             lo, hi = SKY_SHARE
