@@ -18,7 +18,7 @@ from ..volume import validate_volume
 from .closed_form import render_closed_form
 from .settings import BACKENDS, MODELS, RenderSettings, check_lanes
 
-__all__ = ["render", "render_with", "RenderSettings", "BACKENDS", "MODELS"]
+__all__ = ["render", "render_with", "render_under", "RenderSettings", "BACKENDS", "MODELS"]
 
 
 def render(volume: torch.Tensor, views: torch.Tensor, model: str = "ea",
@@ -77,16 +77,24 @@ def render_with(volume: torch.Tensor, views: torch.Tensor, settings: RenderSetti
         check_lanes(volume.shape[0], volume.shape[-1], settings.spp)   # before Dr.Jit: say why, up front
         from .marcher import march       # imports Dr.Jit and sets Mitsuba's variant: on the first Mitsuba render
         return march(volume, views, settings, seed)
-    if settings.backend == "single_scatter":
-        from .single_scatter import render_single_scatter, sample_lights   # torch only; kept off the import path
-        return render_single_scatter(volume, views.to(volume.device), sample_lights(volume.shape[0], seed),
-                                     steps_per_voxel=settings.steps_per_voxel, shadow_planes=settings.shadow_planes,
-                                     spp=settings.spp)
-    if settings.backend == "scatter_march":
-        from .scatter_march import render_scatter_march       # imports Dr.Jit: on first use
+    if settings.backend in ("single_scatter", "scatter_march"):
         from .single_scatter import sample_lights             # torch only; kept off the import path
-        return render_scatter_march(volume, views, sample_lights(volume.shape[0], seed),
-                                    steps_per_voxel=settings.steps_per_voxel, spp=settings.spp)
+        return render_under(volume, views, settings, sample_lights(volume.shape[0], seed))
     from .physical import render_physical_ad    # the path tracer (its scene files, Mitsuba): on first use
     return render_physical_ad(volume, views, lighting=settings.lighting, spp=settings.physical_spp,
                               max_depth=settings.max_depth, seed=seed, filter=settings.filter)
+
+
+def render_under(volume: torch.Tensor, views: torch.Tensor, settings: RenderSettings, lights: Any) -> torch.Tensor:
+    """Single scattering (``settings.backend`` 'single_scatter' or 'scatter_march', with its steps
+    and samples) of ``(B, 4, N, N, N)`` volumes from ``(B, 3)`` views under given ``lights`` (a
+    :class:`~.single_scatter.LightBatch`, one light per pair; inputs assumed valid).
+    :func:`render_with` draws them from the prior for its seed; a light read from a photo passes its own."""
+    if settings.backend == "single_scatter":
+        from .single_scatter import render_single_scatter     # torch only; kept off the import path
+        return render_single_scatter(volume, views.to(volume.device), lights, steps_per_voxel=settings.steps_per_voxel,
+                                     shadow_planes=settings.shadow_planes, spp=settings.spp)
+    if settings.backend == "scatter_march":
+        from .scatter_march import render_scatter_march       # imports Dr.Jit: on first use
+        return render_scatter_march(volume, views, lights, steps_per_voxel=settings.steps_per_voxel, spp=settings.spp)
+    raise ValueError(f"render_under: expected backend 'single_scatter' or 'scatter_march', got {settings.backend!r}")

@@ -28,9 +28,9 @@ from typing import Callable
 
 import torch
 
-from ..render import RenderSettings, render_with
+from ..render import RenderSettings, render_under, render_with
 from ..render.settings import SINGLE_SCATTERING
-from ..render.single_scatter import LightBatch, render_single_scatter
+from ..render.single_scatter import LightBatch
 from ..views import camera_frames
 
 __all__ = ["make_renderer", "light_share", "blend", "RenderFn", "LitRenderFn", "EA_WARMUP", "make_lit_renderer",
@@ -79,12 +79,7 @@ def make_lit_renderer(settings: RenderSettings) -> LitRenderFn:
     settings = settings.validate()
     if settings.backend not in SINGLE_SCATTERING:
         raise ValueError(f"make_lit_renderer: expected a backend of {list(SINGLE_SCATTERING)}, got {settings.backend!r}")
-    if settings.backend == "single_scatter":
-        return lambda v, w, lights: render_single_scatter(v, w.to(v.device), lights, steps_per_voxel=settings.steps_per_voxel,
-                                                          shadow_planes=settings.shadow_planes, spp=settings.spp)
-    from ..render.scatter_march import render_scatter_march        # imports Dr.Jit: on first use
-    return lambda v, w, lights: render_scatter_march(v, w, lights, steps_per_voxel=settings.steps_per_voxel,
-                                                     spp=settings.spp)
+    return lambda v, w, lights: render_under(v, w, settings, lights)
 
 
 def in_camera(directions: torch.Tensor, views: torch.Tensor) -> torch.Tensor:
