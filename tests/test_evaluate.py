@@ -316,6 +316,20 @@ def test_evaluate_command_arguments_and_errors(tmp_path):
         R.main_evaluate(["--run", "x", "--out", str(tmp_path / "out"), "--spp", "0"])
 
 
+def test_rows_are_named_by_the_run_and_a_checkpoint_file_by_its_run_and_file(tmp_path, monkeypatch):
+    """--run RUN names its rows RUN; --run RUN/checkpoints/step_….pt names them RUN/step_… (not by the
+    file alone), so two checkpoints of one run get rows, baselines and figures of their own."""
+    monkeypatch.setattr(R, "read_checkpoint", lambda path: SimpleNamespace(step=4000))
+    monkeypatch.setattr(R, "checkpoint_config", lambda ckpt: SimpleNamespace(run=SimpleNamespace(name="trees-s1", seed=0)))
+    monkeypatch.setattr(R, "model_from_checkpoint", lambda cls, ckpt, cfg: None)
+    folder = tmp_path / "trees-s1"
+    (folder / "checkpoints").mkdir(parents=True)
+    file = folder / "checkpoints" / "step_0004000.pt"
+    file.write_bytes(b"")
+    assert R._load(folder)[3:] == (4000, "trees-s1")
+    assert R._load(file)[3:] == (4000, "trees-s1/step_0004000")
+
+
 @pytest.mark.parametrize("backend", ["closed_form", "physical"])
 def test_evaluate_runs_on_a_tiny_collection_with_a_stand_in_model(tmp_path, monkeypatch, backend):
     """The run plumbing: held-out split, manifest volumes, truth in the input frame, baselines,
@@ -339,7 +353,7 @@ def test_evaluate_runs_on_a_tiny_collection_with_a_stand_in_model(tmp_path, monk
             assert torch.equal(images, load_training_data(cfg, progress=False).held_out[:1])   # held out, not trained on
             return P.truth_in_input_frame(vol, rec["view"], "ea")[None].expand(len(images), -1, -1, -1, -1)
         grey = (lambda images: torch.full((len(images), 4, N, N, N), 0.05))
-        return (cfg, SimpleNamespace(reconstruct=reconstruct), lambda: SimpleNamespace(reconstruct=grey), 123)
+        return (cfg, SimpleNamespace(reconstruct=reconstruct), lambda: SimpleNamespace(reconstruct=grey), 123, "run")
 
     monkeypatch.setattr(R, "_load", fake_load)
     with pytest.raises(UserError, match="manifest.json"):       # the collection is not rendered yet

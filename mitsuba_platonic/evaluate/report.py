@@ -253,9 +253,11 @@ def write_report(rows: Sequence[Row], out_dir: PathLike, notes: Sequence[str] = 
 
 # -- runs ------------------------------------------------------------------------------------
 
-def _load(run_dir: Path) -> Tuple[Any, Model, Callable[[], Model], int]:
-    """A trained run: (config, its :class:`~mitsuba_platonic.model.Model`, a factory of the untrained
-    model, step)."""
+def _load(run_dir: Path) -> Tuple[Any, Model, Callable[[], Model], int, str]:
+    """A trained run folder or one of its checkpoint files: (config, its
+    :class:`~mitsuba_platonic.model.Model`, a factory of the untrained model, step, label). The
+    label names the rows: the run folder's name, and for a checkpoint file ``RUN/step_0004000``
+    (the run and the file), so that two checkpoints of one run get rows and figures of their own."""
     ckpt = read_checkpoint(run_dir)
     cfg = checkpoint_config(ckpt)
     model = model_from_checkpoint(Model, ckpt, cfg)
@@ -264,7 +266,8 @@ def _load(run_dir: Path) -> Tuple[Any, Model, Callable[[], Model], int]:
         torch.manual_seed(cfg.run.seed)                    # the run's seed, fresh initialisation
         return Model.from_config(cfg)
 
-    return cfg, model, untrained_model, ckpt.step
+    label = f"{cfg.run.name}/{run_dir.stem}" if run_dir.is_file() else cfg.run.name
+    return cfg, model, untrained_model, ckpt.step, label
 
 
 def _held_out(cfg, run_dir: Path, data_cache: Optional[PathLike], progress: bool):
@@ -311,14 +314,14 @@ def evaluate_runs(run_dirs: Sequence[PathLike], out_dir: PathLike, n_views: int 
     kw = dict(n_views=n_views, seed=seed, spp=spp, max_depth=max_depth, vgg_network=vgg, fid_network=fidnet,
               progress=progress)
     for run_dir in map(Path, run_dirs):
-        cfg, trained, untrained, step = _load(run_dir)
+        cfg, trained, untrained, step, label = _load(run_dir)
         if cfg.train.task != "reconstruction":
             raise UserError(f"{run_dir} was trained for {cfg.train.task!r}; evaluation reconstructs held-out "
                             f"images and needs an encoder (train.task: reconstruction)")
         model = cfg.render.model
         if cfg.data.source == "folder":
-            name = f"{run_dir.name} ({cfg.train.mode}, step {step})"
-            sections.append(evaluate_photo_run(name, run_dir.name, cfg, trained, untrained if baselines else None,
+            name = f"{label} ({cfg.train.mode}, step {step})"
+            sections.append(evaluate_photo_run(name, label, cfg, trained, untrained if baselines else None,
                                                limit=limit, seed=seed, data_path=data_path, progress=progress,
                                                judge_steps=judge_steps))
             notes.append(f"{name}: {len(sections[-1].rows[0].photos)} held-out photos, {cfg.model.resolution}³, "
@@ -329,7 +332,7 @@ def evaluate_runs(run_dirs: Sequence[PathLike], out_dir: PathLike, n_views: int 
         m = len(data.held_out) if limit is None else min(limit, len(data.held_out))
         images, records = data.held_out[:m], data.held_out_records[:m]
         truths = held_out_truths(records, model)
-        name = f"{run_dir.name} ({cfg.train.mode}, step {step})"
+        name = f"{label} ({cfg.train.mode}, step {step})"
         recon = trained.reconstruct(images).cpu()
         # IF is the run's own image formation: path traced (at its max_depth) for a run trained through light
         physical = cfg.render.backend == "physical"
@@ -341,10 +344,10 @@ def evaluate_runs(run_dirs: Sequence[PathLike], out_dir: PathLike, n_views: int 
                      + (f"; IF path traced (max depth {cfg.render.max_depth}), as it trained" if physical else ""))
         if baselines:
             fresh = untrained().reconstruct(images).cpu()
-            rows.append(score_pairs(f"{run_dir.name}: untrained", model, list(zip(images, fresh, truths)), **kw_run))
+            rows.append(score_pairs(f"{label}: untrained", model, list(zip(images, fresh, truths)), **kw_run))
             if model == "ea":
                 boards = [billboard(x) for x in images]
-                rows.append(score_pairs(f"{run_dir.name}: billboard", model, list(zip(images, boards, truths)),
+                rows.append(score_pairs(f"{label}: billboard", model, list(zip(images, boards, truths)),
                                         **kw_run))
     notes.append(f"evaluated in {time.perf_counter() - t0:.0f} s" + (
         f"; held-out pair k of every row is re-rendered with views and skies of seed {seed} + k" if rows else ""))
@@ -356,7 +359,8 @@ def evaluate_runs(run_dirs: Sequence[PathLike], out_dir: PathLike, n_views: int 
 def add_arguments(p: argparse.ArgumentParser) -> argparse.ArgumentParser:
     """The ``platonic evaluate`` flags."""
     p.add_argument("--run", action="append", required=True, metavar="DIR",
-                   help="a trained run folder (repeatable: one table row per run, plus its baselines)")
+                   help="a trained run folder, or one of its checkpoint files (RUN/checkpoints/step_….pt; "
+                        "repeatable: one table row per run, plus its baselines)")
     p.add_argument("--out", required=True, metavar="DIR", help="folder for report.md, figures/ and results.json")
     p.add_argument("--views", type=int, default=N_VIEWS, help="random re-render views per pair (default 10)")
     p.add_argument("--limit", type=int, default=None, help="at most this many held-out images per run (default all)")
