@@ -5,7 +5,7 @@ inside functions too (a function-level import that closes a loop is a cycle all 
 hides it until the function runs). An edge A → B means A imports B; ``from .pkg import name`` is an
 edge to ``pkg.name`` where that is a module, else to ``pkg``. A package's ``__init__`` imported by
 its own children is not counted (the children of a package that re-exports them are no loop of design),
-as in ``/work/shared/tools/import_cycles.py``. Static, so nothing is imported.
+Static, so nothing is imported.
 """
 
 from __future__ import annotations

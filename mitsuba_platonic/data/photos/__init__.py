@@ -28,7 +28,7 @@ file is named in a :class:`PhotoCollectionWarning` and recorded in
 Example::
 
     from mitsuba_platonic.data.photos import PhotoCollection
-    sets = PhotoCollection.load_splits("../shared/data/tree", resolution=64)
+    sets = PhotoCollection.load_splits("my_photos/", resolution=64)   # a folder of cut-out photos
     train = sets["train"]                  # a torch Dataset of (4, 64, 64) tensors
     print(train.report)                    # files found, duplicates, skipped files, split sizes
     loader = torch.utils.data.DataLoader(train, batch_size=8, shuffle=True)
