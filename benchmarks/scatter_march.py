@@ -13,7 +13,8 @@ Prints three tables (figures only; tests/test_scatter_march.py asserts the agree
    (1.4 is pure Monte Carlo noise with 8 renders), for the torch formation at its defaults and
    this one at several settings.
 3. Seconds per forward + backward of 8 pairs at 32³ and 64³ (random volumes, views and lights):
-   the EA marcher, the torch formation (32³ only) and this one, with the light volumes' share;
+   the EA marcher, the torch formation (32³ only) and this one, with the light volumes' share, and
+   the ratios of the camera pass alone (this − light volumes) and of the light volumes to the EA marcher;
    interleaved, median of --repeats (7), one run, on the variant's device (the GPU under cuda_ad_rgb), each
    timing waiting for queued CUDA work and Dr.Jit launches.
 """
@@ -96,8 +97,9 @@ def cost(repeats: int) -> None:
     device = variant_device()                                 # cuda under cuda_ad_rgb: every formation there
     print(f"\n### Seconds per forward + backward, 8 pairs (median of {repeats}, interleaved, one run; variant "
           f"{ensure_variant().variant()}, on {device})\n")
-    print("| N | EA marcher | torch formation | this (m = 2, spp 1) | of which light volumes | ratio to the EA marcher |")
-    print("|---|---|---|---|---|---|")
+    print("| N | EA marcher | torch formation | this (m = 2, spp 1) | of which light volumes | ratio to the EA marcher | "
+          "the camera pass alone (this − light volumes) to the EA marcher | the light volumes to the EA marcher |")
+    print("|---|---|---|---|---|---|---|---|")
     for n in (32, 64):
         g = torch.Generator().manual_seed(n)
         volume = (torch.rand(8, 4, n, n, n, generator=g) * 0.5).to(device)
@@ -126,7 +128,7 @@ def cost(repeats: int) -> None:
         t = {k: statistics.median(v) for k, v in times.items()}
         torch_cell = f"{t['torch']:.3f}" if "torch" in t else "—"
         print(f"| {n}³ | {t['ea']:.4f} | {torch_cell} | {t['this']:.3f} | {t['light']:.3f} | "
-              f"{t['this'] / t['ea']:.0f}× |")
+              f"{t['this'] / t['ea']:.1f}× | {(t['this'] - t['light']) / t['ea']:.1f}× | {t['light'] / t['ea']:.1f}× |")
 
 
 def main() -> None:
