@@ -22,7 +22,7 @@ __all__ = ["ModelConfig", "NET_KEYS"]
 
 #: The model keys that :class:`~mitsuba_platonic.models.NetConfig` takes as they are.
 NET_KEYS = ("resolution", "latent", "width", "norm", "encoder_hidden", "upsample", "precision", "photo_colour",
-            "photo_texture", "texture_surface", "texture_sides", "texture_blur")
+            "photo_texture", "texture_surface", "texture_sides", "texture_blur", "texture_conv")
 
 
 @dataclass
@@ -49,6 +49,9 @@ class ModelConfig:
     input camera's line does not see (:func:`~mitsuba_platonic.photo_colours.texture_on_sides`).
     texture_blur: with texture_surface, inside the photo blurred by this many of its pixels (a Gaussian's σ)
     instead of its mean colour; 0: the mean colour.
+    texture_conv: with photo_texture, G's last logits corrected by a 3³ convolution that sees the photo's
+    colour, G's own logits and how much of each voxel the input camera sees
+    (:func:`~mitsuba_platonic.photo_colours.texture_corrected`; "G's colour seeing the photo").
     """
 
     resolution: int = 32
@@ -66,6 +69,7 @@ class ModelConfig:
     texture_surface: bool = False
     texture_sides: bool = False
     texture_blur: float = 0.0
+    texture_conv: bool = False
 
     def validate(self) -> "ModelConfig":
         """Check this section's values; raise :class:`~mitsuba_platonic.settings_checks.ConfigError`
@@ -97,6 +101,12 @@ class ModelConfig:
         if self.texture_blur > 0 and not self.texture_surface:
             raise ConfigError("model.texture_blur: it blurs the photo inside the surface, so it needs "
                               "model.texture_surface: true")
+        if self.texture_conv and not self.photo_texture:
+            raise ConfigError("model.texture_conv: the convolution reads the photo's texture, so it needs "
+                              "model.photo_texture: true")
+        if self.texture_conv and (self.texture_surface or self.texture_sides):
+            raise ConfigError("model.texture_conv: it corrects the texture carried along the input camera's rays, "
+                              "not model.texture_surface's or model.texture_sides'; set one of them")
         return self
 
     def net_config(self, channels: int, view_codes: int = 0, pose: bool = False, light: bool = False) -> NetConfig:

@@ -78,8 +78,8 @@ class NetConfig:
     head``); precision: the networks' arithmetic (:data:`PRECISIONS`); photo_colour: G's colour is an
     offset from the input photo's mean colour (:meth:`Generator.forward`); photo_texture: from the
     photo's colour at each voxel's pixel instead (:func:`~mitsuba_platonic.photo_colours.photo_texture`);
-    texture_surface, texture_sides, texture_blur: that colour recoloured
-    (:mod:`~mitsuba_platonic.photo_colours`). A config's model section
+    texture_surface, texture_sides, texture_blur: that colour recoloured; texture_conv: G's logits
+    corrected by a convolution that sees it (:mod:`~mitsuba_platonic.photo_colours`). A config's model section
     builds it (:meth:`~mitsuba_platonic.model_settings.ModelConfig.net_config`, its keys of the same names)."""
 
     resolution: int = 32
@@ -99,6 +99,7 @@ class NetConfig:
     texture_surface: bool = False
     texture_sides: bool = False
     texture_blur: float = 0.0
+    texture_conv: bool = False
 
     def validate(self) -> "NetConfig":
         if self.resolution not in RESOLUTIONS:
@@ -143,6 +144,12 @@ class NetConfig:
                 or not self.texture_blur >= 0 or (self.texture_blur > 0 and not self.texture_surface):
             raise ValueError(f"texture_blur must be a number ≥ 0, and > 0 only with texture_surface; got "
                              f"{self.texture_blur!r} (texture_surface {self.texture_surface!r})")
+        if not isinstance(self.texture_conv, bool) or (self.texture_conv and not self.photo_texture) \
+                or (self.texture_conv and (self.texture_surface or self.texture_sides)):
+            raise ValueError(f"texture_conv must be True or False, and True only with photo_texture and without "
+                             f"texture_surface or texture_sides; got {self.texture_conv!r} (photo_texture "
+                             f"{self.photo_texture!r}, texture_surface {self.texture_surface!r}, texture_sides "
+                             f"{self.texture_sides!r})")
         return self
 
     @property
@@ -233,6 +240,9 @@ class Generator(nn.Module):
         last = "resize" if cfg.upsample == "resize_last" else cfg.upsample
         layers += [*_up(last, c, cfg.volume_channels, bias=True), nn.Sigmoid()]
         self.net = nn.Sequential(*layers)
+        #: ``texture_conv``: the correction of G's logits that sees the photo's texture
+        #: (:func:`~mitsuba_platonic.photo_colours.texture_corrected`): 8 channels in, the 4 logits out
+        self.texture_conv: Optional[nn.Conv3d] = nn.Conv3d(8, 4, 3, padding=1) if cfg.texture_conv else None
         # channels-last 3D weights and activations: oneDNN's 3D convolutions on a CPU run about twice
         # as fast in this layout (docs/training.md, "Where a step's time goes"); the maths is the same
         self.to(memory_format=torch.channels_last_3d)

@@ -11,9 +11,11 @@ from the photo itself, c = σ(ℓ + logit base) (:meth:`~mitsuba_platonic.models
   mean colour inside (``model.texture_surface``), or the photo blurred (``model.texture_blur``);
 - :func:`texture_on_sides`: also the photo as seen from the input camera's left and right
   (:func:`photo_texture_sides`) where only those cameras see a voxel (``model.texture_sides``);
+- :func:`texture_corrected`: G's logits corrected by a convolution that sees the texture, G's
+  logits and what the input camera sees (``model.texture_conv``);
 
 with :func:`transmittances` (deep shadow maps of G's density along the input camera's axes) for
-the last two, and :func:`photo_volume` the one recipe that training and
+the last three, and :func:`photo_volume` the one recipe that training and
 :meth:`~mitsuba_platonic.model.Model.reconstruct` share. docs/training.md, "Real photos", has the
 measurements behind each.
 """
@@ -30,7 +32,7 @@ from torch import nn
 from .render.closed_form import tilt
 
 __all__ = ["COLOUR_MIN", "photo_colour", "blurred", "photo_texture", "photo_texture_sides", "transmittances",
-           "surface_weight", "texture_on_surface", "texture_on_sides", "photo_volume"]
+           "surface_weight", "texture_on_surface", "texture_on_sides", "texture_corrected", "photo_volume"]
 
 
 #: Where :func:`photo_colour` clamps a mean colour, so that its logit stays finite (≈ ±5.5).
@@ -236,16 +238,44 @@ def texture_on_sides(volume: torch.Tensor, offsets: torch.Tensor, texture: torch
                      + w_right * t_right)
 
 
+def texture_corrected(conv: nn.Module, volume: torch.Tensor, offsets: torch.Tensor, texture: torch.Tensor,
+                      elevation: Optional[torch.Tensor] = None) -> Tuple[torch.Tensor, torch.Tensor]:
+    """``model.texture_conv``: (volume, ℓ') of the volume G made with offsets ℓ from the photos'
+    ``texture`` t (:func:`photo_texture`, ``(B, 3, R, R, R)``), its logits corrected by ``conv``
+    (G's :attr:`~mitsuba_platonic.models.Generator.texture_conv`, a 3³ convolution, 8 channels
+    to 4):
+
+        x = [ℓ, logit ρ, logit t, T_front]                      (3 + 1 + 3 + 1 channels per voxel)
+        [δ_c, δ_ρ] = conv(x)
+        colour = σ(ℓ + δ_c + logit t),   ρ' = σ(logit ρ + δ_ρ),   ℓ' = ℓ + δ_c
+
+    with ρ G's density and T_front the transmittance from each voxel towards the input camera
+    (:func:`transmittances` of ρ, held constant, in G's frame). G's own offsets see only the
+    code, so they cannot tell where the texture carried along the input camera's rays runs
+    through the body as streaks seen from the side; the convolution sees the texture, its
+    neighbours and how deep behind what the camera sees each voxel lies. ℓ' is the whole offset
+    from the photo's colour (``train.colour_offset`` penalises it)."""
+    ρ = volume[:, 3:]
+    front = _in_g_frame(transmittances(ρ, elevation)[0], elevation)
+    t = torch.logit(texture.to(volume).clamp(COLOUR_MIN, 1.0 - COLOUR_MIN))
+    logit_ρ = torch.logit(ρ.clamp(1e-6, 1.0 - 1e-6))            # G's own density logit (ρ is its sigmoid)
+    x = torch.cat([offsets, logit_ρ, t, front], dim=1).contiguous(memory_format=torch.channels_last_3d)
+    δ = conv(x).float()
+    logits = torch.cat([offsets + t, logit_ρ], dim=1) + δ
+    return torch.sigmoid(logits).contiguous(), offsets + δ[:, :3]
+
+
 def photo_volume(G: nn.Module, code: torch.Tensor, images: torch.Tensor, recipe: Any,
                  elevation: Optional[torch.Tensor] = None) -> Tuple[torch.Tensor, torch.Tensor]:
     """(volume, ℓ) of a ``photo_colour`` G (or its data-parallel wrapper) for ``code`` and the
     ``images`` it encodes, by ``recipe`` (the model section of a config, or a
     :class:`~mitsuba_platonic.models.NetConfig`: its ``photo_texture``, ``texture_surface``,
-    ``texture_blur``, ``texture_sides`` and ``resolution``): G's colour offset from the photos'
-    mean colour (:func:`photo_colour`) or, with ``photo_texture``, from their texture seen from
-    ``elevation`` (:func:`photo_texture`), recoloured by :func:`texture_on_surface` (inside: the
-    mean colour, or the photo blurred by ``texture_blur`` pixels) or by :func:`texture_on_sides`; ℓ
-    the offsets. The one recipe of training and of :meth:`~mitsuba_platonic.model.Model.reconstruct`."""
+    ``texture_blur``, ``texture_sides``, ``texture_conv`` and ``resolution``): G's colour offset from
+    the photos' mean colour (:func:`photo_colour`) or, with ``photo_texture``, from their texture
+    seen from ``elevation`` (:func:`photo_texture`), recoloured by :func:`texture_on_surface`
+    (inside: the mean colour, or the photo blurred by ``texture_blur`` pixels) or by
+    :func:`texture_on_sides`, or corrected by :func:`texture_corrected`; ℓ the offsets. The one
+    recipe of training and of :meth:`~mitsuba_platonic.model.Model.reconstruct`."""
     mean = photo_colour(images)
     r = recipe.resolution
     t = photo_texture(images, r, elevation) if recipe.photo_texture else None
@@ -255,4 +285,7 @@ def photo_volume(G: nn.Module, code: torch.Tensor, images: torch.Tensor, recipe:
         v = texture_on_surface(v, ℓ, t, inner, elevation)
     elif recipe.texture_sides:
         v = texture_on_sides(v, ℓ, t, photo_texture_sides(images, r, elevation), elevation)
+    elif recipe.texture_conv:
+        conv = getattr(G, "module", G).texture_conv                # G, or the G inside a data-parallel wrapper
+        v, ℓ = texture_corrected(conv, v, ℓ, t, elevation)
     return v, ℓ

@@ -794,3 +794,70 @@ def test_texture_on_surface_with_a_blurred_inside_takes_the_blurred_photo_inside
     with pytest.raises(ConfigError, match="model.texture_blur: expected a non-negative"):
         load_config(None, ["model.photo_colour=true", "model.photo_texture=true", "model.texture_surface=true",
                            "model.texture_blur=-1"])
+
+
+def test_texture_corrected_adds_the_convolutions_output_to_gs_logits():
+    """``model.texture_conv``: on an opaque-ish slab (v = 0.8 in planes 5–10 of 16, 0.1 elsewhere)
+    with G's offsets ℓ, the corrected volume is σ(ℓ + δ_c + logit t) and σ(logit ρ + δ_ρ), and the
+    offsets returned are ℓ + δ_c, for convolutions whose output is known by hand: a bias alone
+    (δ = b), the centre tap of T_front into the density (δ_ρ = w T_front, with T_front written out
+    for the slab: Π of (1 − v) over the planes in front), and the centre tap of logit t's red into
+    the red offset (channel order ℓ, logit ρ, logit t, T_front)."""
+    from mitsuba_platonic.photo_colours import COLOUR_MIN, photo_texture, texture_corrected
+    n = 16
+    x = _ramp_photo(n, b=1)
+    t = photo_texture(x, n)
+    ρ = torch.full((1, 1, n, n, n), 0.1)
+    ρ[:, :, 5:11] = 0.8
+    ℓ = torch.randn(1, 3, n, n, n, generator=torch.Generator().manual_seed(0))
+    volume = torch.cat([torch.sigmoid(ℓ + torch.logit(t.clamp(COLOUR_MIN, 1 - COLOUR_MIN))), ρ], dim=1)
+    logit_t = torch.logit(t.clamp(COLOUR_MIN, 1 - COLOUR_MIN))
+    conv = nn.Conv3d(8, 4, 3, padding=1)
+    with torch.no_grad():
+        conv.weight.zero_()
+        conv.bias.copy_(torch.tensor([0.3, -0.2, 0.1, 0.5]))
+    out, offsets = texture_corrected(conv, volume, ℓ, t)
+    b = conv.bias.detach()
+    assert torch.allclose(out[:, :3], torch.sigmoid(ℓ + b[:3, None, None, None] + logit_t), atol=1e-5)
+    assert torch.allclose(out[:, 3:], torch.sigmoid(torch.logit(ρ) + b[3]), atol=1e-5)
+    assert torch.allclose(offsets, ℓ + b[:3, None, None, None], atol=1e-6)
+    front = torch.ones(n)                                          # T_front per plane (plane 0 nearest the camera)
+    for k in range(1, n):
+        front[k] = front[k - 1] * (1.0 - float(ρ[0, 0, k - 1, 0, 0]))
+    with torch.no_grad():
+        conv.bias.zero_()
+        conv.weight[3, 7, 1, 1, 1] = 2.0                           # T_front → the density's logit
+        conv.weight[0, 4, 1, 1, 1] = -0.5                          # logit t (red) → the red offset
+    out, offsets = texture_corrected(conv, volume, ℓ, t)
+    expected_ρ = torch.sigmoid(torch.logit(ρ) + 2.0 * front[None, None, :, None, None])
+    assert torch.allclose(out[:, 3:], expected_ρ, atol=1e-5)
+    assert torch.allclose(offsets[:, 0], ℓ[:, 0] - 0.5 * logit_t[:, 0], atol=1e-5)
+    assert torch.allclose(offsets[:, 1:], ℓ[:, 1:], atol=1e-6)
+
+
+def test_texture_conv_is_a_layer_of_g_that_training_reaches_and_the_config_checks():
+    """G has the layer only with texture_conv; the model's initialisation draws it as G's other
+    convolutions (N(0, 0.02), not zero: the configuration measured in docs/training.md); the
+    photo recipe (photo_volume) applies it, and the gradient of the volume reaches its weights;
+    the config refuses it without photo_texture and beside texture_surface or texture_sides."""
+    from mitsuba_platonic.model import Model
+    from mitsuba_platonic.photo_colours import photo_volume
+    base = ["model.resolution=16", "model.width=4", "model.latent=8", "model.photo_colour=true",
+            "model.photo_texture=true", "render.model=ea"]
+    cfg = load_config(None, base + ["model.texture_conv=true"])
+    torch.manual_seed(0)
+    model = Model.from_config(cfg)
+    assert Model.from_config(load_config(None, base)).G.texture_conv is None
+    w = model.G.texture_conv.weight
+    assert 0.01 < float(w.detach().std()) < 0.03 and float(model.G.texture_conv.bias.detach().abs().max()) == 0.0
+    x = _ramp_photo(16, b=2)
+    v, ℓ = photo_volume(model.G, torch.randn(2, 8), x, cfg.model)
+    plain, _ = photo_volume(model.G, torch.randn(2, 8), x, load_config(None, base).model)
+    assert v.shape == plain.shape == (2, 4, 16, 16, 16)
+    v.sum().backward()
+    assert w.grad is not None and float(w.grad.abs().max()) > 0.0
+    with pytest.raises(ConfigError, match="model.texture_conv: .*needs model.photo_texture: true"):
+        load_config(None, ["model.photo_colour=true", "model.texture_conv=true"])
+    for other in ("texture_surface", "texture_sides"):
+        with pytest.raises(ConfigError, match="model.texture_conv: .*set one of them"):
+            load_config(None, base + ["model.texture_conv=true", f"model.{other}=true"])

@@ -17,7 +17,7 @@ from mitsuba_platonic.train import run as R
 
 #: Keys a config saved by an older version lacks (added to the config later).
 LATER = {"model": ("critic_width", "init", "critic_init", "upsample", "encoder_hidden", "photo_texture", "texture_surface",
-                   "texture_sides", "texture_blur"),
+                   "texture_sides", "texture_blur", "texture_conv"),
          "train": ("d_augment", "photo_augment", "ema", "pose", "pose_weight", "colour_tv", "r1_weight", "r1_every",
                    "rec_target", "d_roll", "rec_loss", "adv_input", "colour_match")}
 
