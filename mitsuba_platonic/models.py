@@ -240,8 +240,10 @@ class Generator(nn.Module):
         last = "resize" if cfg.upsample == "resize_last" else cfg.upsample
         layers += [*_up(last, c, cfg.volume_channels, bias=True), nn.Sigmoid()]
         self.net = nn.Sequential(*layers)
-        #: ``texture_conv``: the correction of G's logits that sees the photo's texture
-        #: (:func:`~mitsuba_platonic.photo_colours.texture_corrected`): 8 channels in, the 4 logits out
+        #: ``texture_conv``: the correction of G's logits that sees the photo's texture, 8 channels in,
+        #: the 4 logits out; applied by :func:`~mitsuba_platonic.photo_colours.photo_volume`
+        #: (:func:`~mitsuba_platonic.photo_colours.texture_corrected`), not by :meth:`forward`, since it
+        #: needs the input camera's elevation
         self.texture_conv: Optional[nn.Conv3d] = nn.Conv3d(8, 4, 3, padding=1) if cfg.texture_conv else None
         # channels-last 3D weights and activations: oneDNN's 3D convolutions on a CPU run about twice
         # as fast in this layout (docs/training.md, "Where a step's time goes"); the maths is the same
