@@ -810,8 +810,8 @@ def test_texture_corrected_adds_the_convolutions_output_to_gs_logits():
     ρ = torch.full((1, 1, n, n, n), 0.1)
     ρ[:, :, 5:11] = 0.8
     ℓ = torch.randn(1, 3, n, n, n, generator=torch.Generator().manual_seed(0))
-    volume = torch.cat([torch.sigmoid(ℓ + torch.logit(t.clamp(COLOUR_MIN, 1 - COLOUR_MIN))), ρ], dim=1)
     logit_t = torch.logit(t.clamp(COLOUR_MIN, 1 - COLOUR_MIN))
+    volume = torch.cat([torch.sigmoid(ℓ + logit_t), ρ], dim=1)
     conv = nn.Conv3d(8, 4, 3, padding=1)
     with torch.no_grad():
         conv.weight.zero_()
@@ -850,10 +850,11 @@ def test_texture_conv_is_a_layer_of_g_that_training_reaches_and_the_config_check
     assert Model.from_config(load_config(None, base)).G.texture_conv is None
     w = model.G.texture_conv.weight
     assert 0.01 < float(w.detach().std()) < 0.03 and float(model.G.texture_conv.bias.detach().abs().max()) == 0.0
-    x = _ramp_photo(16, b=2)
-    v, ℓ = photo_volume(model.G, torch.randn(2, 8), x, cfg.model)
-    plain, _ = photo_volume(model.G, torch.randn(2, 8), x, load_config(None, base).model)
+    x, z = _ramp_photo(16, b=2), torch.randn(2, 8)
+    v, ℓ = photo_volume(model.G, z, x, cfg.model)
+    plain, _ = photo_volume(model.G, z, x, load_config(None, base).model)     # the same G, the recipe without it
     assert v.shape == plain.shape == (2, 4, 16, 16, 16)
+    assert (v - plain).abs().max() > 1e-3                                    # the recipe applied the layer
     v.sum().backward()
     assert w.grad is not None and float(w.grad.abs().max()) > 0.0
     with pytest.raises(ConfigError, match="model.texture_conv: .*needs model.photo_texture: true"):
