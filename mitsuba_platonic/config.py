@@ -94,6 +94,13 @@ class Config:
         if self.train.colour_offset > 0 and not self.model.photo_colour:
             raise ConfigError("train.colour_offset: it penalises G's colour offsets from the photo's colour, so it "
                               "needs model.photo_colour: true")
+        if self.train.depth_spread > 0 and (self.train.task != "reconstruction" or self.train.rec_target != "image"
+                                            or self.render.model != "ea" or self.render.camera != "orthographic"):
+            raise ConfigError("train.depth_spread: it weighs the input view's EA rays, parallel to depth in the input "
+                              "camera's frame, so it needs train.task 'reconstruction', train.rec_target 'image', "
+                              "render.model 'ea' and render.camera 'orthographic'; got "
+                              f"{self.train.task!r}, {self.train.rec_target!r}, {self.render.model!r} and "
+                              f"{self.render.camera!r}")
         if self.train.colour_match > 0 and self.render.model != "ea":
             raise ConfigError(f"train.colour_match: colour needs render.model 'ea', got {self.render.model!r}")
         if "colour" in self.train.photo_augment and self.render.model != "ea":

@@ -1,13 +1,14 @@
 """train.colour_tv: the density-weighted colour total variation (train/losses.colour_tv) on known
 volumes, its gradient (colour only, never density), and the trainer handing it to G; and
 train.colour_match (train/losses.colour_match): the mean colour of the object from every side; and
-train.colour_offset (train/losses.colour_offset): G's colour held to the photo's."""
+train.colour_offset (train/losses.colour_offset): G's colour held to the photo's; and
+train.depth_spread (train/losses.depth_spread): the input view's colour from a thin surface."""
 
 import pytest
 import torch
 
 from mitsuba_platonic.config import ConfigError, load_config
-from mitsuba_platonic.train.losses import colour_match, colour_offset, colour_tv, mean_colour
+from mitsuba_platonic.train.losses import colour_match, colour_offset, colour_tv, depth_spread, mean_colour
 
 
 def _volume(n=4, colour=(0.2, 0.5, 0.7), density=1.0):
@@ -241,3 +242,97 @@ def test_the_trainer_hands_g_the_offsets_of_the_volume_it_made(tmp_path, monkeyp
     w = v[:, 3:]
     expected = 0.5 * (w * ℓ.abs()).sum() / (3 * w.sum())
     assert float(terms["colour_offset"].detach()) == pytest.approx(float(expected), rel=1e-5)
+
+
+def _rays(opacities):
+    """EA volumes (1, 4, N, 1, R) in a camera's frame: ray r's opacities along depth ``opacities[r]``."""
+    a = torch.as_tensor(opacities, dtype=torch.float64).T            # (N, R)
+    v = torch.full((1, 4, a.shape[0], 1, a.shape[1]), 0.5, dtype=torch.float64)
+    v[0, 3, :, 0, :] = a
+    return v
+
+
+def test_depth_spread_of_rays_worked_by_hand():
+    """N = 4, s_k = (k + ½)/4. An empty ray: 0. One opaque voxel: w = 1 there, L = 1/(3N) = 1/12.
+    a = ½ at the front and 1 at the back: w = (½, 0, 0, ½), L = 2 · ½ · ½ · (7/8 − 1/8) + (¼ + ¼)/12
+    = 3/8 + 1/24 = 5/12. The mean over the three rays: (0 + 1/12 + 5/12) / 3 = 1/6."""
+    assert float(depth_spread(_rays([[0, 0, 0, 0]]))) == 0.0
+    assert float(depth_spread(_rays([[0, 0, 1, 0]]))) == pytest.approx(1 / 12, rel=1e-12)
+    assert float(depth_spread(_rays([[0.5, 0, 0, 1]]))) == pytest.approx(5 / 12, rel=1e-12)
+    assert float(depth_spread(_rays([[0, 0, 0, 0], [0, 0, 1, 0], [0.5, 0, 0, 1]]))) == pytest.approx(1 / 6, rel=1e-12)
+
+
+def test_depth_spread_matches_the_pairwise_sum_on_random_rays_with_exact_zeros_and_ones():
+    """The O(N) form against the distortion written out pair by pair, on rays holding exact 0s and
+    1s (a voxel of 1 stops the ray: nothing behind it has weight); colour does not enter."""
+    torch.manual_seed(4)
+    n = 7
+    a = torch.rand(12, n, dtype=torch.float64)
+    a[a < 0.2] = 0.0
+    a[a > 0.9] = 1.0
+    v = _rays(a)
+    expected = 0.0
+    for ray in a:
+        w, T = [], 1.0
+        for k in range(n):
+            w.append(T * float(ray[k]))
+            T *= 1.0 - float(ray[k])
+        s = [(k + 0.5) / n for k in range(n)]
+        expected += sum(w[k] * w[l] * abs(s[k] - s[l]) for k in range(n) for l in range(n)) \
+            + sum(x * x for x in w) / (3 * n)
+    assert float(depth_spread(v)) == pytest.approx(expected / len(a), rel=1e-12)
+    v[:, :3] = torch.rand_like(v[:, :3])
+    assert float(depth_spread(v)) == pytest.approx(expected / len(a), rel=1e-12)
+
+
+def test_a_thin_surface_spreads_less_than_a_haze_of_the_same_opacity_and_gradients_match():
+    """A ray stopped by one voxel of opacity 0.99 against eight voxels of 1 − 0.01^(1/8) each (the
+    same α): the haze costs more; the gradient in the opacities matches finite differences."""
+    haze = 1 - 0.01 ** (1 / 8)
+    assert float(depth_spread(_rays([[0.99] + [0] * 7]))) < float(depth_spread(_rays([[haze] * 8]))) / 4
+    torch.manual_seed(5)
+    v = torch.rand(2, 4, 5, 3, 3, dtype=torch.float64, requires_grad=True)
+    assert torch.autograd.gradcheck(depth_spread, (v,))
+
+
+def test_the_config_refuses_depth_spread_without_an_input_view_of_ea_rays():
+    with pytest.raises(ConfigError, match="train.depth_spread: .*got 'generation', 'image', 'ea' and 'orthographic'"):
+        load_config(None, ["train.depth_spread=1", "train.task=generation"])
+    with pytest.raises(ConfigError, match="train.depth_spread: .*got 'reconstruction', 'image', 'ea' and 'perspective'"):
+        load_config(None, ["train.depth_spread=1", "render.camera=perspective"])
+    with pytest.raises(ConfigError, match=r"train.depth_spread: expected a non-negative value, got -1"):
+        load_config(None, ["train.depth_spread=-1"])
+
+
+@pytest.mark.usefixtures("tiny_class")
+def test_the_trainer_hands_g_the_depth_spread_of_the_input_view(tmp_path, monkeypatch):
+    """With weight w, G's 'depth_spread' term is w · L_ds of the volume G made (at the front view the
+    input camera's frame is the volume's own); without it, no such term."""
+    from mitsuba_platonic import models
+    from mitsuba_platonic.train.data import load_training_data
+    from mitsuba_platonic.train.trainer import Trainer
+    from tiny_shapes import TINY
+    original = models.Generator.forward
+    seen = {}
+
+    def spy(self, *args, **kwargs):
+        out = original(self, *args, **kwargs)
+        seen["v"] = out.detach().clone()
+        return out
+
+    monkeypatch.setattr(models.Generator, "forward", spy)
+    for weight in (0.0, 3.0):
+        cfg = load_config(None, [
+            f"data.cache={tmp_path}", f"data.shape_class={TINY}", "data.n_shapes=4", "data.views_per_shape=2",
+            "model.resolution=16", "model.width=4", "model.latent=8", "train.batch_size=2",
+            "render.backend=closed_form", "train.task=reconstruction", f"train.depth_spread={weight}"])
+        trainer = Trainer(cfg, load_training_data(cfg, progress=False), torch.device("cpu"))
+        terms = {}
+        original_objective = trainer._g_objective
+        trainer._g_objective = lambda t: terms.update(t) or original_objective(t)
+        trainer.step(0)
+        if not weight:
+            assert "depth_spread" not in terms
+            continue
+        assert float(terms["depth_spread"].detach()) == pytest.approx(3.0 * float(depth_spread(seen["v"])), rel=1e-5)
+        assert float(terms["depth_spread"].detach()) > 0.0

@@ -14,6 +14,11 @@ Colour match (optional prior on G, premultiplied RGBA images): the mean colour o
 object, c̄(I) = Σ_p rgb_p / Σ_p α_p, is the same from every side, so each random view I of the
 reconstruction of photo x answers to
                             L_cm = mean over views and channels of |c̄(I) − c̄(x)|
+Depth spread (optional prior on G's input view, EA volumes in the input camera's frame, depth along
+dim 2 front to back): per ray, the weights w_k = T_k a_k of its N samples at depths s_k = (k + ½)/N
+(T exclusive, as the EA layer), and the distortion loss of Barron et al. 2022 (Mip-NeRF 360)
+                            L_ds = mean over rays of Σ_{k,l} w_k w_l |s_k − s_l| + (1/3N) Σ_k w_k²
+small where a ray's colour comes from one thin surface, large where it is gathered over a thick haze
 WGAN-GP:                    L_D = l_fake − l_real + λ (‖∇_x̂ D(x̂)‖ − 1)²,  x̂ = ε x + (1 − ε) G
                             L_G = −l_fake
 Soft accuracy of D on a batch (the authors' gate: D is updated only while it is ≤ 0.6, so D
@@ -33,7 +38,7 @@ from typing import Callable, Optional, Tuple
 import torch
 import torch.nn.functional as F
 
-__all__ = ["LOSSES", "d_loss", "g_loss", "gradient_penalty", "r1_penalty", "colour_tv", "colour_offset", "mean_colour", "colour_match", "soft_accuracy_counts", "hard_accuracy_counts"]
+__all__ = ["LOSSES", "d_loss", "g_loss", "gradient_penalty", "r1_penalty", "colour_tv", "colour_offset", "depth_spread", "mean_colour", "colour_match", "soft_accuracy_counts", "hard_accuracy_counts"]
 
 #: The GAN losses of :func:`d_loss` / :func:`g_loss` (anything but the first is WGAN-GP).
 LOSSES = ("nonsaturating", "wgan-gp")
@@ -112,6 +117,26 @@ def colour_offset(volume: torch.Tensor, offsets: torch.Tensor) -> torch.Tensor:
                          f"{tuple(volume.shape)} and {tuple(offsets.shape)}")
     w = volume[:, 3:].detach()
     return (w * offsets.abs()).sum() / (3.0 * w.sum()).clamp_min(1e-12)
+
+
+def depth_spread(camera_volume: torch.Tensor) -> torch.Tensor:
+    """L_ds (module docstring) of volumes ``(B, C, N, H, W)`` in a camera's frame (the opacity the last
+    channel, dim 2 the depth from the front): the mean over the H·W rays of the distortion of their
+    EA weights. Zero for empty rays; for a ray stopped by one opaque voxel 1/(3N); for weights spread
+    over depth it grows with their spread. The pairwise sum in O(N) per ray, with W_k = Σ_{l<k} w_l
+    and S_k = Σ_{l<k} w_l s_l: Σ_{k,l} w_k w_l |s_k − s_l| = 2 Σ_k w_k (s_k W_k − S_k)."""
+    if camera_volume.dim() != 5:
+        raise ValueError(f"depth_spread: expected volumes (B, C, N, H, W), got {tuple(camera_volume.shape)}")
+    a = camera_volume[:, -1]
+    n = a.shape[1]
+    τ = 1.0 - a
+    T = torch.cumprod(torch.cat([torch.ones_like(τ[:, :1]), τ[:, :-1]], dim=1), dim=1)   # exclusive: Π_{l<k}
+    w = T * a
+    s = ((torch.arange(n, dtype=a.dtype, device=a.device) + 0.5) / n)[None, :, None, None]
+    W = torch.cumsum(w, dim=1) - w                      # Σ_{l<k} w_l
+    S = torch.cumsum(w * s, dim=1) - w * s              # Σ_{l<k} w_l s_l
+    pairs = 2.0 * (w * (s * W - S)).sum(dim=1)
+    return (pairs + (w * w).sum(dim=1) / (3.0 * n)).mean()
 
 
 def mean_colour(images: torch.Tensor) -> torch.Tensor:

@@ -106,7 +106,10 @@ class TrainConfig:
     that holds the mean colour of each random view's object to the input photo's (reconstruction,
     EA, mode 'platonic'; 0: none) (:func:`mitsuba_platonic.train.losses.colour_match`, docs/training.md);
     colour_offset: weight of the density-weighted mean |ℓ| of G's colour offsets from the photo's
-    colour (``model.photo_colour``; 0: none) (:func:`mitsuba_platonic.train.losses.colour_offset`); ema: null, or the decay β
+    colour (``model.photo_colour``; 0: none) (:func:`mitsuba_platonic.train.losses.colour_offset`);
+    depth_spread: weight of the distortion of the input view's EA weights along its rays, a prior
+    that each ray's colour come from a thin surface (reconstruction, image targets; 0: none)
+    (:func:`mitsuba_platonic.train.losses.depth_spread`, docs/training.md); ema: null, or the decay β
     of an exponential moving average of E's and G's weights, which samples, checkpoints' inference
     weights and evaluation then use (:meth:`mitsuba_platonic.train.trainer.Trainer.inference_model`,
     docs/training.md); d_augment: the differentiable augmentations of every image D sees, real or
@@ -148,6 +151,7 @@ class TrainConfig:
     colour_tv: float = 0.0
     colour_match: float = 0.0
     colour_offset: float = 0.0
+    depth_spread: float = 0.0
     ema: Optional[float] = None
     d_augment: List[str] = field(default_factory=list)
     photo_augment: List[str] = field(default_factory=list)
@@ -201,6 +205,7 @@ class TrainConfig:
         non_negative("train.colour_tv", self.colour_tv)
         non_negative("train.colour_match", self.colour_match)
         non_negative("train.colour_offset", self.colour_offset)
+        non_negative("train.depth_spread", self.depth_spread)
         if self.colour_match > 0 and (self.task != "reconstruction" or self.mode != "platonic"):
             raise ConfigError("train.colour_match: the random views answer to the input photo's colour, so it needs "
                               f"train.task 'reconstruction' and mode 'platonic', got task {self.task!r}, mode {self.mode!r}")

@@ -112,8 +112,8 @@ from ..render.single_scatter import SKY_SHARE, daylights, sample_lights, sky_sha
 from ..views import DEFAULT_ELEVATION, from_angles, front_view, sample_views, to_angles
 from .augment import augment, augment_photos
 from .data import TrainingData
-from .losses import (colour_match, colour_offset, colour_tv, d_loss, g_loss, gradient_penalty, hard_accuracy_counts,
-                     r1_penalty, soft_accuracy_counts)
+from .losses import (colour_match, colour_offset, colour_tv, d_loss, depth_spread, g_loss, gradient_penalty,
+                     hard_accuracy_counts, r1_penalty, soft_accuracy_counts)
 from .renderer import EA_WARMUP, blend, in_camera, light_share, make_lit_renderer, make_renderer
 from .roll import input_frame_roll, roll
 from .settings import MODES, MODES_3D, POSES, REC_TARGETS, TASKS  # noqa: F401  (the choice lists, also named here)
@@ -365,6 +365,8 @@ class Trainer:
             terms["colour_tv"] = t.colour_tv * colour_tv(v)
         if t.colour_offset > 0:                              # the photo's colour unless the views need otherwise
             terms["colour_offset"] = t.colour_offset * colour_offset(v, ℓ)
+        if t.depth_spread > 0:                               # the input view's colour from a thin surface
+            terms["depth_spread"] = t.depth_spread * depth_spread(v_input)
         if t.colour_match > 0:                               # the photo's mean colour from every side
             terms["colour_match"] = t.colour_match * colour_match(i_view, x)
         if rec and t.rec_target == "volume":
@@ -386,7 +388,7 @@ class Trainer:
         """G's (and E's) loss: the sum of its weighted terms, named 'adv2d' (D on rendered views),
         'adv3d' (D3 on volumes), 'adv_input' (D on the input view), 'rec' (the input view), 'rec3d'
         (the input image's ground-truth volume), 'pose' (the elevations of G's renders), 'colour_tv',
-        'colour_match' and 'colour_offset' (priors, when their weights are set), 'light' (the lights of
+        'colour_match', 'colour_offset' and 'depth_spread' (priors, when their weights are set), 'light' (the lights of
         G's renders). One place that sees
         every term, so the tests can check which of them reach G."""
         return sum(terms.values())
