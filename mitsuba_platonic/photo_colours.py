@@ -29,7 +29,7 @@ import torch
 import torch.nn.functional as F
 from torch import nn
 
-from .render.closed_form import tilt
+from .render.closed_form import tilt, transmittance_before
 
 __all__ = ["COLOUR_MIN", "photo_colour", "blurred", "photo_texture", "photo_texture_sides", "transmittances",
            "surface_weight", "texture_on_surface", "texture_on_sides", "texture_corrected", "photo_volume"]
@@ -163,12 +163,7 @@ def transmittances(density: torch.Tensor,
     if elevation is not None:
         v = tilt(v, elevation.detach())
     τ = 1.0 - v
-
-    def before(t: torch.Tensor, dim: int) -> torch.Tensor:
-        """Π of t over the voxels before each one along ``dim`` (1 at the first)."""
-        shifted = torch.cat([torch.ones_like(t.narrow(dim, 0, 1)), t.narrow(dim, 0, t.shape[dim] - 1)], dim=dim)
-        return torch.cumprod(shifted, dim=dim)
-
+    before = transmittance_before                        # Π over the voxels before each one along a dim
     return before(τ, 2), before(τ.flip(2), 2).flip(2), before(τ, 4), before(τ.flip(4), 4).flip(4)
 
 

@@ -18,6 +18,18 @@ def _volume(n=4, colour=(0.2, 0.5, 0.7), density=1.0):
     return v
 
 
+def _tiny_trainer(tmp_path, *overrides):
+    """A trainer on the tiny procedural class (16³ volumes, batch 2, the closed-form layer), with ``overrides``."""
+    from mitsuba_platonic.train.data import load_training_data
+    from mitsuba_platonic.train.trainer import Trainer
+    from tiny_shapes import TINY
+    cfg = load_config(None, [
+        f"data.cache={tmp_path}", f"data.shape_class={TINY}", "data.n_shapes=4", "data.views_per_shape=2",
+        "model.resolution=16", "model.width=4", "model.latent=8", "train.batch_size=2", "render.backend=closed_form",
+        *overrides])
+    return Trainer(cfg, load_training_data(cfg, progress=False), torch.device("cpu"))
+
+
 def test_a_uniform_colour_costs_nothing_and_an_empty_volume_gives_zero():
     assert float(colour_tv(_volume())) == 0.0
     v = _volume(density=0.0)
@@ -68,16 +80,9 @@ def test_the_config_refuses_colour_tv_without_colour_or_below_zero():
 
 @pytest.mark.usefixtures("tiny_class")
 def test_the_trainer_hands_colour_tv_to_g_only_when_its_weight_is_set(tmp_path):
-    from mitsuba_platonic.train.data import load_training_data
-    from mitsuba_platonic.train.trainer import Trainer
-    from tiny_shapes import TINY
     seen = {}
     for weight in (0.0, 0.5):
-        cfg = load_config(None, [
-            f"data.cache={tmp_path}", f"data.shape_class={TINY}", "data.n_shapes=4", "data.views_per_shape=2",
-            "model.resolution=16", "model.width=4", "model.latent=8", "train.batch_size=2",
-            "render.backend=closed_form", f"train.colour_tv={weight}"])
-        trainer = Trainer(cfg, load_training_data(cfg, progress=False), torch.device("cpu"))
+        trainer = _tiny_trainer(tmp_path, f"train.colour_tv={weight}")
         original = trainer._g_objective
 
         def probe(terms, weight=weight, original=original):
@@ -155,15 +160,8 @@ def test_the_config_refuses_colour_match_without_colour_or_an_input_photo():
 def test_the_trainer_hands_g_the_colour_match_of_the_views_d_saw_against_the_photos_e_read(tmp_path):
     """With weight w, G's 'colour_match' term is w · mean |c̄(I_view) − c̄(x)|, computed here from
     the random views D's update saw (its fakes) and the photos E read; without it, no such term."""
-    from mitsuba_platonic.train.data import load_training_data
-    from mitsuba_platonic.train.trainer import Trainer
-    from tiny_shapes import TINY
     for weight in (0.0, 2.0):
-        cfg = load_config(None, [
-            f"data.cache={tmp_path}", f"data.shape_class={TINY}", "data.n_shapes=4", "data.views_per_shape=2",
-            "model.resolution=16", "model.width=4", "model.latent=8", "train.batch_size=2", "train.random_views=2",
-            "render.backend=closed_form", "train.task=reconstruction", f"train.colour_match={weight}"])
-        trainer = Trainer(cfg, load_training_data(cfg, progress=False), torch.device("cpu"))
+        trainer = _tiny_trainer(tmp_path, "train.random_views=2", "train.task=reconstruction", f"train.colour_match={weight}")
         seen, terms = {"D": []}, {}
         trainer.nets["E"].register_forward_hook(lambda m, i, o: [seen.setdefault("x", i[0].detach().clone())] and None)
         trainer.nets["D"].register_forward_hook(lambda m, i, o: seen["D"].append(i[0].detach().clone()))
@@ -216,14 +214,7 @@ def test_the_trainer_hands_g_the_offsets_of_the_volume_it_made(tmp_path, monkeyp
     offsets G returned in the step (recorded here), and those offsets are logit c − logit m: the
     colour G made, less the photo's mean colour it offset from."""
     from mitsuba_platonic import models
-    from mitsuba_platonic.train.data import load_training_data
-    from mitsuba_platonic.train.trainer import Trainer
-    from tiny_shapes import TINY
-    cfg = load_config(None, [
-        f"data.cache={tmp_path}", f"data.shape_class={TINY}", "data.n_shapes=4", "data.views_per_shape=2",
-        "model.resolution=16", "model.width=4", "model.latent=8", "train.batch_size=2", "render.backend=closed_form",
-        "train.task=reconstruction", "model.photo_colour=true", "train.colour_offset=0.5"])
-    trainer = Trainer(cfg, load_training_data(cfg, progress=False), torch.device("cpu"))
+    trainer = _tiny_trainer(tmp_path, "train.task=reconstruction", "model.photo_colour=true", "train.colour_offset=0.5")
     seen, terms = {}, {}
     original = models.Generator.forward
 
@@ -309,9 +300,6 @@ def test_the_trainer_hands_g_the_depth_spread_of_the_input_view(tmp_path, monkey
     """With weight w, G's 'depth_spread' term is w · L_ds of the volume G made (at the front view the
     input camera's frame is the volume's own); without it, no such term."""
     from mitsuba_platonic import models
-    from mitsuba_platonic.train.data import load_training_data
-    from mitsuba_platonic.train.trainer import Trainer
-    from tiny_shapes import TINY
     original = models.Generator.forward
     seen = {}
 
@@ -322,11 +310,7 @@ def test_the_trainer_hands_g_the_depth_spread_of_the_input_view(tmp_path, monkey
 
     monkeypatch.setattr(models.Generator, "forward", spy)
     for weight in (0.0, 3.0):
-        cfg = load_config(None, [
-            f"data.cache={tmp_path}", f"data.shape_class={TINY}", "data.n_shapes=4", "data.views_per_shape=2",
-            "model.resolution=16", "model.width=4", "model.latent=8", "train.batch_size=2",
-            "render.backend=closed_form", "train.task=reconstruction", f"train.depth_spread={weight}"])
-        trainer = Trainer(cfg, load_training_data(cfg, progress=False), torch.device("cpu"))
+        trainer = _tiny_trainer(tmp_path, "train.task=reconstruction", f"train.depth_spread={weight}")
         terms = {}
         original_objective = trainer._g_objective
         trainer._g_objective = lambda t: terms.update(t) or original_objective(t)

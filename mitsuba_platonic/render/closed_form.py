@@ -46,7 +46,7 @@ from typing import Optional, Tuple
 from ..views import camera_frames
 from ..volume import voxel_size, world_to_grid
 
-__all__ = ["FILTERS", "ORTHOGRAPHIC", "camera_space_points", "path_factor", "rotate", "tilt", "reduce_depth",
+__all__ = ["FILTERS", "ORTHOGRAPHIC", "camera_space_points", "path_factor", "rotate", "tilt", "transmittance_before", "reduce_depth",
            "render_closed_form"]
 
 #: Lookup filters both renderers accept, mapped to ``grid_sample`` modes.
@@ -141,6 +141,13 @@ def tilt(volume: torch.Tensor, elevation: torch.Tensor) -> torch.Tensor:
     return out.reshape(b, ch, n, n, n).permute(0, 1, 3, 4, 2)
 
 
+def transmittance_before(tau: torch.Tensor, dim: int) -> torch.Tensor:
+    """EA's exclusive transmittance T_i = Π_{j<i} τ_j along ``dim`` of per-sample transmittances τ
+    (1 at the first sample), in the product domain: exact, with its gradient, at τ = 0 and 1."""
+    ones = torch.ones_like(tau.narrow(dim, 0, 1))
+    return torch.cumprod(torch.cat([ones, tau.narrow(dim, 0, tau.shape[dim] - 1)], dim=dim), dim=dim)
+
+
 def reduce_depth(camera_volume: torch.Tensor, model: str, path: Optional[torch.Tensor] = None) -> torch.Tensor:
     """Apply the image formation ρ along depth (dim 2) of a camera-space volume → ``(B, C', H, W)``.
 
@@ -157,8 +164,7 @@ def reduce_depth(camera_volume: torch.Tensor, model: str, path: Optional[torch.T
         colour, a = camera_volume[:, :3], camera_volume[:, 3:]
         # per-sample transmittance (the clamp: trilinear round-off may lift a density 1 ulp above 1)
         tau = 1.0 - a if path is None else torch.pow((1.0 - a).clamp_min(0.0), path)
-        ones = torch.ones_like(tau[:, :, :1])
-        T = torch.cumprod(torch.cat([ones, tau[:, :, :-1]], dim=2), dim=2)  # exclusive: Π_{j<i}
+        T = transmittance_before(tau, 2)                                    # exclusive: Π_{j<i}
         rgb = (T * (a if path is None else 1.0 - tau) * colour).sum(dim=2)
         alpha = 1.0 - torch.prod(tau, dim=2)
         return torch.cat([rgb, alpha], dim=1)

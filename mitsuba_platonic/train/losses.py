@@ -38,6 +38,8 @@ from typing import Callable, Optional, Tuple
 import torch
 import torch.nn.functional as F
 
+from ..render.closed_form import transmittance_before
+
 __all__ = ["LOSSES", "d_loss", "g_loss", "gradient_penalty", "r1_penalty", "colour_tv", "colour_offset", "depth_spread", "mean_colour", "colour_match", "soft_accuracy_counts", "hard_accuracy_counts"]
 
 #: The GAN losses of :func:`d_loss` / :func:`g_loss` (anything but the first is WGAN-GP).
@@ -130,7 +132,7 @@ def depth_spread(camera_volume: torch.Tensor) -> torch.Tensor:
     a = camera_volume[:, -1]
     n = a.shape[1]
     τ = 1.0 - a
-    T = torch.cumprod(torch.cat([torch.ones_like(τ[:, :1]), τ[:, :-1]], dim=1), dim=1)   # exclusive: Π_{l<k}
+    T = transmittance_before(τ, 1)                      # exclusive: Π_{l<k}, as the EA layer
     w = T * a
     s = ((torch.arange(n, dtype=a.dtype, device=a.device) + 0.5) / n)[None, :, None, None]
     W = torch.cumsum(w, dim=1) - w                      # Σ_{l<k} w_l
