@@ -30,6 +30,15 @@ def _tiny_trainer(tmp_path, *overrides):
     return Trainer(cfg, load_training_data(cfg, progress=False), torch.device("cpu"))
 
 
+def _g_terms(trainer):
+    """G's weighted terms (detached) of ``trainer``'s first step, as its objective received them."""
+    terms = {}
+    original = trainer._g_objective
+    trainer._g_objective = lambda t: terms.update({k: v.detach().clone() for k, v in t.items()}) or original(t)
+    trainer.step(0)
+    return terms
+
+
 def test_a_uniform_colour_costs_nothing_and_an_empty_volume_gives_zero():
     assert float(colour_tv(_volume())) == 0.0
     v = _volume(density=0.0)
@@ -82,15 +91,7 @@ def test_the_config_refuses_colour_tv_without_colour_or_below_zero():
 def test_the_trainer_hands_colour_tv_to_g_only_when_its_weight_is_set(tmp_path):
     seen = {}
     for weight in (0.0, 0.5):
-        trainer = _tiny_trainer(tmp_path, f"train.colour_tv={weight}")
-        original = trainer._g_objective
-
-        def probe(terms, weight=weight, original=original):
-            seen[weight] = {k: v.detach().clone() for k, v in terms.items()}
-            return original(terms)
-
-        trainer._g_objective = probe
-        trainer.step(0)
+        seen[weight] = _g_terms(_tiny_trainer(tmp_path, f"train.colour_tv={weight}"))
     assert "colour_tv" not in seen[0.0]
     assert float(seen[0.5]["colour_tv"]) > 0.0
     with pytest.raises(ConfigError, match="train.colour_tv: the 'gan3d' baseline"):
@@ -162,12 +163,10 @@ def test_the_trainer_hands_g_the_colour_match_of_the_views_d_saw_against_the_pho
     the random views D's update saw (its fakes) and the photos E read; without it, no such term."""
     for weight in (0.0, 2.0):
         trainer = _tiny_trainer(tmp_path, "train.random_views=2", "train.task=reconstruction", f"train.colour_match={weight}")
-        seen, terms = {"D": []}, {}
+        seen = {"D": []}
         trainer.nets["E"].register_forward_hook(lambda m, i, o: [seen.setdefault("x", i[0].detach().clone())] and None)
         trainer.nets["D"].register_forward_hook(lambda m, i, o: seen["D"].append(i[0].detach().clone()))
-        original = trainer._g_objective
-        trainer._g_objective = lambda t: terms.update(t) or original(t)
-        trainer.step(0)
+        terms = _g_terms(trainer)
         if not weight:
             assert "colour_match" not in terms
             continue
@@ -215,7 +214,7 @@ def test_the_trainer_hands_g_the_offsets_of_the_volume_it_made(tmp_path, monkeyp
     colour G made, less the photo's mean colour it offset from."""
     from mitsuba_platonic import models
     trainer = _tiny_trainer(tmp_path, "train.task=reconstruction", "model.photo_colour=true", "train.colour_offset=0.5")
-    seen, terms = {}, {}
+    seen = {}
     original = models.Generator.forward
 
     def spy(self, z, colour=None, offsets=False):
@@ -224,9 +223,7 @@ def test_the_trainer_hands_g_the_offsets_of_the_volume_it_made(tmp_path, monkeyp
         return out
 
     monkeypatch.setattr(models.Generator, "forward", spy)
-    original_objective = trainer._g_objective
-    trainer._g_objective = lambda t: terms.update(t) or original_objective(t)
-    trainer.step(0)
+    terms = _g_terms(trainer)
     v, ℓ, m = seen["v"], seen["offsets"], seen["m"]
     made = torch.logit(v[:, :3].double()) - torch.logit(m.double().clamp(1 / 255, 254 / 255))[:, :, None, None, None]
     assert torch.allclose(made, ℓ.double(), atol=1e-3)
@@ -310,11 +307,7 @@ def test_the_trainer_hands_g_the_depth_spread_of_the_input_view(tmp_path, monkey
 
     monkeypatch.setattr(models.Generator, "forward", spy)
     for weight in (0.0, 3.0):
-        trainer = _tiny_trainer(tmp_path, "train.task=reconstruction", f"train.depth_spread={weight}")
-        terms = {}
-        original_objective = trainer._g_objective
-        trainer._g_objective = lambda t: terms.update(t) or original_objective(t)
-        trainer.step(0)
+        terms = _g_terms(_tiny_trainer(tmp_path, "train.task=reconstruction", f"train.depth_spread={weight}"))
         if not weight:
             assert "depth_spread" not in terms
             continue
