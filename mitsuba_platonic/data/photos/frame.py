@@ -23,13 +23,15 @@ nothing whatever colour their RGB holds in the file.
 from __future__ import annotations
 
 import math
+from dataclasses import dataclass
+from typing import Tuple
 
 import numpy as np
 from PIL import Image
 
 from .rejections import ImageRejected
 
-__all__ = ["frame_and_resample", "check_aspect", "CROPS", "MAX_ASPECT"]
+__all__ = ["frame_and_resample", "framing", "Framing", "check_aspect", "CROPS", "MAX_ASPECT"]
 
 #: ``crop`` choices: keep the photo's framing, or crop to the object's bounding box.
 CROPS = ("image", "bbox")
@@ -49,6 +51,47 @@ def check_aspect(w: int, h: int, name: str, what: str = "the image") -> None:
                             f"{name}: {what} is {w} × {h} pixels, an aspect ratio of {ratio:.3g}:1; at most "
                             f"{MAX_ASPECT:g}:1 is accepted, since padded to a square it would fill only "
                             f"{100.0 / ratio:.2g} % of the training image; crop it to the object first")
+
+
+@dataclass(frozen=True)
+class Framing:
+    """Where :func:`frame_and_resample` puts a photo: the kept part is rows ``row … row + height − 1``
+    and columns ``col … col + width − 1`` of the photo, placed at (``top``, ``left``) in a transparent
+    square of ``side`` source pixels, which is then resampled to R × R."""
+
+    row: int
+    col: int
+    height: int
+    width: int
+    side: int
+    top: int
+    left: int
+
+    def square(self) -> Tuple[float, float, float]:
+        """The square's centre (row, column) and side in the photo's pixel units (edges at integers):
+        the photo's pixel (i, j) lands at ((i + ½ − row_c) / side, (j + ½ − col_c) / side) of the
+        framed image's width, measured from its centre."""
+        return (self.row - self.top + self.side / 2.0, self.col - self.left + self.side / 2.0, float(self.side))
+
+
+def framing(alpha: np.ndarray, crop: str = "image", margin: float = 0.0, name: str = "<image>") -> Framing:
+    """The framing rule of :func:`frame_and_resample` for a photo of alpha ``(H, W)``: crop to the
+    bounding box of ``α > 0`` (``crop="bbox"``; the whole photo where no pixel is covered), pad to a
+    centred square of side ``S = ceil(max(h, w) / (1 − 2·margin))``.
+
+    Raises:
+        ImageRejected: ``extreme_aspect`` (see :func:`check_aspect`).
+    """
+    row, col, (h, w) = 0, 0, alpha.shape[:2]
+    if crop == "bbox":
+        rows = np.flatnonzero(alpha.any(axis=1))
+        cols = np.flatnonzero(alpha.any(axis=0))
+        if rows.size:
+            row, col = int(rows[0]), int(cols[0])
+            h, w = int(rows[-1]) + 1 - row, int(cols[-1]) + 1 - col
+    check_aspect(w, h, name, "its object's bounding box" if crop == "bbox" else "the image")
+    side = max(h, w, math.ceil(max(h, w) / (1.0 - 2.0 * margin) - 1e-9))
+    return Framing(row, col, h, w, side, (side - h) // 2, (side - w) // 2)
 
 
 def _resample(planes: np.ndarray, resolution: int) -> np.ndarray:
@@ -74,18 +117,10 @@ def frame_and_resample(image: np.ndarray, resolution: int = 64, *, crop: str = "
         ImageRejected: ``extreme_aspect`` if what is framed (the image, or with ``crop="bbox"``
             the bounding box) is more than :data:`MAX_ASPECT` times longer than wide or wider than long.
     """
-    alpha = image[..., 3]
-    if crop == "bbox":
-        rows = np.flatnonzero(alpha.any(axis=1))
-        cols = np.flatnonzero(alpha.any(axis=0))
-        if rows.size:
-            image = image[rows[0]:rows[-1] + 1, cols[0]:cols[-1] + 1]
-    h, w = image.shape[:2]
-    check_aspect(w, h, name, "its object's bounding box" if crop == "bbox" else "the image")
-    side = max(h, w, math.ceil(max(h, w) / (1.0 - 2.0 * margin) - 1e-9))
-    top, left = (side - h) // 2, (side - w) // 2
-    planes = np.zeros((4, side, side), np.float32)
-    planes[:, top:top + h, left:left + w] = np.moveaxis(image, 2, 0)
+    f = framing(image[..., 3], crop, margin, name)
+    image = image[f.row:f.row + f.height, f.col:f.col + f.width]
+    planes = np.zeros((4, f.side, f.side), np.float32)
+    planes[:, f.top:f.top + f.height, f.left:f.left + f.width] = np.moveaxis(image, 2, 0)
     out = _resample(planes, resolution)
     np.clip(out[3], 0.0, 1.0, out=out[3])
     np.clip(out[:3], 0.0, out[3:4], out=out[:3])

@@ -16,10 +16,10 @@ import numpy as np
 
 from ...errors import UserError
 from .decode import DecodedImage
-from .frame import CROPS, check_aspect, frame_and_resample
+from .frame import CROPS, Framing, check_aspect, frame_and_resample, framing
 from .mask import BACKGROUNDS, premultiplied_linear
 
-__all__ = ["PhotoOptions", "ImageOptions", "prepare_image"]
+__all__ = ["PhotoOptions", "ImageOptions", "prepare_image", "photo_framing"]
 
 
 @dataclass
@@ -95,9 +95,25 @@ def prepare_image(decoded: DecodedImage, resolution: int = 64, *,
         ValueError: on invalid options.
     """
     _check_options(resolution, background, threshold, crop, margin, erode)
+    image = _masked(decoded, background, threshold, crop, clean, fill_holes, erode, soften, name)
+    return frame_and_resample(image, resolution, crop=crop, margin=margin, name=name)
+
+
+def _masked(decoded: DecodedImage, background, threshold, crop, clean, fill_holes, erode, soften, name) -> np.ndarray:
+    """The photo at its own size, masked and premultiplied, as :func:`prepare_image` frames it."""
     if crop == "image":                                   # before masking: the photo's own shape
         check_aspect(*decoded.size, name)
-    image = premultiplied_linear(decoded, background=background, threshold=threshold,
-                                 clean=clean, fill_holes=fill_holes, erode=erode,
-                                 soften=soften, name=name)
-    return frame_and_resample(image, resolution, crop=crop, margin=margin, name=name)
+    return premultiplied_linear(decoded, background=background, threshold=threshold,
+                                clean=clean, fill_holes=fill_holes, erode=erode,
+                                soften=soften, name=name)
+
+
+def photo_framing(decoded: DecodedImage, *, background: Optional[str] = None, threshold: float = 0.05,
+                  crop: str = "image", margin: float = 0.0, clean: bool = True, fill_holes: bool = False,
+                  erode: int = 0, soften: bool = True, name: str = "<image>") -> Framing:
+    """Where :func:`prepare_image` with these options puts the photo in its training image
+    (:class:`~.frame.Framing`): the rule applied to the mask it makes. Used to bring a rendered
+    collection's ground truth into the photo's frame (:mod:`mitsuba_platonic.evaluate.photo_truth`)."""
+    _check_options(1, background, threshold, crop, margin, erode)
+    image = _masked(decoded, background, threshold, crop, clean, fill_holes, erode, soften, name)
+    return framing(image[..., 3], crop, margin, name)

@@ -1,0 +1,176 @@
+"""A photo run scored against 3D truth: a rendered collection handed to the photo path as cut-out photos.
+
+A collection made by ``platonic make-dataset`` (``--formation physical``: path-traced under random
+skies) keeps the ground-truth volume and the view of every image (``manifest.json``). Trained as
+photos (``data.path: COLLECTION/images``), its reconstructions live in the *photo's frame*: the
+loader cropped each image to its object's bounding box and scaled it to fill the training image
+(``data.crop: bbox``, :func:`~mitsuba_platonic.data.photos.frame.framing`), and where the object
+sits along the input rays is the generator's own choice. This module brings the truth into that
+frame and scores the reconstruction where the photo showed nothing.
+
+**The truth in the photo's frame.** The input camera at view ω has the frame (right, up, ω)
+(:func:`~mitsuba_platonic.views.camera_frames`). The loader's square has its centre at (u_c, v_c) on
+the camera plane and half-width 1/s, with s = P / S (the photo's P pixels span [−1, 1], the square
+S of them). The reconstruction's camera-frame point x = (x₁, x₂, x₃) (``Model.reconstruct``'s grid:
+right, up, towards the camera) is the truth's world point
+
+    p(x) = u_c · right + v_c · up + z_c · ω + (x₁ · right + x₂ · up + x₃ · ω) / s
+
+with z_c the one thing a photo does not fix: it is chosen so that the two volumes' mean depths,
+weighted by density, agree, z_c = z̄_truth − z̄_rec / s. A reconstruction voxel of edge 2/R spans
+2/(R s) of the truth's units, N_t / (R s) truth voxels, so the truth's per-voxel opacity becomes
+
+    a' = 1 − (1 − a)^{N_t / (R s)}
+
+(docs/conventions.md, "Opacity and extinction"), and the framed truth's EA render from the input
+view covers the photo's silhouette as the truth's own render covers the photo.
+
+**Views.** A turntable about the object's *true* vertical axis at the photo's true elevation θ,
+ω(φ, θ) with φ from the input view, written in the camera frame where both volumes live:
+ω_cam = (ω·right₀, ω·up₀, ω·ω₀) with right₀ = (1, 0, 0), up₀ = (0, cos θ, −sin θ),
+ω₀ = (0, sin θ, cos θ). Scores per photo (:class:`TruthScores`): silhouette IoU and MAE of the two
+volumes' EA renders (closed form, :func:`~.protocol.novel_view_errors`) at φ = ±90° (side), 180°
+(back) and 0° (the photo's own view: how well the framing matched), and the 3D IoU at density
+½ (:func:`~.metrics.volume_iou`).
+"""
+
+from __future__ import annotations
+
+import json
+import math
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any, Dict, List, Optional, Sequence, Tuple, Union
+
+import numpy as np
+import torch
+import torch.nn.functional as F
+
+from ..data.photos import decode_image
+from ..data.photos.frame import Framing
+from ..data.photos.prepare import photo_framing
+from ..errors import UserError
+from ..views import camera_frames, from_angles
+from ..volume import voxel_centres, world_to_grid
+from . import metrics as M
+from .photos import photo_splits
+from .protocol import novel_view_errors
+
+__all__ = ["TruthScores", "framed_truth", "turntable_in_camera", "score_against_truth", "SIDE", "BACK"]
+
+PathLike = Union[str, Path]
+
+#: The turntable angles φ (degrees from the input view) of the side and back scores.
+SIDE = (90.0, -90.0)
+BACK = (180.0,)
+
+
+@dataclass
+class TruthScores:
+    """Per held-out photo: its file and the scores of the module docstring (lists in the same order)."""
+
+    files: List[str] = field(default_factory=list)
+    front_iou: List[float] = field(default_factory=list)
+    side_iou: List[float] = field(default_factory=list)
+    side_mae: List[float] = field(default_factory=list)
+    back_iou: List[float] = field(default_factory=list)
+    back_mae: List[float] = field(default_factory=list)
+    volume_iou: List[float] = field(default_factory=list)
+
+    def means(self) -> Dict[str, float]:
+        """The mean of each score over the photos (``truth_<score>``)."""
+        keys = ("front_iou", "side_iou", "side_mae", "back_iou", "back_mae", "volume_iou")
+        return {f"truth_{k}": float(np.mean(getattr(self, k))) for k in keys}
+
+
+def turntable_in_camera(elevation: float, azimuths: Sequence[float]) -> torch.Tensor:
+    """Views ω(φ, θ) about the object's vertical axis, θ = ``elevation`` and φ = ``azimuths`` in degrees
+    from the input view, in the input camera's frame (module docstring): ``(len(azimuths), 3)``."""
+    θ = math.radians(float(elevation))
+    v = from_angles(torch.tensor([float(a) for a in azimuths]), torch.full((len(azimuths),), float(elevation)))
+    v = v.to(torch.float64)
+    s, c = math.sin(θ), math.cos(θ)
+    cam = torch.stack([v[:, 0], v[:, 1] * c - v[:, 2] * s, v[:, 1] * s + v[:, 2] * c], dim=-1)
+    return (cam / cam.norm(dim=-1, keepdim=True)).to(torch.float32)
+
+
+def _mean_depth(density: torch.Tensor, depth: torch.Tensor) -> float:
+    """Σ a·z / Σ a, or 0 for an empty volume."""
+    total = float(density.sum())
+    return 0.0 if total <= 0.0 else float((density.double() * depth).sum()) / total
+
+
+def framed_truth(truth: torch.Tensor, view: Sequence[float], square: Tuple[float, float, float], pixels: int,
+                 reconstruction: torch.Tensor) -> torch.Tensor:
+    """The ground truth ``(4, N_t, N_t, N_t)`` (RGBA, object frame) seen from ``view`` as a photo of
+    ``pixels`` × ``pixels`` framed by ``square`` (:meth:`~mitsuba_platonic.data.photos.frame.Framing.square`:
+    centre row, centre column, side, in pixels), resampled onto the grid of ``reconstruction``
+    ``(4, R, R, R)`` (the input camera's frame) with its depth matched: ``(4, R, R, R)`` (module docstring)."""
+    if truth.dim() != 4 or truth.shape[0] != 4 or reconstruction.dim() != 4 or reconstruction.shape[0] != 4:
+        raise UserError(f"framed_truth needs (4, N, N, N) volumes, got {tuple(truth.shape)} and "
+                        f"{tuple(reconstruction.shape)}")
+    n_t, r = truth.shape[-1], reconstruction.shape[-1]
+    right, up, w = (a[0] for a in camera_frames(torch.tensor([list(view)], dtype=torch.float64)))
+    row_c, col_c, side = square
+    s = pixels / side                                                  # photo pixels per square pixel
+    u_c = -1.0 + 2.0 * col_c / pixels                                  # the square's centre on the camera plane
+    v_c = 1.0 - 2.0 * row_c / pixels
+    # where the object sits along the ray: the density-weighted mean depths agree
+    z_truth = _mean_depth(truth[3], voxel_centres(n_t) @ w)
+    rec_depth = voxel_centres(r)[..., 2]                               # the camera frame's depth x₃ of each voxel
+    z_c = z_truth - _mean_depth(reconstruction[3].cpu(), rec_depth) / s
+    x = voxel_centres(r)                                               # (R, R, R, 3): (x₁, x₂, x₃) of each voxel
+    p = (u_c * right + v_c * up + z_c * w) + (x[..., :1] * right + x[..., 1:2] * up + x[..., 2:] * w) / s
+    grid = world_to_grid(p)[None].to(torch.float32)
+    out = F.grid_sample(truth[None].float(), grid, mode="bilinear", padding_mode="zeros", align_corners=False)[0]
+    a = out[3].clamp(0.0, 1.0 - 1e-7)
+    out[3] = -torch.expm1(torch.log1p(-a) * (n_t / (r * s)))          # a' = 1 − (1 − a)^{N_t / (R s)}
+    return out.clamp(0.0, 1.0)
+
+
+def _manifest(folder: Path) -> Tuple[Path, Dict[str, Dict[str, Any]]]:
+    """The collection root holding ``manifest.json`` (``folder`` or its parent) and its records by image path."""
+    for root in (folder, folder.parent):
+        if (root / "manifest.json").is_file():
+            records = json.loads((root / "manifest.json").read_text())["images"]
+            return root, {str((root / rec["image"]).resolve()): rec for rec in records}
+    raise UserError(f"{folder} is not a rendered collection's images (no manifest.json in it or above it): "
+                    f"3D truth needs a collection made by platonic make-dataset")
+
+
+def score_against_truth(model: Any, cfg: Any, data_path: Optional[PathLike] = None) -> TruthScores:
+    """Reconstruct a folder run's held-out photos (:func:`~.photos.photo_splits`) with ``model`` (a
+    :class:`~mitsuba_platonic.model.Model` of EA) and score each against its ground truth (module
+    docstring). The photos must be a rendered collection's ``images/``; ``data_path`` replaces
+    ``cfg.data.path``."""
+    if cfg.render.model != "ea":
+        raise UserError(f"scoring against 3D truth renders colour: it needs an EA run, got {cfg.render.model!r}")
+    folder = Path(data_path if data_path is not None else cfg.data.path)
+    root, records = _manifest(folder)
+    _, photos, files = photo_splits(cfg, folder)
+    options = {k: v for k, v in cfg.data.image_kwargs().items()}
+    recon = model.reconstruct(photos).detach().cpu()
+    scores = TruthScores()
+    for k, file in enumerate(files):
+        rec = records.get(str(Path(file).resolve()))
+        if rec is None:
+            raise UserError(f"{file} is not in {root / 'manifest.json'}")
+        decoded = decode_image(file)
+        if decoded.size[0] != decoded.size[1]:
+            raise UserError(f"{file}: a rendered collection's images are square, this one is {decoded.size}")
+        framing: Framing = photo_framing(decoded, name=str(file), **options)
+        truth = torch.from_numpy(np.load(root / rec["volume"])["volume"]).float()
+        θ = math.degrees(math.asin(max(-1.0, min(1.0, float(rec["view"][1])))))
+        t = framed_truth(truth, rec["view"], framing.square(), decoded.size[0], recon[k])
+        r = recon[k]
+        front_mae, front_iou = novel_view_errors(r, t, "ea", turntable_in_camera(θ, (0.0,)))
+        side_mae, side_iou = novel_view_errors(r, t, "ea", turntable_in_camera(θ, SIDE))
+        back_mae, back_iou = novel_view_errors(r, t, "ea", turntable_in_camera(θ, BACK))
+        scores.files.append(str(file))
+        scores.front_iou.append(front_iou)
+        scores.side_iou.append(side_iou)
+        scores.side_mae.append(side_mae)
+        scores.back_iou.append(back_iou)
+        scores.back_mae.append(back_mae)
+        scores.volume_iou.append(M.volume_iou(r[3], t[3]))
+    return scores

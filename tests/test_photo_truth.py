@@ -1,0 +1,150 @@
+"""3D truth for photo runs (evaluate/photo_truth.py): the loader's framing, the truth brought into the
+photo's frame, the turntable about the object's true axis, and the scores end to end."""
+
+import json
+import math
+
+import numpy as np
+import pytest
+import torch
+
+from mitsuba_platonic.config import load_config
+from mitsuba_platonic.data.collection import CollectionSpec, make_collection
+from mitsuba_platonic.data.photos import decode_image
+from mitsuba_platonic.data.photos.frame import frame_and_resample, framing
+from mitsuba_platonic.data.photos.prepare import photo_framing
+from mitsuba_platonic.evaluate.metrics import volume_iou
+from mitsuba_platonic.evaluate.photo_truth import framed_truth, score_against_truth, turntable_in_camera
+from mitsuba_platonic.evaluate.photos import photo_splits
+from mitsuba_platonic.evaluate.protocol import billboard
+from mitsuba_platonic.render import render
+from mitsuba_platonic.views import from_angles, front_view
+from mitsuba_platonic.volume import voxel_centres
+
+
+def _sphere(n, centre, radius, density=1.0, colour=(0.8, 0.3, 0.2)):
+    """An anti-aliased sphere (opacity ``density`` inside, a one-voxel ramp) as a (4, N, N, N) volume."""
+    d = (voxel_centres(n) - torch.tensor(centre, dtype=torch.float64)).norm(dim=-1)
+    a = ((radius - d) / (2.0 / n) + 0.5).clamp(0.0, 1.0) * density
+    rgb = torch.tensor(colour, dtype=torch.float64)[:, None, None, None].expand(3, n, n, n)
+    return torch.cat([rgb, a[None]]).float()
+
+
+def _centroid(density):
+    w = density.double()
+    return (voxel_centres(density.shape[-1]) * w[..., None]).sum((0, 1, 2)) / w.sum()
+
+
+def test_framing_square_says_where_frame_and_resample_puts_a_pixel():
+    image = np.zeros((30, 40, 4), np.float32)
+    image[5:15, 10:30, 3] = 1.0                                  # the object: rows 5-14, columns 10-29
+    image[8, 14, 0] = 1.0                                        # one red pixel inside it
+    f = framing(image[..., 3], "bbox", 0.1)
+    assert (f.row, f.col, f.height, f.width) == (5, 10, 10, 20)
+    assert f.side == 25 and (f.top, f.left) == (7, 2)
+    r = 50
+    out = frame_and_resample(image, r, crop="bbox", margin=0.1)
+    red = torch.from_numpy(out[0]).double()
+    m = torch.arange(r, dtype=torch.float64) + 0.5
+    row_at, col_at = float((red.sum(1) * m).sum() / red.sum()), float((red.sum(0) * m).sum() / red.sum())
+    row_c, col_c, side = f.square()
+    assert row_at == pytest.approx(((8 + 0.5 - row_c) / side + 0.5) * r, abs=1e-3)
+    assert col_at == pytest.approx(((14 + 0.5 - col_c) / side + 0.5) * r, abs=1e-3)
+
+
+def _photo_of(truth, view, margin=0.1):
+    photo = render(truth[None], view[None], "ea")[0]
+    alpha = photo[3].numpy()
+    return photo, framing(alpha, "bbox", margin).square()
+
+
+def test_framed_truth_of_an_off_centre_sphere_fills_the_square_centred_at_the_matched_depth():
+    view = from_angles(30.0, 20.0)
+    truth = _sphere(64, (0.2, -0.1, 0.3), 0.4)
+    _, square = _photo_of(truth, view)
+    side = square[2]
+    # the bounding box of α > 0 spans the diameter, 25.6 pixels, and at most two pixels of soft edge;
+    # margin 0.1 pads it to a square 1 / 0.8 times as wide
+    assert math.ceil(25.6 / 0.8) <= side <= math.ceil(29.6 / 0.8)
+    rec = _sphere(32, (0.0, 0.0, 0.25), 0.5)                      # any volume: it sets the depth only
+    t = framed_truth(truth, view.tolist(), square, 64, rec)
+    occupied = float((t[3] >= 0.5).sum()) * (2.0 / 32) ** 3
+    radius = (3.0 * occupied / (4.0 * math.pi)) ** (1.0 / 3.0)
+    assert radius == pytest.approx(0.4 * 64 / side, abs=0.03)     # the square spans [-1, 1]: scale 64 / side
+    cx, cy, cz = _centroid(t[3]).tolist()
+    assert abs(cx) < 2.0 / 32 and abs(cy) < 2.0 / 32                 # centred by the crop, to a voxel
+    assert cz == pytest.approx(float(_centroid(rec[3])[2]), abs=0.01)
+
+
+def test_framed_truth_keeps_the_opacity_of_a_ray_through_a_hazy_sphere():
+    view = from_angles(-50.0, 10.0)
+    truth = _sphere(64, (0.1, 0.2, -0.2), 0.4, density=0.05)
+    _, square = _photo_of(truth, view)
+    t = framed_truth(truth, view.tolist(), square, 64, _sphere(32, (0.0, 0.0, 0.0), 0.5))
+    front = render(t[None], front_view(1), "ea")[0, 3]
+    # the centre ray crosses a chord of 0.8 world units, 25.6 of the truth's voxels of opacity 0.05
+    assert float(front.max()) == pytest.approx(1.0 - 0.95 ** 25.6, abs=0.03)
+
+
+def test_turntable_in_camera_turns_about_the_objects_axis():
+    θ = 30.0
+    views = turntable_in_camera(θ, [0.0, 90.0, -90.0, 180.0, 45.0])
+    assert views[0].tolist() == pytest.approx([0.0, 0.0, 1.0], abs=1e-6)
+    c, s = math.cos(math.radians(θ)), math.sin(math.radians(θ))
+    assert views[1].tolist() == pytest.approx([c, s * c, s * s], abs=1e-6)
+    up = torch.tensor([0.0, c, s])                                  # the object's vertical axis, camera frame
+    assert (views @ up).tolist() == pytest.approx([s] * 5, abs=1e-6)
+    flat = turntable_in_camera(0.0, [20.0, 110.0])
+    assert torch.allclose(flat, from_angles(torch.tensor([20.0, 110.0]), torch.zeros(2)), atol=1e-6)
+
+
+class _Fixed:
+    """A stand-in model whose reconstructions are given."""
+
+    def __init__(self, volumes):
+        self.volumes = volumes
+
+    def reconstruct(self, photos):
+        assert len(photos) == len(self.volumes)
+        return torch.stack(self.volumes)
+
+
+def test_scores_end_to_end_the_truth_scores_one_and_a_billboard_only_from_the_front(tmp_path):
+    spec = CollectionSpec("mushroom", n_shapes=10, views_per_shape=1, resolution=32, formation="ea",
+                          views="band", elevation=(0.0, 40.0), seed=3)
+    make_collection(tmp_path / "c", spec, progress=False)
+    cfg = load_config("photos", [f"data.path={tmp_path / 'c' / 'images'}", "model.resolution=16"])
+    _, photos, files = photo_splits(cfg)
+    records = {r["image"]: r for r in json.loads((tmp_path / "c" / "manifest.json").read_text())["images"]}
+    truths = []
+    for f in files:
+        rec = records[f"images/{f.name}"]
+        decoded = decode_image(f)
+        square = photo_framing(decoded, **cfg.data.image_kwargs()).square()
+        truth = torch.from_numpy(np.load(tmp_path / "c" / rec["volume"])["volume"]).float()
+        truths.append(framed_truth(truth, rec["view"], square, decoded.size[0], torch.zeros(4, 16, 16, 16)))
+    exact = score_against_truth(_Fixed(truths), cfg)
+    assert [str(f) for f in files] == exact.files
+    means = exact.means()
+    # the truth framed once more for scoring is matched in depth to itself framed at depth 0: the same
+    # volume up to the resampling of that small shift (a file paired with another's truth scores far lower)
+    assert min(means["truth_front_iou"], means["truth_side_iou"], means["truth_back_iou"]) > 0.95
+    assert means["truth_volume_iou"] > 0.9 and means["truth_side_mae"] < 0.01
+    # the billboard (the photo drawn through the cube's depth) is the truth from the photo's own view, which
+    # holds only where the truth was framed as the loader framed the photo; from the side it is a prism
+    billboards = score_against_truth(_Fixed([billboard(p) for p in photos]), cfg).means()
+    assert billboards["truth_front_iou"] > 0.9
+    assert billboards["truth_side_iou"] < 0.6 and billboards["truth_volume_iou"] < 0.5
+
+
+def test_score_against_truth_needs_a_rendered_collection(tmp_path):
+    from PIL import Image
+    from mitsuba_platonic.errors import UserError
+
+    for i in range(6):
+        a = np.zeros((20, 20, 4), np.uint8)
+        a[4 + i % 3:15, 5:14] = (200, 50 + 20 * i, 30, 255)
+        Image.fromarray(a).save(tmp_path / f"{i}.png")
+    cfg = load_config("photos", [f"data.path={tmp_path}", "model.resolution=16"])
+    with pytest.raises(UserError, match="manifest.json"):
+        score_against_truth(_Fixed([]), cfg)
