@@ -58,12 +58,13 @@ import torch.distributed as dist
 from ..checkpoint import RunError, load_checkpoint, load_latest_checkpoint, read_checkpoint, save_checkpoint
 from ..config import Config
 from ..errors import Interrupted, UserError
+from ..fileio import confined
 from ..loading import checkpoint_config, model_from_checkpoint
 from ..model import Model
 from ..progress import progress_bar
 from .data import TrainingData, load_training_data
 from .fits import check_model_fits
-from .folder import RUN_MARKER, claim_run_folder, prepare_run_folder, read_run_config, run_lock
+from .folder import RUN_MARKER, RUN_PARTS, claim_run_folder, prepare_run_folder, read_run_config, run_lock
 from .keeper import Checkpoints, non_finite
 from .logs import SAMPLE_VIEWS, ScalarLog, write_samples
 from .machine import SERIAL_MARCHER_MAX_RESOLUTION, distributed, drjit_threads, run_device, training_threads
@@ -89,7 +90,7 @@ def train(cfg: Config, resume: bool = False, progress: bool = True,
     rank, world, local_rank = distributed()
     check_model_fits(cfg, run_device(cfg, local_rank))      # before any data or run folder is written
     run_dir = Path(cfg.run.out_dir) / cfg.run.name
-    with training_threads(cfg):
+    with training_threads(cfg), confined(run_dir, RUN_PARTS):   # no write through a link the folder holds
         if rank != 0:
             return _train(cfg, run_dir, resume, progress, stop_at, rank, world, local_rank, config_file)
         claim_run_folder(run_dir)                            # before the lock: a user's folder stays untouched
