@@ -142,7 +142,7 @@ LAYERS = [
     ("the config, composing every component's settings", ["config"]),
     ("training: loading what runs saved, data, trainer, runs", ["loading", "train"]),
     ("evaluation and export", ["evaluate", "export", "bench"]),
-    ("command line", ["quickstart", "photo_quickstart", "cli", "__main__"]),
+    ("command line", ["quickstart", "photo_quickstart", "cli", "console", "__main__"]),
 ]
 
 #: Imports that go up a layer on purpose, and why (none closes a cycle: the test above says so).

@@ -38,7 +38,7 @@ import numpy as np
 import torch
 
 from ..checkpoint import read_checkpoint
-from ..errors import UserError
+from ..errors import UserError, raise_if_ctrl_c
 from ..fileio import confined, make_folder, write_text
 from ..loading import checkpoint_config, model_from_checkpoint
 from ..model import Model
@@ -109,6 +109,7 @@ def score_pairs(method: str, model: str, triples: Sequence[Tuple[torch.Tensor, t
     if_recon, if_ref = [], []
     bar = progress_bar(len(triples), unit="pair", desc=f"  {method}", disable=not progress)
     for k, (image, recon, truth) in enumerate(triples):
+        raise_if_ctrl_c()                                    # a Ctrl-C Mitsuba's render took (it cancels, winds down)
         res = evaluate_pair(recon, truth, model, n_views=n_views, seed=seed + k, methods=methods, spp=spp,
                             max_depth=max_depth, backend=backend, vgg_network=vgg_network, if_max_depth=if_max_depth)
         row.pairs.append(res.metrics)
