@@ -8,7 +8,7 @@ that stop a command.
   its inputs (``ConfigError``, ``RunError``, the CLI's ``CLIError`` and the photo loader's
   ``ImageRejected`` are user errors too).
 - :class:`Interrupted` (a ``KeyboardInterrupt``): Ctrl-C, with a message saying what was saved
-  and how to continue. The command line prints it as one line and exits with code 130.
+  and how to continue. The command line prints it as one line and exits with code 130 (143 for SIGTERM).
 
 The stop signals (:data:`STOP_SIGNALS`): SIGINT (Ctrl-C) and SIGTERM (what ``kill``, ``timeout``,
 Slurm, systemd and container runtimes send) stop a command alike: each raises
