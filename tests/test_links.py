@@ -274,3 +274,16 @@ def test_reconstruct_writes_nothing_through_a_link_in_out(run, tmp_path):
     assert code == 0, stderr                                           # --out itself may be a link: the user's choice
     assert target.read_bytes() == before
     assert all(_snapshot(folder)[k] == v for k, v in before_folder.items())
+
+
+def test_make_dataset_preview_writes_no_contact_sheet_through_a_link(tmp_path):
+    out = tmp_path / "previews"
+    out.mkdir()
+    target = _outside(tmp_path, "file")
+    before = target.read_bytes()
+    (out / "preview_mushroom.png").symlink_to(target)
+    code, _, stderr = run_cli(["make-dataset", "--preview", "--class", "mushroom", "--preview-shapes", "1",
+                               "--resolution", "16", "--out", str(out)])
+    assert code == 2, stderr
+    _refused(stderr, "make-dataset", out / "preview_mushroom.png")
+    assert target.read_bytes() == before
