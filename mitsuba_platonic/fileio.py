@@ -7,12 +7,15 @@ Confinement (:func:`confined`): a run folder, a collection or an output folder m
 or an archive and hold symbolic links (``checkpoints/`` → someone's folder, ``run.lock`` → a shell
 profile). Within ``with confined(root):`` every path below ``root`` that this module writes, creates,
 opens, locks or deletes (:func:`atomic_write`, :func:`open_file`, :func:`make_folder`,
-:func:`remove`, :func:`remove_temporaries`) is checked part by part from ``root`` down: a part
-that is a symbolic link is refused with :class:`LinkRefused` (a one-line
-:class:`~mitsuba_platonic.errors.UserError` naming the link) before anything is done through it,
-and files are opened with ``O_NOFOLLOW``. ``root`` itself may be a link (the user named it); what
-lies inside may not. ``confined(root, parts)`` checks the folder's own layout (``parts``) on entry,
-so a command refuses before it has done any work, not at its first write.
+:func:`remove`, :func:`remove_temporaries`) is checked part by part from ``root`` down: a folder
+on the way that is a symbolic link, and a file that would be opened through one (``O_NOFOLLOW``),
+is refused with :class:`LinkRefused` (a one-line :class:`~mitsuba_platonic.errors.UserError`
+naming the link) before anything is done through it. A link that is the last part of a path
+written atomically or deleted is replaced or removed itself, never followed (``rename`` and
+``unlink`` act on the link: a broken ``last.pt`` link is simply replaced). ``root`` itself may be
+a link (the user named it); what lies inside may not. ``confined(root, parts)`` checks the
+folder's own layout (``parts``, links as the last part included) on entry, so a command refuses
+before it has done any work, not at its first write.
 """
 
 from __future__ import annotations
@@ -57,7 +60,7 @@ def atomic_write(path: Path, write: Callable[[Path], Any], durable: bool = False
     and raises something else (numpy's ``savez`` closing a zip whose entry is still open raises
     ``ValueError``), so the command line reports the interrupt, not the clean-up's error.
     """
-    path = check_path(path)
+    path = check_path(path, itself=False)                   # a link there is replaced by the rename, not followed
     make_folder(path.parent)
     tmp = temporary_name(path)
     try:
@@ -155,16 +158,18 @@ def confined(root: PathLike, parts: Iterable[str] = ()) -> Iterator[Path]:
         _ROOTS.reset(token)
 
 
-def check_path(path: PathLike) -> Path:
-    """``path``, after checking that no part of it below a :func:`confined` folder (itself included
-    where it is the last part) is a symbolic link; :class:`LinkRefused` naming the first that is."""
+def check_path(path: PathLike, itself: bool = True) -> Path:
+    """``path``, after checking that no part of it below a :func:`confined` folder is a symbolic
+    link (the last part too unless not ``itself``: a link replaced or removed, never followed);
+    :class:`LinkRefused` naming the first that is."""
     path = Path(path)
     full = os.path.abspath(path)
     for root in _ROOTS.get():
         if full == root or not full.startswith(root.rstrip(os.sep) + os.sep):
             continue
         current = root
-        for part in Path(os.path.relpath(full, root)).parts:
+        parts = Path(os.path.relpath(full, root)).parts
+        for part in parts if itself else parts[:-1]:
             current = os.path.join(current, part)
             if os.path.islink(current):
                 raise _refusal(current, root)
@@ -192,8 +197,9 @@ def make_folder(path: PathLike) -> Path:
 
 
 def remove(path: PathLike, missing_ok: bool = False) -> None:
-    """Delete the file ``path`` after :func:`check_path` (never a file a linked folder holds)."""
-    check_path(path).unlink(missing_ok=missing_ok)
+    """Delete the file ``path`` after :func:`check_path` (never a file a linked folder holds; a link
+    itself is removed, not what it points to)."""
+    check_path(path, itself=False).unlink(missing_ok=missing_ok)
 
 
 def write_text(path: PathLike, text: str) -> Path:
