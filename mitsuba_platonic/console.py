@@ -9,10 +9,11 @@ script), once it has saved what it had and said so.
 
 from __future__ import annotations
 
+import signal
 import sys
 from typing import Optional, Sequence
 
-from .errors import catch_stop_signals, end_by_signal, interrupt_caught, interrupt_exit_code
+from .errors import catch_stop_signals, end_by_signal, interrupt_caught, interrupt_exit_code, stopped_by
 
 __all__ = ["main"]
 
@@ -30,6 +31,7 @@ def main(argv: Optional[Sequence[str]] = None) -> None:
     except KeyboardInterrupt:                                # while the command line loaded, or as it returned
         interrupt_caught()
         if not started:
-            print("platonic: interrupted: while starting; nothing was written", file=sys.stderr)
+            what = "terminated (SIGTERM)" if stopped_by() == getattr(signal, "SIGTERM", None) else "interrupted"
+            print(f"platonic: {what}: while starting; nothing was written", file=sys.stderr)
         code = interrupt_exit_code()
     end_by_signal(code)

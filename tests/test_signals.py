@@ -128,4 +128,5 @@ def test_a_signal_while_the_console_script_loads_is_one_line(tmp_path, sig):
                        timeout=300, stdin=subprocess.DEVNULL, cwd=tmp_path)
     assert r.returncode == -getattr(signal, sig), r.stderr
     err = r.stderr.strip()
-    assert err == "platonic: interrupted: while starting; nothing was written", err
+    what = "terminated (SIGTERM)" if sig == "SIGTERM" else "interrupted"
+    assert err == f"platonic: {what}: while starting; nothing was written", err
