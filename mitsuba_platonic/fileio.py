@@ -124,7 +124,8 @@ def remove_temporaries(folder: Path) -> List[Path]:
 #: The folders (absolute, not resolved) whose insides :func:`check_path` checks: :func:`confined`'s.
 _ROOTS: "contextvars.ContextVar[Tuple[str, ...]]" = contextvars.ContextVar("confined_roots", default=())
 
-#: ``os.open`` flags that never follow a link in the last part (0 where the platform has none).
+#: ``os.open`` flags: never follow a link in the last part, and no inheritance by child processes
+#: (each 0 where the platform has none).
 _NO_FOLLOW = getattr(os, "O_NOFOLLOW", 0) | getattr(os, "O_CLOEXEC", 0)
 
 

@@ -10,17 +10,18 @@
 from __future__ import annotations
 
 import argparse
+import json
 import math
 import sys
 from pathlib import Path
 from typing import TYPE_CHECKING, Any, Dict, List
 
-if TYPE_CHECKING:
-    import torch
-
 from ..fileio import confined
 from ..outputs import MARKER, claim_output_folder
 from .args import CLIError, check_out_folder, non_negative_int, parse_models, positive_float, positive_int, resolution
+
+if TYPE_CHECKING:
+    import torch
 
 __all__ = ["add_compare", "add_bench"]
 
@@ -32,8 +33,6 @@ COMPARE_PARTS = (MARKER, "compare.json", "compare_light.json", "compare_light.pn
 def _earlier_comparison(out: Path) -> bool:
     """Whether ``out`` holds a comparison written before :data:`~mitsuba_platonic.outputs.MARKER`
     existed: a ``compare.json`` or ``compare_light.json`` with the keys compare writes."""
-    import json
-
     for name, keys in (("compare.json", {"volume", "repeats", "view_vectors", "results"}),
                        ("compare_light.json", {"volume", "settings", "results"})):
         try:
