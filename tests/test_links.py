@@ -290,3 +290,26 @@ def test_make_dataset_preview_replaces_a_link_never_its_target(tmp_path):
                                "--resolution", "16", "--out", str(out)])
     assert code == 0, stderr
     assert target.read_bytes() == before and not (out / "preview_mushroom.png").is_symlink()
+
+
+def test_generate_overwrite_removes_a_linked_sample_itself_never_its_target(tmp_path):
+    """--overwrite deletes an earlier call's sample_* files: one that is a link goes, its target stays."""
+    import torch
+    from types import SimpleNamespace
+
+    from mitsuba_platonic.export import export_samples
+
+    model = SimpleNamespace(generate=lambda n, seed: torch.rand(n, 4, 8, 8, 8), formation="ea")
+    out = tmp_path / "gen"
+    out.mkdir()
+    target = _outside(tmp_path, "file")
+    before = target.read_bytes()
+    (out / "sample_007.npz").symlink_to(target)
+    (out / "linked").symlink_to(_outside(tmp_path / "more", "folder"))
+    with fileio.confined(out):
+        export_samples(model, 1, out, overwrite=True)
+        with pytest.raises(fileio.LinkRefused, match="linked"):             # a folder on the way: refused
+            export_samples(model, 1, out / "linked", overwrite=True)
+    assert target.read_bytes() == before
+    assert not (out / "sample_007.npz").exists() and not (out / "sample_007.npz").is_symlink()
+    assert (out / "sample_000.npz").is_file() and (out / "samples.png").is_file()
