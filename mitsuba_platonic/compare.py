@@ -31,6 +31,7 @@ import numpy as np
 import torch
 
 from .errors import UserError
+from .fileio import atomic_write, make_folder, write_text
 from .images import composite, heatmap, save_exr, to_hwc
 from .render import MODELS, render
 from .render.settings import OPTIONS_OF, RenderSettings
@@ -257,8 +258,8 @@ def _figure(model: str, cf: torch.Tensor, mi: torch.Tensor, views: torch.Tensor,
     axes[0, 2].set_title(f"|difference| ({'max over R, G, B, A' if ea else 'opacity'})\n"
                          + axes[0, 2].get_title(), fontsize=9)
     fig.suptitle(title, fontsize=11)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fig.savefig(path, dpi=100)
+    make_folder(path.parent)
+    atomic_write(path, lambda tmp: fig.savefig(tmp, dpi=100))     # whole, and never through a link
 
 
 def compare(volume: torch.Tensor, views: torch.Tensor, models: Sequence[str] = MODELS,
@@ -303,7 +304,7 @@ def compare(volume: torch.Tensor, views: torch.Tensor, models: Sequence[str] = M
     check_memory(n, b)                                           # and a size that cannot fit, too
     out = Path(out_dir) if out_dir is not None else None
     if out is not None:
-        out.mkdir(parents=True, exist_ok=True)              # fail before rendering, not after
+        make_folder(out)                                     # fail before rendering, not after
     results = []
     for model in models:
         v = _model_volume(volume, model, b)
@@ -330,7 +331,8 @@ def compare(volume: torch.Tensor, views: torch.Tensor, models: Sequence[str] = M
             result["png"] = str(png)
             for i in range(b):
                 exr = out / f"mitsuba_{model}_view{i}.exr"
-                save_exr(exr, to_hwc(result["mitsuba"][i]))   # EA: R,G,B,A; VH/AO: Y,A (A = opacity)
+                img = to_hwc(result["mitsuba"][i])          # EA: R,G,B,A; VH/AO: Y,A (A = opacity)
+                atomic_write(exr, lambda tmp: save_exr(tmp, img))
                 result["exrs"].append(str(exr))
         results.append(result)
     return results
@@ -350,10 +352,8 @@ SUMMARY_KEYS = ("model", "resolution", "views", "filter", "options", "max_abs_di
 def write_summary(path: Union[str, Path], volume: str, views: torch.Tensor, results: Sequence[Mapping[str, Any]],
                   repeats: int) -> Path:
     """``compare.json``: the volume's name, ``repeats``, the view vectors and each result's :data:`SUMMARY_KEYS`."""
-    path = Path(path)
-    path.write_text(json.dumps({"volume": volume, "repeats": repeats, "view_vectors": views.tolist(),
-                                "results": [{k: r[k] for k in SUMMARY_KEYS} for r in results]}, indent=2))
-    return path
+    return write_text(path, json.dumps({"volume": volume, "repeats": repeats, "view_vectors": views.tolist(),
+                                        "results": [{k: r[k] for k in SUMMARY_KEYS} for r in results]}, indent=2))
 
 
 def format_table(results: Sequence[Mapping[str, Any]]) -> str:

@@ -44,6 +44,7 @@ import torch.nn.functional as F
 
 from .compare import time_render
 from .errors import UserError
+from .fileio import atomic_write, make_folder, write_text
 from .images import linear_to_srgb
 from .progress import progress_bar
 from .render.single_scatter import SunAndSky, reference_render, sample_sun_and_sky
@@ -212,9 +213,9 @@ def write_light_summary(path: Union[str, Path], volume: str, settings: Dict[str,
     """``compare_light.json``: the volume's name, the settings and each result's :data:`LIGHT_SUMMARY_KEYS`."""
     path = Path(path)
     clean = lambda x: None if isinstance(x, float) and not math.isfinite(x) else x  # noqa: E731
-    path.write_text(json.dumps({"volume": volume, "settings": settings,
-                                "results": [{k: clean(r[k]) for k in LIGHT_SUMMARY_KEYS} for r in results]},
-                               indent=2))
+    write_text(path, json.dumps({"volume": volume, "settings": settings,
+                                 "results": [{k: clean(r[k]) for k in LIGHT_SUMMARY_KEYS} for r in results]},
+                                indent=2))
     return path
 
 
@@ -266,6 +267,6 @@ def light_figure(results: Sequence[Dict[str, Any]], path: Union[str, Path], titl
     axes[0, 0].set_title("scatter_march", fontsize=10)
     axes[0, 1].set_title("volpath, max_depth 2", fontsize=10)
     fig.suptitle(title, fontsize=10)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fig.savefig(path, dpi=90)
+    make_folder(path.parent)
+    atomic_write(path, lambda tmp: fig.savefig(tmp, dpi=90))      # whole, and never through a link
     return path

@@ -24,6 +24,7 @@ overrides use dotted keys, ``--set train.steps=500``; values are parsed as YAML 
 from __future__ import annotations
 
 import dataclasses
+import os
 import re
 import typing
 from dataclasses import dataclass, field
@@ -280,4 +281,19 @@ def config_from_dict(data: Dict[str, Any]) -> Config:
     :class:`ConfigError` naming the first bad key."""
     if isinstance(data, dict):                               # an empty section (`train:` alone) is its defaults
         data = {name: {} if value is None else value for name, value in data.items()}
-    return _typed(data).validate()
+    return _expand_home(_typed(data)).validate()
+
+
+#: The settings that name a file or folder: ``~`` (``~user``) in them is expanded, as a shell would,
+#: here where every config is made, so that no command writes into a folder literally named ``~``.
+PATH_KEYS = (("run", "out_dir"), ("data", "cache"), ("data", "path"))
+
+
+def _expand_home(cfg: Config) -> Config:
+    """``cfg`` with ``~`` expanded in the values of :data:`PATH_KEYS`."""
+    for section, key in PATH_KEYS:
+        part = getattr(cfg, section)
+        value = getattr(part, key)
+        if isinstance(value, str) and value.startswith("~"):
+            setattr(part, key, os.path.expanduser(value))
+    return cfg

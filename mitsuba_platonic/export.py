@@ -25,7 +25,7 @@ import torch
 import torch.nn.functional as F
 
 from .errors import UserError
-from .fileio import atomic_write
+from .fileio import atomic_write, make_folder, remove
 from .frames import display_frames, save_gif, turntable_frames
 from .images import composite, linear_to_srgb, save_grid, save_png, to_hwc
 from .views import turntable
@@ -85,7 +85,7 @@ def extract_mesh(volume: torch.Tensor, level: float = 0.5) -> Mesh:
 def save_ply(mesh: Mesh, path: PathLike) -> Path:
     """Binary little-endian PLY with float x, y, z, uchar red, green, blue and triangle faces."""
     path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
+    make_folder(path.parent)
     header = ("ply\nformat binary_little_endian 1.0\ncomment mitsuba-platonic marching cubes\n"
               f"element vertex {len(mesh.vertices)}\nproperty float x\nproperty float y\nproperty float z\n"
               "property uchar red\nproperty uchar green\nproperty uchar blue\n"
@@ -231,7 +231,7 @@ def export_samples(model: "Model", n: int, out: PathLike, seed: int = 0, overwri
     if not overwrite:
         _refuse_earlier(out, earlier)
     for p in earlier:
-        p.unlink()
+        remove(p)
     written = [] if written is None else written
     rows = []
     for i, vol in enumerate(model.generate(n, seed).cpu()):

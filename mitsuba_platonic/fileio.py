@@ -1,14 +1,39 @@
-"""Atomic file writes: a file is either its old self or completely written, never torn."""
+"""The project's file writes: whole or not at all, and never through a symbolic link out of the folder
+they belong to.
+
+Atomic writes (:func:`atomic_write`): a file is either its old self or completely written, never torn.
+
+Confinement (:func:`confined`): a run folder, a collection or an output folder may come from a colleague
+or an archive and hold symbolic links (``checkpoints/`` → someone's folder, ``run.lock`` → a shell
+profile). Within ``with confined(root):`` every path below ``root`` that this module writes, creates,
+opens, locks or deletes (:func:`atomic_write`, :func:`open_file`, :func:`make_folder`,
+:func:`remove`, :func:`remove_temporaries`) is checked part by part from ``root`` down: a folder
+on the way that is a symbolic link, and a file that would be opened through one (``O_NOFOLLOW``),
+is refused with :class:`LinkRefused` (a one-line :class:`~mitsuba_platonic.errors.UserError`
+naming the link) before anything is done through it. A link that is the last part of a path
+written atomically or deleted is replaced or removed itself, never followed (``rename`` and
+``unlink`` act on the link: a broken ``last.pt`` link is simply replaced). ``root`` itself may be
+a link (the user named it); what lies inside may not. ``confined(root, parts)`` checks the
+folder's own layout (``parts``, links as the last part included) on entry, so a command refuses
+before it has done any work, not at its first write.
+"""
 
 from __future__ import annotations
 
+import contextvars
 import errno
 import os
 import re
+from contextlib import contextmanager
 from pathlib import Path
-from typing import Any, Callable, List, Optional
+from typing import Any, Callable, Iterable, Iterator, List, Optional, Tuple, Union
 
-__all__ = ["atomic_write", "temporary_name", "remove_temporaries", "interrupt_behind"]
+from .errors import UserError
+
+__all__ = ["atomic_write", "temporary_name", "remove_temporaries", "interrupt_behind", "LinkRefused", "confined",
+           "check_path", "open_file", "make_folder", "remove", "write_text"]
+
+PathLike = Union[str, Path]
 
 #: What :func:`temporary_name` names a temporary: ``.<stem>.tmp<pid><suffix>``.
 _TEMPORARY = re.compile(r"\..+\.tmp\d+(\.[^.]+)?")
@@ -35,8 +60,8 @@ def atomic_write(path: Path, write: Callable[[Path], Any], durable: bool = False
     and raises something else (numpy's ``savez`` closing a zip whose entry is still open raises
     ``ValueError``), so the command line reports the interrupt, not the clean-up's error.
     """
-    path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
+    path = check_path(path, itself=False)                   # a link there is replaced by the rename, not followed
+    make_folder(path.parent)
     tmp = temporary_name(path)
     try:
         write(tmp)
@@ -86,9 +111,100 @@ def remove_temporaries(folder: Path) -> List[Path]:
     """Delete the temporaries :func:`atomic_write` left in ``folder`` when its process was killed
     (call it only while no other process writes there); return what was deleted."""
     removed = []
-    if Path(folder).is_dir():
+    if check_path(folder).is_dir():
         for p in Path(folder).iterdir():
-            if _TEMPORARY.fullmatch(p.name) and p.is_file():
-                p.unlink()
+            if _TEMPORARY.fullmatch(p.name) and p.is_file() and not p.is_symlink():
+                remove(p)
                 removed.append(p)
     return removed
+
+
+# --------------------------------------------------------------------------- confinement
+
+#: The folders (absolute, not resolved) whose insides :func:`check_path` checks: :func:`confined`'s.
+_ROOTS: "contextvars.ContextVar[Tuple[str, ...]]" = contextvars.ContextVar("confined_roots", default=())
+
+#: ``os.open`` flags: never follow a link in the last part, and no inheritance by child processes
+#: (each 0 where the platform has none).
+_NO_FOLLOW = getattr(os, "O_NOFOLLOW", 0) | getattr(os, "O_CLOEXEC", 0)
+
+
+class LinkRefused(UserError):
+    """A part of a path inside a confined folder is a symbolic link; nothing was done through it."""
+
+
+def _refusal(link: str, root: str) -> LinkRefused:
+    try:
+        target = os.readlink(link)
+    except OSError:
+        target = "?"
+    return LinkRefused(f"{link} is a symbolic link (to {target}) inside {root}; platonic writes, locks and deletes "
+                       f"only real files and folders there and changed nothing through it: replace the link by a "
+                       f"copy of what it points to, or use another folder")
+
+
+@contextmanager
+def confined(root: PathLike, parts: Iterable[str] = ()) -> Iterator[Path]:
+    """Within the block, refuse (:class:`LinkRefused`) every write, lock or deletion through this
+    module whose path below ``root`` passes through a symbolic link; first check each of ``parts``
+    (names relative to ``root``: the folder's layout) so that a link there is refused before any
+    work. Blocks nest: a path below several confined folders is checked from the outermost."""
+    root = Path(root)
+    token = _ROOTS.set(_ROOTS.get() + (os.path.abspath(root),))
+    try:
+        for part in parts:
+            check_path(root / part)
+        yield root
+    finally:
+        _ROOTS.reset(token)
+
+
+def check_path(path: PathLike, itself: bool = True) -> Path:
+    """``path``, after checking that no part of it below a :func:`confined` folder is a symbolic
+    link (the last part too unless not ``itself``: a link replaced or removed, never followed);
+    :class:`LinkRefused` naming the first that is."""
+    path = Path(path)
+    full = os.path.abspath(path)
+    for root in _ROOTS.get():
+        if full == root or not full.startswith(root.rstrip(os.sep) + os.sep):
+            continue
+        current = root
+        parts = Path(os.path.relpath(full, root)).parts
+        for part in parts if itself else parts[:-1]:
+            current = os.path.join(current, part)
+            if os.path.islink(current):
+                raise _refusal(current, root)
+        break                                                # the outermost root checked every part below it
+    return path
+
+
+def open_file(path: PathLike, flags: int, mode: int = 0o644) -> int:
+    """``os.open(path, flags | O_NOFOLLOW)`` after :func:`check_path`: a file descriptor, never one
+    of a link's target (a link that appears meanwhile is refused by the kernel, and here in words)."""
+    path = check_path(path)
+    try:
+        return os.open(path, flags | _NO_FOLLOW, mode)
+    except OSError as e:
+        if e.errno == errno.ELOOP and os.path.islink(path):
+            raise _refusal(os.path.abspath(path), os.path.dirname(os.path.abspath(path))) from None
+        raise
+
+
+def make_folder(path: PathLike) -> Path:
+    """Create the folder ``path`` and its missing parents (``mkdir -p``) after :func:`check_path`."""
+    path = check_path(path)
+    path.mkdir(parents=True, exist_ok=True)
+    return path
+
+
+def remove(path: PathLike, missing_ok: bool = False) -> None:
+    """Delete the file ``path`` after :func:`check_path` (never a file a linked folder holds; a link
+    itself is removed, not what it points to)."""
+    check_path(path, itself=False).unlink(missing_ok=missing_ok)
+
+
+def write_text(path: PathLike, text: str) -> Path:
+    """Write ``text`` to ``path`` atomically (:func:`atomic_write`); return the path."""
+    path = Path(path)
+    atomic_write(path, lambda tmp: tmp.write_text(text))
+    return path

@@ -15,7 +15,7 @@ import numpy as np
 import torch
 from PIL import Image
 
-from .fileio import atomic_write
+from .fileio import atomic_write, make_folder
 from .images import composite, linear_to_srgb, to_hwc
 from .render import render
 from .views import turntable
@@ -44,7 +44,7 @@ def turntable_frames(volume: torch.Tensor, model: str, frames: int = 36, elevati
 def save_gif(frames: Sequence[np.ndarray], path: PathLike, scale: int = 4, duration_ms: int = 60) -> Path:
     """Frames (float sRGB in [0, 1]) → an endlessly looping GIF, upscaled ``scale``× (nearest)."""
     path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
+    make_folder(path.parent)
     pil = [Image.fromarray((np.clip(f, 0, 1) * 255 + 0.5).astype(np.uint8)) for f in frames]
     pil = [p.resize((p.width * scale, p.height * scale), Image.NEAREST) for p in pil]
     atomic_write(path, lambda tmp: pil[0].save(tmp, format="GIF", save_all=True, append_images=pil[1:],

@@ -15,7 +15,7 @@ from __future__ import annotations
 import json
 import time
 from pathlib import Path
-from typing import Dict, List, Optional, Sequence
+from typing import Any, Dict, List, Optional, Sequence
 
 from .config import load_config
 from .errors import UserError
@@ -23,8 +23,9 @@ from .evaluate.judge import BANDS
 from .evaluate.photos import photo_splits
 from .evaluate import report as evaluation_report
 from .export import export_held_out
+from .fileio import confined, write_text
 from .model import Model
-from .quickstart import stopped
+from .quickstart import QUICKSTART_PARTS, claim_quickstart_folder, stopped
 from .resources import config_path
 from .train.fits import check_model_fits
 from .train import run as training_run
@@ -50,20 +51,22 @@ def _judge_lines(results: List[Dict]) -> List[str]:
 
 
 def photo_quickstart(photos: Path, out: Path = Path("quickstart-photos"), steps: Optional[int] = None,
-                     progress: bool = True, overrides: Sequence[str] = ()) -> Path:
+                     progress: bool = True, overrides: Sequence[str] = (), overwrite: bool = False) -> Path:
     """Train on the photo folder ``photos`` into ``out``, judge and export; return ``out/report.md``.
     ``overrides``: ``KEY=VALUE`` changes to ``configs/photos.yaml`` (e.g. ``model.resolution=16``).
     Ctrl-C stops it at any stage (a half-trained model is never evaluated) with an
-    :class:`~mitsuba_platonic.errors.Interrupted` that says what was kept and how to continue."""
+    :class:`~mitsuba_platonic.errors.Interrupted` that says what was kept and how to continue. ``out``
+    must be new, empty or an earlier quickstart's (which it continues), else it is refused before any
+    work unless ``overwrite``."""
     stage = {"now": "loading the photos"}
     try:
-        return _photo_quickstart(Path(photos), Path(out), steps, progress, overrides, stage)
+        return _photo_quickstart(Path(photos), Path(out), steps, progress, overrides, stage, overwrite)
     except KeyboardInterrupt as e:
         raise stopped(e, stage, f"platonic quickstart --photos {photos} --out {out}", steps, overrides) from None
 
 
 def _photo_quickstart(photos: Path, out: Path, steps: Optional[int], progress: bool, overrides: Sequence[str],
-                      stage: Dict[str, str]) -> Path:
+                      stage: Dict[str, str], overwrite: bool = False) -> Path:
     """:func:`photo_quickstart`, telling ``stage["now"]`` what it is doing."""
 
     if not photos.is_dir():
@@ -77,6 +80,14 @@ def _photo_quickstart(photos: Path, out: Path, steps: Optional[int], progress: b
     check_model_fits(cfg)
     train_photos, held, files = photo_splits(cfg)                 # a folder that cannot train fails here
     run_dir = Path(cfg.run.out_dir) / cfg.run.name
+    with confined(out, QUICKSTART_PARTS):               # a link in the folder is refused before any work
+        claim_quickstart_folder(out, run_dir, overwrite)
+        return _run_photo_quickstart(photos, out, cfg, run_dir, train_photos, held, progress, stage, t0)
+
+
+def _run_photo_quickstart(photos: Path, out: Path, cfg: Any, run_dir: Path, train_photos: Any, held: Any,
+                          progress: bool, stage: Dict[str, str], t0: float) -> Path:
+    """:func:`photo_quickstart` in its claimed, confined folder ``out``."""
     resume = (run_dir / "checkpoints" / "last.pt").exists()
     stage["now"] = "training"
     training_run.train(cfg, resume=resume, progress=progress)          # looked up when called (tests replace it)
@@ -107,6 +118,4 @@ def _photo_quickstart(photos: Path, out: Path, steps: Optional[int], progress: b
              f"The full evaluation: {evaluation}", "", "## Files", "",
              f"- run folder: {run_dir} (samples/, scalars.csv, tb/, checkpoints/)",
              f"- held-out reconstructions: {recon_dir}"] + [f"  - {w}" for w in written]
-    report = out / "report.md"
-    report.write_text("\n".join(lines) + "\n")
-    return report
+    return write_text(out / "report.md", "\n".join(lines) + "\n")

@@ -19,7 +19,7 @@ from __future__ import annotations
 import csv
 import time
 from pathlib import Path
-from typing import Dict, Optional, Sequence
+from typing import Any, Dict, Optional, Sequence
 
 import torch
 
@@ -27,13 +27,16 @@ from .config import load_config
 from .errors import Interrupted
 from .evaluate.protocol import held_out_scores
 from .export import export_held_out
+from .fileio import confined, write_text
 from .model import Model
+from .outputs import MARKER, claim_output_folder
 from .resources import config_path
 from .train import data as training_data
 from .train import run as training_run
 from .train.fits import check_model_fits
+from .train.folder import is_run_folder
 
-__all__ = ["quickstart", "stopped"]
+__all__ = ["quickstart", "stopped", "claim_quickstart_folder"]
 
 #: The quickstart's config, carried inside the package (configs/quickstart.yaml).
 CONFIG = config_path("quickstart")
@@ -43,17 +46,19 @@ _BACKEND_NAMES = {"closed_form": "closed-form layer", "mitsuba": "Mitsuba ray ma
 
 
 def quickstart(out: Path = Path("quickstart"), steps: Optional[int] = None, progress: bool = True,
-               overrides: Sequence[str] = ()) -> Path:
+               overrides: Sequence[str] = (), overwrite: bool = False) -> Path:
     """Run the quickstart into ``out``; return the path of its report.
 
     overrides: ``section.key=value`` changes to ``configs/quickstart.yaml`` (``--set``), applied
-    after ``out`` and ``steps``. Ctrl-C stops it at any stage (a half-trained model is never
+    after ``out`` and ``steps``. ``out`` must be new, empty or an earlier quickstart's (which it
+    continues), else it is refused before any work unless ``overwrite``
+    (:func:`claim_quickstart_folder`). Ctrl-C stops it at any stage (a half-trained model is never
     evaluated): raises :class:`~mitsuba_platonic.errors.Interrupted` saying what is kept (the cached
     data, the checkpoint training saved) and that running it again continues from there.
     """
     stage = {"now": "preparing the data"}
     try:
-        return _quickstart(Path(out), steps, progress, stage, overrides)
+        return _quickstart(Path(out), steps, progress, stage, overrides, overwrite)
     except KeyboardInterrupt as e:
         raise stopped(e, stage, f"platonic quickstart --out {out}", steps, overrides) from None
 
@@ -70,8 +75,19 @@ def stopped(e: KeyboardInterrupt, stage: Dict[str, str], command: str, steps: Op
                        f"(the data stays cached and training resumes from its last checkpoint)", saved=saved)
 
 
+def claim_quickstart_folder(out: Path, run_dir: Path, overwrite: bool) -> None:
+    """Make ``out`` the quickstart's output folder (:func:`~mitsuba_platonic.outputs.claim_output_folder`):
+    new, empty or an earlier quickstart's (marked, or from before the mark: ``run_dir`` is a run
+    folder), else refused unless ``overwrite``."""
+    claim_output_folder(out, "quickstart", overwrite, earlier=lambda _: is_run_folder(run_dir))
+
+
+#: What the quickstarts write into ``--out`` (:func:`~mitsuba_platonic.fileio.confined`: none may be a link).
+QUICKSTART_PARTS = (MARKER, "report.md", "run", "data", "reconstructions", "evaluation")
+
+
 def _quickstart(out: Path, steps: Optional[int], progress: bool, stage: Dict[str, str],
-                overrides: Sequence[str] = ()) -> Path:
+                overrides: Sequence[str] = (), overwrite: bool = False) -> Path:
     """:func:`quickstart`, telling ``stage["now"]`` what it is doing."""
 
     t0 = time.perf_counter()
@@ -81,6 +97,13 @@ def _quickstart(out: Path, steps: Optional[int], progress: bool, stage: Dict[str
     cfg = load_config(CONFIG, overrides + extra)
     check_model_fits(cfg)                               # before rendering the data
     run_dir = Path(cfg.run.out_dir) / cfg.run.name
+    with confined(out, QUICKSTART_PARTS):               # a link in the folder is refused before any work
+        claim_quickstart_folder(out, run_dir, overwrite)
+        return _run_quickstart(out, cfg, run_dir, progress, stage, t0)
+
+
+def _run_quickstart(out: Path, cfg: Any, run_dir: Path, progress: bool, stage: Dict[str, str], t0: float) -> Path:
+    """:func:`quickstart` in its claimed, confined folder ``out``."""
     resume = (run_dir / "checkpoints" / "last.pt").exists()
     data = training_data.load_training_data(cfg, progress=progress)   # looked up when called (tests replace it)
     t_data = time.perf_counter() - t0
@@ -128,6 +151,4 @@ def _quickstart(out: Path, steps: Optional[int], progress: bool, stage: Dict[str
               "against the ground-truth volume resampled into that frame.", "",
               "## Files", "", f"- run folder: {run_dir} (samples/, scalars.csv, tb/, checkpoints/)",
               f"- reconstructions of held-out images: {recon_dir}"] + [f"  - {w}" for w in written]
-    report = out / "report.md"
-    report.write_text("\n".join(lines) + "\n")
-    return report
+    return write_text(out / "report.md", "\n".join(lines) + "\n")

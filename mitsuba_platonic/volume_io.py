@@ -23,7 +23,7 @@ import numpy as np
 import torch
 
 from .errors import UserError
-from .fileio import atomic_write
+from .fileio import atomic_write, make_folder
 from .volume import TEST_VOLUMES, test_volume
 
 __all__ = ["BUILTIN_PREFIX", "VolumeFileError", "to_mitsuba_grid", "read_npz", "load_volume", "write_npz",
@@ -163,7 +163,7 @@ def save_volume(volume: torch.Tensor, stem: PathLike) -> List[Path]:
     each whole or not at all (:func:`~mitsuba_platonic.fileio.atomic_write`); ``stem`` keeps its dots
     (``shot.v1`` → ``shot.v1.npz``)."""
     stem = Path(stem)
-    stem.parent.mkdir(parents=True, exist_ok=True)
+    make_folder(stem.parent)
     npz, vol = stem.with_name(stem.name + ".npz"), stem.with_name(stem.name + ".vol")
     volume = volume.detach().float().cpu()
     atomic_write(npz, lambda tmp: write_npz(volume, tmp))

@@ -5,7 +5,6 @@ folder, run names that leave ``out_dir``, and a truncated ``last.pt``."""
 import subprocess
 import sys
 import threading
-from types import SimpleNamespace
 
 import pytest
 import torch
@@ -159,7 +158,6 @@ def test_run_names_are_one_folder_name(tmp_path, name, capsys):
 def test_a_second_run_in_a_busy_run_folder_is_refused(tmp_path, monkeypatch, capsys):
     """While run A is in its first step, run B with the same run.name (the command line, in a
     thread) is refused with one line; A then finishes with its own checkpoints."""
-    monkeypatch.setattr(R, "signal", SimpleNamespace(signal=lambda *a: None, SIGINT=2))  # B runs in a thread
     real = Trainer.step
     second = {}
 

@@ -130,7 +130,7 @@ def test_the_package_has_no_import_cycle():
 #: never one above. Names are module prefixes under ``mitsuba_platonic``; the package itself (its
 #: face, which re-exports the renderer) sits on top.
 LAYERS = [
-    ("foundation", ["errors", "fileio", "backend", "resources", "progress", "_data"]),
+    ("foundation", ["errors", "fileio", "outputs", "backend", "resources", "progress", "_data"]),
     ("conventions: views, volume (and its files), images", ["views", "volume", "volume_io", "images"]),
     ("the checks every settings section shares", ["settings_checks"]),
     ("renderer", ["render", "compare", "compare_light", "frames"]),
@@ -142,7 +142,7 @@ LAYERS = [
     ("the config, composing every component's settings", ["config"]),
     ("training: loading what runs saved, data, trainer, runs", ["loading", "train"]),
     ("evaluation and export", ["evaluate", "export", "bench"]),
-    ("command line", ["quickstart", "photo_quickstart", "cli", "__main__"]),
+    ("command line", ["quickstart", "photo_quickstart", "cli", "console", "__main__"]),
 ]
 
 #: Imports that go up a layer on purpose, and why (none closes a cycle: the test above says so).

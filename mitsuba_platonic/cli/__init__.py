@@ -24,8 +24,9 @@ what it runs when it runs, so ``--help`` and a wrong flag answer without startin
 Exit codes: 0 on success; 2 on a user error (usage errors, unreadable or invalid files, invalid
 options: :class:`~mitsuba_platonic.errors.UserError`, which ``ConfigError``, ``RunError`` and
 ``CLIError`` are, ``BackendError``, and ``OSError`` from files and disks), printed as one line on
-stderr without a traceback; 130 on Ctrl-C, one line saying what was saved. Any other exception is
-a bug and keeps its traceback (exit code 1).
+stderr without a traceback; 130 on Ctrl-C and 143 on SIGTERM, one line saying what was saved (the
+console script, :mod:`mitsuba_platonic.console`, then ends by the signal itself, so that a calling
+shell stops too). Any other exception is a bug and keeps its traceback (exit code 1).
 """
 
 from __future__ import annotations
@@ -36,7 +37,7 @@ from typing import Callable, Optional, Sequence
 
 from .. import __version__
 from ..backend import BackendError
-from ..errors import UserError, remembering_ctrl_c
+from ..errors import UserError, interrupt_caught, interrupt_exit_code, remembering_ctrl_c
 from .args import PROG, CLIError, parse_models
 from .checkpoints import add_convert_checkpoint
 from .dataset import add_make_dataset
@@ -71,7 +72,7 @@ def main(argv: Optional[Sequence[str]] = None) -> int:
     ``BackendError``, and ``OSError``: a missing file, no permission, a full disk) print a
     one-line message on stderr and return 2; Ctrl-C, at any moment (numpy and torch load in
     here, where it is caught), prints one line on stderr saying what was saved and how to go on
-    and returns 130; ``--help`` and ``--version`` return 0. Any other exception is a bug: it
+    and returns 130 (SIGTERM likewise, returning 143); ``--help`` and ``--version`` return 0. Any other exception is a bug: it
     propagates with its traceback. A warning (a skipped photo, a checkpoint fallen back from) is
     one line, ``platonic <command>: warning: …``, not Python's file-and-source-line format.
     """
@@ -90,8 +91,9 @@ def _run(argv: Optional[Sequence[str]]) -> int:
             return int(e.code) if isinstance(e.code, int) else 2
         return run_handler(args)
     except KeyboardInterrupt as e:
+        interrupt_caught()                                   # a second Ctrl-C now raises nothing
         print(interrupt_message(args, e), file=sys.stderr)
-        return 130
+        return interrupt_exit_code()
     except (UserError, BackendError, OSError) as e:
         print(error_message(args, e), file=sys.stderr)
         return 2
@@ -99,5 +101,6 @@ def _run(argv: Optional[Sequence[str]]) -> int:
         interrupt = interrupt_behind(e)
         if interrupt is None:
             raise
+        interrupt_caught()
         print(interrupt_message(args, interrupt), file=sys.stderr)
-        return 130
+        return interrupt_exit_code()

@@ -1,7 +1,5 @@
 """``python -m mitsuba_platonic.cli`` (as torchrun launches training): the ``platonic`` command."""
 
-import sys
+from ..console import main
 
-from . import main
-
-sys.exit(main())
+main()

@@ -8,6 +8,7 @@ import argparse
 from pathlib import Path
 from typing import Tuple, Union
 
+from ..fileio import confined
 from .args import CLIError, non_negative_int, positive_float, positive_int
 
 __all__ = ["add_make_dataset"]
@@ -58,10 +59,11 @@ def _cmd_make_dataset(args: argparse.Namespace) -> int:
     _check_dataset_flags(args)
     out = Path(args.out)
     if args.preview:
-        for c in classes:
-            path = contact_sheet(c, out / f"preview_{c}.png", n_shapes=args.preview_shapes,
-                                 resolution=args.resolution, seed=args.seed)
-            print(f"wrote {path}")
+        with confined(out):                                  # no contact sheet written through a link in --out
+            for c in classes:
+                path = contact_sheet(c, out / f"preview_{c}.png", n_shapes=args.preview_shapes,
+                                     resolution=args.resolution, seed=args.seed)
+                print(f"wrote {path}")
         return 0
     for path in args.envmap or ():                          # named on the command line: checked even if unused
         check_envmap(path, what="--envmap")

@@ -9,11 +9,12 @@ set (``p.set_defaults(interrupted=...)``), else :data:`STARTING`.
 from __future__ import annotations
 
 import argparse
+import signal
 import sys
 import warnings
 from typing import Optional
 
-from ..errors import Interrupted
+from ..errors import Interrupted, stopped_by
 from ..fileio import interrupt_behind
 from .args import PROG
 
@@ -34,7 +35,8 @@ def interrupt_message(args: Optional[argparse.Namespace], e: BaseException) -> s
     command = getattr(args, "command", None)
     where = f"{PROG} {command}" if command else PROG
     detail = str(e) if isinstance(e, Interrupted) and str(e) else getattr(args, "interrupted", STARTING)
-    return f"{where}: interrupted: {one_line(detail)}"
+    what = "terminated (SIGTERM)" if stopped_by() == getattr(signal, "SIGTERM", None) else "interrupted"
+    return f"{where}: {what}: {one_line(detail)}"
 
 
 def error_message(args: Optional[argparse.Namespace], e: BaseException) -> str:

@@ -14,6 +14,7 @@ from pathlib import Path
 from typing import List
 
 from ..errors import Interrupted
+from ..fileio import confined
 from .args import non_negative_int, positive_int
 
 __all__ = ["add_reconstruct", "add_generate"]
@@ -35,12 +36,14 @@ def _cmd_reconstruct(args: argparse.Namespace) -> int:
     written: List[Path] = []
     done_inputs = 0
     try:
-        for path, done in export_reconstructions(model, args.images, out, background=args.background, crop=args.crop,
-                                                 level=args.level, overwrite=args.overwrite, written=written):
-            done_inputs += 1
-            if done.no_mesh:
-                print(f"{path}: no mesh: {done.no_mesh}", file=sys.stderr)
-            print(f"{path} → " + ", ".join(str(p) for p in done.paths))
+        with confined(out):                                  # nothing written through a link --out holds
+            for path, done in export_reconstructions(model, args.images, out, background=args.background,
+                                                     crop=args.crop, level=args.level, overwrite=args.overwrite,
+                                                     written=written):
+                done_inputs += 1
+                if done.no_mesh:
+                    print(f"{path}: no mesh: {done.no_mesh}", file=sys.stderr)
+                print(f"{path} → " + ", ".join(str(p) for p in done.paths))
     except KeyboardInterrupt:
         raise _interrupted_export("reconstruct", written, out,
                                   f"{done_inputs} of {len(args.images)} input(s) finished") from None
@@ -77,7 +80,8 @@ def _cmd_generate(args: argparse.Namespace) -> int:
     out = Path(args.out) if args.out else Path(args.run) / "generated"
     written: List[Path] = []
     try:
-        export_samples(model, args.n, out, seed=args.seed, overwrite=args.overwrite, written=written)
+        with confined(out):                                  # nothing written or deleted through a link --out holds
+            export_samples(model, args.n, out, seed=args.seed, overwrite=args.overwrite, written=written)
     except KeyboardInterrupt:
         samples = len({p.stem for p in written if p.name.startswith("sample_")})
         raise _interrupted_export("generate", written, out, f"{samples} of {args.n} sample(s) begun, "

@@ -10,13 +10,38 @@
 from __future__ import annotations
 
 import argparse
+import json
 import math
 import sys
 from pathlib import Path
+from typing import TYPE_CHECKING, Any, Dict, List
 
+from ..fileio import confined
+from ..outputs import MARKER, claim_output_folder
 from .args import CLIError, check_out_folder, non_negative_int, parse_models, positive_float, positive_int, resolution
 
+if TYPE_CHECKING:
+    import torch
+
 __all__ = ["add_compare", "add_bench"]
+
+#: What compare writes into ``--out`` by fixed names (:func:`~mitsuba_platonic.fileio.confined`: none may be a link).
+COMPARE_PARTS = (MARKER, "compare.json", "compare_light.json", "compare_light.png",
+                 *(f"compare_{m}.png" for m in ("vh", "ao", "ea")))
+
+
+def _earlier_comparison(out: Path) -> bool:
+    """Whether ``out`` holds a comparison written before :data:`~mitsuba_platonic.outputs.MARKER`
+    existed: a ``compare.json`` or ``compare_light.json`` with the keys compare writes."""
+    for name, keys in (("compare.json", {"volume", "repeats", "view_vectors", "results"}),
+                       ("compare_light.json", {"volume", "settings", "results"})):
+        try:
+            data = json.loads((out / name).read_text())
+        except (OSError, ValueError):
+            continue
+        if isinstance(data, dict) and set(data) == keys:
+            return True
+    return False
 
 #: compare's flags for the renderer settings they set (their errors name the flag).
 _COMPARE_FLAGS = {"step": "--step", "spp": "--spp", "jitter": "--jitter", "filter": "--filter"}
@@ -38,9 +63,6 @@ def _check_compare_settings(args: argparse.Namespace) -> None:
 
 def _cmd_compare_light(args: argparse.Namespace, volume, views) -> int:
     """``--light``: single scattering (scatter_march) against volpath at depth 2, the extremes included."""
-    from ..compare_light import (BLOCK, compare_light, format_light_table, light_cases, light_figure,
-                                 write_light_summary)
-
     if volume.shape[1] != 4:
         raise CLIError(f"--light: the volume needs colour ([r, g, b, density], C = 4), got C = {volume.shape[1]}")
     if args.jitter or args.step != 1.0 or args.filter != "trilinear":
@@ -53,8 +75,15 @@ def _cmd_compare_light(args: argparse.Namespace, volume, views) -> int:
         raise CLIError(f"--spp: single scattering's rays per pixel: expected a square number (1, 4, 9, …), "
                        f"got {args.spp}")
     out = Path(args.out)
-    check_out_folder(out)
-    out.mkdir(parents=True, exist_ok=True)
+    with confined(out, COMPARE_PARTS):                      # a link in the folder is refused before any work
+        claim_output_folder(out, "compare", args.overwrite, earlier=_earlier_comparison)
+        return _compare_light_into(args, volume, views, out)
+
+
+def _compare_light_into(args: argparse.Namespace, volume: "torch.Tensor", views: "torch.Tensor", out: Path) -> int:
+    """``compare --light`` into the claimed, confined folder ``out``."""
+    from ..compare_light import BLOCK, compare_light, format_light_table, light_cases, light_figure, write_light_summary
+
     cases = light_cases(volume, views, seed=args.seed)
     results = compare_light(cases, spp=args.ref_spp, renders=args.ref_renders, steps_per_voxel=args.steps_per_voxel,
                             ours_spp=args.spp, seed=args.seed, repeats=args.repeats)
@@ -73,7 +102,7 @@ def _cmd_compare_light(args: argparse.Namespace, volume, views) -> int:
 
 
 def _cmd_compare(args: argparse.Namespace) -> int:
-    from ..compare import check_memory, compare, comparison_views, format_table, write_summary
+    from ..compare import check_memory, comparison_views
     from ..volume_io import BUILTIN_PREFIX, load_volume
 
     if not args.light:
@@ -98,7 +127,16 @@ def _cmd_compare(args: argparse.Namespace) -> int:
     views = comparison_views(args.views, seed=args.seed)
     options = {"step": args.step, "spp": args.spp, "jitter": args.jitter, "seed": args.seed}
     out = Path(args.out)
-    check_out_folder(out)
+    with confined(out, COMPARE_PARTS):                      # a link in the folder is refused before any work
+        claim_output_folder(out, "compare", args.overwrite, earlier=_earlier_comparison)
+        return _compare_into(args, volume, views, models, options, out)
+
+
+def _compare_into(args: argparse.Namespace, volume: "torch.Tensor", views: "torch.Tensor", models: List[str],
+                  options: Dict[str, Any], out: Path) -> int:
+    """``compare`` into the claimed, confined folder ``out``."""
+    from ..compare import compare, format_table, write_summary
+
     results = compare(volume, views, models, filter=args.filter, options=options, out_dir=out,
                       repeats=args.repeats)
 
@@ -154,7 +192,11 @@ def add_compare(sub: "argparse._SubParsersAction") -> None:
     p.add_argument("--ref-renders", type=positive_int, default=8,
                    help="--light: independent volpath renders, ≥ 4; their spread is the standard error "
                         "(default: %(default)s)")
-    p.add_argument("--out", default="compare", help="output folder (default: %(default)s/)")
+    p.add_argument("--out", default="compare", help="output folder: new, empty or an earlier compare's "
+                                                    "(default: %(default)s/)")
+    p.add_argument("--overwrite", action="store_true",
+                   help="write into an --out that holds files compare did not write, replacing those of its names "
+                        "(compare.json, compare_*.png, mitsuba_*.exr, compare_light.*)")
     p.add_argument("--seed", type=non_negative_int, default=0,
                    help="seed of the random views and of Mitsuba's sampler (default: %(default)s)")
     p.add_argument("--repeats", type=positive_int, default=3,

@@ -22,12 +22,12 @@ def _cmd_quickstart(args: argparse.Namespace) -> int:
         from ..photo_quickstart import photo_quickstart
 
         report = photo_quickstart(Path(args.photos), Path(args.out or "quickstart-photos"), steps=args.steps,
-                                  progress=not args.quiet, overrides=args.set or ())
+                                  progress=not args.quiet, overrides=args.set or (), overwrite=args.overwrite)
     else:
         from ..quickstart import quickstart
 
         report = quickstart(Path(args.out or "quickstart"), steps=args.steps, progress=not args.quiet,
-                            overrides=args.set or ())
+                            overrides=args.set or (), overwrite=args.overwrite)
     print(report.read_text())
     print(f"report: {report}")
     return 0
@@ -45,7 +45,11 @@ def add_quickstart(sub: "argparse._SubParsersAction") -> None:
                    help="train on your own folder of cut-out photos of one class instead (configs/photos.yaml), and "
                         "judge the held-out photos' reconstructions from every side")
     p.add_argument("--out", default=None,
-                   help="output folder (default: quickstart/, or quickstart-photos/ with --photos)")
+                   help="output folder (default: quickstart/, or quickstart-photos/ with --photos): new, empty or "
+                        "an earlier quickstart's, which it continues")
+    p.add_argument("--overwrite", action="store_true",
+                   help="write into an --out that holds files the quickstart did not write, replacing those of "
+                        "its names (report.md, run/, data/, reconstructions/)")
     p.add_argument("--steps", type=positive_int, default=None, help="training steps (default: the config's)")
     p.add_argument("--set", action="append", metavar="KEY=VALUE",
                    help="override a key of configs/quickstart.yaml (configs/photos.yaml with --photos), e.g. "
@@ -73,8 +77,8 @@ def add_train(sub: "argparse._SubParsersAction") -> None:
                        description="Train with a YAML config (configs/*.yaml); every key can be overridden "
                                    "with --set section.key=value. Writes a run folder with the resolved "
                                    "config, checkpoints, logs and samples (only into a new or empty folder or one of "
-                                   "its own runs; the --config file is never written). Ctrl-C saves a checkpoint "
-                                   "and exits with code 130; "
+                                   "its own runs; the --config file is never written). Ctrl-C or SIGTERM saves a "
+                                   "checkpoint and ends the process by that signal (exit status 130 or 143); "
                                    "--resume continues exactly. Data parallel: torchrun --nproc-per-node N "
                                    "-m mitsuba_platonic.cli train ...")
     p.add_argument("--config", default=None,

@@ -31,7 +31,7 @@ import numpy as np
 import torch
 
 from ..errors import Interrupted, UserError, raise_if_ctrl_c
-from ..fileio import atomic_write
+from ..fileio import atomic_write, confined, make_folder, open_file, remove
 from ..images import save_exr, save_png, to_hwc, to_png_rgba
 from ..progress import progress_bar
 from ..render import render
@@ -64,6 +64,12 @@ def make_collection(out: Union[str, Path], spec: CollectionSpec, overwrite: bool
     """
     spec.validate()
     out = Path(out)
+    with confined(out, (".lock", *RECORDS, *SUBFOLDERS)):   # a link in the folder is refused before any work
+        return _finish_collection(out, spec, overwrite, progress)
+
+
+def _finish_collection(out: Path, spec: CollectionSpec, overwrite: bool, progress: bool) -> Path:
+    """:func:`make_collection` in the confined folder ``out``."""
     if overwrite:
         overwrite_plan(out)                          # refuse before writing anything (again under the lock)
     manifest_file = out / "manifest.json"
@@ -72,7 +78,7 @@ def make_collection(out: Union[str, Path], spec: CollectionSpec, overwrite: bool
             with lock(out / ".lock"):
                 remove_temporaries(out)
         return manifest_file                         # finished: read-only, safe for concurrent readers
-    out.mkdir(parents=True, exist_ok=True)
+    make_folder(out)
     with lock(out / ".lock"):
         return _make_collection(out, spec, overwrite, progress)
 
@@ -88,8 +94,8 @@ def _make_collection(out: Path, spec: CollectionSpec, overwrite: bool, progress:
                             f"use another folder, or overwrite=True (--overwrite) to start over")
     if overwrite:
         for f in overwrite_plan(out):                # the collection's own files only
-            f.unlink()
-    out.mkdir(parents=True, exist_ok=True)
+            remove(f)
+    make_folder(out)
     remove_temporaries(out)
     write_json(spec_file, spec.to_dict())
 
@@ -134,7 +140,7 @@ def _render_pending(out: Path, spec: CollectionSpec, records: Dict[str, Dict[str
                     done: Callable[[int, int], bool], bar: Any) -> None:
     """Render every image (and write every volume) of ``spec`` that is not done yet, shape by shape."""
     n, K = spec.n_shapes, spec.views_per_shape
-    with open(records_file, "a+") as log:
+    with os.fdopen(open_file(records_file, os.O_RDWR | os.O_CREAT | os.O_APPEND), "a+") as log:
         log.seek(0, os.SEEK_END)
         if log.tell() > 0:                           # end a torn last line before appending
             log.seek(log.tell() - 1)

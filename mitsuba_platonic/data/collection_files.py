@@ -22,6 +22,7 @@ there, it refuses and deletes nothing. Rendering into the folder is :mod:`.colle
 from __future__ import annotations
 
 import json
+import os
 import re
 import warnings
 from contextlib import contextmanager
@@ -29,7 +30,7 @@ from pathlib import Path
 from typing import Any, Dict, Iterator, List, Optional, Set, Union
 
 from ..errors import UserError
-from ..fileio import atomic_write
+from ..fileio import atomic_write, open_file, remove
 from .collection_spec import CollectionSpec, json_kind
 
 __all__ = ["SUBFOLDERS", "RECORDS", "image_id", "load_manifest", "manifest_problem", "read_spec", "read_records",
@@ -225,16 +226,20 @@ def temporaries(out: Path) -> List[Path]:
 def remove_temporaries(out: Path) -> None:
     """Delete :func:`temporaries` (call it holding the collection's lock)."""
     for stray in temporaries(out):
-        stray.unlink(missing_ok=True)
+        remove(stray, missing_ok=True)
 
 
 @contextmanager
 def lock(path: Path) -> Iterator[None]:
-    """An exclusive advisory lock: one writer per collection folder (others wait)."""
+    """An exclusive advisory lock: one writer per collection folder (others wait). The lock file is
+    opened, never truncated, and never through a link (:func:`~mitsuba_platonic.fileio.open_file`)."""
     import fcntl  # lazy: POSIX only, where a collection is locked
-    with open(path, "w") as f:
-        fcntl.flock(f, fcntl.LOCK_EX)
+    fd = open_file(path, os.O_RDWR | os.O_CREAT)
+    try:
+        fcntl.flock(fd, fcntl.LOCK_EX)
         try:
             yield
         finally:
-            fcntl.flock(f, fcntl.LOCK_UN)
+            fcntl.flock(fd, fcntl.LOCK_UN)
+    finally:
+        os.close(fd)

@@ -8,6 +8,7 @@ from typing import Union
 import torch
 
 from .. import views as V
+from ..fileio import atomic_write, make_folder
 from ..images import composite, linear_to_srgb, to_hwc
 from ..render import render
 from . import shapes
@@ -53,6 +54,6 @@ def contact_sheet(shape_class: str, path: Union[str, Path], n_shapes: int = 4, n
                  f"elevation {elevation:g}°)", fontsize=9)
     fig.tight_layout()
     path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fig.savefig(path)
+    make_folder(path.parent)
+    atomic_write(path, lambda tmp: fig.savefig(tmp))          # whole, and never through a link
     return path

@@ -7,6 +7,7 @@ from typing import Optional, Sequence, Tuple, Union
 
 import torch
 
+from ..fileio import atomic_write, make_folder
 from . import metrics as M
 
 __all__ = ["save_image_grid"]
@@ -40,7 +41,7 @@ def save_image_grid(lines: Sequence[Sequence[torch.Tensor]], titles: Sequence[st
     fig.suptitle(suptitle, fontsize=8)
     fig.tight_layout()
     path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fig.savefig(path, dpi=100)
+    make_folder(path.parent)
+    atomic_write(path, lambda tmp: fig.savefig(tmp, dpi=100))     # whole, and never through a link
     plt.close(fig)
     return path

@@ -38,9 +38,11 @@ import numpy as np
 import torch
 
 from ..checkpoint import read_checkpoint
-from ..errors import UserError
+from ..errors import UserError, raise_if_ctrl_c
+from ..fileio import confined, make_folder, write_text
 from ..loading import checkpoint_config, model_from_checkpoint
 from ..model import Model
+from ..outputs import MARKER, check_output_folder, claim_output_folder
 from ..progress import progress_bar
 from ..render import render
 from ..train.data import collection_folder, load_training_data
@@ -54,6 +56,9 @@ from .protocol import METHODS, N_VIEWS, billboard, evaluate_pair, held_out_truth
 
 __all__ = ["Row", "score_pairs", "write_table", "write_class_table", "write_figure", "write_report", "evaluate_runs",
            "add_arguments", "run", "main_evaluate", "FIGURE_VIEWS", "SCALE"]
+
+#: What evaluate writes into ``--out`` (:func:`~mitsuba_platonic.fileio.confined`: none may be a link).
+REPORT_PARTS = (MARKER, "report.md", "results.json", "figures")
 
 #: The paper's display scales (Table 2): DSSIM and VGG × 10, RMSE × 10².
 SCALE = {"dssim": 10.0, "vgg": 10.0, "rmse": 100.0, "iou": 1.0, "cd": 1.0, "fid": 1.0}
@@ -104,6 +109,7 @@ def score_pairs(method: str, model: str, triples: Sequence[Tuple[torch.Tensor, t
     if_recon, if_ref = [], []
     bar = progress_bar(len(triples), unit="pair", desc=f"  {method}", disable=not progress)
     for k, (image, recon, truth) in enumerate(triples):
+        raise_if_ctrl_c()                                    # a Ctrl-C Mitsuba's render took (it cancels, winds down)
         res = evaluate_pair(recon, truth, model, n_views=n_views, seed=seed + k, methods=methods, spp=spp,
                             max_depth=max_depth, backend=backend, vgg_network=vgg_network, if_max_depth=if_max_depth)
         row.pairs.append(res.metrics)
@@ -209,7 +215,7 @@ def write_report(rows: Sequence[Row], out_dir: PathLike, notes: Sequence[str] = 
     out = Path(out_dir)
     if out.exists() and not out.is_dir():
         raise UserError(f"--out {str(out)!r} exists and is not a folder")
-    out.mkdir(parents=True, exist_ok=True)
+    make_folder(out)
     figures = []
     for r in rows:
         if r.examples:
@@ -243,11 +249,11 @@ def write_report(rows: Sequence[Row], out_dir: PathLike, notes: Sequence[str] = 
         lines += ["", "## Figures", "", "Input | reconstruction from 3 novel views | ground truth from the same views.", ""]
         lines += [f"![{r.method} ({r.formation})](figures/{p.name})" for r, p in figures]
     report = out / "report.md"
-    report.write_text("\n".join(lines) + "\n")
+    write_text(report, "\n".join(lines) + "\n")
     results = [{"method": r.method, "formation": r.formation, "shape_class": r.shape_class, "mode": r.mode,
                 "means": r.means(), "pairs": r.pairs} for r in rows]
     results += [entry for section in photo_sections for entry in section_results(section)]
-    (out / "results.json").write_text(json.dumps(results, indent=1))
+    write_text(out / "results.json", json.dumps(results, indent=1))
     return report
 
 
@@ -292,7 +298,7 @@ def evaluate_runs(run_dirs: Sequence[PathLike], out_dir: PathLike, n_views: int 
                   baselines: bool = True, vgg_weights: Optional[PathLike] = None,
                   fid_weights: Optional[PathLike] = None, data_cache: Optional[PathLike] = None,
                   progress: bool = True, data_path: Optional[PathLike] = None,
-                  judge_steps: int = CRITIC_STEPS) -> Path:
+                  judge_steps: int = CRITIC_STEPS, overwrite: bool = False) -> Path:
     """Score each trained run (and its baselines) on its held-out shapes; write the report. Returns
     the path of ``report.md``. ``limit``: at most this many held-out images per run (all by default).
 
@@ -300,11 +306,38 @@ def evaluate_runs(run_dirs: Sequence[PathLike], out_dir: PathLike, n_views: int 
     (:func:`~.photos.evaluate_photo_run`, its renderer seeded by ``seed``) and gets a "Real
     photos" section, judged away from the input view by critics of ``judge_steps`` steps
     (:mod:`.judge`; 0 skips the judge); ``data_path`` replaces such runs' ``data.path``. ``n_views``, ``spp``,
-    ``max_depth`` and the VGG/FID networks apply to the ground-truth protocol only."""
+    ``max_depth`` and the VGG/FID networks apply to the ground-truth protocol only.
+
+    ``out_dir`` must be new, empty or an earlier evaluation's; any other folder that holds something
+    is refused before any work (:class:`UserError`) unless ``overwrite``
+    (:func:`~mitsuba_platonic.outputs.claim_output_folder`), and nothing is written through a link
+    it holds."""
     if not run_dirs:
         raise UserError("no run to evaluate: pass at least one --run DIR")
     if limit is not None and (isinstance(limit, bool) or not isinstance(limit, int) or limit < 1):
         raise UserError(f"limit must be a positive int, got {limit!r}")
+    with confined(out_dir, REPORT_PARTS):
+        check_output_folder(out_dir, "evaluate", overwrite, earlier=_earlier_evaluation)   # before any work
+        rows, notes, sections = _evaluate_runs(run_dirs, n_views, limit, spp, max_depth, seed, baselines, vgg_weights,
+                                               fid_weights, data_cache, progress, data_path, judge_steps)
+        claim_output_folder(out_dir, "evaluate", overwrite, earlier=_earlier_evaluation)
+        return write_report(rows, out_dir, notes, photo_sections=sections)
+
+
+def _earlier_evaluation(out: Path) -> bool:
+    """Whether ``out`` holds an evaluation written before :data:`~mitsuba_platonic.outputs.MARKER`
+    existed: a ``results.json`` beside a ``report.md`` that starts as evaluate's do."""
+    try:
+        return (out / "results.json").is_file() and (out / "report.md").read_text().startswith("# Evaluation\n")
+    except (OSError, UnicodeDecodeError):
+        return False
+
+
+def _evaluate_runs(run_dirs: Sequence[PathLike], n_views: int, limit: Optional[int], spp: int, max_depth: int,
+                   seed: int, baselines: bool, vgg_weights: Optional[PathLike], fid_weights: Optional[PathLike],
+                   data_cache: Optional[PathLike], progress: bool, data_path: Optional[PathLike],
+                   judge_steps: int) -> Tuple[List[Row], List[str], List[PhotoSection]]:
+    """The scoring of :func:`evaluate_runs`: its rows, notes and photo sections."""
     vgg = M.load_feature_network(vgg_weights, "VGG16") if vgg_weights is not None else None
     fidnet = M.load_feature_network(fid_weights, "Inception-v3") if fid_weights is not None else None
     rows: List[Row] = []
@@ -351,7 +384,7 @@ def evaluate_runs(run_dirs: Sequence[PathLike], out_dir: PathLike, n_views: int 
                                         **kw_run))
     notes.append(f"evaluated in {time.perf_counter() - t0:.0f} s" + (
         f"; held-out pair k of every row is re-rendered with views and skies of seed {seed} + k" if rows else ""))
-    return write_report(rows, out_dir, notes, photo_sections=sections)
+    return rows, notes, sections
 
 
 # -- the command -----------------------------------------------------------------------------
@@ -379,6 +412,9 @@ def add_arguments(p: argparse.ArgumentParser) -> argparse.ArgumentParser:
     p.add_argument("--judge-steps", type=int, default=CRITIC_STEPS, metavar="N",
                    help=f"training steps of each two-sample critic that judges photo runs away from the input view "
                         f"(default {CRITIC_STEPS}; 0 skips the judge)")
+    p.add_argument("--overwrite", action="store_true",
+                   help="write into an --out that holds files evaluate did not write, replacing report.md, "
+                        "results.json and figures/ of the same names there (nothing else is deleted)")
     p.add_argument("--quiet", action="store_true", help="no progress lines")
     return p
 
@@ -395,7 +431,7 @@ def run(args: argparse.Namespace) -> int:
     report = evaluate_runs(args.run, args.out, n_views=args.views, limit=args.limit, spp=args.spp, seed=args.seed,
                            baselines=not args.no_baselines, vgg_weights=args.vgg_weights,
                            fid_weights=args.fid_weights, data_cache=args.data_cache, progress=not args.quiet,
-                           data_path=args.data_path, judge_steps=args.judge_steps)
+                           data_path=args.data_path, judge_steps=args.judge_steps, overwrite=args.overwrite)
     print(f"report: {report}")
     return 0
 

@@ -27,13 +27,17 @@ import yaml
 from .. import __version__
 from ..checkpoint import RunError, checkpoint_files
 from ..config import Config, ConfigError, config_from_dict, yaml_problem
-from ..fileio import atomic_write, remove_temporaries
+from ..fileio import atomic_write, make_folder, open_file, remove_temporaries
 from ..loading import config_difference
 
-__all__ = ["RUN_MARKER", "is_run_folder", "claim_run_folder", "run_lock", "prepare_run_folder", "read_run_config"]
+__all__ = ["RUN_MARKER", "RUN_PARTS", "is_run_folder", "claim_run_folder", "run_lock", "prepare_run_folder", "read_run_config"]
 
 #: The file ``train`` writes first into a folder it makes a run folder.
 RUN_MARKER = "run.json"
+
+#: What ``train`` writes, locks and deletes in a run folder: none of them may be a symbolic link
+#: (:func:`~mitsuba_platonic.fileio.confined`; a folder copied from a colleague may hold links).
+RUN_PARTS = (RUN_MARKER, "run.lock", "config.yaml", "scalars.csv", "checkpoints", "samples", "tb")
 
 
 def is_run_folder(folder: Path) -> bool:
@@ -64,14 +68,14 @@ def claim_run_folder(folder: Path) -> None:
             raise RunError(f"{folder} is not a run folder (no {RUN_MARKER}, no checkpoints) and holds "
                            f"{len(held)} item(s) ({shown}); train writes only into a new or empty folder or "
                            f"one of its own runs, and changed nothing there; {change}")
-    folder.mkdir(parents=True, exist_ok=True)
+    make_folder(folder)
     _write_marker(folder)
 
 
 def _write_marker(folder: Path) -> None:
     """Write :data:`RUN_MARKER` directly (not through a temporary: a torn marker still marks the folder)."""
     text = json.dumps({"written_by": "platonic train", "mitsuba_platonic": __version__, "pid": os.getpid()})
-    with open(folder / RUN_MARKER, "w") as f:
+    with os.fdopen(open_file(folder / RUN_MARKER, os.O_WRONLY | os.O_CREAT | os.O_TRUNC), "w") as f:
         f.write(text + "\n")
 
 
@@ -92,10 +96,10 @@ def run_lock(run_dir: Path) -> Iterator[Path]:
     """
     import fcntl  # lazy: POSIX only, where a run folder is locked
 
-    run_dir.mkdir(parents=True, exist_ok=True)
+    make_folder(run_dir)
     path = run_dir / "run.lock"
     while True:
-        fd = os.open(path, os.O_RDWR | os.O_CREAT, 0o644)
+        fd = open_file(path, os.O_RDWR | os.O_CREAT)
         try:
             fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
         except OSError:
@@ -136,7 +140,7 @@ def prepare_run_folder(run_dir: Path, cfg: Config, resume: bool, config_file: Op
     if not resume and existing:
         raise RunError(f"{run_dir} already holds a run; pass --resume to continue it, or choose "
                        f"another run.name")
-    run_dir.mkdir(parents=True, exist_ok=True)
+    make_folder(run_dir)
     for folder in (run_dir, run_dir / "checkpoints"):   # what a killed run was writing (we hold the lock)
         remove_temporaries(folder)
     if resume:

@@ -20,6 +20,7 @@ import torch
 
 from ..checkpoint import CHECKPOINT_VERSION, RunError, load_latest_checkpoint, load_weights, save_checkpoint
 from ..config import Config
+from ..fileio import remove
 from ..loading import config_difference, saved_config
 
 __all__ = ["Checkpoints", "non_finite", "same_settings"]
@@ -103,4 +104,4 @@ class Checkpoints:
             held = self.held() if self.step == step else self.kept()
             raise RunError(f"step {step}: the checkpoint could not be written ({e}); {held}") from None
         for old in sorted(self.folder.glob("step_*.pt"))[:-self.cfg.run.keep_checkpoints]:
-            old.unlink()
+            remove(old)

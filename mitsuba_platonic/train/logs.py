@@ -13,7 +13,7 @@ from typing import Any, Dict, List, Tuple
 
 import torch
 
-from ..fileio import atomic_write
+from ..fileio import atomic_write, make_folder
 from ..frames import display_frames, save_gif, turntable_frames
 from ..images import composite, linear_to_srgb, save_grid, to_hwc
 from ..model import Model
@@ -55,7 +55,7 @@ class ScalarLog:
                 self.rows = [r for r in csv.DictReader(f) if int(r["step"]) <= start_step]
         try:
             from torch.utils.tensorboard import SummaryWriter  # lazy: TensorBoard is slow to import, and may be broken
-            self.tb = SummaryWriter(str(folder / "tb"), purge_step=start_step + 1)
+            self.tb = SummaryWriter(str(make_folder(folder / "tb")), purge_step=start_step + 1)
         except ImportError:  # tensorboard is a dependency; keep training if it is broken
             self.tb = None
 

@@ -25,9 +25,11 @@ temporaries a killed one left; ``scalars.csv`` is written before each checkpoint
 loses no row); a full disk ends the run with one line naming the file, the good checkpoints
 as they were. ``resume=True`` continues from ``last.pt``;
 because every random draw of a step derives from (seed, step), the continued run matches an
-uninterrupted one step for step (on CPU). Ctrl-C (SIGINT) finishes the current step, saves a
-checkpoint and raises :class:`~mitsuba_platonic.errors.Interrupted` saying which step it holds
-(the command line: one line on stderr, exit code 130), so that ``train && evaluate`` stops.
+uninterrupted one step for step (on CPU). Ctrl-C (SIGINT) and SIGTERM (``kill``, ``timeout``,
+Slurm, systemd) finish the current step, save a checkpoint and raise
+:class:`~mitsuba_platonic.errors.Interrupted` saying which step it holds (the command line: one
+line on stderr, then the process ends by the signal: exit status 130 or 143), so that
+``train && evaluate``, and ``train; evaluate`` in a script, stop.
 
 What is saved: a checkpoint is written only on a clean stop (a periodic checkpoint, the last
 step, Ctrl-C, ``stop_at``) and only if every tensor of the state is finite. An exception during
@@ -46,7 +48,6 @@ renderer; rank 0 writes checkpoints, logs and samples.
 
 from __future__ import annotations
 
-import signal
 import time
 import warnings
 from pathlib import Path
@@ -57,13 +58,14 @@ import torch.distributed as dist
 
 from ..checkpoint import RunError, load_checkpoint, load_latest_checkpoint, read_checkpoint, save_checkpoint
 from ..config import Config
-from ..errors import Interrupted, UserError
+from ..errors import Interrupted, StopBetweenSteps, UserError
+from ..fileio import confined
 from ..loading import checkpoint_config, model_from_checkpoint
 from ..model import Model
 from ..progress import progress_bar
 from .data import TrainingData, load_training_data
 from .fits import check_model_fits
-from .folder import RUN_MARKER, claim_run_folder, prepare_run_folder, read_run_config, run_lock
+from .folder import RUN_MARKER, RUN_PARTS, claim_run_folder, prepare_run_folder, read_run_config, run_lock
 from .keeper import Checkpoints, non_finite
 from .logs import SAMPLE_VIEWS, ScalarLog, write_samples
 from .machine import SERIAL_MARCHER_MAX_RESOLUTION, distributed, drjit_threads, run_device, training_threads
@@ -89,7 +91,7 @@ def train(cfg: Config, resume: bool = False, progress: bool = True,
     rank, world, local_rank = distributed()
     check_model_fits(cfg, run_device(cfg, local_rank))      # before any data or run folder is written
     run_dir = Path(cfg.run.out_dir) / cfg.run.name
-    with training_threads(cfg):
+    with training_threads(cfg), confined(run_dir, RUN_PARTS):   # no write through a link the folder holds
         if rank != 0:
             return _train(cfg, run_dir, resume, progress, stop_at, rank, world, local_rank, config_file)
         claim_run_folder(run_dir)                            # before the lock: a user's folder stays untouched
@@ -136,10 +138,7 @@ def _train(cfg: Config, run_dir: Path, resume: bool, progress: bool, stop_at: Op
     sample_inputs = pool[torch.linspace(0, len(pool) - 1, min(4, len(pool))).long()]   # spread: different shapes
     samples_seed = cfg.run.seed + 12345                      # generation runs: the same z at every sample
 
-    stop = {"now": False}
-    previous = None
-    if rank == 0 and hasattr(signal, "SIGINT"):
-        previous = signal.signal(signal.SIGINT, lambda *_: stop.update(now=True))
+    stop = StopBetweenSteps()                                # Ctrl-C and SIGTERM: stop after this step, save
     log = ScalarLog(run_dir, start) if rank == 0 else None
     end = cfg.run.steps if stop_at is None else min(stop_at, cfg.run.steps)
     bar = progress_bar(cfg.run.steps, initial=start, disable=not progress or rank != 0, unit="step", desc="train")
@@ -165,7 +164,7 @@ def _train(cfg: Config, run_dir: Path, resume: bool, progress: bool, stop_at: Op
             if rank == 0 and step % cfg.run.checkpoint_every == 0:
                 log.flush()                                  # first: the rows after a checkpoint are dropped on
                 checkpoints.save(step, trainer.state_dict())  # resume, rows missing before it would stay lost
-            flag = torch.tensor(float(stop["now"]))
+            flag = torch.tensor(float(stop.signal is not None))
             if world > 1:
                 dist.all_reduce(flag)                       # stop together
             if flag.item() > 0:
@@ -197,8 +196,9 @@ def _train(cfg: Config, run_dir: Path, resume: bool, progress: bool, stop_at: Op
                 except OSError:
                     if clean:                                # else the error on its way says more
                         raise
-                if previous is not None:
-                    signal.signal(signal.SIGINT, previous)
+                stop.restore()
+        else:
+            stop.restore()
         if world > 1:
             if clean:
                 dist.barrier()                               # rank 0 has written the last checkpoint

@@ -1,0 +1,182 @@
+"""An output folder the user made is not overwritten (issue 46): ``evaluate``, ``quickstart`` (and
+``--photos``) and ``compare`` write into a new or empty ``--out``, or one they made before (marked by
+``platonic.json``; a quickstart continues there); any other folder that holds something is refused
+with one line, nothing in it changed, unless ``--overwrite``. And ``~`` in the config's paths means
+the home folder, never a folder literally named ``~``."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+from types import SimpleNamespace
+
+import pytest
+
+from mitsuba_platonic.config import load_config
+from mitsuba_platonic.errors import Interrupted
+from mitsuba_platonic.evaluate import report as E
+from mitsuba_platonic.outputs import MARKER, made_by
+from cli_runner import one_line, run_cli
+
+
+def _snapshot(folder: Path):
+    return {str(p.relative_to(folder)): p.read_bytes() for p in sorted(folder.rglob("*")) if p.is_file()}
+
+
+def _users_folder(folder: Path, name: str) -> None:
+    folder.mkdir(parents=True)
+    (folder / name).write_text("# my own notes\nline two\n")
+    (folder / "notes.txt").write_text("keep\n")
+
+
+def _refused(stderr: str, command: str, out: Path) -> None:
+    err = one_line(stderr, command, "error")
+    assert f"--out {out}" in err and "--overwrite" in err and "did not write" in err, err
+
+
+# --------------------------------------------------------------------------- evaluate
+
+
+@pytest.fixture
+def scored(monkeypatch):
+    """evaluate with its scoring replaced by one synthetic row: what it writes, and where, is real."""
+    calls = []
+
+    def scoring(*args):
+        calls.append(args)
+        return [E.Row("run (platonic, step 1)", "EA", pairs=[{"iou": 1.0}])], ["synthetic"], []
+
+    monkeypatch.setattr(E, "_evaluate_runs", scoring)
+    return calls
+
+
+def test_evaluate_refuses_a_users_folder_and_overwrites_only_when_asked(tmp_path, scored):
+    out = tmp_path / "eval"
+    _users_folder(out, "report.md")
+    before = _snapshot(out)
+    code, _, stderr = run_cli(["evaluate", "--run", "r", "--out", str(out), "--quiet"])
+    assert code == 2
+    _refused(stderr, "evaluate", out)
+    assert _snapshot(out) == before and not scored                   # refused before any scoring
+    code, stdout, stderr = run_cli(["evaluate", "--run", "r", "--out", str(out), "--quiet", "--overwrite"])
+    assert code == 0, stderr
+    assert (out / "report.md").read_text().startswith("# Evaluation") and (out / "notes.txt").read_text() == "keep\n"
+    assert made_by(out) == "platonic evaluate"
+    code, _, stderr = run_cli(["evaluate", "--run", "r", "--out", str(out), "--quiet"])   # its own: redone in place
+    assert code == 0, stderr
+
+
+def test_evaluate_into_a_new_folder_marks_it_and_an_earlier_unmarked_evaluation_is_its_own(tmp_path, scored):
+    out = tmp_path / "eval"
+    assert run_cli(["evaluate", "--run", "r", "--out", str(out), "--quiet"])[0] == 0
+    assert json.loads((out / MARKER).read_text())["written_by"] == "platonic evaluate"
+    (out / MARKER).unlink()                                           # as written before the marker existed
+    code, _, stderr = run_cli(["evaluate", "--run", "r", "--out", str(out), "--quiet"])
+    assert code == 0, stderr
+
+
+def test_evaluate_with_a_bad_run_leaves_no_new_folder(tmp_path):
+    out = tmp_path / "eval"
+    code, _, stderr = run_cli(["evaluate", "--run", str(tmp_path / "missing"), "--out", str(out), "--quiet"])
+    assert code == 2 and not out.exists(), stderr
+
+
+# --------------------------------------------------------------------------- quickstart
+
+
+@pytest.fixture
+def stopped_training(monkeypatch):
+    """The quickstart with its data and training replaced: training stops with a Ctrl-C at step 7,
+    so the test sees where it was allowed to start (exit 130) and where it was refused (exit 2)."""
+    from mitsuba_platonic import quickstart as Q
+    from mitsuba_platonic.train import data as D
+    from mitsuba_platonic.train import run as R
+
+    trained = []
+    monkeypatch.setattr(D, "load_training_data", lambda cfg, progress=True: SimpleNamespace(held_out=[], images=[]))
+    monkeypatch.setattr(Q, "held_out_scores", lambda model, data: {})
+    monkeypatch.setattr(Q, "Model", SimpleNamespace(from_config=lambda cfg: "untrained"))
+
+    def train(cfg, resume=False, progress=True):
+        trained.append(resume)
+        raise Interrupted("after step 7 of 400", saved="last.pt holds step 7")
+
+    monkeypatch.setattr(R, "train", train)
+    return trained
+
+
+def test_quickstart_refuses_a_users_folder_unless_overwrite(tmp_path, stopped_training):
+    out = tmp_path / "qs"
+    _users_folder(out, "report.md")
+    before = _snapshot(out)
+    code, _, stderr = run_cli(["quickstart", "--out", str(out), "--quiet"])
+    assert code == 2
+    _refused(stderr, "quickstart", out)
+    assert _snapshot(out) == before and not stopped_training
+    code, _, stderr = run_cli(["quickstart", "--out", str(out), "--quiet", "--overwrite"])
+    assert code == 130 and stopped_training == [False], stderr
+    assert made_by(out) == "platonic quickstart"
+
+
+def test_quickstart_continues_in_its_own_folder(tmp_path, stopped_training):
+    out = tmp_path / "qs"
+    for _ in range(2):                                                # new, then its own (marked)
+        code, _, stderr = run_cli(["quickstart", "--out", str(out), "--quiet"])
+        assert code == 130, stderr
+    assert made_by(out) == "platonic quickstart"
+    legacy = tmp_path / "old"                                         # from before the marker: its run folder says so
+    (legacy / "run").mkdir(parents=True)
+    (legacy / "run" / "run.json").write_text("{}\n")
+    (legacy / "report.md").write_text("# mitsuba-platonic quickstart report\n")
+    code, _, stderr = run_cli(["quickstart", "--out", str(legacy), "--quiet"])
+    assert code == 130, stderr
+    assert len(stopped_training) == 3
+
+
+def test_photo_quickstart_refuses_a_users_folder(tmp_path, stopped_training):
+    from test_links import _photo_folder
+
+    out = tmp_path / "qp"
+    _users_folder(out, "report.md")
+    before = _snapshot(out)
+    code, _, stderr = run_cli(["quickstart", "--photos", str(_photo_folder(tmp_path)), "--out", str(out), "--quiet",
+                               "--set", "model.resolution=16"])
+    assert code == 2
+    _refused(stderr, "quickstart", out)
+    assert _snapshot(out) == before and not stopped_training
+
+
+# --------------------------------------------------------------------------- compare
+
+
+def _compare(out: Path, *extra: str):
+    return run_cli(["compare", "--resolution", "8", "--views", "1", "--repeats", "1", "--models", "vh",
+                    "--out", str(out), *extra])
+
+
+def test_compare_refuses_a_users_compare_json_and_redoes_its_own(tmp_path):
+    out = tmp_path / "cmp"
+    _users_folder(out, "compare.json")
+    before = _snapshot(out)
+    code, _, stderr = _compare(out)
+    assert code == 2
+    _refused(stderr, "compare", out)
+    assert _snapshot(out) == before
+    code, _, stderr = _compare(out, "--overwrite")
+    assert code == 0, stderr
+    assert json.loads((out / "compare.json").read_text())["results"][0]["model"] == "vh"
+    assert (out / "notes.txt").read_text() == "keep\n"
+    code, _, stderr = _compare(out)                                    # its own: redone in place
+    assert code == 0, stderr
+
+
+# --------------------------------------------------------------------------- ~ in the config
+
+
+def test_a_tilde_in_the_configs_paths_is_the_home_folder(tmp_path, monkeypatch):
+    monkeypatch.setenv("HOME", str(tmp_path / "home"))
+    cfg = load_config(None, ["run.out_dir=~/runs", "data.cache=~/data", "data.source=folder", "data.path=~/photos"])
+    assert cfg.run.out_dir == str(tmp_path / "home" / "runs")
+    assert cfg.data.cache == str(tmp_path / "home" / "data")
+    assert cfg.data.path == str(tmp_path / "home" / "photos")
+    assert load_config(None, ["run.out_dir=runs/~x"]).run.out_dir == "runs/~x"   # only a leading ~ is home

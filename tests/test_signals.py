@@ -1,0 +1,132 @@
+"""SIGTERM stops a command as Ctrl-C does, and a signal ends the process by that signal (issue 46).
+
+``kill``, ``timeout``, Slurm, systemd and container runtimes send SIGTERM: training saves a checkpoint
+and prints one line, as on Ctrl-C, and then the process dies by the signal (a shell sees 143 or
+130), so that a script around it (``platonic train ...; platonic evaluate ...``) stops too. A
+second Ctrl-C while the first is handled, and a Ctrl-C while the console script loads, are one
+line and no traceback."""
+
+from __future__ import annotations
+
+import os
+import shlex
+import signal
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import pytest
+
+from mitsuba_platonic.checkpoint import read_checkpoint
+
+#: A training that runs far longer than the test and writes a sample after every step (the test
+#: waits for the first) but no periodic checkpoint: what it finds afterwards the signal saved.
+_SETTINGS = ["run.name=r", "run.steps=1000000", "run.log_every=1", "run.sample_every=1",
+             "run.checkpoint_every=1000000", "data.shape_class=mushroom", "data.n_shapes=2",
+             "data.views_per_shape=1", "model.resolution=16", "model.width=4", "model.latent=8",
+             "train.batch_size=2", "render.backend=closed_form"]
+
+
+def _train_command(tmp_path: Path):
+    sets = [f"run.out_dir={tmp_path / 'runs'}", f"data.cache={tmp_path / 'data'}", *_SETTINGS]
+    return [sys.executable, "-m", "mitsuba_platonic.cli", "train", "--quiet",
+            *[arg for s in sets for arg in ("--set", s)]]
+
+
+def _wait_for(path: Path, process: subprocess.Popen) -> None:
+    """Until ``path`` exists (training has run a step); fail with its output if the process ends first."""
+    while not path.exists():
+        if process.poll() is not None:
+            out, err = process.communicate()
+            pytest.fail(f"the training ended before its first step (exit {process.returncode}):\n{out}\n{err}")
+        time.sleep(0.2)
+
+
+@pytest.mark.parametrize("via_shell", [False, True], ids=["train", "bash around train"])
+@pytest.mark.parametrize("sig", [signal.SIGTERM, signal.SIGINT], ids=["SIGTERM", "SIGINT"])
+def test_a_signal_saves_says_so_in_one_line_and_ends_the_process_by_it(tmp_path, sig, via_shell):
+    command = _train_command(tmp_path)
+    if via_shell:
+        command = ["bash", "-c", f"{shlex.join(command)}; echo next"]
+    process = subprocess.Popen(command, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+                               stdin=subprocess.DEVNULL, cwd=tmp_path, start_new_session=True)
+    try:
+        _wait_for(tmp_path / "runs" / "r" / "samples" / "step_0000001.png", process)
+        if via_shell:
+            os.killpg(process.pid, sig)              # as a terminal's Ctrl-C, or Slurm's SIGTERM, reaches the job
+        else:
+            process.send_signal(sig)
+        stdout, stderr = process.communicate(timeout=600)
+    finally:
+        if process.poll() is None:
+            os.killpg(process.pid, signal.SIGKILL)
+    assert process.returncode == -sig, (process.returncode, stderr)
+    assert "next" not in stdout                          # the script's next line did not run
+    lines = [line for line in stderr.splitlines() if line.strip()]
+    assert len(lines) == 1 and "Traceback" not in stderr, stderr
+    what = "terminated (SIGTERM)" if sig == signal.SIGTERM else "interrupted"
+    assert lines[0].startswith(f"platonic train: {what}: after step "), lines[0]
+    assert "last.pt holds step" in lines[0] and "--resume" in lines[0], lines[0]
+    step = read_checkpoint(tmp_path / "runs" / "r").step
+    assert step >= 1 and f"holds step {step};" in lines[0], (step, lines[0])
+
+
+_TWICE = """
+import os, signal, sys
+from mitsuba_platonic import cli
+from mitsuba_platonic.cli import exits
+
+def handler(args):                    # a Ctrl-C in evaluate, and a second one while the first unwinds
+    try:
+        os.kill(os.getpid(), signal.SIGINT)
+        while True:
+            pass
+    finally:
+        os.kill(os.getpid(), signal.SIGINT)
+
+parser = cli.build_parser()
+parser._subparsers._group_actions[0].choices["evaluate"].set_defaults(handler=handler)
+cli.build_parser = lambda: parser
+message = exits.interrupt_message
+
+def third(args, e):                   # and a third while its one line is written
+    os.kill(os.getpid(), signal.SIGINT)
+    return message(args, e)
+
+cli.interrupt_message = third
+from mitsuba_platonic.console import main
+main(["evaluate", "--run", "r", "--out", "o"])
+"""
+
+
+def test_ctrl_c_twice_in_evaluate_is_one_line_and_the_process_ends_by_it(tmp_path):
+    r = subprocess.run([sys.executable, "-c", _TWICE], capture_output=True, text=True, timeout=300,
+                       stdin=subprocess.DEVNULL, cwd=tmp_path)
+    assert r.returncode == -signal.SIGINT, r.stderr
+    err = r.stderr.strip()
+    assert "\n" not in err and "Traceback" not in err, err
+    assert err.startswith("platonic evaluate: interrupted: no report was written"), err
+
+
+_WHILE_LOADING = """
+import os, signal, sys
+class Interrupt:                      # a Ctrl-C while the console script loads the command line
+    def find_spec(self, name, path=None, target=None):
+        if name == "mitsuba_platonic.cli.args":
+            os.kill(os.getpid(), signal.{sig})
+        return None
+sys.meta_path.insert(0, Interrupt())
+from mitsuba_platonic.console import main
+main(["train", "--quiet"])
+"""
+
+
+@pytest.mark.parametrize("sig", ["SIGINT", "SIGTERM"])
+def test_a_signal_while_the_console_script_loads_is_one_line(tmp_path, sig):
+    r = subprocess.run([sys.executable, "-c", _WHILE_LOADING.format(sig=sig)], capture_output=True, text=True,
+                       timeout=300, stdin=subprocess.DEVNULL, cwd=tmp_path)
+    assert r.returncode == -getattr(signal, sig), r.stderr
+    err = r.stderr.strip()
+    what = "terminated (SIGTERM)" if sig == "SIGTERM" else "interrupted"
+    assert err == f"platonic: {what}: while starting; nothing was written", err
