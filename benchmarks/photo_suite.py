@@ -45,6 +45,7 @@ from mitsuba_platonic.config import load_config
 from mitsuba_platonic.data.collection import CollectionSpec, make_collection
 from mitsuba_platonic.evaluate.judge import CRITIC_STEPS
 from mitsuba_platonic.evaluate.photo_truth import score_against_truth
+from mitsuba_platonic.errors import Interrupted, UserError
 from mitsuba_platonic.evaluate.report import evaluate_runs
 from mitsuba_platonic.model import Model
 from mitsuba_platonic.train import run as training_run
@@ -166,4 +167,9 @@ def main(argv: Optional[Sequence[str]] = None) -> int:
 
 
 if __name__ == "__main__":
-    sys.exit(main())
+    try:
+        sys.exit(main())
+    except Interrupted as e:                           # training saved a checkpoint: a re-run resumes
+        sys.exit(f"photo_suite: interrupted {e}")
+    except UserError as e:
+        sys.exit(f"photo_suite: {e}")
