@@ -122,12 +122,13 @@ import ctypes
 import glob
 import math
 import os
+from dataclasses import replace
 from typing import Any, Dict, Optional, Tuple
 
 import torch
 
 from ..views import camera_frames
-from .settings import RenderSettings
+from .settings import RenderSettings, check_lanes
 from .variant import ensure_variant, variant_device
 
 mi = ensure_variant()
@@ -818,10 +819,6 @@ def march_pixels(volume: torch.Tensor, views: torch.Tensor, settings: RenderSett
     volume's resolution (``march`` with spp k², averaged over k × k blocks, is the same image downsampled).
     One launch of the same frozen kernel as :func:`march`; ``settings``' spp and jitter are replaced.
     """
-    from dataclasses import replace
-
-    from .settings import check_lanes
-
     k = int(factor)
     if k < 1:
         raise ValueError(f"factor: expected a positive int, got {factor!r}")

@@ -26,10 +26,19 @@ from typing import Dict, List, Optional, Tuple, Union
 import numpy as np
 import torch
 import torch.nn.functional as F
+from PIL import Image
 
+from ..checkpoint import read_checkpoint
 from ..errors import UserError
+from ..evaluate.photos import photo_splits
+from ..export import extract_mesh, save_ply
+from ..fileio import atomic_write
+from ..loading import checkpoint_config, model_from_checkpoint
+from ..model import Model
 from ..render import RenderSettings, render_with
+from ..train.data import collection_folder, load_training_data
 from ..volume import CHANNELS
+from ..volume_io import read_volume_file, save_volume
 
 __all__ = ["RENDERERS", "FORMATIONS", "BACKGROUND", "Frame", "Scene", "Exports", "open_source", "render_frame",
            "formations_for", "renderers_for", "resolutions_for", "to_display", "clean_name"]
@@ -166,7 +175,7 @@ def render_frame(volume: torch.Tensor, view: Tuple[float, float, float], rendere
             v = v[:, 3:]
         v = v.contiguous()
         if backend == "mitsuba" and k > 1:
-            from ..render.marcher import march_pixels
+            from ..render.marcher import march_pixels          # lazy: imports Dr.Jit, on the marcher's first frame
             image = march_pixels(v, w, settings, k)[0]
         else:
             image = render_with(v, w, settings, 0)[0]
@@ -242,10 +251,7 @@ def _decode(model, z: torch.Tensor) -> torch.Tensor:
 
 def _held_out(cfg) -> Tuple[Optional[torch.Tensor], List[str], Optional[str]]:
     """A run's held-out inputs and their names, or (None, [], why none) when they are not here."""
-    from ..train.data import collection_folder
-
     if cfg.data.source == "folder":
-        from ..evaluate.photos import photo_splits
         try:
             _, held, files = photo_splits(cfg)
         except UserError as e:
@@ -255,7 +261,6 @@ def _held_out(cfg) -> Tuple[Optional[torch.Tensor], List[str], Optional[str]]:
     if not folder.is_dir():
         return None, [], (f"the run's collection {str(folder)!r} is not here (data.cache is relative to where "
                           f"training ran); no held-out inputs")
-    from ..train.data import load_training_data
     data = load_training_data(cfg, progress=False)
     if len(data.held_out) == 0:
         return None, [], "the run holds out no input"
@@ -266,8 +271,6 @@ def _held_out(cfg) -> Tuple[Optional[torch.Tensor], List[str], Optional[str]]:
 
 def open_source(source: PathLike, photo: Optional[PathLike] = None) -> Scene:
     """SOURCE → :class:`Scene` (module docstring); :class:`UserError` naming what is wrong."""
-    from ..volume_io import read_volume_file
-
     path = Path(source)
     if not path.exists():
         raise UserError(f"SOURCE {str(path)!r} does not exist; expected a volume file (.npz, .vol) or a run folder")
@@ -279,10 +282,6 @@ def open_source(source: PathLike, photo: Optional[PathLike] = None) -> Scene:
                                                          f"{volume.shape[-1]}³)")
     if not path.is_dir():
         raise UserError(f"SOURCE {str(path)!r} is neither a file nor a folder")
-    from ..checkpoint import read_checkpoint
-    from ..loading import checkpoint_config, model_from_checkpoint
-    from ..model import Model
-
     ckpt = read_checkpoint(path)
     cfg = checkpoint_config(ckpt)
     model = model_from_checkpoint(Model, ckpt, cfg)
@@ -347,10 +346,6 @@ class Exports:
 
     def png(self, frame: Frame, name: str = "view") -> Path:
         """The frame as ``name.png`` (8-bit sRGB, as shown)."""
-        from PIL import Image
-
-        from ..fileio import atomic_write
-
         path = self._free(name, (".png",)).with_suffix(".png")
         atomic_write(path, lambda tmp: Image.fromarray(frame.image).save(tmp, format="PNG"))
         return path
@@ -358,9 +353,6 @@ class Exports:
     def volume(self, volume: torch.Tensor, name: str = "volume", level: float = 0.5) -> List[Path]:
         """``name.npz`` and ``name.vol`` (:func:`~mitsuba_platonic.volume_io.save_volume`) and a marching-cubes
         mesh ``name.ply`` at ``level`` (none where the density never crosses it)."""
-        from ..export import extract_mesh, save_ply
-        from ..volume_io import save_volume
-
         stem = self._free(name, (".npz", ".vol", ".ply"))
         written = save_volume(volume, stem)
         try:
