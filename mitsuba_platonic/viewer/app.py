@@ -5,8 +5,9 @@ message gives the view ω = normalize(position − look_at) (the scene's up is +
 orbit camera has the project's frame: right = (ω_z, 0, −ω_x), up = ω × right; panning moves
 look_at and position together and leaves ω, the orthographic frame, as it is; zooming changes
 the distance, which an orthographic camera does not see). While the camera keeps moving (a
-message within :data:`SETTLE_S`), the thread renders a low-resolution frame; once it rests, the
-full one. Frames are drawn as the scene's background image, padded with the background grey to
+message within :data:`SETTLE_S`), the thread renders a low-resolution frame (a quarter of the
+resolution, at least the volume's; the same resolution with "low resolution while moving" off),
+sent as JPEG; once it rests, the full one, as PNG. Frames are drawn as the scene's background image, padded with the background grey to
 the canvas' aspect so that the square render keeps its shape (viser stretches the image over
 the canvas), centred, its side the canvas' shorter side.
 
@@ -175,7 +176,9 @@ class ClientView:
             self.resolution = gui.add_dropdown("resolution", choices, initial_value=choices[0],
                                                hint="image pixels per side")
             self.spp = gui.add_slider("path tracer spp", min=1, max=64, step=1, initial_value=4)
-            for handle in (self.renderer, self.formation, self.resolution, self.spp):
+            self.low = gui.add_checkbox("low resolution while moving", initial_value=True,
+                                        hint="a quarter of the resolution (at least the volume's) while the camera moves")
+            for handle in (self.renderer, self.formation, self.resolution, self.spp, self.low):
                 handle.on_update(lambda _: self.wake.set())
         with gui.add_folder("Camera"):
             for label, daz, delv in (("azimuth -30", -30.0, 0.0), ("azimuth +30", 30.0, 0.0),
@@ -276,10 +279,10 @@ class ClientView:
             view, moving = tuple(float(x) for x in self.view), time.monotonic() - self.last_move < SETTLE_S
         full = int(self.resolution.value)
         n = self.app.scene.volume.shape[-1]
-        low = max(n, full // 4)
-        res, quality = (low, "moving") if moving and low < full else (full, "full")
+        low = max(n, full // 4) if self.low.value else full
+        res, quality = (low, "moving") if moving else (full, "full")
         return (view, self.renderer.value, self.formation.value, res, int(self.spp.value), self.app.version,
-                self.client.camera.aspect), quality
+                self.client.camera.aspect, quality)
 
     def _loop(self) -> None:
         while not self.stopped:
@@ -287,11 +290,12 @@ class ClientView:
             self.wake.clear()
             if self.stopped:
                 return
+            request = None
             try:
-                request, quality = self._request()
+                request = self._request()
                 if request == self.shown:
                     continue
-                self._render(request, quality)
+                self._render(request)
             except UserError as e:
                 self.info.content = f"frame: error: {e}"
                 self.shown = request
@@ -301,8 +305,8 @@ class ClientView:
                 self.info.content = f"frame: error: {type(e).__name__}: {e}"
                 self.shown = request
 
-    def _render(self, request: Tuple, quality: str) -> None:
-        view, renderer, formation, res, spp, version, aspect = request
+    def _render(self, request: Tuple) -> None:
+        view, renderer, formation, res, spp, version, aspect, quality = request
         with self.app.render_lock, self.app.scene_lock:
             volume = self.app.scene.volume
             frame = render_frame(volume, view, renderer, formation, res, spp)
