@@ -409,3 +409,54 @@ def test_the_page_saves_the_view_inside_the_output_folder(page, server):
     assert saved.exists() and not (server.cwd.parent / "outside.png").exists()
     from PIL import Image
     assert Image.open(saved).size == (N, N)
+
+
+def test_dragging_the_canvas_orbits_with_low_resolution_frames_while_moving(page, server, volume_file):
+    """The mouse orbits viser's camera; the server renders quarter-resolution frames while it moves
+    (JPEG) and the full one once it rests, at the view the camera reached."""
+    volume = read_volume_file(volume_file)[0]
+    _frame(page)
+    _choose(page, 2, str(4 * N))                                     # 64² frames: 16² while moving
+    _frame(page, rf"full, {4 * N}×")
+    box = page.locator("canvas").first.bounding_box()
+    x, y = box["x"] + box["width"] * 0.35, box["y"] + box["height"] * 0.5
+    page.mouse.move(x, y)
+    page.mouse.down()
+    seen = set()
+    for step in range(1, 30):
+        page.mouse.move(x + 8 * step, y + 2 * step)
+        time.sleep(0.05)
+        m = FRAME.search(page.get_by_text(re.compile(r"^frame \d+:")).inner_text())
+        seen.add((m.group(3), int(m.group(4))))
+    page.mouse.up()
+    assert ("moving", N) in seen, seen
+    m = _frame(page, rf"full, {4 * N}×")
+    az, el = float(m.group(5)), float(m.group(6))
+    assert abs(az) > 5.0, (az, el)                                    # the drag turned the camera
+    expected = render_frame(volume, tuple(from_angles(az, el).tolist()), "closed form", "EA", 4 * N).image
+    mean, p95 = _difference(_shown(page, 4 * N), expected)           # the angles printed to 0.1°
+    assert mean <= 2 * TOLERANCE and p95 <= 4 * TOLERANCE_MAX, (mean, p95)
+
+
+def test_a_reconstruction_run_steps_through_its_held_out_inputs(browser, runs, tmp_path, monkeypatch):
+    """The page of a run (served in this process: the run's tiny shape class is registered here only)."""
+    from mitsuba_platonic.viewer.app import ViewerApp
+
+    monkeypatch.chdir(runs["reconstruction"].parent.parent.parent)   # data.cache is relative to where training ran
+    app = ViewerApp(open_source(runs["reconstruction"]), tmp_path / "exports", port=0)
+    try:
+        page = browser.new_page(viewport={"width": 1400, "height": 600})
+        page.set_default_timeout(WAIT_MS)
+        page.goto(app.url)
+        _frame(page)
+        page.get_by_text(re.compile(r"\(1 of \d+\)")).wait_for()
+        assert page.get_by_role("img").count() + page.locator("img").count() >= 1   # the input beside the view
+        count = int(_frame(page).group(1))
+        page.get_by_role("button", name="next input").click()
+        page.get_by_text(re.compile(r"\(2 of \d+\)")).wait_for()
+        # a new frame for the new volume (a run of one step reconstructs nearly the same volume from each)
+        page.wait_for_function(f"() => /frame (\\d+):/.exec(document.body.innerText)[1] > {count}")
+        assert app.scene.input_index == 1
+        page.close()
+    finally:
+        app.stop()
