@@ -28,15 +28,10 @@ import torch
 import torch.nn.functional as F
 from PIL import Image
 
-from ..checkpoint import read_checkpoint
 from ..errors import UserError
-from ..evaluate.photos import photo_splits
 from ..export import extract_mesh, save_ply
 from ..fileio import atomic_write
-from ..loading import checkpoint_config, model_from_checkpoint
-from ..model import Model
 from ..render import RenderSettings, render_with
-from ..train.data import collection_folder, load_training_data
 from ..volume import CHANNELS
 from ..volume_io import read_volume_file, save_volume
 
@@ -251,6 +246,10 @@ def _decode(model, z: torch.Tensor) -> torch.Tensor:
 
 def _held_out(cfg) -> Tuple[Optional[torch.Tensor], List[str], Optional[str]]:
     """A run's held-out inputs and their names, or (None, [], why none) when they are not here."""
+    # lazy: the data and evaluation modules cost a second to import, for run folders only
+    from ..evaluate.photos import photo_splits
+    from ..train.data import collection_folder, load_training_data
+
     if cfg.data.source == "folder":
         try:
             _, held, files = photo_splits(cfg)
@@ -282,6 +281,11 @@ def open_source(source: PathLike, photo: Optional[PathLike] = None) -> Scene:
                                                          f"{volume.shape[-1]}³)")
     if not path.is_dir():
         raise UserError(f"SOURCE {str(path)!r} is neither a file nor a folder")
+    # lazy: checkpoints, configs and networks, for run folders only (a volume file's first frame waits for none)
+    from ..checkpoint import read_checkpoint
+    from ..loading import checkpoint_config, model_from_checkpoint
+    from ..model import Model
+
     ckpt = read_checkpoint(path)
     cfg = checkpoint_config(ckpt)
     model = model_from_checkpoint(Model, ckpt, cfg)
