@@ -246,9 +246,8 @@ def _decode(model, z: torch.Tensor) -> torch.Tensor:
 
 def _held_out(cfg) -> Tuple[Optional[torch.Tensor], List[str], Optional[str]]:
     """A run's held-out inputs and their names, or (None, [], why none) when they are not here."""
-    # lazy: the data and evaluation modules cost a second to import, for run folders only
-    from ..evaluate.photos import photo_splits
-    from ..train.data import collection_folder, load_training_data
+    from ..evaluate.photos import photo_splits                          # lazy: a second to import; runs only
+    from ..train.data import collection_folder, load_training_data     # lazy: runs only
 
     if cfg.data.source == "folder":
         try:
@@ -281,10 +280,11 @@ def open_source(source: PathLike, photo: Optional[PathLike] = None) -> Scene:
                                                          f"{volume.shape[-1]}³)")
     if not path.is_dir():
         raise UserError(f"SOURCE {str(path)!r} is neither a file nor a folder")
-    # lazy: checkpoints, configs and networks, for run folders only (a volume file's first frame waits for none)
-    from ..checkpoint import read_checkpoint
-    from ..loading import checkpoint_config, model_from_checkpoint
-    from ..model import Model
+    # lazy, the three: checkpoints, configs and networks are for run folders only (a volume file's
+    # first frame waits for none of them)
+    from ..checkpoint import read_checkpoint                  # lazy: runs only
+    from ..loading import checkpoint_config, model_from_checkpoint   # lazy: runs only
+    from ..model import Model                                 # lazy: runs only
 
     ckpt = read_checkpoint(path)
     cfg = checkpoint_config(ckpt)
