@@ -94,7 +94,9 @@ class Frame:
     resolution: int
 
 
-_resampled: Dict[Tuple[int, int], torch.Tensor] = {}
+#: The last resampled volume: (the source tensor itself, R, the resampled one). The source is kept and
+#: compared by identity, not by ``id()``, which a new volume may reuse once the old one is freed.
+_resampled: List[Tuple[torch.Tensor, int, torch.Tensor]] = []
 
 
 def _at_resolution(volume: torch.Tensor, r: int) -> torch.Tensor:
@@ -103,12 +105,11 @@ def _at_resolution(volume: torch.Tensor, r: int) -> torch.Tensor:
     n = volume.shape[-1]
     if r == n:
         return volume[None]
-    key = (id(volume), r)
-    if key not in _resampled:
+    if not (_resampled and _resampled[0][0] is volume and _resampled[0][1] == r):
         _resampled.clear()                                   # one resampled volume at a time (memory)
-        _resampled[key] = F.interpolate(volume[None], size=(r, r, r), mode="trilinear",
-                                        align_corners=False).clamp_(0.0, 1.0)
-    return _resampled[key]
+        _resampled.append((volume, r, F.interpolate(volume[None], size=(r, r, r), mode="trilinear",
+                                                    align_corners=False).clamp_(0.0, 1.0)))
+    return _resampled[0][2]
 
 
 def resolutions_for(n: int) -> List[int]:
