@@ -126,16 +126,22 @@ def in_browser(source: Path, pixels: int, seconds: float) -> None:
                 page.mouse.down()
                 before, t0 = frame_count(page), time.monotonic()
                 steps = 0
+                seen: dict = {}
                 while time.monotonic() - t0 < seconds:
                     steps += 1
                     page.mouse.move(x + 4 * (steps % 100), y + (steps % 20), steps=1)
+                    m = FRAME.search(page.get_by_text(re.compile(r"^frame \d+:")).inner_text())
+                    if m:
+                        seen[m.group(1)] = (m.group(3), m.group(4), float(m.group(2)))
                     time.sleep(0.02)
                 after, t1 = frame_count(page), time.monotonic()
                 page.mouse.up()
-                m = FRAME.search(page.get_by_text(re.compile(r"^frame \d+:")).inner_text())
+                moving = [v for v in seen.values() if v[0] == "moving"]
+                kinds = sorted({f"{q} {r}²" for q, r, _ in seen.values()})
                 print(f"browser: marcher, dragging for {t1 - t0:.1f} s with low resolution while moving "
                       f"{'on' if low else 'off'}: {(after - before) / (t1 - t0):.1f} frames/s shown "
-                      f"(last: {m.group(4)}×{m.group(4)} px, {m.group(2)} ms to render)")
+                      f"({', '.join(kinds)} seen; render {np.median([v[2] for v in moving or seen.values()]):.0f} ms "
+                      f"median)")
         finally:
             proc.send_signal(2)
             try:
