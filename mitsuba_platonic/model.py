@@ -250,6 +250,13 @@ class Model(nn.Module):
         upright volumes, in their own frame: no input view to tilt them into; a model with
         ``photo_colour`` has no photo to read a colour from and offsets from grey)."""
         z = torch.randn(n, self.latent, generator=torch.Generator().manual_seed(seed)).to(self.device)
+        return self.decode(z)
+
+    @torch.no_grad()
+    def decode(self, z: torch.Tensor) -> torch.Tensor:
+        """G of given latents ``z`` ``(n, latent)`` as :meth:`generate` decodes its draws → ``(n, C, R, R, R)``
+        (the viewer's walk between two latents decodes the points between them)."""
+        n = z.shape[0]
         grey = torch.full((n, 3), 0.5, device=self.device) if self.net.photo_colour else None   # no photo: logit 0
         return self._eval(lambda: self.G(self.code(z)) if grey is None else self.G(self.code(z), grey))
 

@@ -26,8 +26,8 @@ from .errors import UserError
 from .fileio import atomic_write, make_folder
 from .volume import TEST_VOLUMES, test_volume
 
-__all__ = ["BUILTIN_PREFIX", "VolumeFileError", "to_mitsuba_grid", "read_npz", "load_volume", "write_npz",
-           "write_vol", "save_volume"]
+__all__ = ["BUILTIN_PREFIX", "VolumeFileError", "to_mitsuba_grid", "read_npz", "read_vol", "read_volume_file",
+           "load_volume", "write_npz", "write_vol", "save_volume"]
 
 PathLike = Union[str, Path]
 
@@ -79,6 +79,43 @@ def read_npz(path: Path) -> torch.Tensor:
         except Exception as e:
             raise VolumeFileError(f"could not read array 'volume' from {name!r}: {e}") from None
     return torch.from_numpy(_checked(v, name))[None]
+
+
+def read_vol(path: Path) -> torch.Tensor:
+    """Read a Mitsuba ``.vol`` grid (float32, the layout :func:`write_vol` writes) → ``(1, C, N, N, N)``
+    float32, checked as :func:`read_npz` checks its array (cubic, C = 1 or 4, values in [0, 1]).
+
+    Raises :class:`VolumeFileError` naming the file and what is wrong (missing, not a ``.vol``, an
+    encoding other than float32, a size that does not match its header, …)."""
+    path = Path(path)
+    name = str(path)
+    if not path.exists():
+        raise VolumeFileError(f"volume file {name!r} does not exist")
+    if not path.is_file():
+        raise VolumeFileError(f"volume file {name!r} is not a file")
+    data = path.read_bytes()
+    header = len(_VOL_MAGIC) + 4 * 4 + 6 * 4
+    if len(data) < header or data[:3] != b"VOL":
+        raise VolumeFileError(f"{name!r} is not a Mitsuba .vol file (it does not start with 'VOL' and a header)")
+    if data[:len(_VOL_MAGIC)] != _VOL_MAGIC:
+        raise VolumeFileError(f"{name!r}: only version 3 .vol files of float32 values (encoding 1) are read")
+    x, y, z, c = (int(i) for i in np.frombuffer(data, "<i4", 4, len(_VOL_MAGIC)))
+    if min(x, y, z, c) < 1 or len(data) - header != 4 * x * y * z * c:
+        raise VolumeFileError(f"{name!r}: its header says {x}×{y}×{z}×{c} values, its body holds "
+                              f"{(len(data) - header) // 4} (a truncated or damaged file)")
+    grid = torch.from_numpy(np.frombuffer(data, "<f4", x * y * z * c, header).reshape(z, y, x, c).copy())
+    v = grid.flip(0, 1).permute(3, 0, 1, 2).numpy()          # [Z, Y, X, C] → (C, D, H, W): to_mitsuba_grid's inverse
+    return torch.from_numpy(_checked(v, name))[None]
+
+
+def read_volume_file(path: PathLike) -> torch.Tensor:
+    """A ``.npz`` (:func:`read_npz`) or ``.vol`` (:func:`read_vol`) file → ``(1, C, N, N, N)``."""
+    path = Path(path)
+    if path.suffix.lower() == ".npz":
+        return read_npz(path)
+    if path.suffix.lower() == ".vol":
+        return read_vol(path)
+    raise VolumeFileError(f"{str(path)!r}: expected a volume file ending in .npz or .vol")
 
 
 def _checked(v: np.ndarray, name: str) -> np.ndarray:

@@ -1,7 +1,8 @@
 #!/usr/bin/env bash
 # Install everything mitsuba-platonic needs on a fresh Debian/Ubuntu machine:
 #   1. a shared libLLVM >= 16 for Dr.Jit's CPU backend (LLVM 14 is rejected, 15 aborts),
-#   2. a virtual environment in .venv with the package, its test tools and Jupyter (jupyter lab notebooks/).
+#   2. a virtual environment in .venv with the package, its test tools, Jupyter (jupyter lab notebooks/) and the
+#      viewer (platonic view); tests/test_viewer.py installs Debian's chromium itself where it is missing.
 # Idempotent: re-running it only installs what is missing.
 set -euo pipefail
 cd "$(dirname "$0")/.."
@@ -52,6 +53,6 @@ if ! command -v nvidia-smi >/dev/null 2>&1 || ! nvidia-smi -L >/dev/null 2>&1; t
 fi
 if ! .venv/bin/python -c "import mitsuba_platonic" >/dev/null 2>&1 || [ pyproject.toml -nt .venv/.installed ]; then
   echo "setup: installing the package into .venv"
-  .venv/bin/python -m pip install -q --disable-pip-version-check "${CONSTRAINTS[@]}" -e ".[test,notebooks]"
+  .venv/bin/python -m pip install -q --disable-pip-version-check "${CONSTRAINTS[@]}" -e ".[test,notebooks,viewer]"
   touch .venv/.installed
 fi

@@ -141,7 +141,7 @@ LAYERS = [
      ["train.settings", "train.run_settings", "train.augment", "train.losses", "train.roll", "checkpoint"]),
     ("the config, composing every component's settings", ["config"]),
     ("training: loading what runs saved, data, trainer, runs", ["loading", "train"]),
-    ("evaluation and export", ["evaluate", "export", "bench"]),
+    ("evaluation and export", ["evaluate", "export", "bench", "viewer"]),
     ("command line", ["quickstart", "photo_quickstart", "cli", "console", "__main__"]),
 ]
 

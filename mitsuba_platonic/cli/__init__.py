@@ -8,6 +8,7 @@ that checks its flags, calls the library function that does the work and prints 
 - :mod:`.dataset`: ``make-dataset``, procedural shape classes rendered to image collections.
 - :mod:`.renderers`: ``compare`` (closed form vs Mitsuba on one volume) and ``bench`` (the
   renderers' speed/accuracy trade).
+- :mod:`.viewer`: ``view``, an interactive web viewer on the renderers (the ``viewer`` extra).
 - :mod:`.checkpoints`: ``convert-checkpoint``, for a trusted checkpoint the safe loader refuses
   (the only command that unpickles with ``weights_only=False``).
 
@@ -45,13 +46,14 @@ from .exits import error_message, interrupt_behind, interrupt_message, printable
 from .export import add_generate, add_reconstruct
 from .renderers import add_bench, add_compare
 from .training import add_evaluate, add_quickstart, add_train
+from .viewer import add_view
 
 __all__ = ["main", "build_parser", "parse_models", "CLIError", "SUBCOMMANDS"]
 
 #: Subcommand registrars, in help order. Add ``add_<command>`` functions here.
 SUBCOMMANDS: Sequence[Callable[["argparse._SubParsersAction"], None]] = (
     add_quickstart, add_train, add_reconstruct, add_generate, add_evaluate, add_make_dataset, add_compare,
-    add_bench, add_convert_checkpoint)
+    add_bench, add_convert_checkpoint, add_view)
 
 
 def build_parser() -> argparse.ArgumentParser:

@@ -122,18 +122,19 @@ import ctypes
 import glob
 import math
 import os
+from dataclasses import replace
 from typing import Any, Dict, Optional, Tuple
 
 import torch
 
 from ..views import camera_frames
-from .settings import RenderSettings
+from .settings import RenderSettings, check_lanes
 from .variant import ensure_variant, variant_device
 
 mi = ensure_variant()
 import drjit as dr  # noqa: E402  (after the variant is set)
 
-__all__ = ["march", "n_segments", "recorded_floats", "segment_transmittance", "tiled_ray", "tiled_lane", "tiled_backward", "V_MAX", "RECORD_LIMIT"]
+__all__ = ["march", "march_pixels", "n_segments", "recorded_floats", "segment_transmittance", "tiled_ray", "tiled_lane", "tiled_backward", "V_MAX", "RECORD_LIMIT"]
 
 #: Density clamp used by AO/EA when step != 1 (log domain).
 V_MAX = 1.0 - 1e-6
@@ -807,3 +808,34 @@ def march(volume: torch.Tensor, views: torch.Tensor, settings: RenderSettings, s
     src = volume.to(device=variant_device(), dtype=torch.float32)
     out = _March.apply(src, views.detach().to(torch.float64).cpu(), opt, int(seed))
     return out.to(volume.device)
+
+
+def march_pixels(volume: torch.Tensor, views: torch.Tensor, settings: RenderSettings, factor: int) -> torch.Tensor:
+    """Forward only: ``(B, C, N, N, N)`` volumes from ``(B, 3)`` views as ``(B, C, kN, kN)`` images, k = ``factor``.
+
+    The marcher's regular sub-pixel grid of spp = k² rays per pixel, each ray kept as a pixel of its
+    own instead of averaged into its pixel: ray (sx, sy) of pixel (j, i) sits at x = −1 + (j + (sx + ½)/k)Δ,
+    the centre of pixel (kj + sx) of a kN-pixel image, so this is the marcher's render at k times the
+    volume's resolution (``march`` with spp k², averaged over k × k blocks, is the same image downsampled).
+    One launch of the same frozen kernel as :func:`march`; ``settings``' spp and jitter are replaced.
+    """
+    k = int(factor)
+    if k < 1:
+        raise ValueError(f"factor: expected a positive int, got {factor!r}")
+    opt = replace(settings, spp=k * k, jitter=False).validate()
+    src = volume.detach().to(device=variant_device(), dtype=torch.float32)
+    b, c, n = src.shape[0], src.shape[1], src.shape[-1]
+    check_lanes(b, n, opt.spp)
+    keep: list = []
+    with torch.no_grad():
+        data = _shared(_channels_last(src, keep), keep)
+        frames = _frames(views.detach().to(torch.float64).cpu(), keep)
+        _spread_over_threads(b * n * n * opt.spp, 4)
+        run = _frozen_forward if FREEZE else _forward_pass
+        boxes = _shared(occupied_boxes(src), keep) if SKIP_EMPTY else None
+        values, _, _ = run(data, frames, dr.opaque(mi.UInt32, 0), boxes, _Static((b, c, n), opt, False, False))
+        rays = torch.stack([v.torch().view(b, n, n, k, k) for v in values], dim=1)     # (B, C, i, j, sy, sx)
+        image = rays.permute(0, 1, 2, 4, 3, 5).reshape(b, len(values), n * k, n * k).clone()
+        del values
+        dr.sync_thread()
+    return image.to(volume.device)

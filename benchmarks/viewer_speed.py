@@ -1,0 +1,176 @@
+"""Benchmark: how fast ``platonic view`` answers (issue 45's targets; a benchmark, not a test).
+
+    .venv/bin/python benchmarks/viewer_speed.py [--resolution 32] [--pixels 256] [--seconds 5] [--source FILE|RUN]
+
+Prints figures only:
+
+1. first frame: seconds from starting ``platonic view SOURCE`` (a 32³ test volume written to a
+   temporary .npz unless ``--source``) to the first frame shown in headless Chromium (the page
+   opened as soon as the command prints its address; the browser started before the clock).
+   Target: within 5 s on 2 cores.
+2. frames/s through the marcher while orbiting, on the server alone: ``render_frame`` of the marcher
+   at ``--pixels``² for views 3° apart around the object, plus what the page adds per frame
+   (enlarging, padding to a 16:9 canvas, PNG and JPEG encoding), after one warm-up frame.
+   Target: ≥ 10 frames/s at 32³ and 256×256 pixels.
+3. frames/s in the browser while the mouse drags the camera round for ``--seconds``: the page's
+   own frame counter over the drag, with "low resolution while moving" on (the viewer's default:
+   a quarter of the resolution, at least the volume's) and off (every frame at ``--pixels``²).
+
+Chromium: Debian's (``apt-get install chromium``), driven by playwright; without it, only 2 is printed.
+"""
+
+from __future__ import annotations
+
+import argparse
+import os
+import re
+import shutil
+import subprocess
+import sys
+import tempfile
+import threading
+import time
+from pathlib import Path
+
+import numpy as np
+import torch
+
+from mitsuba_platonic.views import from_angles
+from mitsuba_platonic.volume import test_volume
+
+FRAME = re.compile(r"frame (\d+): ([0-9.]+) ms, (full|moving), (\d+)×\d+ px")
+
+
+def server_side(volume: torch.Tensor, pixels: int, frames: int = 40) -> None:
+    from viser._image_encoding import cv2_imencode_with_fallback
+
+    from mitsuba_platonic.viewer.app import _pad_to_aspect
+    from mitsuba_platonic.viewer.scene import render_frame
+
+    def one(i: int, fmt: str) -> float:
+        t = time.perf_counter()
+        frame = render_frame(volume, tuple(from_angles(3.0 * i, 20.0).tolist()), "marcher", "EA", pixels)
+        cv2_imencode_with_fallback(fmt, _pad_to_aspect(frame.image, 16 / 9), jpeg_quality=90, channel_ordering="rgb")
+        return time.perf_counter() - t
+
+    start = time.perf_counter()
+    one(0, "png")
+    print(f"marcher, first frame in this process (Dr.Jit traces its kernel): {time.perf_counter() - start:.2f} s")
+    for fmt in ("jpeg", "png"):
+        render = []
+        total = []
+        for i in range(1, frames + 1):
+            t = time.perf_counter()
+            frame = render_frame(volume, tuple(from_angles(3.0 * i, 20.0).tolist()), "marcher", "EA", pixels)
+            render.append(time.perf_counter() - t)
+            cv2_imencode_with_fallback(fmt, _pad_to_aspect(frame.image, 16 / 9), jpeg_quality=90,
+                                       channel_ordering="rgb")
+            total.append(time.perf_counter() - t)
+        print(f"server: marcher at {volume.shape[-1]}³, {pixels}×{pixels} px, {frames} views 3° apart: render "
+              f"{1000 * np.median(render):.0f} ms median, with the page's {fmt.upper()} "
+              f"{1000 * np.median(total):.0f} ms → {1 / np.median(total):.1f} frames/s")
+
+
+def start_view(source: Path, cwd: Path):
+    proc = subprocess.Popen([sys.executable, "-m", "mitsuba_platonic.cli", "view", str(source), "--port", "0"],
+                            cwd=cwd, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+                            env={**os.environ, "PYTHONUNBUFFERED": "1"})
+    started = time.monotonic()
+    lines: list = []
+    threading.Thread(target=lambda: lines.extend(iter(proc.stdout.readline, "")), daemon=True).start()
+    while not lines and proc.poll() is None and time.monotonic() - started < 120:
+        time.sleep(0.02)
+    if not lines:
+        proc.kill()
+        raise SystemExit(f"platonic view printed no address: {proc.stderr.read()}")
+    url = re.search(r"http://127\.0\.0\.1:\d+", lines[0]).group(0)
+    return proc, started, url, time.monotonic() - started
+
+
+def frame_count(page) -> int:
+    m = FRAME.search(page.get_by_text(re.compile(r"^frame \d+:")).inner_text())
+    return int(m.group(1)) if m else 0
+
+
+def in_browser(source: Path, pixels: int, seconds: float) -> None:
+    from playwright.sync_api import sync_playwright
+
+    exe = shutil.which("chromium") or shutil.which("chromium-browser")
+    if exe is None:
+        print("browser: no chromium (apt-get install chromium): skipped")
+        return
+    with sync_playwright() as p, tempfile.TemporaryDirectory() as cwd:
+        browser = p.chromium.launch(executable_path=exe, headless=True,
+                                    args=["--no-sandbox", "--enable-unsafe-swiftshader", "--use-angle=swiftshader"])
+        page = browser.new_page(viewport={"width": 1280, "height": 720})
+        page.set_default_timeout(60_000)
+        proc, started, url, address = start_view(source, Path(cwd))
+        try:
+            page.goto(url)
+            page.get_by_text(re.compile(r"^frame \d+: .*full")).wait_for()
+            first = time.monotonic() - started
+            print(f"first frame: {first:.2f} s after the command (its address after {address:.2f} s; "
+                  f"closed form at the volume's resolution)")
+            page.get_by_role("combobox").nth(0).click()
+            page.get_by_role("option", name="marcher", exact=True).click()
+            page.get_by_role("combobox").nth(2).click()
+            page.get_by_role("option", name=str(pixels), exact=True).click()
+            page.get_by_text(re.compile(rf"^frame \d+: .*full, {pixels}×")).wait_for()
+            for low in (True, False):
+                if not low:
+                    page.get_by_text("low resolution while moving").click()
+                    time.sleep(0.5)
+                box = page.locator("canvas").first.bounding_box()
+                x, y = box["x"] + box["width"] * 0.3, box["y"] + box["height"] * 0.5
+                page.mouse.move(x, y)
+                page.mouse.down()
+                before, t0 = frame_count(page), time.monotonic()
+                steps = 0
+                seen: dict = {}
+                while time.monotonic() - t0 < seconds:
+                    steps += 1
+                    page.mouse.move(x + 4 * (steps % 100), y + (steps % 20), steps=1)
+                    m = FRAME.search(page.get_by_text(re.compile(r"^frame \d+:")).inner_text())
+                    if m:
+                        seen[m.group(1)] = (m.group(3), m.group(4), float(m.group(2)))
+                    time.sleep(0.02)
+                after, t1 = frame_count(page), time.monotonic()
+                page.mouse.up()
+                moving = [v for v in seen.values() if v[0] == "moving"]
+                kinds = sorted({f"{q} {r}²" for q, r, _ in seen.values()})
+                print(f"browser: marcher, dragging for {t1 - t0:.1f} s with low resolution while moving "
+                      f"{'on' if low else 'off'}: {(after - before) / (t1 - t0):.1f} frames/s shown "
+                      f"({', '.join(kinds)} seen; render {np.median([v[2] for v in moving or seen.values()]):.0f} ms "
+                      f"median)")
+        finally:
+            proc.send_signal(2)
+            try:
+                proc.wait(timeout=20)
+            except subprocess.TimeoutExpired:
+                proc.kill()
+            browser.close()
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    parser.add_argument("--resolution", type=int, default=32, help="test volume N (default: 32)")
+    parser.add_argument("--pixels", type=int, default=256, help="image pixels per side (a multiple of N)")
+    parser.add_argument("--seconds", type=float, default=5.0, help="length of each drag in the browser")
+    parser.add_argument("--source", default=None, help="a volume file or run folder instead of the test volume")
+    parser.add_argument("--no-browser", action="store_true")
+    args = parser.parse_args()
+    torch.set_num_threads(min(2, os.cpu_count() or 1))
+    print(f"torch threads {torch.get_num_threads()}, {os.cpu_count()} cores, load average "
+          f"{', '.join(f'{x:.1f}' for x in os.getloadavg())}")
+    volume = test_volume(args.resolution, "figure", "ea")[0]
+    with tempfile.TemporaryDirectory() as tmp:
+        source = Path(args.source) if args.source else Path(tmp) / f"figure{args.resolution}.npz"
+        if not args.source:
+            np.savez(source, volume=volume.numpy())
+        if not args.no_browser:
+            in_browser(source, args.pixels, args.seconds)
+        server_side(volume, args.pixels)
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,17 @@
+"""``platonic view``: an interactive web viewer on the project's own renderers (the ``viewer`` extra).
+
+- :mod:`.scene`: what is shown, without the web library: the SOURCE (a volume file, a run
+  folder, a photo run with a photo) opened as volumes, a frame of the current volume rendered by
+  one of the project's renderers at a camera direction, and the exports a page may ask for,
+  kept inside the output folder. Imports torch and the package, never the web library.
+- :mod:`.app`: the page, on `viser <https://viser.studio>`_ (the library nerfstudio's viewer runs
+  on): each browser's camera → a view ω (from the object towards the camera) → a frame rendered on
+  the server and set as the page's background image (a low-resolution frame while the camera
+  moves, the full one when it stops), GUI controls for renderer, formation, resolution, the
+  source's inputs and latents, and the exports.
+
+Nothing outside this sub-package imports viser (tests/test_viewer.py pins it); this ``__init__``
+imports neither module, so ``import mitsuba_platonic.viewer`` is light.
+"""
+
+__all__: list = []

@@ -1,0 +1,352 @@
+"""The page of ``platonic view``, on viser: each browser's camera → a server-rendered frame.
+
+Per browser (viser client) a :class:`ClientView` keeps the GUI and a render thread. A camera
+message gives the view ω = normalize(position − look_at) (the scene's up is +y, so viser's
+orbit camera has the project's frame: right = (ω_z, 0, −ω_x), up = ω × right; panning moves
+look_at and position together and leaves ω, the orthographic frame, as it is; zooming changes
+the distance, which an orthographic camera does not see). While the camera keeps moving (a
+message within :data:`SETTLE_S`), the thread renders a low-resolution frame (a quarter of the
+resolution, at least the volume's; the same resolution with "low resolution while moving" off),
+sent as JPEG; once it rests, the full one, as PNG. Frames are drawn as the scene's background image, padded with the background grey to
+the canvas' aspect so that the square render keeps its shape (viser stretches the image over
+the canvas), centred, its side the canvas' shorter side.
+
+The GUI: renderer, formation, resolution, the path tracer's spp, buttons that orbit the camera by
+fixed angles (and the front view), the frame time and the renderer's settings (a line of text
+the tests read: ``frame N: T ms, full|moving, R×R px, az A° el E°``), the source's inputs (a
+reconstruction run: previous/next held-out input, shown beside the view) or latents (a
+generation run: seed, new latent, a walk to a second seed), and exports into the output folder.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import io
+import socket
+import threading
+import time
+from pathlib import Path
+from typing import Callable, Optional, Tuple
+
+import numpy as np
+import torch
+import viser
+
+from ..errors import UserError
+from ..views import from_angles, to_angles
+from .scene import (BACKGROUND, Exports, Frame, Scene, formations_for, render_frame, renderers_for,
+                    resolutions_for)
+
+__all__ = ["ViewerApp", "check_port", "SETTLE_S"]
+
+#: A camera at rest this long gets its full-resolution frame.
+SETTLE_S = 0.2
+#: Distance of the initial camera from the centre (the cube is [−1, 1]³).
+DISTANCE = 4.0
+#: Frames are enlarged to at least this many pixels a side before they are padded to the canvas' aspect.
+MIN_SHOWN = 256
+#: The background grey as an 8-bit sRGB value (what :func:`~.scene.to_display` composites over).
+_BG8 = int(round(255 * (1.055 * BACKGROUND ** (1 / 2.4) - 0.055)))
+
+
+def check_port(host: str, port: int) -> None:
+    """Raise :class:`UserError` naming ``--port`` unless ``host:port`` can be bound now (viser itself
+    would quietly move to the next free port)."""
+    if port == 0:
+        return
+    family = socket.AF_INET6 if ":" in host else socket.AF_INET
+    with socket.socket(family, socket.SOCK_STREAM) as s:
+        s.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)
+        try:
+            s.bind((host, port))
+        except OSError as e:
+            raise UserError(f"--port {port}: {host}:{port} cannot be used ({e.strerror or e}); choose another "
+                            f"--port (0 picks a free one)") from None
+
+
+def _pad_to_aspect(image: np.ndarray, aspect: float) -> np.ndarray:
+    """A square ``(R, R, 3)`` frame as the background image of a canvas of width/height ``aspect``:
+    enlarged (nearest: each pixel a k×k block) to at least :data:`MIN_SHOWN` pixels a side, so that
+    padding it to the aspect in whole pixels keeps it square on the canvas within 0.2 %, then padded
+    with the background grey on both sides."""
+    r0 = image.shape[0]
+    k = max(1, -(-MIN_SHOWN // r0))
+    if k > 1:
+        image = np.repeat(np.repeat(image, k, 0), k, 1)
+    r = image.shape[0]
+    if not np.isfinite(aspect) or aspect <= 0:
+        return image
+    if aspect >= 1.0:
+        w = max(r, int(round(r * aspect)))
+        out = np.full((r, w, 3), _BG8, np.uint8)
+        x0 = (w - r) // 2
+        out[:, x0:x0 + r] = image
+    else:
+        h = max(r, int(round(r / aspect)))
+        out = np.full((h, r, 3), _BG8, np.uint8)
+        y0 = (h - r) // 2
+        out[y0:y0 + r] = image
+    return out
+
+
+class ViewerApp:
+    """The viser server for one :class:`~.scene.Scene`, its exports into ``out``."""
+
+    def __init__(self, scene: Scene, out: Path, host: str = "127.0.0.1", port: int = 8080):
+        check_port(host, port)
+        self.scene, self.exports = scene, Exports(out)
+        self.render_lock = threading.Lock()               # one render at a time (torch's and Dr.Jit's threads)
+        self.scene_lock = threading.RLock()
+        self.version = 0                                   # bumped when the volume changes
+        with contextlib.redirect_stdout(io.StringIO()):      # viser's own banner: the command prints the address
+            self.server = viser.ViserServer(host=host, port=port, label="platonic view", verbose=False)
+        if port and self.server.get_port() != port:        # taken between the check and the bind
+            self.server.stop()
+            raise UserError(f"--port {port}: {host}:{port} is in use; choose another --port (0 picks a free one)")
+        self.host, self.port = host, self.server.get_port()
+        self.server.scene.set_up_direction("+y")
+        self.server.initial_camera.position = (0.0, 0.0, DISTANCE)
+        self.server.initial_camera.look_at = (0.0, 0.0, 0.0)
+        self.server.initial_camera.up = (0.0, 1.0, 0.0)
+        self.clients = {}
+        self.server.on_client_connect(self._connect)
+        self.server.on_client_disconnect(self._disconnect)
+
+    @property
+    def url(self) -> str:
+        host = f"[{self.host}]" if ":" in self.host else self.host
+        return f"http://{host}:{self.port}"
+
+    def _connect(self, client: "viser.ClientHandle") -> None:
+        self.clients[client.client_id] = ClientView(self, client)
+
+    def _disconnect(self, client: "viser.ClientHandle") -> None:
+        view = self.clients.pop(client.client_id, None)
+        if view is not None:
+            view.stop()
+
+    def volume_changed(self) -> None:
+        """The scene's volume changed (another input or latent): every page renders again."""
+        with self.scene_lock:
+            self.version += 1
+        for view in list(self.clients.values()):
+            view.refresh_source()
+            view.wake.set()
+
+    def stop(self) -> None:
+        for view in list(self.clients.values()):
+            view.stop()
+        with contextlib.redirect_stdout(io.StringIO()):
+            self.server.stop()
+
+
+class ClientView:
+    """One browser's GUI, camera and render thread."""
+
+    def __init__(self, app: ViewerApp, client: "viser.ClientHandle"):
+        self.app, self.client = app, client
+        self.lock = threading.Lock()
+        self.wake = threading.Event()
+        self.stopped = False
+        self.view = np.array([0.0, 0.0, 1.0])
+        self.last_move = 0.0
+        self.shown: Optional[Tuple] = None
+        self.count = 0
+        self.frame: Optional[Frame] = None
+        self.times = {}                                    # renderer → last full frame's seconds
+        self._gui()
+        client.camera.on_update(self._camera)
+        self.thread = threading.Thread(target=self._loop, name=f"render-{client.client_id}", daemon=True)
+        self.thread.start()
+        self.wake.set()
+
+    # -- GUI ------------------------------------------------------------------------------------
+
+    def _gui(self) -> None:
+        gui, scene = self.client.gui, self.app.scene
+        c, n = scene.volume.shape[0], scene.volume.shape[-1]
+        gui.add_markdown(f"**{scene.title}**" + "".join(f"\n\n{note}" for note in scene.notes))
+        self.info = gui.add_markdown("frame: waiting for the first frame")
+        self.settings = gui.add_markdown("")
+        with gui.add_folder("Renderer"):
+            self.renderer = gui.add_dropdown("renderer", renderers_for(c), initial_value="closed form")
+            self.formation = gui.add_dropdown("formation", formations_for(c), initial_value=formations_for(c)[-1],
+                                              hint="VH, AO: density only; EA: colour (the lit renderers form EA)")
+            choices = [str(r) for r in resolutions_for(n)]
+            self.resolution = gui.add_dropdown("resolution", choices, initial_value=choices[0],
+                                               hint="image pixels per side")
+            self.spp = gui.add_slider("path tracer spp", min=1, max=64, step=1, initial_value=4)
+            self.low = gui.add_checkbox("low resolution while moving", initial_value=True,
+                                        hint="a quarter of the resolution (at least the volume's) while the camera moves")
+            for handle in (self.renderer, self.formation, self.resolution, self.spp, self.low):
+                handle.on_update(lambda _: self.wake.set())
+        with gui.add_folder("Camera"):
+            for label, daz, delv in (("azimuth -30", -30.0, 0.0), ("azimuth +30", 30.0, 0.0),
+                                     ("elevation -15", 0.0, -15.0), ("elevation +15", 0.0, 15.0)):
+                gui.add_button(label).on_click(self._orbit_by(daz, delv))
+            gui.add_button("front view").on_click(lambda _: self.set_view(0.0, 0.0))
+        self.source_gui(gui)
+        with gui.add_folder("Export"):
+            self.name = gui.add_text("name", initial_value="view", hint="a file name inside the output folder")
+            gui.add_button("save view (PNG)").on_click(lambda _: self._export_png())
+            gui.add_button("save volume (.npz .vol .ply)").on_click(lambda _: self._export_volume())
+            self.exported = gui.add_markdown(f"into `{self.app.exports.folder}`")
+
+    def source_gui(self, gui) -> None:
+        scene = self.app.scene
+        self.input_image = None
+        if scene.input is not None:
+            with gui.add_folder("Input"):
+                self.input_image = gui.add_image(np.repeat(np.repeat(scene.input, 4, 0), 4, 1), label="input",
+                                                 format="png")
+                self.input_label = gui.add_markdown(self._input_text())
+                if scene.inputs is not None and len(scene.inputs) > 1:
+                    gui.add_button("previous input").on_click(lambda _: self._step_input(-1))
+                    gui.add_button("next input").on_click(lambda _: self._step_input(+1))
+        if scene.kind == "generation" or (scene.kind == "reconstruction" and scene.inputs is None):
+            with gui.add_folder("Latent"):
+                self.seed = gui.add_number("seed", initial_value=scene.seeds[0], min=0, step=1)
+                self.seed_b = gui.add_number("walk to seed", initial_value=scene.seeds[0] + 1, min=0, step=1)
+                self.walk = gui.add_slider("walk", min=0.0, max=1.0, step=0.05, initial_value=0.0)
+                gui.add_button("new latent").on_click(lambda _: self._new_latent())
+                for handle in (self.seed, self.seed_b, self.walk):
+                    handle.on_update(lambda _: self._latent())
+
+    def _input_text(self) -> str:
+        scene = self.app.scene
+        if not scene.input_names:
+            return ""
+        return f"{scene.input_names[scene.input_index]} ({scene.input_index + 1} of {len(scene.input_names)})"
+
+    def refresh_source(self) -> None:
+        scene = self.app.scene
+        if self.input_image is not None and scene.input is not None:
+            self.input_image.image = np.repeat(np.repeat(scene.input, 4, 0), 4, 1)
+            self.input_label.content = self._input_text()
+
+    def _step_input(self, step: int) -> None:
+        with self.app.scene_lock:
+            self.app.scene.show_input(self.app.scene.input_index + step)
+        self.app.volume_changed()
+
+    def _new_latent(self) -> None:
+        self.seed.value = int(self.seed.value) + 1          # its on_update draws it
+
+    def _latent(self) -> None:
+        t = float(self.walk.value)
+        with self.app.scene_lock:
+            self.app.scene.show_latent(int(self.seed.value), int(self.seed_b.value) if t > 0 else None, t)
+        self.app.volume_changed()
+
+    # -- camera -----------------------------------------------------------------------------------
+
+    def _camera(self, camera) -> None:
+        w = np.asarray(camera.position, float) - np.asarray(camera.look_at, float)
+        norm = float(np.linalg.norm(w))
+        if norm < 1e-9:
+            return
+        with self.lock:
+            self.view = w / norm
+            self.last_move = time.monotonic()
+        self.wake.set()
+
+    def _orbit_by(self, daz: float, delv: float) -> Callable:
+        def orbit(_) -> None:
+            with self.lock:
+                az, el = (float(a) for a in to_angles(torch.tensor(self.view)))
+            self.set_view(az + daz, max(-89.0, min(89.0, el + delv)))
+        return orbit
+
+    def set_view(self, azimuth: float, elevation: float) -> None:
+        """Move this browser's camera to ω(azimuth, elevation) around its look-at point, at its distance."""
+        w = from_angles(azimuth, elevation).double().numpy()
+        cam = self.client.camera
+        look = np.asarray(cam.look_at, float)
+        d = float(np.linalg.norm(np.asarray(cam.position, float) - look)) or DISTANCE
+        with self.client.atomic():
+            cam.up_direction = (0.0, 1.0, 0.0)
+            cam.position = tuple(look + d * w)              # viser moves look_at along with the position:
+            cam.look_at = tuple(look)                         # set it back, to orbit about it
+        with self.lock:                                    # render it even before the browser echoes it
+            self.view = w
+            self.last_move = 0.0
+        self.wake.set()
+
+    # -- frames -----------------------------------------------------------------------------------
+
+    def _request(self) -> Tuple:
+        with self.lock:
+            view, moving = tuple(float(x) for x in self.view), time.monotonic() - self.last_move < SETTLE_S
+        full = int(self.resolution.value)
+        n = self.app.scene.volume.shape[-1]
+        low = max(n, full // 4) if self.low.value else full
+        res, quality = (low, "moving") if moving else (full, "full")
+        return (view, self.renderer.value, self.formation.value, res, int(self.spp.value), self.app.version,
+                self.client.camera.aspect, quality)
+
+    def _loop(self) -> None:
+        while not self.stopped:
+            self.wake.wait(timeout=SETTLE_S / 2)
+            self.wake.clear()
+            if self.stopped:
+                return
+            request = None
+            try:
+                request = self._request()
+                if request == self.shown:
+                    continue
+                self._render(request)
+            except UserError as e:
+                self.info.content = f"frame: error: {e}"
+                self.shown = request
+            except Exception as e:                          # the page stays up; the error shows there
+                if self.stopped:
+                    return
+                self.info.content = f"frame: error: {type(e).__name__}: {e}"
+                self.shown = request
+
+    def _render(self, request: Tuple) -> None:
+        view, renderer, formation, res, spp, version, aspect, quality = request
+        with self.app.render_lock, self.app.scene_lock:
+            volume = self.app.scene.volume
+            frame = render_frame(volume, view, renderer, formation, res, spp)
+        if self.stopped:
+            return
+        # full frames lossless (PNG, what the tests compare), moving ones as JPEG (a tenth of the encoding time)
+        self.client.scene.set_background_image(_pad_to_aspect(frame.image, aspect),
+                                               format="png" if quality == "full" else "jpeg", jpeg_quality=90)
+        self.count += 1
+        self.frame, self.shown = frame, request
+        if quality == "full":
+            self.times[renderer] = frame.seconds
+        az, el = (float(a) for a in to_angles(torch.tensor(view)))
+        self.info.content = (f"frame {self.count}: {1000 * frame.seconds:.1f} ms, {quality}, {res}×{res} px, "
+                             f"az {az:.1f}° el {el:.1f}°")
+        self.settings.content = frame.settings
+
+    # -- exports ----------------------------------------------------------------------------------
+
+    def _export_png(self) -> None:
+        if self.frame is None:
+            self.exported.content = "no frame to save yet"
+            return
+        try:
+            path = self.app.exports.png(self.frame, self.name.value)
+        except (UserError, OSError) as e:
+            self.exported.content = f"not saved: {e}"
+            return
+        self.exported.content = f"saved `{path}`"
+
+    def _export_volume(self) -> None:
+        with self.app.scene_lock:
+            volume = self.app.scene.volume.clone()
+        try:
+            paths = self.app.exports.volume(volume, self.name.value)
+        except (UserError, OSError) as e:
+            self.exported.content = f"not saved: {e}"
+            return
+        self.exported.content = "saved " + ", ".join(f"`{p}`" for p in paths)
+
+    def stop(self) -> None:
+        self.stopped = True
+        self.wake.set()

@@ -1,0 +1,367 @@
+"""What ``platonic view`` shows, without the web library: the source's volumes, frames, exports.
+
+- :func:`open_source`: SOURCE as a :class:`Scene`: a volume file (``.npz``, ``.vol``), a run folder
+  (reconstruction: its held-out inputs, stepped through; generation: latents drawn by seed, or a
+  walk between two), or a reconstruction run with ``photo`` (reconstructed, shown beside the view).
+  Every problem is a :class:`~mitsuba_platonic.errors.UserError` (one line, exit 2 on the command line).
+- :func:`render_frame`: the current volume from a view ω (from the object towards the camera; the
+  orthographic camera, docs/conventions.md) through one of the project's renderers at an image
+  resolution, as 8-bit sRGB over :data:`BACKGROUND`, with the seconds it took and the settings used.
+  An image resolution R = kN above the volume's N: the marcher keeps its k² sub-pixel rays apart;
+  the other renderers render the volume resampled trilinearly to R³ (cached).
+- :class:`Exports`: the PNG of a frame and the volume (``.npz`` + ``.vol``, a ``.ply`` mesh) written
+  into one output folder, under names cleaned of path characters and never over an earlier file:
+  nothing the page sends can name a file outside that folder.
+"""
+
+from __future__ import annotations
+
+import math
+import re
+import time
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Dict, List, Optional, Tuple, Union
+
+import numpy as np
+import torch
+import torch.nn.functional as F
+from PIL import Image
+
+from ..errors import UserError
+from ..export import extract_mesh, save_ply
+from ..fileio import atomic_write
+from ..render import RenderSettings, render_with
+from ..volume import CHANNELS
+from ..volume_io import read_volume_file, save_volume
+
+__all__ = ["RENDERERS", "FORMATIONS", "BACKGROUND", "Frame", "Scene", "Exports", "open_source", "render_frame",
+           "formations_for", "renderers_for", "resolutions_for", "to_display", "clean_name"]
+
+#: The renderers the page offers: label → backend (mitsuba_platonic.render.BACKENDS).
+RENDERERS: Dict[str, str] = {"closed form": "closed_form", "marcher": "mitsuba",
+                             "single scattering": "scatter_march", "path tracer": "physical"}
+#: Image formations: label → model.
+FORMATIONS: Dict[str, str] = {"VH": "vh", "AO": "ao", "EA": "ea"}
+#: The backends that light colour volumes (EA formation only).
+_LIT = ("scatter_march", "physical")
+#: The grey (linear) the frames are composited over.
+BACKGROUND = 0.08
+#: Largest image resolution the page offers (the marcher's 512² frame of a 64³ volume: 8×8 rays per voxel).
+MAX_RESOLUTION = 512
+#: Largest image the renderers other than the marcher render (they render the volume resampled to
+#: R³: the closed form takes about 13 s for 256² on 2 cores); a larger choice renders at this one.
+MAX_RESAMPLED = 128
+
+PathLike = Union[str, Path]
+
+
+def formations_for(channels: int) -> List[str]:
+    """The formation labels a volume of ``channels`` channels can be rendered with (EA needs colour)."""
+    return ["VH", "AO", "EA"] if channels == 4 else ["VH", "AO"]
+
+
+def renderers_for(channels: int) -> List[str]:
+    """The renderer labels for a volume of ``channels`` channels (the lit ones render colour only)."""
+    return list(RENDERERS) if channels == 4 else ["closed form", "marcher"]
+
+
+def to_display(image: torch.Tensor) -> np.ndarray:
+    """A render ``(C, H, W)`` (premultiplied linear RGBA, or an opacity: a white object) → ``(H, W, 3)``
+    uint8 sRGB over :data:`BACKGROUND` (the sRGB curve of :func:`~mitsuba_platonic.images.linear_to_srgb`,
+    written out here in torch: colour-science costs a second to import and milliseconds a frame)."""
+    x = image.detach().float().cpu()
+    if x.shape[0] == 1:
+        rgb, alpha = x.expand(3, -1, -1), x
+    else:
+        rgb, alpha = x[:3], x[3:4]
+    lin = (rgb + (1.0 - alpha) * BACKGROUND).clamp(0.0, 1.0)
+    srgb = torch.where(lin <= 0.0031308, 12.92 * lin, 1.055 * lin.clamp_min(1e-12) ** (1 / 2.4) - 0.055)
+    return (srgb.clamp(0.0, 1.0) * 255.0 + 0.5).to(torch.uint8).permute(1, 2, 0).contiguous().numpy()
+
+
+@dataclass
+class Frame:
+    """One rendered view: ``image`` ``(R, R, 3)`` uint8 sRGB, ``seconds`` of rendering (from the call to
+    the displayable image), ``settings`` (what the renderer was told, one line) and the ``view``."""
+
+    image: np.ndarray
+    seconds: float
+    settings: str
+    view: Tuple[float, float, float]
+    renderer: str
+    formation: str
+    resolution: int
+
+
+#: The last resampled volume: (the source tensor itself, R, the resampled one). The source is kept and
+#: compared by identity, not by ``id()``, which a new volume may reuse once the old one is freed.
+_resampled: List[Tuple[torch.Tensor, int, torch.Tensor]] = []
+
+
+def _at_resolution(volume: torch.Tensor, r: int) -> torch.Tensor:
+    """``(C, N, N, N)`` → ``(1, C, R, R, R)``: itself for R = N, else resampled trilinearly (cell-centred,
+    the renderers' ``align_corners=False`` convention), clamped to [0, 1]; the last one is cached."""
+    n = volume.shape[-1]
+    if r == n:
+        return volume[None]
+    if not (_resampled and _resampled[0][0] is volume and _resampled[0][1] == r):
+        _resampled.clear()                                   # one resampled volume at a time (memory)
+        _resampled.append((volume, r, F.interpolate(volume[None], size=(r, r, r), mode="trilinear",
+                                                    align_corners=False).clamp_(0.0, 1.0)))
+    return _resampled[0][2]
+
+
+def resolutions_for(n: int) -> List[int]:
+    """The image resolutions offered for an N³ volume: kN for k = 1, 2, 4, 8 up to :data:`MAX_RESOLUTION`."""
+    return [k * n for k in (1, 2, 4, 8) if k * n <= MAX_RESOLUTION] or [n]
+
+
+def render_frame(volume: torch.Tensor, view: Tuple[float, float, float], renderer: str = "closed form",
+                 formation: str = "EA", resolution: Optional[int] = None, spp: int = 4) -> Frame:
+    """Render the ``(C, N, N, N)`` ``volume`` (checked when it was opened) from the unit ``view`` ω.
+
+    ``renderer``: a label of :data:`RENDERERS`; ``formation``: one of :data:`FORMATIONS` (a lit
+    renderer always forms EA); ``resolution``: the image's R = kN, k a positive int (default N);
+    ``spp``: the path tracer's samples per pixel. The random sky of the lit renderers is the one of
+    seed 0 (the same in every frame).
+
+    At k > 1 the marcher keeps its k² regular sub-pixel rays per pixel apart
+    (:func:`~mitsuba_platonic.render.marcher.march_pixels`: the same kernel, k² times the rays); the
+    other renderers render the volume resampled trilinearly to (kN)³ (their images are the volume's
+    resolution), which costs them about k³ times the work.
+    """
+    if renderer not in RENDERERS:
+        raise UserError(f"renderer: expected one of {list(RENDERERS)}, got {renderer!r}")
+    if formation not in FORMATIONS:
+        raise UserError(f"formation: expected one of {list(FORMATIONS)}, got {formation!r}")
+    backend = RENDERERS[renderer]
+    c, n = volume.shape[0], volume.shape[-1]
+    model = "ea" if backend in _LIT else FORMATIONS[formation]
+    if CHANNELS[model] == 4 and c != 4:
+        raise UserError(f"{renderer} {model.upper()}: the volume has no colour (C = {c}); use VH or AO")
+    r = n if resolution is None else int(resolution)
+    if r % n or not n <= r <= max(n, MAX_RESOLUTION):
+        raise UserError(f"resolution: expected a multiple of the volume's {n} up to {MAX_RESOLUTION} pixels, got {r}")
+    k = r // n
+    capped = ""
+    if backend != "mitsuba" and r > max(n, MAX_RESAMPLED):
+        k = max(1, MAX_RESAMPLED // n)
+        capped, r = f" (asked {r}², the {renderer} renders at most {max(n, k * n)}² here)", k * n
+    options: Dict[str, object] = {}
+    shown = [f"{renderer} ({backend})", model.upper(), f"{r}×{r} px{capped}"]
+    if backend == "mitsuba":
+        shown.append(f"volume {n}³, step 1 voxel" + (f", {k}×{k} rays per voxel-sized pixel" if k > 1 else ""))
+    else:
+        shown.append(f"volume {n}³" + ("" if k == 1 else f" resampled to {r}³"))
+    if backend == "physical":
+        if isinstance(spp, bool) or not isinstance(spp, int) or spp < 1:
+            raise UserError(f"spp: expected a positive int, got {spp!r}")
+        options["physical_spp"] = spp
+        shown.append(f"spp {spp}, max depth {RenderSettings().max_depth}, sun and sky of seed 0")
+    elif backend == "scatter_march":
+        shown.append(f"{RenderSettings().steps_per_voxel} samples per voxel, sun and sky of seed 0")
+    settings = RenderSettings.for_call(backend, model, **options)
+    w = torch.tensor([view], dtype=torch.float64)
+    w = (w / w.norm()).to(torch.float32)
+    start = time.perf_counter()
+    with torch.no_grad():
+        v = volume[None] if backend == "mitsuba" else _at_resolution(volume, r)
+        if CHANNELS[model] == 1 and c == 4:
+            v = v[:, 3:]
+        v = v.contiguous()
+        if backend == "mitsuba" and k > 1:
+            from ..render.marcher import march_pixels          # lazy: imports Dr.Jit, on the marcher's first frame
+            image = march_pixels(v, w, settings, k)[0]
+        else:
+            image = render_with(v, w, settings, 0)[0]
+        image = to_display(image)
+    seconds = time.perf_counter() - start
+    return Frame(image, seconds, ", ".join(shown), tuple(float(x) for x in w[0]), renderer, formation, r)
+
+
+# --------------------------------------------------------------------------- sources
+
+
+@dataclass
+class Scene:
+    """What the viewer shows: ``volume`` ``(C, N, N, N)`` (the current one), ``kind`` ('volume',
+    'reconstruction', 'generation'), ``title``, and for a run its ``model``, held-out ``inputs``
+    ``(M, C, R, R)`` with their ``input_names`` (reconstruction), the displayed ``input`` image
+    (an input or the photo, ``(R, R, 3)`` uint8) and a note on what was found (``notes``)."""
+
+    volume: torch.Tensor
+    kind: str
+    title: str
+    model: Optional[object] = None
+    inputs: Optional[torch.Tensor] = None
+    input_names: List[str] = field(default_factory=list)
+    input: Optional[np.ndarray] = None
+    input_index: int = 0
+    seeds: Tuple[int, int] = (0, 1)
+    walk: float = 0.0
+    notes: List[str] = field(default_factory=list)
+
+    # -- reconstruction: held-out inputs ------------------------------------------------------
+
+    def show_input(self, index: int) -> None:
+        """Reconstruct held-out input ``index`` (modulo their count) and make it the current volume."""
+        if self.inputs is None or len(self.inputs) == 0:
+            raise UserError("this source has no held-out inputs to step through")
+        self.input_index = index % len(self.inputs)
+        image = self.inputs[self.input_index:self.input_index + 1]
+        self.volume = _reconstruct(self.model, image)
+        self.input = to_display(image[0])
+
+    # -- generation: latents ------------------------------------------------------------------
+
+    def show_latent(self, seed_a: int, seed_b: Optional[int] = None, t: float = 0.0) -> None:
+        """G of the latent drawn with ``seed_a`` (as ``generate(1, seed)`` draws it), or, with ``seed_b``,
+        of the spherical interpolation at ``t`` ∈ [0, 1] between the two (a walk between two latents)."""
+        za = _latent(self.model, seed_a)
+        z = za if seed_b is None else _slerp(za, _latent(self.model, seed_b), float(t))
+        self.seeds, self.walk = (seed_a, seed_a if seed_b is None else seed_b), float(t)
+        self.volume = _decode(self.model, z)
+
+
+def _reconstruct(model, image: torch.Tensor) -> torch.Tensor:
+    return model.reconstruct_upright(image.to(model.device))[0][0].detach().float().cpu().clamp(0.0, 1.0)
+
+
+def _latent(model, seed: int) -> torch.Tensor:
+    return torch.randn(1, model.latent, generator=torch.Generator().manual_seed(int(seed)))
+
+
+def _slerp(a: torch.Tensor, b: torch.Tensor, t: float) -> torch.Tensor:
+    """Spherical interpolation of two Gaussian latents (keeps their norm typical, unlike a straight line)."""
+    cos = float((a * b).sum() / (a.norm() * b.norm()))
+    omega = math.acos(max(-1.0, min(1.0, cos)))
+    if omega < 1e-6:
+        return (1 - t) * a + t * b
+    return (math.sin((1 - t) * omega) * a + math.sin(t * omega) * b) / math.sin(omega)
+
+
+def _decode(model, z: torch.Tensor) -> torch.Tensor:
+    return model.decode(z.to(model.device))[0].detach().float().cpu().clamp(0.0, 1.0)
+
+
+def _held_out(cfg) -> Tuple[Optional[torch.Tensor], List[str], Optional[str]]:
+    """A run's held-out inputs and their names, or (None, [], why none) when they are not here."""
+    from ..evaluate.photos import photo_splits                          # lazy: a second to import; runs only
+    from ..train.data import collection_folder, load_training_data     # lazy: runs only
+
+    if cfg.data.source == "folder":
+        try:
+            _, held, files = photo_splits(cfg)
+        except UserError as e:
+            return None, [], str(e)
+        return held, [Path(f).name for f in files], None
+    folder = collection_folder(cfg)
+    if not folder.is_dir():
+        return None, [], (f"the run's collection {str(folder)!r} is not here (data.cache is relative to where "
+                          f"training ran); no held-out inputs")
+    data = load_training_data(cfg, progress=False)
+    if len(data.held_out) == 0:
+        return None, [], "the run holds out no input"
+    names = [f"held-out {i}" + (f" (shape {r.get('shape')})" if isinstance(r, dict) and "shape" in r else "")
+             for i, r in enumerate(data.held_out_records or [{}] * len(data.held_out))]
+    return data.held_out, names, None
+
+
+def open_source(source: PathLike, photo: Optional[PathLike] = None) -> Scene:
+    """SOURCE → :class:`Scene` (module docstring); :class:`UserError` naming what is wrong."""
+    path = Path(source)
+    if not path.exists():
+        raise UserError(f"SOURCE {str(path)!r} does not exist; expected a volume file (.npz, .vol) or a run folder")
+    if path.is_file():
+        if photo is not None:
+            raise UserError(f"--photo needs a reconstruction run folder as SOURCE, got the file {str(path)!r}")
+        volume = read_volume_file(path)[0]
+        return Scene(volume=volume, kind="volume", title=f"{path.name} ({volume.shape[0]} channel(s), "
+                                                         f"{volume.shape[-1]}³)")
+    if not path.is_dir():
+        raise UserError(f"SOURCE {str(path)!r} is neither a file nor a folder")
+    # lazy, the three: checkpoints, configs and networks are for run folders only (a volume file's
+    # first frame waits for none of them)
+    from ..checkpoint import read_checkpoint                  # lazy: runs only
+    from ..loading import checkpoint_config, model_from_checkpoint   # lazy: runs only
+    from ..model import Model                                 # lazy: runs only
+
+    ckpt = read_checkpoint(path)
+    cfg = checkpoint_config(ckpt)
+    model = model_from_checkpoint(Model, ckpt, cfg)
+    step = f"step {model.step}"
+    if model.task != "reconstruction":
+        if photo is not None:
+            raise UserError(f"--photo: {str(path)!r} is a generation run (train.task: {model.task}); it has no "
+                            f"encoder to reconstruct a photo; use a reconstruction run, or leave --photo out")
+        scene = Scene(volume=torch.zeros(0), kind="generation", title=f"{path.name}: generation ({step})", model=model)
+        scene.show_latent(0)
+        return scene
+    if photo is not None:
+        image = model.load_image(photo)                      # the loader's one-line errors (missing, damaged)
+        scene = Scene(volume=_reconstruct(model, image), kind="reconstruction",
+                      title=f"{path.name}: reconstruction of {Path(photo).name} ({step})", model=model,
+                      inputs=image, input_names=[Path(photo).name])
+        scene.input = to_display(image[0])
+        return scene
+    inputs, names, why = _held_out(cfg)
+    scene = Scene(volume=torch.zeros(0), kind="reconstruction", title=f"{path.name}: reconstruction ({step})",
+                  model=model, inputs=inputs, input_names=names)
+    if inputs is None:
+        scene.notes.append(why or "no held-out inputs")
+        scene.show_latent(0)                                 # G alone: something to look at
+        scene.notes.append("showing G(z) of seed 0 instead")
+    else:
+        scene.show_input(0)
+    return scene
+
+
+# --------------------------------------------------------------------------- exports
+
+_UNSAFE = re.compile(r"[^A-Za-z0-9_+-]")
+
+
+def clean_name(text: str, default: str = "view") -> str:
+    """A page's name for an export → a plain file stem: letters, digits and ``_ + -`` only (every other
+    character, the path separators and dots included, becomes ``_``), at most 64 characters."""
+    name = _UNSAFE.sub("_", str(text).strip())[:64].strip("_")
+    return name or default
+
+
+class Exports:
+    """Files the page asks for, inside ``folder`` only (created on the first export)."""
+
+    def __init__(self, folder: PathLike):
+        self.folder = Path(folder)
+
+    def _free(self, stem: str, exts: Tuple[str, ...]) -> Path:
+        """``folder/stem`` (``stem_2``, ``stem_3``, … where an earlier export holds any of ``exts``),
+        checked to lie inside ``folder``."""
+        self.folder.mkdir(parents=True, exist_ok=True)
+        base, k = clean_name(stem), 1
+        name = base
+        while any((self.folder / (name + e)).exists() for e in exts):
+            k += 1
+            name = f"{base}_{k}"
+        target = (self.folder / name).resolve()
+        if target.parent != self.folder.resolve():           # clean_name makes this impossible; kept as a guard
+            raise UserError(f"export name {stem!r} leaves the output folder {str(self.folder)!r}")
+        return self.folder / name
+
+    def png(self, frame: Frame, name: str = "view") -> Path:
+        """The frame as ``name.png`` (8-bit sRGB, as shown)."""
+        path = self._free(name, (".png",)).with_suffix(".png")
+        atomic_write(path, lambda tmp: Image.fromarray(frame.image).save(tmp, format="PNG"))
+        return path
+
+    def volume(self, volume: torch.Tensor, name: str = "volume", level: float = 0.5) -> List[Path]:
+        """``name.npz`` and ``name.vol`` (:func:`~mitsuba_platonic.volume_io.save_volume`) and a marching-cubes
+        mesh ``name.ply`` at ``level`` (none where the density never crosses it)."""
+        stem = self._free(name, (".npz", ".vol", ".ply"))
+        written = save_volume(volume, stem)
+        try:
+            mesh = extract_mesh(volume, level=level)
+        except ValueError:
+            return written
+        return written + [save_ply(mesh, stem.with_name(stem.name + ".ply"))]

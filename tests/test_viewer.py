@@ -1,0 +1,462 @@
+"""``platonic view``: the viewer's frames, sources and exports, and the page itself in a real browser.
+
+The browser tests start ``platonic view`` on a 16³ test volume in a subprocess and drive Debian's
+headless Chromium with playwright (its own browser downloads are never used: ``executable_path``).
+The set-up installs Chromium with ``apt-get install -y chromium`` where it is missing; the browser
+tests skip, saying why, only where it cannot be installed (no apt-get, not root, no package). Every
+wait is bounded (:data:`WAIT_MS`); the server is stopped with SIGINT (Ctrl-C: exit 130) at the end.
+
+Tolerance of the screenshot against the closed form: the page draws the R×R frame (enlarged by
+whole pixels, then stretched over the canvas' square by WebGL); the screenshot is read at the
+centres of the R×R cells, where the drawn texture takes its pixel's value, and must match the
+closed form's 8-bit sRGB frame within :data:`TOLERANCE` levels on average and
+:data:`TOLERANCE_MAX` at 95 % of the pixels (measured with software WebGL: identical); the same
+comparison against the view 30° away must fail by far, so the check sees which view is shown.
+"""
+
+from __future__ import annotations
+
+import io
+import os
+import re
+import shutil
+import signal
+import socket
+import subprocess
+import sys
+import threading
+import time
+from pathlib import Path
+
+import numpy as np
+import pytest
+import torch
+
+from cli_runner import one_line, run_cli
+from mitsuba_platonic.views import from_angles
+from mitsuba_platonic.volume import test_volume
+from mitsuba_platonic.volume_io import read_vol, read_volume_file, write_vol
+from tiny_shapes import TINY
+
+viser = pytest.importorskip("viser", reason="the 'viewer' extra is not installed (pip install -e '.[viewer]')")
+
+from mitsuba_platonic.viewer.scene import (Exports, clean_name, open_source, render_frame,  # noqa: E402
+                                           resolutions_for, to_display)
+
+ROOT = Path(__file__).resolve().parents[1]
+N = 16
+WAIT_MS = 30_000                      # one wait for the page (the marcher's first frame traces its kernel)
+TOLERANCE = 1.0                       # mean |Δ| in 8-bit sRGB levels (measured: 0, the same pixels)
+TOLERANCE_MAX = 3.0                   # at the 95th percentile
+FRAME = re.compile(r"frame (\d+): ([0-9.]+) ms, (full|moving), (\d+)×\d+ px, az (-?[0-9.]+)° el (-?[0-9.]+)°")
+
+
+def closed_form(volume: torch.Tensor, azimuth: float, elevation: float) -> np.ndarray:
+    return render_frame(volume, tuple(from_angles(azimuth, elevation).tolist()), "closed form", "EA").image
+
+
+# --------------------------------------------------------------------------- without a browser
+
+
+def test_a_vol_file_reads_back_what_write_vol_wrote(tmp_path):
+    v = test_volume(8, "figure", "ea")[0]
+    path = write_vol(v, tmp_path / "v.vol")
+    assert torch.equal(read_vol(path)[0], v)
+    assert torch.equal(read_volume_file(path)[0], v)
+    path.write_bytes(path.read_bytes()[:-4])
+    with pytest.raises(ValueError, match="truncated or damaged"):
+        read_vol(path)
+
+
+def test_the_marchers_finer_frames_are_its_sub_pixel_rays():
+    """At R = kN the marcher's frame is its k×k sub-pixel rays kept apart: averaged over k×k blocks,
+    the marcher's own render with spp = k² (the same rays, averaged in the renderer)."""
+    from mitsuba_platonic.render import render
+    from mitsuba_platonic.render.marcher import march_pixels
+    from mitsuba_platonic.render.settings import RenderSettings
+
+    v = test_volume(N, "figure", "ea")
+    w = from_angles(30.0, 20.0)[None]
+    settings = RenderSettings.for_call("mitsuba", "ea")
+    assert torch.equal(march_pixels(v, w, settings, 1), render(v, w, "ea", "mitsuba"))
+    fine = march_pixels(v, w, settings, 4)
+    assert fine.shape == (1, 4, 4 * N, 4 * N)
+    torch.testing.assert_close(torch.nn.functional.avg_pool2d(fine, 4), render(v, w, "ea", "mitsuba", spp=16),
+                               atol=1e-5, rtol=0)
+    frame = render_frame(v[0], tuple(w[0].tolist()), "marcher", "EA", 4 * N)
+    assert frame.image.shape == (4 * N, 4 * N, 3)
+    np.testing.assert_array_equal(frame.image, to_display(fine[0]))
+
+
+def test_frames_follow_the_formation_and_the_volume_channels():
+    v = test_volume(N, "figure", "ea")[0]
+    assert resolutions_for(N) == [16, 32, 64, 128]
+    vh = render_frame(v, (0.0, 0.0, 1.0), "closed form", "VH")
+    assert vh.image.shape == (N, N, 3) and (vh.image[..., 0] == vh.image[..., 1]).all()      # grey
+    density = v[3:]
+    with pytest.raises(ValueError, match="no colour"):
+        render_frame(density, (0.0, 0.0, 1.0), "closed form", "EA")
+    with pytest.raises(ValueError, match="multiple of the volume"):
+        render_frame(v, (0.0, 0.0, 1.0), "closed form", "EA", 24)
+    capped = render_frame(v, (0.0, 0.0, 1.0), "closed form", "EA", 256)
+    assert capped.image.shape == (128, 128, 3) and "at most 128" in capped.settings
+
+
+def test_exports_stay_inside_the_output_folder(tmp_path):
+    out = tmp_path / "exports"
+    ex = Exports(out)
+    frame = render_frame(test_volume(8, "figure", "ea")[0], (0.0, 0.0, 1.0))
+    paths = [ex.png(frame, name) for name in ("../../escape", "/etc/passwd", "a/../../b", "..", "", "view")]
+    for p in paths:
+        assert p.resolve().parent == out.resolve() and p.suffix == ".png" and p.exists()
+    assert [p.name for p in paths] == ["escape.png", "etc_passwd.png", "a_______b.png", "view.png", "view_2.png",
+                                       "view_3.png"]
+    assert clean_name("x" * 100) == "x" * 64
+    vol = ex.volume(test_volume(8, "figure", "ea")[0], "../shape")
+    assert sorted(p.name for p in vol) == ["shape.npz", "shape.ply", "shape.vol"]
+    assert not (tmp_path / "shape.npz").exists()
+    assert torch.equal(read_volume_file(out / "shape.vol")[0], test_volume(8, "figure", "ea")[0])
+
+
+def test_nothing_outside_the_viewer_imports_the_web_library():
+    """Import the package and every module outside mitsuba_platonic.viewer (and the command line,
+    which imports the viewer only in its handler): viser stays unloaded."""
+    code = (
+        "import pkgutil, importlib, sys\n"
+        "import mitsuba_platonic\n"
+        "names = [m.name for m in pkgutil.walk_packages(mitsuba_platonic.__path__, 'mitsuba_platonic.')\n"
+        "         if not m.name.startswith('mitsuba_platonic.viewer.') and not m.name.endswith('__main__')]\n"
+        "for name in names:\n"
+        "    importlib.import_module(name)\n"
+        "import mitsuba_platonic.viewer\n"
+        "from mitsuba_platonic.cli import build_parser\n"
+        "build_parser().parse_args(['view', 'x.npz'])\n"
+        "print(len(names), 'viser' in sys.modules)\n")
+    result = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=300, cwd=ROOT)
+    assert result.returncode == 0, result.stderr
+    count, loaded = result.stdout.split()
+    assert int(count) > 50 and loaded == "False", result.stdout
+
+
+# --------------------------------------------------------------------------- bad input: one line, exit 2
+
+
+@pytest.fixture(scope="module")
+def volume_file(tmp_path_factory) -> Path:
+    path = tmp_path_factory.mktemp("volume") / "figure.npz"
+    np.savez(path, volume=test_volume(N, "figure", "ea")[0].numpy())
+    return path
+
+
+def test_a_missing_or_damaged_source_is_one_line(tmp_path):
+    (tmp_path / "bad.npz").write_bytes(b"not an archive")
+    (tmp_path / "bad.vol").write_bytes(b"VOL\x03" + b"\x00" * 10)
+    (tmp_path / "notes.txt").write_text("hello")
+    (tmp_path / "empty_run").mkdir()
+    for source, message in ((tmp_path / "missing.npz", "does not exist"), (tmp_path / "bad.npz", "could not read"),
+                            (tmp_path / "bad.vol", "not a Mitsuba .vol"), (tmp_path / "notes.txt", ".npz or .vol"),
+                            (tmp_path / "empty_run", "checkpoint")):
+        code, out, err = run_cli(["view", str(source), "--port", "0"])
+        assert code == 2, (source, err)
+        assert message in one_line(err, "view", "error"), err
+
+
+def test_a_busy_port_names_the_flag(volume_file):
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        s.listen(1)
+        port = s.getsockname()[1]
+        code, out, err = run_cli(["view", str(volume_file), "--port", str(port)])
+    assert code == 2
+    assert f"--port {port}" in one_line(err, "view", "error") and "choose another --port" in err
+
+
+@pytest.fixture(scope="module")
+def runs(tmp_path_factory, tiny_class):
+    """A reconstruction run and a generation run of one training step each, 16³."""
+    from mitsuba_platonic.config import load_config
+    from mitsuba_platonic.train import run as R
+
+    tmp = tmp_path_factory.mktemp("runs")
+    made = {}
+    for task in ("reconstruction", "generation"):
+        cfg = load_config(None, [
+            f"run.out_dir={tmp}/runs", f"run.name={task}", "run.steps=1", "run.sample_every=1000",
+            "run.checkpoint_every=1000", f"data.cache={tmp}/data", f"data.shape_class={TINY}", "data.n_shapes=4",
+            "data.views_per_shape=2", "data.split=0.5", f"model.resolution={N}", "model.width=4", "model.latent=8",
+            "model.norm=batch", "train.batch_size=2", f"train.task={task}"])
+        made[task] = R.train(cfg, progress=False)
+    return made
+
+
+def test_a_photo_for_a_generation_run_is_one_line(runs, tmp_path):
+    from PIL import Image
+    photo = tmp_path / "photo.png"
+    Image.new("RGBA", (N, N), (200, 100, 50, 255)).save(photo)
+    code, out, err = run_cli(["view", str(runs["generation"]), "--photo", str(photo), "--port", "0"])
+    assert code == 2 and "generation run" in one_line(err, "view", "error") and "--photo" in err
+
+
+def test_run_sources_step_through_inputs_and_latents(runs, tmp_path, monkeypatch):
+    monkeypatch.chdir(runs["reconstruction"].parent.parent.parent)   # data.cache is relative to where training ran
+    rec = open_source(runs["reconstruction"])
+    assert rec.kind == "reconstruction" and rec.inputs is not None and len(rec.inputs) >= 2
+    first = rec.volume.clone()
+    assert rec.input.shape == (N, N, 3) and first.shape == (4, N, N, N)
+    rec.show_input(1)
+    assert rec.input_index == 1 and not torch.equal(rec.volume, first)
+    from PIL import Image
+    photo = tmp_path / "photo.png"
+    Image.new("RGBA", (N, N), (200, 100, 50, 255)).save(photo)
+    image = np.zeros((N, N, 4), np.uint8)
+    image[4:12, 4:12] = (200, 100, 50, 255)
+    Image.fromarray(image).save(photo)
+    with_photo = open_source(runs["reconstruction"], photo)
+    assert with_photo.input.shape == (N, N, 3) and with_photo.input_names == ["photo.png"]
+
+    gen = open_source(runs["generation"])
+    assert gen.kind == "generation"
+    from mitsuba_platonic.model import Model
+    model = Model.from_checkpoint(runs["generation"])
+    torch.testing.assert_close(gen.volume, model.generate(1, seed=0)[0])
+    a = gen.volume.clone()
+    gen.show_latent(0, 1, 1.0)                       # the end of the walk is seed 1's latent
+    torch.testing.assert_close(gen.volume, model.generate(1, seed=1)[0], atol=1e-5, rtol=0)
+    gen.show_latent(0, 1, 0.5)
+    assert not torch.equal(gen.volume, a)
+
+
+# --------------------------------------------------------------------------- in the browser
+
+
+def _chromium() -> str:
+    """Debian's chromium, installed here where missing; a skip saying why where it cannot be."""
+    for name in ("chromium", "chromium-browser"):
+        if shutil.which(name):
+            return shutil.which(name)
+    if not shutil.which("apt-get"):
+        pytest.skip("no chromium and no apt-get to install it: the browser tests need Debian's chromium")
+    if os.geteuid() != 0:
+        pytest.skip("no chromium, and this user cannot run apt-get install chromium (not root)")
+    env = {**os.environ, "DEBIAN_FRONTEND": "noninteractive"}
+    for attempt in (["apt-get", "install", "-y", "-q", "chromium"], ["apt-get", "update", "-q"],
+                    ["apt-get", "install", "-y", "-q", "chromium"]):
+        subprocess.run(attempt, env=env, capture_output=True, timeout=900)
+        if shutil.which("chromium"):
+            return shutil.which("chromium")
+    pytest.skip("apt-get install -y chromium did not install a chromium: the browser tests cannot run here")
+
+
+@pytest.fixture(scope="module")
+def browser():
+    sync_api = pytest.importorskip("playwright.sync_api", reason="playwright is not installed (the 'test' extra)")
+    exe = _chromium()
+    with sync_api.sync_playwright() as p:
+        b = p.chromium.launch(executable_path=exe, headless=True,
+                              args=["--no-sandbox", "--enable-unsafe-swiftshader", "--use-angle=swiftshader",
+                                    "--ignore-gpu-blocklist"])
+        yield b
+        b.close()
+
+
+class Server:
+    """``platonic view`` in a subprocess: its address, its output, Ctrl-C at the end."""
+
+    def __init__(self, args, cwd: Path):
+        self.cwd = cwd
+        self.proc = subprocess.Popen([sys.executable, "-m", "mitsuba_platonic.cli", "view", *map(str, args),
+                                      "--port", "0"], cwd=cwd, stdout=subprocess.PIPE, stderr=subprocess.PIPE,
+                                     text=True, env={**os.environ, "PYTHONUNBUFFERED": "1"})
+        self.started = time.monotonic()
+        self.lines: list = []
+        reader = threading.Thread(target=lambda: self.lines.extend(iter(self.proc.stdout.readline, "")), daemon=True)
+        reader.start()
+        deadline = time.monotonic() + 120
+        while not self.lines and time.monotonic() < deadline and self.proc.poll() is None:
+            time.sleep(0.05)
+        if not self.lines:
+            self.proc.kill()
+            raise AssertionError(f"platonic view printed no address: {self.proc.stderr.read()}")
+        found = re.search(r"http://127\.0\.0\.1:\d+", self.lines[0])
+        assert found, self.lines[0]
+        self.url = found.group(0)
+
+    def stop(self) -> tuple:
+        self.proc.send_signal(signal.SIGINT)
+        try:
+            code = self.proc.wait(timeout=20)
+        except subprocess.TimeoutExpired:
+            self.proc.kill()
+            code = self.proc.wait()
+        return code, self.proc.stderr.read()
+
+
+@pytest.fixture(scope="module")
+def server(volume_file, tmp_path_factory):
+    cwd = tmp_path_factory.mktemp("cwd")
+    s = Server([volume_file], cwd)
+    yield s
+    code, err = s.stop()
+    assert code == 130, err
+    assert one_line(err, "view", "interrupted")
+
+
+@pytest.fixture
+def page(browser, server):
+    page = browser.new_page(viewport={"width": 1400, "height": 600})
+    page.set_default_timeout(WAIT_MS)
+    page.goto(server.url)
+    yield page
+    page.close()
+
+
+def _frame(page, pattern: str = "full") -> re.Match:
+    """Wait for a frame line matching ``pattern`` (a regex over the line) and return its match."""
+    locator = page.get_by_text(re.compile(r"^frame \d+: .*" + pattern))
+    locator.wait_for()
+    m = FRAME.search(locator.inner_text())
+    assert m, locator.inner_text()
+    return m
+
+
+def _shown(page, r: int) -> np.ndarray:
+    """The R×R frame as drawn: the canvas' centred square, read at its R×R cell centres, once two
+    screenshots 0.3 s apart agree (the page fades in, and the canvas paints after the text updates;
+    at most 20 tries)."""
+    from PIL import Image
+
+    box = page.locator("canvas").first.bounding_box()
+    side = min(box["width"], box["height"])
+    x0, y0 = box["x"] + (box["width"] - side) / 2, box["y"] + (box["height"] - side) / 2
+    centres = (np.arange(r) + 0.5) * side / r
+    ys, xs = np.floor(y0 + centres).astype(int), np.floor(x0 + centres).astype(int)
+    last = None
+    for _ in range(20):
+        time.sleep(0.3)
+        shot = np.asarray(Image.open(io.BytesIO(page.screenshot())).convert("RGB"))[ys][:, xs]
+        if last is not None and np.array_equal(shot, last):
+            return shot
+        last = shot
+    return last
+
+
+def _difference(a: np.ndarray, b: np.ndarray) -> tuple:
+    d = np.abs(a.astype(float) - b.astype(float))
+    return float(d.mean()), float(np.percentile(d, 95))
+
+
+def _views_apart(a: np.ndarray, b: np.ndarray) -> bool:
+    """Frames of two views 30° apart differ far beyond the tolerance (16³ figure: mean 5.6, p95 35)."""
+    mean, p95 = _difference(a, b)
+    return mean > 2 * TOLERANCE and p95 > 4 * TOLERANCE_MAX
+
+
+def _choose(page, which: int, option: str) -> None:
+    page.get_by_role("combobox").nth(which).click()
+    page.get_by_role("option", name=option, exact=True).click()
+
+
+def test_the_page_shows_the_closed_form_and_follows_the_camera(page, server, volume_file):
+    volume = read_volume_file(volume_file)[0]
+    m = _frame(page, r"az 0\.0° el 0\.0°")
+    assert int(m.group(4)) == N
+    first = time.monotonic() - server.started
+    shown = _shown(page, N)
+    front, side = closed_form(volume, 0.0, 0.0), closed_form(volume, 30.0, 0.0)
+    mean, p95 = _difference(shown, front)
+    assert mean <= TOLERANCE and p95 <= TOLERANCE_MAX, (mean, p95)
+    assert _views_apart(shown, side)                                         # the check tells views apart
+    print(f"first frame {first:.1f} s after the command; screenshot vs closed form: mean {mean:.2f}, p95 {p95:.1f}")
+
+    page.get_by_role("button", name="azimuth +30").click()
+    _frame(page, r"az 30\.0° el 0\.0°")
+    moved = _shown(page, N)
+    mean, p95 = _difference(moved, side)
+    assert mean <= TOLERANCE and p95 <= TOLERANCE_MAX, (mean, p95)
+    assert _views_apart(moved, shown)
+
+    page.get_by_role("button", name="elevation +15").click()
+    _frame(page, r"az 30\.0° el 15\.0°")
+    mean, p95 = _difference(_shown(page, N), closed_form(volume, 30.0, 15.0))
+    assert mean <= TOLERANCE and p95 <= TOLERANCE_MAX, (mean, p95)
+
+
+def test_the_path_tracers_frames_take_longer_than_the_marchers(page):
+    _frame(page)
+    times = {}
+    for renderer in ("marcher", "path tracer"):
+        _choose(page, 0, renderer)
+        page.get_by_text(re.compile(rf"^{renderer} \(")).wait_for()
+        page.get_by_role("button", name="azimuth +30").click()    # a second frame: the first traced the kernels
+        m = _frame(page, r"az 30\.0° el 0\.0°")
+        times[renderer] = float(m.group(2))
+        page.get_by_role("button", name="front view").click()
+        _frame(page, r"az 0\.0° el 0\.0°")
+    assert times["path tracer"] > times["marcher"], times
+
+
+def test_the_page_saves_the_view_inside_the_output_folder(page, server):
+    _frame(page)
+    box = page.locator("input.mantine-TextInput-input[value='view']")   # the export's "name" text box
+    box.wait_for()
+    name = box.element_handle()
+    name.fill("../../outside")
+    name.press("Enter")
+    time.sleep(0.5)                                                 # the new value reaches the server
+    page.get_by_role("button", name="save view (PNG)").click()
+    page.get_by_text(re.compile(r"saved .*outside\.png")).wait_for()
+    saved = server.cwd / "view-exports" / "outside.png"
+    assert saved.exists() and not (server.cwd.parent / "outside.png").exists()
+    from PIL import Image
+    assert Image.open(saved).size == (N, N)
+
+
+def test_dragging_the_canvas_orbits_with_low_resolution_frames_while_moving(page, server, volume_file):
+    """The mouse orbits viser's camera; the server renders quarter-resolution frames while it moves
+    (JPEG) and the full one once it rests, at the view the camera reached."""
+    volume = read_volume_file(volume_file)[0]
+    _frame(page)
+    _choose(page, 2, str(4 * N))                                     # 64² frames: 16² while moving
+    _frame(page, rf"full, {4 * N}×")
+    box = page.locator("canvas").first.bounding_box()
+    x, y = box["x"] + box["width"] * 0.35, box["y"] + box["height"] * 0.5
+    page.mouse.move(x, y)
+    page.mouse.down()
+    seen = set()
+    for step in range(1, 30):
+        page.mouse.move(x + 8 * step, y + 2 * step)
+        time.sleep(0.05)
+        m = FRAME.search(page.get_by_text(re.compile(r"^frame \d+:")).inner_text())
+        seen.add((m.group(3), int(m.group(4))))
+    page.mouse.up()
+    assert ("moving", N) in seen, seen
+    m = _frame(page, rf"full, {4 * N}×")
+    az, el = float(m.group(5)), float(m.group(6))
+    assert abs(az) > 5.0, (az, el)                                    # the drag turned the camera
+    expected = render_frame(volume, tuple(from_angles(az, el).tolist()), "closed form", "EA", 4 * N).image
+    mean, p95 = _difference(_shown(page, 4 * N), expected)           # the angles printed to 0.1°
+    assert mean <= 2 * TOLERANCE and p95 <= 4 * TOLERANCE_MAX, (mean, p95)
+
+
+def test_a_reconstruction_run_steps_through_its_held_out_inputs(browser, runs, tmp_path, monkeypatch):
+    """The page of a run (served in this process: the run's tiny shape class is registered here only)."""
+    from mitsuba_platonic.viewer.app import ViewerApp
+
+    monkeypatch.chdir(runs["reconstruction"].parent.parent.parent)   # data.cache is relative to where training ran
+    app = ViewerApp(open_source(runs["reconstruction"]), tmp_path / "exports", port=0)
+    try:
+        page = browser.new_page(viewport={"width": 1400, "height": 600})
+        page.set_default_timeout(WAIT_MS)
+        page.goto(app.url)
+        _frame(page)
+        page.get_by_text(re.compile(r"\(1 of \d+\)")).wait_for()
+        assert page.get_by_role("img").count() + page.locator("img").count() >= 1   # the input beside the view
+        count = int(_frame(page).group(1))
+        page.get_by_role("button", name="next input").click()
+        page.get_by_text(re.compile(r"\(2 of \d+\)")).wait_for()
+        # a new frame for the new volume (a run of one step reconstructs nearly the same volume from each)
+        page.wait_for_function(f"() => /frame (\\d+):/.exec(document.body.innerText)[1] > {count}")
+        assert app.scene.input_index == 1
+        page.close()
+    finally:
+        app.stop()
