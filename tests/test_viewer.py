@@ -4,7 +4,7 @@ The browser tests start ``platonic view`` on a 16³ test volume in a subprocess 
 headless Chromium with playwright (its own browser downloads are never used: ``executable_path``).
 The set-up installs Chromium with ``apt-get install -y chromium`` where it is missing; the browser
 tests skip, saying why, only where it cannot be installed (no apt-get, not root, no package). Every
-wait is bounded (:data:`WAIT_MS`); the server is stopped with SIGINT (Ctrl-C: exit 130) at the end.
+wait is bounded (:data:`WAIT_MS`); the server is stopped with SIGINT (Ctrl-C: it ends by the signal, 130 to a shell) at the end.
 
 Tolerance of the screenshot against the closed form: the page draws the R×R frame (enlarged by
 whole pixels, then stretched over the canvas' square by WebGL); the screenshot is read at the
@@ -297,7 +297,7 @@ def server(volume_file, tmp_path_factory):
     s = Server([volume_file], cwd)
     yield s
     code, err = s.stop()
-    assert code == 130, err
+    assert code == -signal.SIGINT, err                     # died by the signal: a shell sees 130
     assert one_line(err, "view", "interrupted")
 
 
