@@ -21,7 +21,6 @@ VH/AO, where ``A`` is the opacity).
 from __future__ import annotations
 
 import json
-import os
 import sys
 import time
 from pathlib import Path
@@ -30,6 +29,7 @@ from typing import Any, Callable, Dict, List, Mapping, Optional, Sequence, Tuple
 import numpy as np
 import torch
 
+from .budget import available_memory
 from .errors import UserError
 from .images import composite, heatmap, save_exr, to_hwc
 from .render import MODELS, render
@@ -57,34 +57,6 @@ def memory_estimate(n: int, views: int, builtin: bool = False) -> int:
     """Estimated peak memory (bytes) of comparing an ``n``³ volume from ``views`` views (``builtin``:
     including building a built-in test volume): ``n³ × max(BUILTIN_BYTES, RENDER_BYTES + VIEW_BYTES × views)``."""
     return int(n) ** 3 * max(BUILTIN_BYTES if builtin else 0, RENDER_BYTES + VIEW_BYTES * int(views))
-
-
-def available_memory() -> Tuple[Optional[int], str]:
-    """(bytes this process can still allocate, where the number comes from): ``MemAvailable`` of
-    ``/proc/meminfo`` (else the free pages of ``os.sysconf``), or a cgroup v2 limit if that is
-    smaller; ``(None, 'unknown')`` where neither can be read."""
-    found: List[Tuple[int, str]] = []
-    try:
-        with open("/proc/meminfo") as f:
-            for line in f:
-                if line.startswith("MemAvailable:"):
-                    found.append((int(line.split()[1]) * 1024, "MemAvailable in /proc/meminfo"))
-                    break
-    except (OSError, ValueError, IndexError):
-        pass
-    if not found:
-        try:
-            found.append((os.sysconf("SC_AVPHYS_PAGES") * os.sysconf("SC_PAGE_SIZE"), "free pages, os.sysconf"))
-        except (ValueError, OSError, AttributeError):
-            pass
-    try:
-        limit = Path("/sys/fs/cgroup/memory.max").read_text().strip()
-        if limit != "max":
-            used = int(Path("/sys/fs/cgroup/memory.current").read_text())
-            found.append((int(limit) - used, "the cgroup limit /sys/fs/cgroup/memory.max"))
-    except (OSError, ValueError):
-        pass
-    return min(found) if found else (None, "unknown")
 
 
 def check_memory(n: int, views: int, builtin: bool = False, what: Optional[str] = None) -> None:

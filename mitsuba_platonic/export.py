@@ -24,6 +24,7 @@ import numpy as np
 import torch
 import torch.nn.functional as F
 
+from . import budget
 from .errors import UserError
 from .fileio import atomic_write
 from .frames import display_frames, save_gif, turntable_frames
@@ -37,7 +38,7 @@ if TYPE_CHECKING:
 
 #: save_volume is volume_io's, named here too for the callers that import it from export (notebooks).
 __all__ = ["save_volume", "display_frames", "turntable_frames", "save_gif", "extract_mesh",
-           "save_ply", "Mesh", "Exported", "export_volume", "export_reconstructions", "export_samples", "output_names",
+           "save_ply", "Mesh", "Exported", "export_volume", "export_reconstructions", "export_samples", "check_samples_fit", "output_names",
            "EXPORT_EXTENSIONS"]
 
 PathLike = Union[str, Path]
@@ -218,6 +219,23 @@ def export_reconstructions(model: "Model", images: Sequence[PathLike], out: Path
 _SAMPLE = re.compile(r"sample_\d{3,}\.(npz|vol|gif|ply)|samples\.png")
 
 
+def check_samples_fit(model: "Model", n: int, out: PathLike) -> None:
+    """:class:`UserError` naming ``-n`` where ``n`` samples cannot fit, before any work: the volumes
+    ``model.generate`` holds at once (each twice: G's output and its CPU copy or logits) in the memory
+    available, or their ``.vol`` files alone on the disk of ``out`` (lower bounds)."""
+    volume = model.channels * model.resolution ** 3 * 4
+    memory = budget.available_memory()
+    if memory[0] is not None:
+        most = max(memory[0], 0) // (2 * volume)
+        budget.check_fits(2 * volume * n, memory, f"-n {n}: generating {n} volumes of {model.resolution}³ at once",
+                          f"lower -n (at most about {most} fit)" if most else "not even one fits")
+    disk = budget.free_disk(out)
+    if disk[0] is not None:
+        most = max(disk[0], 0) // (volume + 48)
+        budget.check_fits((volume + 48) * n, disk, f"-n {n}: the .vol files of {n} samples alone",
+                          f"lower -n (at most about {most} fit), or choose another --out", resource="disk space")
+
+
 def export_samples(model: "Model", n: int, out: PathLike, seed: int = 0, overwrite: bool = False,
                    written: Optional[List[Path]] = None) -> List[Path]:
     """``platonic generate``: ``n`` volumes of ``model.generate(n, seed)`` → ``out/sample_NNN``
@@ -227,6 +245,7 @@ def export_samples(model: "Model", n: int, out: PathLike, seed: int = 0, overwri
     A folder holding an earlier call's samples is refused (:class:`UserError`, before any work),
     so that no old ``sample_NNN`` is left beside new ones; ``overwrite`` deletes them first."""
     out = Path(out)
+    check_samples_fit(model, n, out)
     earlier = sorted(p for p in out.iterdir() if _SAMPLE.fullmatch(p.name)) if out.is_dir() else []
     if not overwrite:
         _refuse_earlier(out, earlier)

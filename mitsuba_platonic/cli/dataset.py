@@ -8,7 +8,7 @@ import argparse
 from pathlib import Path
 from typing import Tuple, Union
 
-from .args import CLIError, non_negative_int, positive_float, positive_int
+from .args import CLIError, positive_float, positive_int, seed
 
 __all__ = ["add_make_dataset"]
 
@@ -121,7 +121,7 @@ def add_make_dataset(sub: "argparse._SubParsersAction") -> None:
                    help="perspective: full field of view in degrees (default: %(default)s)")
     p.add_argument("--distance", type=positive_float, default=None,
                    help="perspective: camera distance from the centre, > 1 (default: 1 / tan(fov/2))")
-    p.add_argument("--seed", type=non_negative_int, default=0, help="master seed (default: %(default)s)")
+    p.add_argument("--seed", type=seed, default=0, help="master seed (default: %(default)s)")
     p.add_argument("--out", default="data", help="output folder (default: %(default)s/)")
     p.add_argument("--class-subfolder", action="store_true",
                    help="write one class into OUT/CLASS (always done for several classes)")

@@ -14,7 +14,7 @@ from pathlib import Path
 from typing import List
 
 from ..errors import Interrupted
-from .args import non_negative_int, positive_int
+from .args import CLIError, positive_int, seed
 
 __all__ = ["add_reconstruct", "add_generate"]
 
@@ -30,6 +30,9 @@ def _cmd_reconstruct(args: argparse.Namespace) -> int:
     from ..export import export_reconstructions
     from ..model import Model
 
+    if not 0.0 < args.level < 1.0:                           # a density level: before the model is read
+        raise CLIError(f"--level: expected the mesh's iso-level, a density between 0 and 1 (exclusive), got "
+                       f"{args.level:g}")
     model = Model.from_checkpoint(args.run)
     out = Path(args.out) if args.out else Path(args.run) / "reconstructions"
     written: List[Path] = []
@@ -93,7 +96,7 @@ def add_generate(sub: "argparse._SubParsersAction") -> None:
                                    "is refused unless --overwrite, which deletes them first.")
     p.add_argument("--run", required=True, help="a run folder")
     p.add_argument("-n", type=positive_int, default=16, help="number of samples (default: %(default)s)")
-    p.add_argument("--seed", type=non_negative_int, default=0)
+    p.add_argument("--seed", type=seed, default=0)
     p.add_argument("--out", default=None, help="output folder (default: RUN/generated)")
     p.add_argument("--overwrite", action="store_true",
                    help="delete an earlier call's sample_* files and samples.png in --out first")

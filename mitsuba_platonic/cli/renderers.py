@@ -14,7 +14,7 @@ import math
 import sys
 from pathlib import Path
 
-from .args import CLIError, check_out_folder, non_negative_int, parse_models, positive_float, positive_int, resolution
+from .args import CLIError, check_out_folder, parse_models, positive_float, positive_int, resolution, seed
 
 __all__ = ["add_compare", "add_bench"]
 
@@ -155,7 +155,7 @@ def add_compare(sub: "argparse._SubParsersAction") -> None:
                    help="--light: independent volpath renders, ≥ 4; their spread is the standard error "
                         "(default: %(default)s)")
     p.add_argument("--out", default="compare", help="output folder (default: %(default)s/)")
-    p.add_argument("--seed", type=non_negative_int, default=0,
+    p.add_argument("--seed", type=seed, default=0,
                    help="seed of the random views and of Mitsuba's sampler (default: %(default)s)")
     p.add_argument("--repeats", type=positive_int, default=3,
                    help="timed runs per backend after one warm-up; the best counts (default: %(default)s)")
@@ -217,7 +217,7 @@ def add_bench(sub: "argparse._SubParsersAction") -> None:
     p.add_argument("--models", default="vh,ao,ea", help="comma-separated models (default: %(default)s)")
     p.add_argument("--volume", choices=tuple(TEST_VOLUMES), default="figure",
                    help="built-in test volume (default: %(default)s)")
-    p.add_argument("--seed", type=non_negative_int, default=0,
+    p.add_argument("--seed", type=seed, default=0,
                    help="seed of the views, the loss weights and the path tracer (default: %(default)s)")
     p.add_argument("--physical-ref-spp", type=positive_int, default=32,
                    help="spp of the path tracer's own reference (default: %(default)s)")
