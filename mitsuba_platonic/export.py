@@ -232,7 +232,7 @@ def check_samples_fit(model: "Model", n: int, out: PathLike) -> None:
     disk = budget.free_disk(out)
     if disk[0] is not None:
         most = max(disk[0], 0) // (volume + 48)
-        budget.check_fits((volume + 48) * n, disk, f"-n {n}: the .vol files of {n} samples alone",
+        budget.check_fits((volume + 48) * n, disk, f"-n {n}: writing the .vol files of {n} samples alone",
                           f"lower -n (at most about {most} fit), or choose another --out", resource="disk space")
 
 

@@ -1,0 +1,99 @@
+"""Sizes that cannot fit are refused up front, in one line naming the flag or key (issue 46):
+``generate -n``, ``train.batch_size``, ``make-dataset --views/--shapes`` (memory and disk), and the
+checks share one owner of "available memory" (:mod:`mitsuba_platonic.budget`)."""
+
+from __future__ import annotations
+
+import shutil
+from pathlib import Path
+
+import pytest
+
+from mitsuba_platonic import budget
+from mitsuba_platonic.config import ConfigError, load_config
+from mitsuba_platonic.train import run as R
+from mitsuba_platonic.train.fits import batch_bytes, check_batch_fits
+from cli_runner import one_line, run_cli
+from tiny_shapes import TINY
+
+GB = 10 ** 9
+
+
+def _fake_memory(monkeypatch, gigabytes: float = 8.0):
+    monkeypatch.setattr(budget, "available_memory", lambda: (int(gigabytes * GB), "MemAvailable in /proc/meminfo"))
+
+
+def _fake_disk(monkeypatch, gigabytes: float = 50.0):
+    monkeypatch.setattr(budget, "free_disk", lambda path: (int(gigabytes * GB), f"free on the disk of {path}"))
+
+
+# --------------------------------------------------------------------------- train.batch_size
+
+
+def test_a_batch_that_cannot_fit_is_refused_naming_the_key(tmp_path, monkeypatch):
+    _fake_memory(monkeypatch)
+    monkeypatch.chdir(tmp_path)
+    code, _, stderr = run_cli(["train", "--quiet", "--set", "train.batch_size=1000000",
+                               "--set", f"data.cache={tmp_path}/data"])
+    assert code == 2
+    err = one_line(stderr, "train", "error")
+    assert err.startswith("platonic train: error: train.batch_size: a batch of 1000000 volumes of 32³ needs at least ")
+    assert "more than the 8.0 GB available (MemAvailable in /proc/meminfo); lower train.batch_size (at most about" in err
+    assert list(tmp_path.iterdir()) == []                               # no data, no run folder
+
+
+def test_the_batch_estimate_grows_with_the_batch_and_a_default_batch_fits(monkeypatch):
+    cfg = load_config(None)
+    assert batch_bytes(cfg, 16) == 2 * batch_bytes(cfg, 8) > 0
+    _fake_memory(monkeypatch)
+    check_batch_fits(cfg)                                               # 8 volumes of 32³ fit in 8 GB
+    monkeypatch.setattr(budget, "available_memory", lambda: (1000, "a test"))
+    with pytest.raises(ConfigError, match=r"^train\.batch_size: .*not even a batch of 1 fits"):
+        check_batch_fits(cfg)
+
+
+# --------------------------------------------------------------------------- generate -n
+
+
+def _overrides(out: Path, data: Path):
+    return [f"run.out_dir={out}", "run.name=r", "run.steps=2", "run.log_every=1", "run.sample_every=100000",
+            "run.checkpoint_every=2", f"data.cache={data}", f"data.shape_class={TINY}", "data.n_shapes=2",
+            "data.views_per_shape=1", "model.resolution=16", "model.width=4", "model.latent=8",
+            "train.batch_size=2"]
+
+
+@pytest.fixture(scope="module")
+def tiny_run(tmp_path_factory, tiny_class):
+    root = tmp_path_factory.mktemp("run")
+    R.train(load_config(None, _overrides(root / "runs", root / "data")), progress=False)
+    return root / "runs" / "r"
+
+
+def test_generate_refuses_more_samples_than_memory_holds(tiny_run, tmp_path, monkeypatch):
+    from mitsuba_platonic.model import Model
+
+    _fake_memory(monkeypatch)
+    monkeypatch.setattr(Model, "generate", lambda *a, **k: pytest.fail("generated before the size check"))
+    out = tmp_path / "gen"
+    code, _, stderr = run_cli(["generate", "--run", str(tiny_run), "-n", "100000000", "--out", str(out)])
+    assert code == 2
+    err = one_line(stderr, "generate", "error")
+    assert "-n 100000000: generating 100000000 volumes of 16³ at once needs at least 1.31e+04 GB of memory" in err, err
+    assert "lower -n (at most about 61035 fit)" in err and not out.exists()
+
+
+def test_generate_refuses_more_samples_than_the_disk_holds(tiny_run, tmp_path, monkeypatch):
+    _fake_memory(monkeypatch, 1e6)
+    _fake_disk(monkeypatch, 1.0)
+    out = tmp_path / "gen"
+    code, _, stderr = run_cli(["generate", "--run", str(tiny_run), "-n", "100000", "--out", str(out)])
+    assert code == 2
+    err = one_line(stderr, "generate", "error")
+    assert "-n 100000: writing the .vol files of 100000 samples alone needs at least 6.56 GB of disk space" in err, err
+    assert "or choose another --out" in err and not out.exists()
+
+
+def test_free_disk_reads_the_nearest_existing_folder(tmp_path):
+    have, source = budget.free_disk(tmp_path / "not" / "yet")
+    assert have == shutil.disk_usage(tmp_path).free or have > 0
+    assert str(tmp_path) in source
