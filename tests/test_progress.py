@@ -76,3 +76,25 @@ def test_make_dataset_into_a_log_writes_lines_not_redraws(tmp_path):
     assert "\r" not in err
     lines = err.splitlines()
     assert 2 <= len(lines) <= 10 and lines[-1].startswith(f"{TINY} ea: 20/20 img (100%)"), lines   # per shape: 25 %
+
+
+def test_a_first_line_says_the_size_at_once_and_long_tenths_get_timed_lines(monkeypatch):
+    """Work whose first tenth takes hours (make-dataset at 10⁶ views, compare at 10⁵) prints its size
+    at once and a line every ``seconds`` between the tenths; the clock is the test's."""
+    from mitsuba_platonic import progress as P
+
+    now = [0.0]
+    monkeypatch.setattr(P.time, "perf_counter", lambda: now[0])
+    out = io.StringIO()
+    bar = progress_bar(1000, unit="img", desc="chair ea", file=out, first_line=True, seconds=30.0)
+    assert _lines(out) == ["chair ea: 0/1000 img (0%)"]
+    bar.update(1)
+    now[0] = 29.0
+    bar.update(1)
+    assert len(_lines(out)) == 1                                   # under 30 s since the last line: none
+    now[0] = 31.0
+    bar.update(1)
+    assert len(_lines(out)) == 2 and _lines(out)[1].startswith("chair ea: 3/1000 img (0%), ")
+    now[0] = 40.0
+    bar.update(1)
+    assert len(_lines(out)) == 2                                   # timed from the last line, not the start

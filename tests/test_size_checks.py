@@ -16,6 +16,8 @@ from mitsuba_platonic.train.fits import batch_bytes, check_batch_fits
 from cli_runner import one_line, run_cli
 from tiny_shapes import TINY
 
+pytestmark = pytest.mark.usefixtures("tiny_class")
+
 GB = 10 ** 9
 
 
@@ -97,3 +99,72 @@ def test_free_disk_reads_the_nearest_existing_folder(tmp_path):
     have, source = budget.free_disk(tmp_path / "not" / "yet")
     assert have == shutil.disk_usage(tmp_path).free or have > 0
     assert str(tmp_path) in source
+
+
+# --------------------------------------------------------------------------- make-dataset
+
+
+@pytest.mark.parametrize("flags, what", [
+    (["--views", "100000000"], "--shapes 100 --views 100000000: holding the records of 10000000000 images needs"),
+    (["--views", "1000000"], "--shapes 100 --views 1000000: holding the records of 100000000 images needs"),
+    (["--shapes", "100000000"], "--shapes 100000000 --views 10: holding the records of 1000000000 images needs"),
+])
+def test_make_dataset_refuses_sizes_whose_records_cannot_fit(tmp_path, monkeypatch, flags, what):
+    from mitsuba_platonic.data import shapes
+    _fake_memory(monkeypatch)
+    _fake_disk(monkeypatch, 1e9)
+    monkeypatch.setattr(shapes, "generate", lambda *a: pytest.fail("a shape was made before the size check"))
+    out = tmp_path / "d"
+    code, _, stderr = run_cli(["make-dataset", "--class", TINY, *flags, "--out", str(out)])
+    assert code == 2
+    err = one_line(stderr, "make-dataset", "error")
+    assert what in err and "more than the 8.0 GB available (MemAvailable" in err, err
+    assert "at most about 13333333 images (--shapes × --views) fit" in err
+    assert not out.exists()
+
+
+def test_make_dataset_refuses_what_the_disk_cannot_hold_for_every_class(tmp_path, monkeypatch):
+    _fake_memory(monkeypatch, 1e6)
+    _fake_disk(monkeypatch, 1.0)
+    out = tmp_path / "d"
+    code, _, stderr = run_cli(["make-dataset", "--class", f"{TINY},chair", "--views", "10000", "--out", str(out)])
+    assert code == 2
+    err = one_line(stderr, "make-dataset", "error")
+    assert "--shapes 100 --views 10000 for 2 classes: writing 2000000 images of 64² and their volumes needs" in err
+    assert "of disk space" in err and "images per class (--shapes × --views) fit; lower them, or choose another --out" in err
+    assert not out.exists()
+
+
+def test_make_dataset_renders_a_shape_in_chunks_and_says_its_size_first(tmp_path, monkeypatch, capsys, tiny_class):
+    from mitsuba_platonic.data import collection as C
+    from mitsuba_platonic.data.collection import CollectionSpec, make_collection
+
+    monkeypatch.setattr(C, "VIEW_CHUNK", 2)
+    batches, seen = [], []
+    real = C._render_shape
+
+    def counting(spec, vol, views, lights, *rest):
+        seen.append(capsys.readouterr().err)                   # what was printed before this render
+        batches.append(len(views))
+        return real(spec, vol, views, lights, *rest)
+
+    monkeypatch.setattr(C, "_render_shape", counting)
+    spec = CollectionSpec(shape_class=TINY, n_shapes=2, views_per_shape=5, resolution=16)
+    make_collection(tmp_path / "d", spec, progress=True)
+    assert batches == [2, 2, 1, 2, 2, 1]                       # never more than a chunk at once
+    assert seen[0].strip() == f"{TINY} ea: 0/10 img (0%)"         # the size, before the first render
+    assert len(list((tmp_path / "d" / "images").glob("*.png"))) == 10
+
+
+def test_finished_images_are_counted_from_the_records_not_every_index(tmp_path, monkeypatch, tiny_class):
+    from mitsuba_platonic.data import collection as C
+    from mitsuba_platonic.data.collection import CollectionSpec, make_collection
+
+    spec = CollectionSpec(shape_class=TINY, n_shapes=2, views_per_shape=2, resolution=16)
+    make_collection(tmp_path / "d", spec, progress=False)
+    asked = []
+    records = {C.image_id(i, k): {} for i in range(2) for k in range(2)}
+    assert C._finished(records, 2, 2, lambda i, k: asked.append((i, k)) or True) == 4
+    assert C._finished(records, 10 ** 8, 10 ** 8, lambda i, k: True) == 4      # instant at any size
+    assert C._finished({**records, "junk": {}}, 1, 2, lambda i, k: True) == 2
+    assert sorted(asked) == [(0, 0), (0, 1), (1, 0), (1, 1)]

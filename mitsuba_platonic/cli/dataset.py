@@ -46,7 +46,7 @@ def _check_dataset_flags(args: argparse.Namespace) -> None:
 
 def _cmd_make_dataset(args: argparse.Namespace) -> int:
     from ..data import shapes
-    from ..data.collection import CollectionSpec, make_collection
+    from ..data.collection import CollectionSpec, check_collection_fits, make_collection
     from ..data.envmaps import check_envmap, default_envmaps
     from ..data.preview import contact_sheet
 
@@ -66,14 +66,18 @@ def _cmd_make_dataset(args: argparse.Namespace) -> int:
     for path in args.envmap or ():                          # named on the command line: checked even if unused
         check_envmap(path, what="--envmap")
     envmaps = tuple(args.envmap) if args.envmap else tuple(default_envmaps())
+    specs = []
     for c in classes:
-        spec = CollectionSpec(
+        specs.append(CollectionSpec(
             shape_class=c, n_shapes=args.shapes, views_per_shape=args.views, resolution=args.resolution,
             formation=args.formation, renderer=args.renderer, filter=args.filter, views=args.view_dist,
             elevation=args.elevation, lighting=args.lighting,
             envmaps=envmaps if (args.formation == "physical" and args.lighting != "sunsky") else (),
             spp=args.spp, max_depth=args.max_depth, camera=args.camera, fov=args.fov,
-            distance=args.distance, seed=args.seed)
+            distance=args.distance, seed=args.seed))
+    specs[0].validate()
+    check_collection_fits(specs[0], out, classes=len(specs))  # every class's size, before the first renders
+    for c, spec in zip(classes, specs):
         folder = out / c if len(classes) > 1 or args.class_subfolder else out
         manifest = make_collection(folder, spec, overwrite=args.overwrite, progress=not args.quiet)
         print(f"{c}: {spec.n_shapes * spec.views_per_shape} images in {folder} (manifest: {manifest})")
