@@ -98,3 +98,21 @@ def test_a_first_line_says_the_size_at_once_and_long_tenths_get_timed_lines(monk
     now[0] = 40.0
     bar.update(1)
     assert len(_lines(out)) == 2                                   # timed from the last line, not the start
+
+
+def test_compare_says_its_size_before_the_first_render_and_a_line_per_step(monkeypatch, capsys, tmp_path):
+    from mitsuba_platonic import compare as C
+    from mitsuba_platonic.volume import test_volume
+
+    before_first = []
+    real = C.render
+    monkeypatch.setattr(C, "render", lambda *a, **k: (before_first.append(capsys.readouterr().err)
+                                                      if not before_first else None) or real(*a, **k))
+    shown = []
+    monkeypatch.setattr(C, "_figure", lambda model, cf, mi, views, title, path: shown.append((cf.shape[0], title)))
+    monkeypatch.setattr(C, "FIGURE_VIEWS", 2)
+    C.compare(test_volume(8), C.comparison_views(3), ("vh",), repeats=1, out_dir=tmp_path, progress=True)
+    assert before_first[0].strip() == "compare: 3 view(s) at 8³, 2 runs per backend: 0/3 step (0%)"
+    lines = capsys.readouterr().err.strip().splitlines()
+    assert [line.split("; done=")[-1] for line in lines] == ["vh closed form", "vh Mitsuba", "vh figure and 3 EXR(s)"]
+    assert shown[0][0] == 2 and "the first 2 of 3 views" in shown[0][1]       # a figure of at most FIGURE_VIEWS rows

@@ -100,7 +100,7 @@ def _cmd_compare(args: argparse.Namespace) -> int:
     out = Path(args.out)
     check_out_folder(out)
     results = compare(volume, views, models, filter=args.filter, options=options, out_dir=out,
-                      repeats=args.repeats)
+                      repeats=args.repeats, progress=not args.quiet)
 
     n = volume.shape[-1]
     print(f"closed form vs Mitsuba: {args.volume} at {n}³, {len(views)} view(s), filter={args.filter}, "
@@ -159,6 +159,7 @@ def add_compare(sub: "argparse._SubParsersAction") -> None:
                    help="seed of the random views and of Mitsuba's sampler (default: %(default)s)")
     p.add_argument("--repeats", type=positive_int, default=3,
                    help="timed runs per backend after one warm-up; the best counts (default: %(default)s)")
+    p.add_argument("--quiet", action="store_true", help="no progress lines")
     p.set_defaults(handler=_cmd_compare,
                    interrupted="the files already in --out are whole, compare.json (written last) is missing; "
                                "run the same command again")
