@@ -18,6 +18,9 @@ import zipfile
 from pathlib import Path
 from typing import Any, Dict, Iterator, List, Optional, Union
 
+import torch
+from torch import _weights_only_unpickler as unpickler
+
 __all__ = ["foreign_objects", "pickled_globals"]
 
 #: Opcodes that push a string (the module and name STACK_GLOBAL takes from the stack).
@@ -84,9 +87,6 @@ def pickled_globals(path: Union[str, Path]) -> List[str]:
 def _allowed() -> set:
     """The globals ``torch.load(weights_only=True)`` builds (its own list and any added with
     ``torch.serialization.add_safe_globals``)."""
-    import torch
-    from torch import _weights_only_unpickler as unpickler
-
     allowed = set(unpickler._get_allowed_globals())
     for entry in torch.serialization.get_safe_globals():
         obj = entry[0] if isinstance(entry, tuple) else entry
