@@ -35,6 +35,7 @@ from .images import composite, heatmap, save_exr, to_hwc
 from .progress import progress_bar
 from .render import MODELS, render
 from .render.settings import OPTIONS_OF, RenderSettings
+from .render.variant import ensure_variant
 from .views import front_view, sample_views, to_angles, validate_views
 from .volume import CHANNELS
 
@@ -281,6 +282,7 @@ def compare(volume: torch.Tensor, views: torch.Tensor, models: Sequence[str] = M
     out = Path(out_dir) if out_dir is not None else None
     if out is not None:
         out.mkdir(parents=True, exist_ok=True)              # fail before rendering, not after
+    ensure_variant()                                             # a backend that cannot run: said before any line
     results = []
     steps = len(models) * (3 if out is not None else 2)
     bar = progress_bar(steps, unit="step", desc=f"compare: {b} view(s) at {n}³, {1 + repeats} runs per backend",
