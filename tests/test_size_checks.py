@@ -131,7 +131,7 @@ def test_make_dataset_refuses_what_the_disk_cannot_hold_for_every_class(tmp_path
     assert code == 2
     err = one_line(stderr, "make-dataset", "error")
     assert "--shapes 100 --views 10000 for 2 classes: writing 2000000 images of 64² and their volumes needs" in err
-    assert "of disk space" in err and "images per class (--shapes × --views) fit; lower them, or choose another --out" in err
+    assert "of disk space" in err and "images per class (--shapes × --views) fit; lower them, or write elsewhere (--out)" in err
     assert not out.exists()
 
 

@@ -76,7 +76,7 @@ def _cmd_make_dataset(args: argparse.Namespace) -> int:
             spp=args.spp, max_depth=args.max_depth, camera=args.camera, fov=args.fov,
             distance=args.distance, seed=args.seed))
     specs[0].validate()
-    check_collection_fits(specs[0], out, classes=len(specs))  # every class's size, before the first renders
+    check_collection_fits(specs[0], out, classes=len(specs), names=("--shapes", "--views"))  # before any class renders
     for c, spec in zip(classes, specs):
         folder = out / c if len(classes) > 1 or args.class_subfolder else out
         manifest = make_collection(folder, spec, overwrite=args.overwrite, progress=not args.quiet)

@@ -71,18 +71,21 @@ def collection_needs(spec: CollectionSpec) -> Tuple[int, int]:
     return memory, disk
 
 
-def check_collection_fits(spec: CollectionSpec, out: Union[str, Path], classes: int = 1) -> None:
+def check_collection_fits(spec: CollectionSpec, out: Union[str, Path], classes: int = 1,
+                          names: Tuple[str, str] = ("n_shapes", "views_per_shape")) -> None:
     """:class:`~mitsuba_platonic.errors.UserError` in one line, before anything is written, where
     ``classes`` collections of ``spec``'s size cannot fit: their records in the memory available, or
-    their files on the disk of ``out``; it names ``--shapes`` and ``--views`` and how many would fit."""
+    their files on the disk of ``out``; it names the sizes by ``names`` (``--shapes``, ``--views`` on
+    the command line; the spec's fields by default) and says how many images would fit."""
     memory, disk = collection_needs(spec)
-    size = f"--shapes {spec.n_shapes} --views {spec.views_per_shape}"
+    size = f"{names[0]} {spec.n_shapes} {names[1]} {spec.views_per_shape}"
+    both = f"{names[0]} × {names[1]}"
     images = spec.n_shapes * spec.views_per_shape
     per_class = " per class" if classes > 1 else ""
     have = budget.available_memory()                 # one class at a time: its records are held until its manifest
     if have[0] is not None:
         budget.check_fits(memory, have, f"{size}: holding the records of {images} images",
-                          f"at most about {max(have[0], 0) // RECORD_MEMORY} images (--shapes × --views) fit")
+                          f"at most about {max(have[0], 0) // RECORD_MEMORY} images ({both}) fit")
     have = budget.free_disk(out)
     if have[0] is not None:
         per_image = disk / max(images, 1)
@@ -90,7 +93,8 @@ def check_collection_fits(spec: CollectionSpec, out: Union[str, Path], classes: 
         budget.check_fits(disk * classes, have, f"{size}{every}: writing {images * classes} images of "
                           f"{spec.resolution}² and their volumes",
                           f"at most about {int(max(have[0], 0) // per_image // classes)} images{per_class} "
-                          f"(--shapes × --views) fit; lower them, or choose another --out", resource="disk space")
+                          f"({both}) fit; lower them, or write elsewhere{' (--out)' if names[0].startswith('--') else ''}",
+                          resource="disk space")
 
 
 def _finished(records: Dict[str, Dict[str, Any]], n: int, K: int, done: Callable[[int, int], bool]) -> int:
