@@ -16,7 +16,6 @@ import torch
 
 from mitsuba_platonic.checkpoint import UnsafeCheckpoint, load_checkpoint, objects_to_convert
 from mitsuba_platonic.config import load_config
-from mitsuba_platonic.model import Model
 from mitsuba_platonic.pickle_scan import foreign_objects, pickled_globals
 from mitsuba_platonic.train import run as R
 from cli_runner import one_line, run_cli
