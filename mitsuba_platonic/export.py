@@ -29,6 +29,7 @@ from .errors import UserError
 from .fileio import atomic_write
 from .frames import display_frames, save_gif, turntable_frames
 from .images import composite, linear_to_srgb, save_grid, save_png, to_hwc
+from .progress import progress_bar
 from .views import turntable
 from .volume import voxel_size, world_to_grid
 from .volume_io import save_volume
@@ -237,13 +238,15 @@ def check_samples_fit(model: "Model", n: int, out: PathLike) -> None:
 
 
 def export_samples(model: "Model", n: int, out: PathLike, seed: int = 0, overwrite: bool = False,
-                   written: Optional[List[Path]] = None) -> List[Path]:
+                   written: Optional[List[Path]] = None, progress: bool = False) -> List[Path]:
     """``platonic generate``: ``n`` volumes of ``model.generate(n, seed)`` → ``out/sample_NNN``
     .npz/.vol/.gif (24-frame turntables) and ``out/samples.png`` (one row per sample, 4 views
     90° apart); returns every path written, the overview last.
 
     A folder holding an earlier call's samples is refused (:class:`UserError`, before any work),
-    so that no old ``sample_NNN`` is left beside new ones; ``overwrite`` deletes them first."""
+    so that no old ``sample_NNN`` is left beside new ones; ``overwrite`` deletes them first. With
+    ``progress``, a line on stderr at once (how many) and as the samples are written
+    (:func:`~mitsuba_platonic.progress.progress_bar`)."""
     out = Path(out)
     check_samples_fit(model, n, out)
     earlier = sorted(p for p in out.iterdir() if _SAMPLE.fullmatch(p.name)) if out.is_dir() else []
@@ -253,8 +256,11 @@ def export_samples(model: "Model", n: int, out: PathLike, seed: int = 0, overwri
         p.unlink()
     written = [] if written is None else written
     rows = []
+    bar = progress_bar(n, unit="sample", desc="generate", disable=not progress, first_line=True, seconds=30.0)
     for i, vol in enumerate(model.generate(n, seed).cpu()):
         export_volume(vol, out / f"sample_{i:03d}", model.formation, level=None, frames=24, written=written)
         rows.append(display_frames(vol, model.formation, turntable(4, elevation=20.0)))
+        bar.update(1)
+    bar.close()
     written.append(save_grid(out / "samples.png", rows))
     return written

@@ -54,7 +54,7 @@ class _System:
 
 
 def _generate(run: Path, tmp_path: Path):
-    return run_cli(["generate", "--run", str(run), "-n", "1", "--out", str(tmp_path / "gen")])
+    return run_cli(["generate", "--run", str(run), "-n", "1", "--out", str(tmp_path / "gen"), "--quiet"])
 
 
 def test_a_missing_run_folder_is_said_not_to_exist(tmp_path):

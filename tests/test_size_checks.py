@@ -95,6 +95,20 @@ def test_generate_refuses_more_samples_than_the_disk_holds(tiny_run, tmp_path, m
     assert "or choose another --out" in err and not out.exists()
 
 
+def test_generate_says_how_many_before_generating_and_quiet_says_nothing(tiny_run, tmp_path, monkeypatch):
+    import sys
+    from mitsuba_platonic.model import Model
+
+    before = []                                                   # stderr (run_cli's) when G starts
+    real = Model.generate
+    monkeypatch.setattr(Model, "generate", lambda self, *a: before.append(sys.stderr.getvalue()) or real(self, *a))
+    code, _, stderr = run_cli(["generate", "--run", str(tiny_run), "-n", "2", "--out", str(tmp_path / "a")])
+    assert code == 0 and before[0].strip() == "generate: 0/2 sample (0%)"
+    assert stderr.strip().splitlines()[-1].startswith("generate: 2/2 sample (100%)")
+    code, _, stderr = run_cli(["generate", "--run", str(tiny_run), "-n", "2", "--out", str(tmp_path / "b"), "--quiet"])
+    assert code == 0 and stderr == ""
+
+
 def test_free_disk_reads_the_nearest_existing_folder(tmp_path):
     have, source = budget.free_disk(tmp_path / "not" / "yet")
     assert have == shutil.disk_usage(tmp_path).free or have > 0

@@ -80,7 +80,8 @@ def _cmd_generate(args: argparse.Namespace) -> int:
     out = Path(args.out) if args.out else Path(args.run) / "generated"
     written: List[Path] = []
     try:
-        export_samples(model, args.n, out, seed=args.seed, overwrite=args.overwrite, written=written)
+        export_samples(model, args.n, out, seed=args.seed, overwrite=args.overwrite, written=written,
+                       progress=not args.quiet)
     except KeyboardInterrupt:
         samples = len({p.stem for p in written if p.name.startswith("sample_")})
         raise _interrupted_export("generate", written, out, f"{samples} of {args.n} sample(s) begun, "
@@ -100,4 +101,5 @@ def add_generate(sub: "argparse._SubParsersAction") -> None:
     p.add_argument("--out", default=None, help="output folder (default: RUN/generated)")
     p.add_argument("--overwrite", action="store_true",
                    help="delete an earlier call's sample_* files and samples.png in --out first")
+    p.add_argument("--quiet", action="store_true", help="no progress lines")
     p.set_defaults(handler=_cmd_generate, interrupted="nothing was written; run the same command again")
