@@ -182,3 +182,20 @@ def test_finished_images_are_counted_from_the_records_not_every_index(tmp_path, 
     assert C._finished(records, 10 ** 8, 10 ** 8, lambda i, k: True) == 4      # instant at any size
     assert C._finished({**records, "junk": {}}, 1, 2, lambda i, k: True) == 2
     assert sorted(asked) == [(0, 0), (0, 1), (1, 0), (1, 1)]
+
+
+def test_a_resumed_collection_counts_the_images_already_on_disk(tmp_path, monkeypatch):
+    from mitsuba_platonic.data.collection import CollectionSpec, check_collection_fits, collection_needs, recorded_images
+
+    spec = CollectionSpec(shape_class=TINY, n_shapes=10, views_per_shape=10, resolution=16)
+    _, disk = collection_needs(spec)
+    folder = tmp_path / "d"
+    folder.mkdir()
+    (folder / "records.jsonl").write_text("{}\n" * 60)
+    assert recorded_images(folder) == 60 and recorded_images(tmp_path / "none") == 0
+    _fake_memory(monkeypatch, 1e6)
+    monkeypatch.setattr(budget, "free_disk", lambda path: (int(disk * 0.5), "a test"))
+    check_collection_fits(spec, folder, done=60)                        # 40 % left: fits in half the need
+    with pytest.raises(ValueError, match=r"^n_shapes 10 views_per_shape 10: writing 100 images of 16² .*"
+                                         r"\(n_shapes × views_per_shape\) fit; lower them, or write elsewhere$"):
+        check_collection_fits(spec, folder, done=40)

@@ -46,7 +46,7 @@ def _check_dataset_flags(args: argparse.Namespace) -> None:
 
 def _cmd_make_dataset(args: argparse.Namespace) -> int:
     from ..data import shapes
-    from ..data.collection import CollectionSpec, check_collection_fits, make_collection
+    from ..data.collection import CollectionSpec, check_collection_fits, make_collection, recorded_images
     from ..data.envmaps import check_envmap, default_envmaps
     from ..data.preview import contact_sheet
 
@@ -76,9 +76,10 @@ def _cmd_make_dataset(args: argparse.Namespace) -> int:
             spp=args.spp, max_depth=args.max_depth, camera=args.camera, fov=args.fov,
             distance=args.distance, seed=args.seed))
     specs[0].validate()
-    check_collection_fits(specs[0], out, classes=len(specs), names=("--shapes", "--views"))  # before any class renders
-    for c, spec in zip(classes, specs):
-        folder = out / c if len(classes) > 1 or args.class_subfolder else out
+    folders = [out / c if len(classes) > 1 or args.class_subfolder else out for c in classes]
+    done = 0 if args.overwrite else sum(recorded_images(folder) for folder in folders)   # a resume's images are there
+    check_collection_fits(specs[0], out, classes=len(specs), names=("--shapes", "--views"), done=done)
+    for c, spec, folder in zip(classes, specs, folders):
         manifest = make_collection(folder, spec, overwrite=args.overwrite, progress=not args.quiet)
         print(f"{c}: {spec.n_shapes * spec.views_per_shape} images in {folder} (manifest: {manifest})")
     return 0

@@ -45,7 +45,7 @@ from .collection_files import (RECORDS, SUBFOLDERS, image_id, is_finished, load_
 from .collection_spec import FORMATIONS, RENDERERS, CollectionSpec
 from .envmaps import check_envmap, default_envmaps
 
-__all__ = ["CollectionSpec", "make_collection", "check_collection_fits", "collection_needs", "load_manifest", "FORMATIONS", "RENDERERS",
+__all__ = ["CollectionSpec", "make_collection", "check_collection_fits", "collection_needs", "recorded_images", "load_manifest", "FORMATIONS", "RENDERERS",
            "default_envmaps", "check_envmap", "image_id", "SUBFOLDERS", "RECORDS"]
 
 
@@ -71,12 +71,26 @@ def collection_needs(spec: CollectionSpec) -> Tuple[int, int]:
     return memory, disk
 
 
+def recorded_images(folder: Union[str, Path]) -> int:
+    """How many images a (half-written) collection in ``folder`` has recorded: the lines of its
+    ``records.jsonl`` (0 where there is none), read in blocks."""
+    lines = 0
+    try:
+        with open(Path(folder) / "records.jsonl", "rb") as f:
+            for block in iter(lambda: f.read(1 << 20), b""):
+                lines += block.count(b"\n")
+    except OSError:
+        return 0
+    return lines
+
+
 def check_collection_fits(spec: CollectionSpec, out: Union[str, Path], classes: int = 1,
-                          names: Tuple[str, str] = ("n_shapes", "views_per_shape")) -> None:
+                          names: Tuple[str, str] = ("n_shapes", "views_per_shape"), done: int = 0) -> None:
     """:class:`~mitsuba_platonic.errors.UserError` in one line, before anything is written, where
     ``classes`` collections of ``spec``'s size cannot fit: their records in the memory available, or
-    their files on the disk of ``out``; it names the sizes by ``names`` (``--shapes``, ``--views`` on
-    the command line; the spec's fields by default) and says how many images would fit."""
+    their files on the disk of ``out`` (less the ``done`` images already there, a resumed collection's);
+    it names the sizes by ``names`` (``--shapes``, ``--views`` on the command line; the spec's fields
+    by default) and says how many images would fit."""
     memory, disk = collection_needs(spec)
     size = f"{names[0]} {spec.n_shapes} {names[1]} {spec.views_per_shape}"
     both = f"{names[0]} × {names[1]}"
@@ -90,7 +104,7 @@ def check_collection_fits(spec: CollectionSpec, out: Union[str, Path], classes: 
     if have[0] is not None:
         per_image = disk / max(images, 1)
         every = f" for {classes} classes" if classes > 1 else ""
-        budget.check_fits(disk * classes, have, f"{size}{every}: writing {images * classes} images of "
+        budget.check_fits(int(disk * classes - per_image * min(done, images * classes)), have, f"{size}{every}: writing {images * classes} images of "
                           f"{spec.resolution}² and their volumes",
                           f"at most about {int(max(have[0], 0) // per_image // classes)} images{per_class} "
                           f"({both}) fit; lower them, or write elsewhere{' (--out)' if names[0].startswith('--') else ''}",
@@ -126,7 +140,7 @@ def make_collection(out: Union[str, Path], spec: CollectionSpec, overwrite: bool
     """
     spec.validate()
     out = Path(out)
-    check_collection_fits(spec, out)                 # before the lock, a folder or anything else
+    check_collection_fits(spec, out, done=0 if overwrite else recorded_images(out))   # before the lock or a folder
     if overwrite:
         overwrite_plan(out)                          # refuse before writing anything (again under the lock)
     manifest_file = out / "manifest.json"
