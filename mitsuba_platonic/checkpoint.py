@@ -31,7 +31,7 @@ from __future__ import annotations
 
 import pickle
 import re
-import sys
+import warnings
 from collections import OrderedDict
 from dataclasses import dataclass
 from pathlib import Path, PurePath
@@ -42,18 +42,30 @@ import torch
 
 from .errors import UserError
 from .fileio import atomic_write
+from .pickle_scan import foreign_objects
 
-__all__ = ["RunError", "UnsafeCheckpoint", "CHECKPOINT_VERSION", "Checkpoint", "save_checkpoint",
-           "load_checkpoint", "checkpoint_files", "load_latest_checkpoint", "read_checkpoint", "convert_checkpoint",
+__all__ = ["RunError", "UnsafeCheckpoint", "DamagedCheckpoint", "NotACheckpoint", "CHECKPOINT_VERSION", "Checkpoint", "save_checkpoint",
+           "load_checkpoint", "checkpoint_files", "load_latest_checkpoint", "read_checkpoint", "objects_to_convert", "convert_checkpoint",
            "load_weights", "saved_config_dict"]
 
 CHECKPOINT_VERSION = 1
 
 _NUMBERED = re.compile(r"step_(\d+)\.pt")
+#: The first bytes of torch's zip format (a legacy or plain pickle starts with 0x80, its protocol).
+_ZIP_MAGIC = b"PK\x03\x04"
 
 
 class RunError(UserError):
     """A run folder or checkpoint that cannot be used as asked (exists, missing, incompatible)."""
+
+
+class DamagedCheckpoint(RunError):
+    """A checkpoint file that is truncated or damaged: cut short by a copy or a save (torch's own
+    errors for it read ``[Errno 22] Invalid argument`` or name miniz)."""
+
+
+class NotACheckpoint(RunError):
+    """A file that is no checkpoint at all (a config, an image) where one was expected."""
 
 
 class UnsafeCheckpoint(RunError):
@@ -156,18 +168,60 @@ def load_checkpoint(path: Path, device: torch.device = torch.device("cpu")) -> D
     """
     if not path.is_file():
         raise RunError(f"no checkpoint at {path}")
+    with open(path, "rb") as f:
+        head = f.read(4)
+    if head and not head.startswith((_ZIP_MAGIC, b"\x80")):
+        raise NotACheckpoint(f"{path} is not a checkpoint file (neither torch's zip format nor a pickle)")
     try:
-        return torch.load(path, map_location=device, weights_only=True)
+        with warnings.catch_warnings():  # torch's note on a plain pickle's protocol: the scan below says more
+            warnings.filterwarnings("ignore", message="Detected pickle protocol")
+            return torch.load(path, map_location=device, weights_only=True)
     except pickle.UnpicklingError as e:
         what = _refused_object(str(e))
-        if what is None:
-            raise
-        what = what if len(what) <= 80 else what[:79] + "…"
-        raise UnsafeCheckpoint(
-            f"{path} was refused: it holds a Python object ({what}) whose loading could run any code (a "
-            f"checkpoint holds only tensors and plain data); if you trust where the file came from, convert it "
-            f"once with `platonic convert-checkpoint {path}`",
-            what) from None
+        if what is None:                 # a pickle torch cannot read (protocol 4's FRAME) may still name objects
+            foreign = foreign_objects(path)
+            if not foreign:
+                raise DamagedCheckpoint(_damaged(path, e)) from None
+            what = foreign[0]
+        raise _unsafe(path, what) from None
+    except Exception as e:               # RuntimeError (a zip cut short), EOFError, OSError (a seek past the end)
+        foreign = foreign_objects(path) if head.startswith(b"\x80") else []
+        if foreign:
+            raise _unsafe(path, foreign[0]) from None
+        raise DamagedCheckpoint(_damaged(path, e)) from None
+
+
+def _unsafe(path: Path, what: str) -> UnsafeCheckpoint:
+    """The one line of a file that names an object the safe loader does not build."""
+    shown = what if len(what) <= 80 else what[:79] + "…"
+    return UnsafeCheckpoint(
+        f"{path} was refused: it holds a Python object ({shown}) whose loading could run any code (a "
+        f"checkpoint holds only tensors and plain data); if you trust where the file came from, convert it "
+        f"once with `platonic convert-checkpoint {path}`",
+        what)
+
+
+def _damaged(path: Path, e: BaseException) -> str:
+    """Why a checkpoint file that is no unsafe one could not be read, in words (torch's own text,
+    ``[Errno 22] Invalid argument`` or a miniz error, says nothing a user can act on)."""
+    size = path.stat().st_size
+    if size == 0:
+        return f"{path} is empty (0 bytes): a copy or a save cut short"
+    return (f"{path} is truncated or damaged ({size:,} bytes, not a whole checkpoint: a copy or a save cut "
+            f"short); copy it again, or use another checkpoint of the run (checkpoints/step_*.pt)")
+
+
+def objects_to_convert(path: Union[str, Path]) -> Optional[List[str]]:
+    """What converting ``path`` would import and could call, read without unpickling it: the objects
+    (``posix.system``, ``numpy.ndarray``) its pickles name that the safe loader does not build, or
+    None if it loads safely already (nothing to convert). :class:`RunError` naming the file if it is
+    missing, truncated or no checkpoint."""
+    path = Path(path)
+    try:
+        load_checkpoint(path)
+        return None
+    except UnsafeCheckpoint as e:
+        return foreign_objects(path) or [e.refused]
 
 
 def convert_checkpoint(path: Union[str, Path], out: Union[str, Path, None] = None) -> Optional[str]:
@@ -330,12 +384,12 @@ def load_latest_checkpoint(folder: Path, device: torch.device = torch.device("cp
             state = _checked(path, device)
         except UnsafeCheckpoint:         # not a torn file: falling back would hide a crafted one
             raise
-        except Exception as e:  # torch.load raises RuntimeError, EOFError, UnpicklingError, ... for torn files
-            failed.append((path, _one_line(e)))
+        except Exception as e:  # torn, damaged, not a checkpoint, another format, contents not a training state
+            failed.append((path, _reason(e)))
             continue
-        if failed and warn:
-            print(f"warning: could not load {_by_reason(failed, str)}; using {path} (step {int(state['step'])})",
-                  file=sys.stderr, flush=True)
+        if failed and warn:             # one line, `platonic <command>: warning: …` on the command line
+            warnings.warn(f"could not load {_by_reason(failed, str)}; using {path} (step {int(state['step'])})",
+                          stacklevel=2)
         return state, path
     if not failed:
         raise RunError(f"no checkpoint in {folder}")
@@ -365,12 +419,20 @@ def read_checkpoint(source: Union[str, Path], device: Union[str, torch.device] =
     if source.is_file():
         try:
             state = _checked(source, device)
-        except UnsafeCheckpoint:
+        except NotACheckpoint:
+            raise NotACheckpoint(f"{source} is not a checkpoint: --run takes a run folder (runs/NAME) or one of its "
+                                 f"checkpoint files (runs/NAME/checkpoints/last.pt)") from None
+        except RunError:
             raise
         except Exception as e:
             raise RunError(f"{source} cannot be loaded: {_one_line(e)}") from None
         path, run_dir = source, source.parent.parent
     else:
+        if not source.exists():
+            raise RunError(f"{source} does not exist: --run takes a run folder (runs/NAME) or a checkpoint file")
+        if not source.is_dir():
+            raise RunError(f"{source} is neither a folder nor a file: --run takes a run folder (runs/NAME) or a "
+                           f"checkpoint file")
         if not checkpoint_files(source / "checkpoints"):
             raise RunError(f"{source} has no checkpoints/last.pt: not a training run, or not started")
         state, path = load_latest_checkpoint(source / "checkpoints", device)
@@ -385,6 +447,15 @@ def _by_reason(failed: List[Tuple[Path, str]], name) -> str:
     for path, why in failed:
         groups.setdefault(why, []).append(name(path))
     return "; ".join(f"{', '.join(names)} ({why})" for why, names in groups.items())
+
+
+def _reason(e: BaseException) -> str:
+    """Why a checkpoint file was passed over, short, for a list of files."""
+    if isinstance(e, DamagedCheckpoint):
+        return "empty" if "is empty" in str(e) else "truncated or damaged"
+    if isinstance(e, NotACheckpoint):
+        return "not a checkpoint file"
+    return _one_line(e)
 
 
 def _one_line(e: BaseException, limit: int = 100) -> str:

@@ -21,7 +21,6 @@ VH/AO, where ``A`` is the opacity).
 from __future__ import annotations
 
 import json
-import os
 import sys
 import time
 from pathlib import Path
@@ -30,11 +29,14 @@ from typing import Any, Callable, Dict, List, Mapping, Optional, Sequence, Tuple
 import numpy as np
 import torch
 
+from .budget import available_memory
 from .errors import UserError
 from .fileio import atomic_write, make_folder, write_text
 from .images import composite, heatmap, save_exr, to_hwc
+from .progress import progress_bar
 from .render import MODELS, render
 from .render.settings import OPTIONS_OF, RenderSettings
+from .render.variant import ensure_variant
 from .views import front_view, sample_views, to_angles, validate_views
 from .volume import CHANNELS
 
@@ -52,40 +54,14 @@ _MITSUBA_ONLY = (set(OPTIONS_OF["mitsuba"]) - {"filter"}) | {"seed"}   # the mar
 #: expanded copies, the renderers' buffers); building a built-in test volume takes ``BUILTIN_BYTES``
 #: at its peak (float64 coordinates and shape fields), before rendering starts.
 RENDER_BYTES, VIEW_BYTES, BUILTIN_BYTES = 64, 48, 330
+#: The most views a comparison figure shows (one row each; the rest are in the EXRs and the numbers).
+FIGURE_VIEWS = 8
 
 
 def memory_estimate(n: int, views: int, builtin: bool = False) -> int:
     """Estimated peak memory (bytes) of comparing an ``n``³ volume from ``views`` views (``builtin``:
     including building a built-in test volume): ``n³ × max(BUILTIN_BYTES, RENDER_BYTES + VIEW_BYTES × views)``."""
     return int(n) ** 3 * max(BUILTIN_BYTES if builtin else 0, RENDER_BYTES + VIEW_BYTES * int(views))
-
-
-def available_memory() -> Tuple[Optional[int], str]:
-    """(bytes this process can still allocate, where the number comes from): ``MemAvailable`` of
-    ``/proc/meminfo`` (else the free pages of ``os.sysconf``), or a cgroup v2 limit if that is
-    smaller; ``(None, 'unknown')`` where neither can be read."""
-    found: List[Tuple[int, str]] = []
-    try:
-        with open("/proc/meminfo") as f:
-            for line in f:
-                if line.startswith("MemAvailable:"):
-                    found.append((int(line.split()[1]) * 1024, "MemAvailable in /proc/meminfo"))
-                    break
-    except (OSError, ValueError, IndexError):
-        pass
-    if not found:
-        try:
-            found.append((os.sysconf("SC_AVPHYS_PAGES") * os.sysconf("SC_PAGE_SIZE"), "free pages, os.sysconf"))
-        except (ValueError, OSError, AttributeError):
-            pass
-    try:
-        limit = Path("/sys/fs/cgroup/memory.max").read_text().strip()
-        if limit != "max":
-            used = int(Path("/sys/fs/cgroup/memory.current").read_text())
-            found.append((int(limit) - used, "the cgroup limit /sys/fs/cgroup/memory.max"))
-    except (OSError, ValueError):
-        pass
-    return min(found) if found else (None, "unknown")
 
 
 def check_memory(n: int, views: int, builtin: bool = False, what: Optional[str] = None) -> None:
@@ -264,7 +240,7 @@ def _figure(model: str, cf: torch.Tensor, mi: torch.Tensor, views: torch.Tensor,
 
 def compare(volume: torch.Tensor, views: torch.Tensor, models: Sequence[str] = MODELS,
             filter: str = "trilinear", options: Optional[Mapping[str, Any]] = None,
-            out_dir: Union[str, Path, None] = None, repeats: int = 3) -> List[Dict[str, Any]]:
+            out_dir: Union[str, Path, None] = None, repeats: int = 3, progress: bool = False) -> List[Dict[str, Any]]:
     """Render ``volume`` from ``views`` with both backends for each model and compare them.
 
     Args:
@@ -279,6 +255,8 @@ def compare(volume: torch.Tensor, views: torch.Tensor, models: Sequence[str] = M
         out_dir: where to write ``compare_<model>.png`` and ``mitsuba_<model>_view<i>.exr``;
             ``None`` writes nothing.
         repeats: timed runs per backend after one warm-up run; the best is reported.
+        progress: a progress line on stderr at once (the comparison's size) and after each
+            backend's runs and each model's files (:func:`~mitsuba_platonic.progress.progress_bar`).
 
     Returns:
         One dict per model: ``model``, ``resolution``, ``views``, ``filter``, ``options``,
@@ -305,11 +283,19 @@ def compare(volume: torch.Tensor, views: torch.Tensor, models: Sequence[str] = M
     out = Path(out_dir) if out_dir is not None else None
     if out is not None:
         make_folder(out)                                     # fail before rendering, not after
+    ensure_variant()                                             # a backend that cannot run: said before any line
     results = []
+    steps = len(models) * (3 if out is not None else 2)
+    bar = progress_bar(steps, unit="step", desc=f"compare: {b} view(s) at {n}³, {1 + repeats} runs per backend",
+                       disable=not progress, every=1.0 / steps, first_line=True)
     for model in models:
         v = _model_volume(volume, model, b)
         cf, cf_s = time_render(lambda: render(v, views, model, "closed_form", filter=filter), repeats)
+        bar.set_postfix({"done": f"{model} closed form"})
+        bar.update(1)
         mi, mi_s = time_render(lambda: render(v, views, model, "mitsuba", filter=filter, **options), repeats)
+        bar.set_postfix({"done": f"{model} Mitsuba"})
+        bar.update(1)
         diff = (cf.detach().cpu().double() - mi.detach().cpu().double()).abs()
         result: Dict[str, Any] = {
             "model": model, "resolution": n, "views": b, "filter": filter, "options": dict(options),
@@ -327,14 +313,20 @@ def compare(volume: torch.Tensor, views: torch.Tensor, models: Sequence[str] = M
             if model == "ea":
                 title += "\nEA shown as premultiplied RGBA composited over a mid-grey (0.5) background"
             png = out / f"compare_{model}.png"
-            _figure(model, result["closed_form"], result["mitsuba"], views, title, png)
+            shown = min(b, FIGURE_VIEWS)
+            if shown < b:
+                title += f"\nthe first {shown} of {b} views (every view's Mitsuba render is an EXR)"
+            _figure(model, result["closed_form"][:shown], result["mitsuba"][:shown], views[:shown], title, png)
             result["png"] = str(png)
             for i in range(b):
                 exr = out / f"mitsuba_{model}_view{i}.exr"
                 img = to_hwc(result["mitsuba"][i])          # EA: R,G,B,A; VH/AO: Y,A (A = opacity)
                 atomic_write(exr, lambda tmp: save_exr(tmp, img))
                 result["exrs"].append(str(exr))
+            bar.set_postfix({"done": f"{model} figure and {b} EXR(s)"})
+            bar.update(1)
         results.append(result)
+    bar.close()
     return results
 
 

@@ -17,7 +17,7 @@ and type: an unknown key or a wrong type is an error that names the key (``train
 expected int, got 'eight'``); numbers must be finite (no ``.inf``, ``.nan``). pydantic checks keys
 and types (on the plain dataclasses: other modules construct them directly); the sections'
 ``validate()`` and :meth:`Config.validate` check ranges, choices and combinations. Command-line
-overrides use dotted keys, ``--set train.steps=500``; values are parsed as YAML scalars (``true``,
+overrides use dotted keys, ``--set run.steps=500``; values are parsed as YAML scalars (``true``,
 ``1e-4``, ``[0.5, 0.9]``, ``null``). Every section and :class:`ConfigError` stay importable from here.
 """
 
@@ -39,7 +39,7 @@ from .data.settings import DataConfig
 from .model_settings import ModelConfig
 from .render.settings import LIT, SINGLE_SCATTERING, RenderSettings as RenderConfig
 from .resources import config_names, config_path
-from .settings_checks import ConfigError
+from .settings_checks import ConfigError, quoted
 from .train.run_settings import RunConfig
 from .train.settings import MODES_3D, PRGAN, TrainConfig
 from .views import DEFAULT_ELEVATION
@@ -47,6 +47,9 @@ from .views import DEFAULT_ELEVATION
 __all__ = ["Config", "RunConfig", "DataConfig", "ModelConfig", "RenderConfig", "TrainConfig",
            "load_config", "config_file", "config_from_dict", "apply_overrides", "ConfigError"]
 
+
+#: The override the ``--set`` errors show as an example (a test checks that it is accepted).
+OVERRIDE_EXAMPLE = "run.steps=500"
 
 _FLOAT = re.compile(r"[-+]?(\d+\.?\d*|\.\d+)[eE][-+]?\d+")
 
@@ -197,7 +200,7 @@ def _one_line(e: pydantic.ValidationError, data: Any) -> ConfigError:
         return ConfigError(f"{key}: unknown key (known: {known})")
     expected = dict.fromkeys(_EXPECTED.get(err["type"], err["msg"].replace("Input should be ", "", 1))
                              for err in errors)
-    return ConfigError(f"{key or 'config'}: expected {' or '.join(expected)}, got {errors[0]['input']!r}")
+    return ConfigError(f"{key or 'config'}: expected {' or '.join(expected)}, got {quoted(errors[0]['input'])}")
 
 
 def _key(loc: Sequence[Any], data: Any) -> str:
@@ -216,11 +219,11 @@ def apply_overrides(data: Dict[str, Any], overrides: Sequence[str]) -> Dict[str,
     """Apply ``key.sub=value`` strings (values parsed as YAML scalars) to a nested dict."""
     for item in overrides:
         if "=" not in item:
-            raise ConfigError(f"override {item!r}: expected key=value, e.g. train.steps=500")
+            raise ConfigError(f"override {item!r}: expected key=value, e.g. {OVERRIDE_EXAMPLE}")
         key, text = item.split("=", 1)
         parts = key.strip().split(".")
         if len(parts) != 2 or not all(parts):
-            raise ConfigError(f"override {item!r}: expected section.key=value, e.g. train.steps=500")
+            raise ConfigError(f"override {item!r}: expected section.key=value, e.g. {OVERRIDE_EXAMPLE}")
         try:
             value = yaml.safe_load(text)
         except yaml.YAMLError as e:
@@ -238,11 +241,15 @@ def load_config(path: Optional[Union[str, Path]] = None, overrides: Sequence[str
     if path is not None:
         path = config_file(path)
         try:
-            data = yaml.safe_load(path.read_text()) or {}
+            data = yaml.safe_load(path.read_text())
         except UnicodeDecodeError:
             raise ConfigError(f"{path}: not a YAML text file (not UTF-8 text)") from None
         except yaml.YAMLError as e:
             raise ConfigError(f"{path}: not valid YAML ({yaml_problem(e)})") from None
+        if data is None:                                    # empty or comments only: not silently "all defaults"
+            raise ConfigError(f"{path}: the config file is empty; expected a mapping of sections (run, data, "
+                              f"model, render, train); for the defaults leave --config out, or start from a "
+                              f"packaged config (--config quickstart)")
         if not isinstance(data, dict):
             raise ConfigError(f"{path}: expected a mapping of sections (run, data, model, render, train), "
                               f"got a {type(data).__name__}")

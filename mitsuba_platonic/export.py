@@ -24,10 +24,12 @@ import numpy as np
 import torch
 import torch.nn.functional as F
 
+from . import budget
 from .errors import UserError
 from .fileio import atomic_write, make_folder, remove
 from .frames import display_frames, save_gif, turntable_frames
 from .images import composite, linear_to_srgb, save_grid, save_png, to_hwc
+from .progress import progress_bar
 from .views import turntable
 from .volume import voxel_size, world_to_grid
 from .volume_io import save_volume
@@ -37,7 +39,7 @@ if TYPE_CHECKING:
 
 #: save_volume is volume_io's, named here too for the callers that import it from export (notebooks).
 __all__ = ["save_volume", "display_frames", "turntable_frames", "save_gif", "extract_mesh",
-           "save_ply", "Mesh", "Exported", "export_volume", "export_reconstructions", "export_samples", "output_names",
+           "save_ply", "Mesh", "Exported", "export_volume", "export_reconstructions", "export_samples", "check_samples_fit", "output_names",
            "EXPORT_EXTENSIONS"]
 
 PathLike = Union[str, Path]
@@ -218,15 +220,35 @@ def export_reconstructions(model: "Model", images: Sequence[PathLike], out: Path
 _SAMPLE = re.compile(r"sample_\d{3,}\.(npz|vol|gif|ply)|samples\.png")
 
 
+def check_samples_fit(model: "Model", n: int, out: PathLike) -> None:
+    """:class:`UserError` naming ``-n`` where ``n`` samples cannot fit, before any work: the volumes
+    ``model.generate`` holds at once (each twice: G's output and its CPU copy or logits) in the memory
+    available, or their ``.vol`` files alone on the disk of ``out`` (lower bounds)."""
+    volume = model.channels * model.resolution ** 3 * 4
+    memory = budget.available_memory()
+    if memory[0] is not None:
+        most = max(memory[0], 0) // (2 * volume)
+        budget.check_fits(2 * volume * n, memory, f"-n {n}: generating {n} volumes of {model.resolution}³ at once",
+                          f"lower -n (at most about {most} fit)" if most else "not even one fits")
+    disk = budget.free_disk(out)
+    if disk[0] is not None:
+        most = max(disk[0], 0) // (volume + 48)
+        budget.check_fits((volume + 48) * n, disk, f"-n {n}: writing the .vol files of {n} samples alone",
+                          f"lower -n (at most about {most} fit), or choose another --out", resource="disk space")
+
+
 def export_samples(model: "Model", n: int, out: PathLike, seed: int = 0, overwrite: bool = False,
-                   written: Optional[List[Path]] = None) -> List[Path]:
+                   written: Optional[List[Path]] = None, progress: bool = False) -> List[Path]:
     """``platonic generate``: ``n`` volumes of ``model.generate(n, seed)`` → ``out/sample_NNN``
     .npz/.vol/.gif (24-frame turntables) and ``out/samples.png`` (one row per sample, 4 views
     90° apart); returns every path written, the overview last.
 
     A folder holding an earlier call's samples is refused (:class:`UserError`, before any work),
-    so that no old ``sample_NNN`` is left beside new ones; ``overwrite`` deletes them first."""
+    so that no old ``sample_NNN`` is left beside new ones; ``overwrite`` deletes them first. With
+    ``progress``, a line on stderr at once (how many) and as the samples are written
+    (:func:`~mitsuba_platonic.progress.progress_bar`)."""
     out = Path(out)
+    check_samples_fit(model, n, out)
     earlier = sorted(p for p in out.iterdir() if _SAMPLE.fullmatch(p.name)) if out.is_dir() else []
     if not overwrite:
         _refuse_earlier(out, earlier)
@@ -234,8 +256,11 @@ def export_samples(model: "Model", n: int, out: PathLike, seed: int = 0, overwri
         remove(p)
     written = [] if written is None else written
     rows = []
+    bar = progress_bar(n, unit="sample", desc="generate", disable=not progress, first_line=True, seconds=30.0)
     for i, vol in enumerate(model.generate(n, seed).cpu()):
         export_volume(vol, out / f"sample_{i:03d}", model.formation, level=None, frames=24, written=written)
         rows.append(display_frames(vol, model.formation, turntable(4, elevation=20.0)))
+        bar.update(1)
+    bar.close()
     written.append(save_grid(out / "samples.png", rows))
     return written

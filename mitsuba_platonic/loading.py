@@ -70,9 +70,21 @@ def model_from_checkpoint(cls: Type[M], ckpt: Checkpoint, cfg: Optional[Config] 
         load_weights(model, trainer["ema"], ckpt.path, what)
     else:
         load_weights(model, {k: v for k, v in nets.items() if k.startswith(("E.", "G.", "P.", "L."))}, ckpt.path, what)
+    _check_finite(model, ckpt.path)
     model.step, model.origin = ckpt.step, ckpt.path
     device = next(iter(nets.values())).device if nets else torch.device("cpu")
     return model.to(device)
+
+
+def _check_finite(model: torch.nn.Module, path: Path) -> None:
+    """:class:`RunError` naming ``path`` and the first weight that holds NaN or ±Inf (a run that
+    diverged saved them; every volume would be NaN)."""
+    for name, value in model.state_dict().items():
+        if value.is_floating_point() and not bool(torch.isfinite(value).all()):
+            what = "NaN" if bool(torch.isnan(value).any()) else "Inf"
+            raise RunError(f"{path}: the checkpoint's weights hold {what} (first at {name}): the run diverged; use "
+                           f"an earlier checkpoint "
+                           f"(--run {path.parent}/step_NNNNNNN.pt) or train again")
 
 
 def load_model(cls: Type[M], source: Union[str, Path], device: Union[str, torch.device] = "cpu") -> M:

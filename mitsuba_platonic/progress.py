@@ -46,13 +46,17 @@ class LineProgress:
     one each time another ``every`` of ``total`` is done, and one when it closes short of that."""
 
     def __init__(self, total: int, initial: int = 0, unit: str = "it", desc: Optional[str] = None,
-                 every: float = 0.1, file: Optional[IO[str]] = None) -> None:
+                 every: float = 0.1, file: Optional[IO[str]] = None, first_line: bool = False,
+                 seconds: Optional[float] = None) -> None:
         self.total, self.n, self.unit, self.desc = int(total), int(initial), unit, desc
-        self.every, self.file = every, file
+        self.every, self.file, self.seconds = every, file, seconds
         self._start_n, self._t0 = self.n, time.perf_counter()
         self._postfix = ""
         self._printed = self._bucket(self.n)
         self._written = self.n
+        self._last = self._t0
+        if first_line:                                     # the work's size, at once, before the first unit
+            self._write()
 
     def _bucket(self, n: int) -> int:
         """How many ``every`` steps of the total ``n`` has passed."""
@@ -65,6 +69,8 @@ class LineProgress:
         if bucket > self._printed:
             self._printed = bucket
             self._write()
+        elif self.seconds is not None and time.perf_counter() - self._last >= self.seconds:
+            self._write()                                  # a long tenth: a line every ``seconds`` as well
 
     def set_postfix(self, values: Optional[Mapping[str, Any]] = None, **kwargs: Any) -> None:
         """Values shown at the end of the next line (``key=value``)."""
@@ -92,7 +98,7 @@ class LineProgress:
         return text + (f"; {self._postfix}" if self._postfix else "")
 
     def _write(self) -> None:
-        self._written = self.n
+        self._written, self._last = self.n, time.perf_counter()
         print(self.line(), file=self.file if self.file is not None else sys.stderr, flush=True)
 
 
@@ -113,15 +119,19 @@ class _Silent:
 
 
 def progress_bar(total: int, initial: int = 0, unit: str = "it", desc: Optional[str] = None,
-                 disable: bool = False, every: float = 0.1,
-                 file: Optional[IO[str]] = None) -> Union["tqdm", LineProgress, _Silent]:  # noqa: F821
+                 disable: bool = False, every: float = 0.1, file: Optional[IO[str]] = None,
+                 first_line: bool = False,
+                 seconds: Optional[float] = None) -> Union["tqdm", LineProgress, _Silent]:  # noqa: F821
     """A progress bar over ``total`` units (``initial`` already done) written to ``file``
     (default stderr): a live tqdm bar on a terminal or in a notebook, else a :class:`LineProgress`
-    writing a plain line every ``every`` of the way; silent with ``disable``. Every bar has
-    ``update(n)``, ``set_postfix(dict)`` and ``close()``."""
+    writing a plain line every ``every`` of the way (with ``first_line`` one at once, saying the
+    work's size; with ``seconds`` also one whenever that long passed since the last line, for work
+    whose tenths take long); silent with ``disable``. Every bar has ``update(n)``,
+    ``set_postfix(dict)`` and ``close()``."""
     if disable:
         return _Silent(total, initial)
     if is_live(file):
         from tqdm.auto import tqdm  # lazy: as in is_live
         return tqdm(total=total, initial=initial, unit=unit, desc=desc, file=file, dynamic_ncols=True)
-    return LineProgress(total, initial=initial, unit=unit, desc=desc, every=every, file=file)
+    return LineProgress(total, initial=initial, unit=unit, desc=desc, every=every, file=file, first_line=first_line,
+                        seconds=seconds)

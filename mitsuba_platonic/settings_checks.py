@@ -9,34 +9,50 @@ only the error types and the view conventions, never a section or the config.
 
 from __future__ import annotations
 
+import reprlib
 from typing import Any, Sequence
 
 from .errors import UserError
 from .views import DISTRIBUTIONS, sample_views
 
-__all__ = ["ConfigError", "choice", "positive", "non_negative", "check_elevation"]
+__all__ = ["ConfigError", "choice", "positive", "non_negative", "check_elevation", "quoted", "QUOTE_LIMIT"]
+
+#: The most characters a message quotes of a value: a YAML alias bomb (a few lines that expand to
+#: millions of items) is named by its beginning, not printed whole.
+QUOTE_LIMIT = 200
+
+_REPR = reprlib.Repr()
+_REPR.maxlevel, _REPR.maxlist, _REPR.maxtuple, _REPR.maxdict, _REPR.maxset = 4, 12, 12, 8, 8
+_REPR.maxstring, _REPR.maxother, _REPR.maxlong = QUOTE_LIMIT, QUOTE_LIMIT, 60
 
 
 class ConfigError(UserError):
     """A bad configuration; the message names the key."""
 
 
+def quoted(value: Any, limit: int = QUOTE_LIMIT) -> str:
+    """``repr(value)`` for a message, at most ``limit`` characters (``…`` where cut), built without
+    the whole repr of a huge value (nested lists a YAML alias expands are shortened level by level)."""
+    text = _REPR.repr(value) if isinstance(value, (list, tuple, dict, set, frozenset)) else repr(value)
+    return text if len(text) <= limit else text[:limit - 1] + "…"
+
+
 def choice(key: str, value: Any, choices: Sequence[Any]) -> None:
     """``value`` is one of ``choices``; else ``key: expected one of [...], got value``."""
     if value not in choices:
-        raise ConfigError(f"{key}: expected one of {list(choices)}, got {value!r}")
+        raise ConfigError(f"{key}: expected one of {list(choices)}, got {quoted(value)}")
 
 
 def positive(key: str, value: Any) -> None:
     """``value`` > 0; else ``key: expected a positive value, got value``."""
     if not value > 0:
-        raise ConfigError(f"{key}: expected a positive value, got {value!r}")
+        raise ConfigError(f"{key}: expected a positive value, got {quoted(value)}")
 
 
 def non_negative(key: str, value: Any) -> None:
     """``value`` ≥ 0; else ``key: expected a non-negative value, got value``."""
     if value < 0:
-        raise ConfigError(f"{key}: expected a non-negative value, got {value!r}")
+        raise ConfigError(f"{key}: expected a non-negative value, got {quoted(value)}")
 
 
 def check_elevation(section: str, distribution: str, elevation: Any) -> None:

@@ -64,8 +64,11 @@ def read_npz(path: Path) -> torch.Tensor:
         raise VolumeFileError(f"volume file {name!r} is not a file")
     try:
         archive = np.load(path, allow_pickle=False)
-    except Exception as e:  # numpy raises several types for non-npz content
-        raise VolumeFileError(f"could not read {name!r} as a .npz archive: {e}") from None
+    except OSError as e:    # the file itself (permissions, I/O)
+        raise VolumeFileError(f"could not read {name!r}: {e.strerror or e}") from None
+    except Exception:       # numpy's text for other content advises allow_pickle, which would run its code
+        raise VolumeFileError(f"{name!r} is not a valid .npz volume (not a numpy archive, or a damaged one); "
+                              f"expected a file written by numpy.savez(path, volume=array)") from None
     if not isinstance(archive, np.lib.npyio.NpzFile):
         raise VolumeFileError(f"{name!r} is a single .npy array, not a .npz archive; save it with "
                               f"numpy.savez({name!r}, volume=array)")

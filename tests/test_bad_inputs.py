@@ -55,6 +55,47 @@ def test_truncated_envmap_is_one_line_not_an_abort(whole_envmap, tmp_path, cut):
     assert not out.exists()
 
 
+def _envmap(path, kind: str):
+    """A 8 × 16 lat-long map, grey 0.5, with what ``kind`` names wrong, written by Mitsuba."""
+    import numpy as np
+    from mitsuba_platonic.render.variant import ensure_variant
+
+    pixels = np.full((8, 16, 3), 0.5, dtype=np.float32)
+    if kind == "a NaN pixel":
+        pixels[3, 5, 1] = np.nan
+    elif kind == "an Inf pixel":
+        pixels[2, 7] = np.inf
+    elif kind == "all black":
+        pixels[:] = 0.0
+    elif kind == "all negative":
+        pixels[:] = -1.0
+    ensure_variant().Bitmap(pixels).write(str(path))
+    return path
+
+
+@pytest.mark.parametrize("kind, problem", [
+    ("a NaN pixel", "1 pixel value(s) are NaN or Inf (NaN at row 3, column 5)"),
+    ("an Inf pixel", "3 pixel value(s) are NaN or Inf (Inf at row 2, column 7)"),
+    ("all black", "every pixel is black (0): it gives no light"),
+    ("all negative", "384 pixel value(s) are negative (as low as -1)"),
+])
+def test_an_envmap_that_cannot_light_is_one_line_naming_the_file(tmp_path, kind, problem):
+    envmap = _envmap(tmp_path / "bad.exr", kind)
+    out = tmp_path / "d"
+    code, _, stderr = run_cli(["make-dataset", "--class", TINY, "--shapes", "1", "--views", "1", "--resolution", "16",
+                               "--formation", "physical", "--spp", "1", "--lighting", "envmap", "--envmap",
+                               str(envmap), "--out", str(out), "--quiet"])
+    assert code == 2
+    err = one_line(stderr, "make-dataset", kind="error")
+    assert f"--envmap '{envmap}' cannot light a scene: {problem}" in err, err
+    assert not out.exists()
+
+
+def test_a_good_envmap_passes_the_value_check(tmp_path):
+    from mitsuba_platonic.data.envmaps import check_envmap
+    check_envmap(_envmap(tmp_path / "good.exr", "good"))
+
+
 # --------------------------------------------------------------------------- a manifest of the wrong shape
 
 

@@ -122,11 +122,11 @@ def test_resume_finishes_without_rerendering(tmp_path, monkeypatch):
     calls = []
     real = C._render_shape
 
-    def crash_after_first_shape(spec_, vol, views, lights):
+    def crash_after_first_shape(spec_, vol, views, lights, *offset):
         calls.append(len(views))
         if len(calls) == 2:
             raise KeyboardInterrupt("simulated crash")
-        return real(spec_, vol, views, lights)
+        return real(spec_, vol, views, lights, *offset)
 
     monkeypatch.setattr(C, "_render_shape", crash_after_first_shape)
     with pytest.raises(KeyboardInterrupt):

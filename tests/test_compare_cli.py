@@ -198,7 +198,7 @@ def _bad_npz(tmp_path, kind):
     ("not_cubic", "cubic"),
     ("out_of_range", "1.5] (1 value(s) outside, the first at index (3, 4, 4, 4)"),
     ("nan", "NaN"),
-    ("not_npz", "could not read"),
+    ("not_npz", "is not a valid .npz volume"),
     ("missing_file", "does not exist"),
 ])
 def test_bad_npz_exits_2(tmp_path, kind, message):

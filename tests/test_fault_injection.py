@@ -518,14 +518,17 @@ CORRUPTIONS = {
 
 
 @pytest.mark.parametrize("kind", list(CORRUPTIONS))
-def test_a_bad_last_checkpoint_falls_back_with_a_warning(base_run, tmp_path, capsys, kind):
+def test_a_bad_last_checkpoint_falls_back_with_a_warning(base_run, tmp_path, kind):
+    """A warning (the command line prints it as ``platonic <command>: warning: …``, one line)."""
     run_dir = _copy_run(base_run, tmp_path)
     last = run_dir / "checkpoints" / "last.pt"
     CORRUPTIONS[kind](last)
-    ckpt = read_checkpoint(run_dir)
+    with pytest.warns(UserWarning) as caught:
+        ckpt = read_checkpoint(run_dir)
     assert ckpt.step == 4 and ckpt.path.name == "step_0000004.pt"
-    warning = capsys.readouterr().err.strip()
-    assert "\n" not in warning and warning.startswith(f"warning: could not load {last} ("), warning
+    assert len(caught) == 1
+    warning = str(caught[0].message)
+    assert "\n" not in warning and warning.startswith(f"could not load {last} ("), warning
     assert warning.endswith(f"using {ckpt.path} (step 4)"), warning
 
 

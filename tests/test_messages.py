@@ -137,3 +137,43 @@ def test_an_image_pillow_only_warns_about_is_refused_naming_the_file(tmp_path, m
         with pytest.raises(ImageRejected) as e:
             decode_image(path)
     assert e.value.reason == "too_large" and str(path) in str(e.value)
+
+
+# --------------------------------------------------------------------------- issue 46: flags and files misnamed
+
+
+@pytest.mark.parametrize("command", [["generate", "--run", "r"], ["make-dataset"], ["compare"]])
+def test_a_seed_past_64_bits_is_a_usage_error_not_an_overflow(command, tmp_path):
+    code, _, stderr = run_cli([*command, "--seed", "99999999999999999999", "--out", str(tmp_path / "o")])
+    assert code == 2 and "Traceback" not in stderr and "Overflow" not in stderr
+    assert "argument --seed: expected a seed, an integer from 0 to 2⁶³ − 1" in stderr, stderr
+    assert not (tmp_path / "o").exists()
+
+
+def test_the_largest_seed_is_accepted():
+    from mitsuba_platonic.cli.args import MAX_SEED, seed
+    import torch
+    assert seed(str(MAX_SEED)) == MAX_SEED
+    torch.Generator().manual_seed(MAX_SEED)                               # what the seed is handed to
+
+
+@pytest.mark.parametrize("content", [b"not an archive at all\n", b"PK\x03\x04 cut short"])
+def test_a_npz_that_is_not_one_is_one_line_without_pickle_advice(tmp_path, content):
+    bad = tmp_path / "v.npz"
+    bad.write_bytes(content)
+    code, _, stderr = run_cli(["compare", "--volume", str(bad), "--out", str(tmp_path / "o")])
+    assert code == 2
+    err = one_line(stderr, "compare", "error")
+    assert f"'{bad}' is not a valid .npz volume" in err and "pickle" not in err, err
+    assert not (tmp_path / "o").exists()
+
+
+@pytest.mark.parametrize("level", ["0", "1", "-0.5", "2"])
+def test_reconstruct_names_level_outside_0_1(tmp_path, level):
+    code, _, stderr = run_cli(["reconstruct", "--run", str(tmp_path / "no_run"), "--level", level,
+                               str(tmp_path / "x.png")])
+    assert code == 2
+    err = one_line(stderr, "reconstruct", "error")
+    assert err.startswith("platonic reconstruct: error: --level: expected the mesh's iso-level, a density between 0 "
+                          "and 1"), err
+

@@ -356,7 +356,7 @@ def test_jpeg_on_white_threshold_masking(tmp_path):
     assert (x[:3] <= x[3:] + 1e-6).all()
     # without background="white" a photo without alpha has no mask: a clear error
     with pytest.raises(ValueError, match="no_alpha"), pytest.warns(PhotoCollectionWarning,
-                                                                   match="background='white'"):
+                                                                   match="data.background: white"):
         PhotoCollection(tmp_path, 64, "all")
 
 

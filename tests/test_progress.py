@@ -76,3 +76,43 @@ def test_make_dataset_into_a_log_writes_lines_not_redraws(tmp_path):
     assert "\r" not in err
     lines = err.splitlines()
     assert 2 <= len(lines) <= 10 and lines[-1].startswith(f"{TINY} ea: 20/20 img (100%)"), lines   # per shape: 25 %
+
+
+def test_a_first_line_says_the_size_at_once_and_long_tenths_get_timed_lines(monkeypatch):
+    """Work whose first tenth takes hours (make-dataset at 10⁶ views, compare at 10⁵) prints its size
+    at once and a line every ``seconds`` between the tenths; the clock is the test's."""
+    from mitsuba_platonic import progress as P
+
+    now = [0.0]
+    monkeypatch.setattr(P.time, "perf_counter", lambda: now[0])
+    out = io.StringIO()
+    bar = progress_bar(1000, unit="img", desc="chair ea", file=out, first_line=True, seconds=30.0)
+    assert _lines(out) == ["chair ea: 0/1000 img (0%)"]
+    bar.update(1)
+    now[0] = 29.0
+    bar.update(1)
+    assert len(_lines(out)) == 1                                   # under 30 s since the last line: none
+    now[0] = 31.0
+    bar.update(1)
+    assert len(_lines(out)) == 2 and _lines(out)[1].startswith("chair ea: 3/1000 img (0%), ")
+    now[0] = 40.0
+    bar.update(1)
+    assert len(_lines(out)) == 2                                   # timed from the last line, not the start
+
+
+def test_compare_says_its_size_before_the_first_render_and_a_line_per_step(monkeypatch, capsys, tmp_path):
+    from mitsuba_platonic import compare as C
+    from mitsuba_platonic.volume import test_volume
+
+    before_first = []
+    real = C.render
+    monkeypatch.setattr(C, "render", lambda *a, **k: (before_first.append(capsys.readouterr().err)
+                                                      if not before_first else None) or real(*a, **k))
+    shown = []
+    monkeypatch.setattr(C, "_figure", lambda model, cf, mi, views, title, path: shown.append((cf.shape[0], title)))
+    monkeypatch.setattr(C, "FIGURE_VIEWS", 2)
+    C.compare(test_volume(8), C.comparison_views(3), ("vh",), repeats=1, out_dir=tmp_path, progress=True)
+    assert before_first[0].strip() == "compare: 3 view(s) at 8³, 2 runs per backend: 0/3 step (0%)"
+    lines = capsys.readouterr().err.strip().splitlines()
+    assert [line.split("; done=")[-1] for line in lines] == ["vh closed form", "vh Mitsuba", "vh figure and 3 EXR(s)"]
+    assert shown[0][0] == 2 and "the first 2 of 3 views" in shown[0][1]       # a figure of at most FIGURE_VIEWS rows

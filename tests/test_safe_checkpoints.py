@@ -179,7 +179,7 @@ def test_a_checkpoint_with_other_objects_is_refused_then_converted_knowingly(run
     real_load = torch.load
     monkeypatch.setattr(torch, "load", lambda p, *a, **k: (unsafe.append(Path(p).name) if k.get("weights_only")
                                                            is False else None) or real_load(p, *a, **k))
-    code, stdout, stderr = run_cli(["convert-checkpoint", str(run_dir)])
+    code, stdout, stderr = run_cli(["convert-checkpoint", "--yes", str(run_dir)])
     assert code == 0, stderr
     assert unsafe == ["last.pt"]                               # only the file that needed it
     assert f"{last}: converted (it held numpy" in stdout and "step_0000004.pt: loads safely already" in stdout

@@ -13,8 +13,8 @@ from typing import Callable, List
 
 from ..errors import UserError
 
-__all__ = ["PROG", "CLIError", "positive_int", "non_negative_int", "resolution", "positive_float",
-           "parse_models", "check_out_folder"]
+__all__ = ["PROG", "CLIError", "positive_int", "non_negative_int", "resolution", "positive_float", "seed",
+           "MAX_SEED", "parse_models", "check_out_folder"]
 
 PROG = "platonic"
 
@@ -26,14 +26,15 @@ class CLIError(UserError):
 # --------------------------------------------------------------------------- argument types
 
 
-def _number_type(convert: Callable[[str], float], minimum: float, what: str) -> Callable[[str], float]:
-    """An argparse type: ``convert(text)``, finite and ≥ ``minimum``, else an error saying ``what``."""
+def _number_type(convert: Callable[[str], float], minimum: float, what: str,
+                 maximum: float = float("inf")) -> Callable[[str], float]:
+    """An argparse type: ``convert(text)``, finite and in [``minimum``, ``maximum``], else an error saying ``what``."""
     def parse(text: str):
         try:
             value = convert(text)
         except ValueError:
             raise argparse.ArgumentTypeError(f"expected {what}, got {text!r}") from None
-        if not (value >= minimum and value != float("inf")):
+        if not (minimum <= value <= maximum and value != float("inf")):
             raise argparse.ArgumentTypeError(f"expected {what}, got {text!r}")
         return value
     return parse
@@ -42,6 +43,9 @@ def _number_type(convert: Callable[[str], float], minimum: float, what: str) -> 
 positive_int = _number_type(int, 1, "a positive integer")
 non_negative_int = _number_type(int, 0, "a non-negative integer")
 resolution = _number_type(int, 2, "an integer resolution of at least 2")
+#: The largest seed: torch's and numpy's generators take a 64-bit signed integer.
+MAX_SEED = 2 ** 63 - 1
+seed = _number_type(int, 0, f"a seed, an integer from 0 to 2⁶³ − 1 = {MAX_SEED}", maximum=MAX_SEED)
 positive_float = _number_type(float, float.fromhex("0x1p-1074"), "a positive finite number")
 
 

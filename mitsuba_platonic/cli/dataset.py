@@ -9,7 +9,7 @@ from pathlib import Path
 from typing import Tuple, Union
 
 from ..fileio import confined
-from .args import CLIError, non_negative_int, positive_float, positive_int
+from .args import CLIError, positive_float, positive_int, seed
 
 __all__ = ["add_make_dataset"]
 
@@ -47,7 +47,7 @@ def _check_dataset_flags(args: argparse.Namespace) -> None:
 
 def _cmd_make_dataset(args: argparse.Namespace) -> int:
     from ..data import shapes
-    from ..data.collection import CollectionSpec, make_collection
+    from ..data.collection import CollectionSpec, check_collection_fits, make_collection, recorded_images
     from ..data.envmaps import check_envmap, default_envmaps
     from ..data.preview import contact_sheet
 
@@ -68,15 +68,20 @@ def _cmd_make_dataset(args: argparse.Namespace) -> int:
     for path in args.envmap or ():                          # named on the command line: checked even if unused
         check_envmap(path, what="--envmap")
     envmaps = tuple(args.envmap) if args.envmap else tuple(default_envmaps())
+    specs = []
     for c in classes:
-        spec = CollectionSpec(
+        specs.append(CollectionSpec(
             shape_class=c, n_shapes=args.shapes, views_per_shape=args.views, resolution=args.resolution,
             formation=args.formation, renderer=args.renderer, filter=args.filter, views=args.view_dist,
             elevation=args.elevation, lighting=args.lighting,
             envmaps=envmaps if (args.formation == "physical" and args.lighting != "sunsky") else (),
             spp=args.spp, max_depth=args.max_depth, camera=args.camera, fov=args.fov,
-            distance=args.distance, seed=args.seed)
-        folder = out / c if len(classes) > 1 or args.class_subfolder else out
+            distance=args.distance, seed=args.seed))
+    specs[0].validate()
+    folders = [out / c if len(classes) > 1 or args.class_subfolder else out for c in classes]
+    done = 0 if args.overwrite else sum(recorded_images(folder) for folder in folders)   # a resume's images are there
+    check_collection_fits(specs[0], out, classes=len(specs), names=("--shapes", "--views"), done=done)
+    for c, spec, folder in zip(classes, specs, folders):
         manifest = make_collection(folder, spec, overwrite=args.overwrite, progress=not args.quiet)
         print(f"{c}: {spec.n_shapes * spec.views_per_shape} images in {folder} (manifest: {manifest})")
     return 0
@@ -123,7 +128,7 @@ def add_make_dataset(sub: "argparse._SubParsersAction") -> None:
                    help="perspective: full field of view in degrees (default: %(default)s)")
     p.add_argument("--distance", type=positive_float, default=None,
                    help="perspective: camera distance from the centre, > 1 (default: 1 / tan(fov/2))")
-    p.add_argument("--seed", type=non_negative_int, default=0, help="master seed (default: %(default)s)")
+    p.add_argument("--seed", type=seed, default=0, help="master seed (default: %(default)s)")
     p.add_argument("--out", default="data", help="output folder (default: %(default)s/)")
     p.add_argument("--class-subfolder", action="store_true",
                    help="write one class into OUT/CLASS (always done for several classes)")

@@ -15,7 +15,7 @@ from typing import List
 
 from ..errors import Interrupted
 from ..fileio import confined
-from .args import non_negative_int, positive_int
+from .args import CLIError, positive_int, seed
 
 __all__ = ["add_reconstruct", "add_generate"]
 
@@ -31,6 +31,9 @@ def _cmd_reconstruct(args: argparse.Namespace) -> int:
     from ..export import export_reconstructions
     from ..model import Model
 
+    if not 0.0 < args.level < 1.0:                           # a density level: before the model is read
+        raise CLIError(f"--level: expected the mesh's iso-level, a density between 0 and 1 (exclusive), got "
+                       f"{args.level:g}")
     model = Model.from_checkpoint(args.run)
     out = Path(args.out) if args.out else Path(args.run) / "reconstructions"
     written: List[Path] = []
@@ -81,7 +84,8 @@ def _cmd_generate(args: argparse.Namespace) -> int:
     written: List[Path] = []
     try:
         with confined(out):                                  # nothing written or deleted through a link --out holds
-            export_samples(model, args.n, out, seed=args.seed, overwrite=args.overwrite, written=written)
+            export_samples(model, args.n, out, seed=args.seed, overwrite=args.overwrite, written=written,
+                           progress=not args.quiet)
     except KeyboardInterrupt:
         samples = len({p.stem for p in written if p.name.startswith("sample_")})
         raise _interrupted_export("generate", written, out, f"{samples} of {args.n} sample(s) begun, "
@@ -97,8 +101,9 @@ def add_generate(sub: "argparse._SubParsersAction") -> None:
                                    "is refused unless --overwrite, which deletes them first.")
     p.add_argument("--run", required=True, help="a run folder")
     p.add_argument("-n", type=positive_int, default=16, help="number of samples (default: %(default)s)")
-    p.add_argument("--seed", type=non_negative_int, default=0)
+    p.add_argument("--seed", type=seed, default=0)
     p.add_argument("--out", default=None, help="output folder (default: RUN/generated)")
     p.add_argument("--overwrite", action="store_true",
                    help="delete an earlier call's sample_* files and samples.png in --out first")
+    p.add_argument("--quiet", action="store_true", help="no progress lines")
     p.set_defaults(handler=_cmd_generate, interrupted="nothing was written; run the same command again")

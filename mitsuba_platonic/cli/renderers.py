@@ -18,7 +18,7 @@ from typing import TYPE_CHECKING, Any, Dict, List
 
 from ..fileio import confined
 from ..outputs import MARKER, claim_output_folder
-from .args import CLIError, check_out_folder, non_negative_int, parse_models, positive_float, positive_int, resolution
+from .args import CLIError, check_out_folder, parse_models, positive_float, positive_int, resolution, seed
 
 if TYPE_CHECKING:
     import torch
@@ -138,7 +138,7 @@ def _compare_into(args: argparse.Namespace, volume: "torch.Tensor", views: "torc
     from ..compare import compare, format_table, write_summary
 
     results = compare(volume, views, models, filter=args.filter, options=options, out_dir=out,
-                      repeats=args.repeats)
+                      repeats=args.repeats, progress=not args.quiet)
 
     n = volume.shape[-1]
     print(f"closed form vs Mitsuba: {args.volume} at {n}³, {len(views)} view(s), filter={args.filter}, "
@@ -197,10 +197,11 @@ def add_compare(sub: "argparse._SubParsersAction") -> None:
     p.add_argument("--overwrite", action="store_true",
                    help="write into an --out that holds files compare did not write, replacing those of its names "
                         "(compare.json, compare_*.png, mitsuba_*.exr, compare_light.*)")
-    p.add_argument("--seed", type=non_negative_int, default=0,
+    p.add_argument("--seed", type=seed, default=0,
                    help="seed of the random views and of Mitsuba's sampler (default: %(default)s)")
     p.add_argument("--repeats", type=positive_int, default=3,
                    help="timed runs per backend after one warm-up; the best counts (default: %(default)s)")
+    p.add_argument("--quiet", action="store_true", help="no progress lines")
     p.set_defaults(handler=_cmd_compare,
                    interrupted="the files already in --out are whole, compare.json (written last) is missing; "
                                "run the same command again")
@@ -259,7 +260,7 @@ def add_bench(sub: "argparse._SubParsersAction") -> None:
     p.add_argument("--models", default="vh,ao,ea", help="comma-separated models (default: %(default)s)")
     p.add_argument("--volume", choices=tuple(TEST_VOLUMES), default="figure",
                    help="built-in test volume (default: %(default)s)")
-    p.add_argument("--seed", type=non_negative_int, default=0,
+    p.add_argument("--seed", type=seed, default=0,
                    help="seed of the views, the loss weights and the path tracer (default: %(default)s)")
     p.add_argument("--physical-ref-spp", type=positive_int, default=32,
                    help="spp of the path tracer's own reference (default: %(default)s)")

@@ -30,6 +30,7 @@ from typing import Any, Callable, Dict, List, Optional, Tuple, Union
 import numpy as np
 import torch
 
+from .. import budget
 from ..errors import Interrupted, UserError, raise_if_ctrl_c
 from ..fileio import atomic_write, confined, make_folder, open_file, remove
 from ..images import save_exr, save_png, to_hwc, to_png_rgba
@@ -44,8 +45,83 @@ from .collection_files import (RECORDS, SUBFOLDERS, image_id, is_finished, load_
 from .collection_spec import FORMATIONS, RENDERERS, CollectionSpec
 from .envmaps import check_envmap, default_envmaps
 
-__all__ = ["CollectionSpec", "make_collection", "load_manifest", "FORMATIONS", "RENDERERS",
+__all__ = ["CollectionSpec", "make_collection", "check_collection_fits", "collection_needs", "recorded_images", "load_manifest", "FORMATIONS", "RENDERERS",
            "default_envmaps", "check_envmap", "image_id", "SUBFOLDERS", "RECORDS"]
+
+
+#: Views of one shape rendered in one batch: a shape's views are rendered a chunk at a time, so
+#: that memory does not grow with ``--views`` (and the first images come within seconds).
+VIEW_CHUNK = 64
+#: A progress line at least this often (seconds) where output is a log, besides every tenth.
+PROGRESS_SECONDS = 30.0
+#: Lower bounds of what a collection takes, per image: memory for its record (a dict, held until the
+#: manifest is written: measured about 0.9 KB) and disk for its record line, manifest entry, PNG and
+#: EXR (about 450 bytes and ≥ 1 byte per pixel measured at 64²; the EXR alone is 2.5 to 4.5 bytes per
+#: pixel); per shape the ``.vol`` file exactly (4 float32 channels per voxel and a 48-byte header).
+RECORD_MEMORY, RECORD_DISK, IMAGE_DISK_PER_PIXEL, VOL_HEADER = 600, 300, 1, 48
+
+
+def collection_needs(spec: CollectionSpec) -> Tuple[int, int]:
+    """(memory, disk) a collection of ``spec`` needs at least, in bytes (lower bounds: what its
+    records hold and its ``.vol`` files and images take)."""
+    images = spec.n_shapes * spec.views_per_shape
+    memory = images * RECORD_MEMORY
+    disk = (images * (RECORD_DISK + IMAGE_DISK_PER_PIXEL * spec.resolution ** 2)
+            + spec.n_shapes * (16 * spec.resolution ** 3 + VOL_HEADER))
+    return memory, disk
+
+
+def recorded_images(folder: Union[str, Path]) -> int:
+    """How many images a (half-written) collection in ``folder`` has recorded: the lines of its
+    ``records.jsonl`` (0 where there is none), read in blocks."""
+    lines = 0
+    try:
+        with open(Path(folder) / "records.jsonl", "rb") as f:
+            for block in iter(lambda: f.read(1 << 20), b""):
+                lines += block.count(b"\n")
+    except OSError:
+        return 0
+    return lines
+
+
+def check_collection_fits(spec: CollectionSpec, out: Union[str, Path], classes: int = 1,
+                          names: Tuple[str, str] = ("n_shapes", "views_per_shape"), done: int = 0) -> None:
+    """:class:`~mitsuba_platonic.errors.UserError` in one line, before anything is written, where
+    ``classes`` collections of ``spec``'s size cannot fit: their records in the memory available, or
+    their files on the disk of ``out`` (less the ``done`` images already there, a resumed collection's);
+    it names the sizes by ``names`` (``--shapes``, ``--views`` on the command line; the spec's fields
+    by default) and says how many images would fit."""
+    memory, disk = collection_needs(spec)
+    size = f"{names[0]} {spec.n_shapes} {names[1]} {spec.views_per_shape}"
+    both = f"{names[0]} × {names[1]}"
+    images = spec.n_shapes * spec.views_per_shape
+    per_class = " per class" if classes > 1 else ""
+    have = budget.available_memory()                 # one class at a time: its records are held until its manifest
+    if have[0] is not None:
+        budget.check_fits(memory, have, f"{size}: holding the records of {images} images",
+                          f"at most about {max(have[0], 0) // RECORD_MEMORY} images ({both}) fit")
+    have = budget.free_disk(out)
+    if have[0] is not None:
+        per_image = disk / max(images, 1)
+        every = f" for {classes} classes" if classes > 1 else ""
+        budget.check_fits(int(disk * classes - per_image * min(done, images * classes)), have, f"{size}{every}: writing {images * classes} images of "
+                          f"{spec.resolution}² and their volumes",
+                          f"at most about {int(max(have[0], 0) // per_image // classes)} images{per_class} "
+                          f"({both}) fit; lower them, or write elsewhere{' (--out)' if names[0].startswith('--') else ''}",
+                          resource="disk space")
+
+
+def _finished(records: Dict[str, Dict[str, Any]], n: int, K: int, done: Callable[[int, int], bool]) -> int:
+    """How many images of an ``n`` × ``K`` collection are done, from its records (not a loop over
+    every image: a large collection's first line comes at once)."""
+    count = 0
+    for iid in records:
+        try:
+            i, k = (int(part) for part in iid.split("_"))
+        except ValueError:
+            continue
+        count += i < n and k < K and done(i, k)
+    return count
 
 
 def make_collection(out: Union[str, Path], spec: CollectionSpec, overwrite: bool = False,
@@ -70,6 +146,7 @@ def make_collection(out: Union[str, Path], spec: CollectionSpec, overwrite: bool
 
 def _finish_collection(out: Path, spec: CollectionSpec, overwrite: bool, progress: bool) -> Path:
     """:func:`make_collection` in the confined folder ``out``."""
+    check_collection_fits(spec, out, done=0 if overwrite else recorded_images(out))   # before the lock or a folder
     if overwrite:
         overwrite_plan(out)                          # refuse before writing anything (again under the lock)
     manifest_file = out / "manifest.json"
@@ -109,15 +186,16 @@ def _make_collection(out: Path, spec: CollectionSpec, overwrite: bool, progress:
                 and (out / "exr" / f"{iid}.exr").exists())
 
     total = n * K
-    finished = sum(done(i, k) for i in range(n) for k in range(K))
+    finished = _finished(records, n, K, done)
     bar = progress_bar(total, initial=finished, disable=not progress, unit="img",
-                       desc=f"{spec.shape_class} {spec.formation}")
+                       desc=f"{spec.shape_class} {spec.formation}", first_line=finished < total,
+                       seconds=PROGRESS_SECONDS)
     t0 = time.perf_counter()
     try:
         _render_pending(out, spec, records, records_file, done, bar)
     except KeyboardInterrupt as e:                   # Ctrl-C: what is on disk is whole (atomic writes)
         bar.close()
-        saved = (f"{sum(done(i, k) for i in range(n) for k in range(K))} of {total} images of the collection "
+        saved = (f"{_finished(records, n, K, done)} of {total} images of the collection "
                  f"in {out} are saved")
         raise Interrupted(f"{saved}; run the same command again to render the rest", saved=saved) from e
     bar.close()
@@ -148,41 +226,53 @@ def _render_pending(out: Path, spec: CollectionSpec, records: Dict[str, Dict[str
                 log.write("\n")
         for i in range(n):
             raise_if_ctrl_c()                        # a Ctrl-C a library swallowed in the shape before
-            pending = [k for k in range(K) if not done(i, k)]
-            if not pending and all((out / "volumes" / f"{i:05d}{ext}").exists() for ext in (".npz", ".vol")):
-                continue
-            vol = shapes.generate(spec.shape_class, spec.shape_seed(i), spec.resolution)
-            _write_volume(out / "volumes", i, spec, vol)
-            if not pending:
-                continue
-            views = torch.stack([spec.view(i, k) for k in pending])
-            lights = [spec.lighting_of(i, k) for k in pending] if spec.formation == "physical" else None
-            images, exposures = _render_shape(spec, vol, views, lights)
-            for j, k in enumerate(pending):
-                iid = image_id(i, k)
-                img = to_hwc(images[j])
-                atomic_write(out / "exr" / f"{iid}.exr", lambda p: save_exr(p, img))
-                atomic_write(out / "images" / f"{iid}.png", lambda p: save_png(p, to_png_rgba(img)))
-                record = {"id": iid, "image": f"images/{iid}.png", "exr": f"exr/{iid}.exr",
-                          "shape": i, "shape_seed": spec.shape_seed(i), "volume": f"volumes/{i:05d}.npz",
-                          "view": [float(x) for x in views[j]]}
-                if lights is not None:
-                    record["lighting"] = lights[j].to_dict()
-                    record["exposure"] = exposures[j]
-                log.write(json.dumps(record) + "\n")
-                log.flush()
-                os.fsync(log.fileno())
-                records[iid] = record
-            bar.update(len(pending))
+            vol = None
+            for first in range(0, K, VIEW_CHUNK):    # a chunk of views at a time: memory stays bounded
+                pending = [k for k in range(first, min(K, first + VIEW_CHUNK)) if not done(i, k)]
+                if not pending:
+                    continue
+                if vol is None:
+                    vol = shapes.generate(spec.shape_class, spec.shape_seed(i), spec.resolution)
+                    _write_volume(out / "volumes", i, spec, vol)
+                _render_views(out, spec, i, vol, pending, records, log, seed_offset=first)
+                bar.update(len(pending))
+                raise_if_ctrl_c()
+            if vol is None and not all((out / "volumes" / f"{i:05d}{ext}").exists() for ext in (".npz", ".vol")):
+                _write_volume(out / "volumes", i, spec,
+                              shapes.generate(spec.shape_class, spec.shape_seed(i), spec.resolution))
+
+
+def _render_views(out: Path, spec: CollectionSpec, i: int, vol: torch.Tensor, pending: List[int],
+                  records: Dict[str, Dict[str, Any]], log: Any, seed_offset: int = 0) -> None:
+    """Render views ``pending`` of shape ``i`` and write their images, EXRs and record lines
+    (``seed_offset``: the chunk's first view, so that chunks do not repeat the path tracer's seeds)."""
+    views = torch.stack([spec.view(i, k) for k in pending])
+    lights = [spec.lighting_of(i, k) for k in pending] if spec.formation == "physical" else None
+    images, exposures = _render_shape(spec, vol, views, lights, seed_offset)
+    for j, k in enumerate(pending):
+        iid = image_id(i, k)
+        img = to_hwc(images[j])
+        atomic_write(out / "exr" / f"{iid}.exr", lambda p: save_exr(p, img))
+        atomic_write(out / "images" / f"{iid}.png", lambda p: save_png(p, to_png_rgba(img)))
+        record = {"id": iid, "image": f"images/{iid}.png", "exr": f"exr/{iid}.exr",
+                  "shape": i, "shape_seed": spec.shape_seed(i), "volume": f"volumes/{i:05d}.npz",
+                  "view": [float(x) for x in views[j]]}
+        if lights is not None:
+            record["lighting"] = lights[j].to_dict()
+            record["exposure"] = exposures[j]
+        log.write(json.dumps(record) + "\n")
+        log.flush()
+        os.fsync(log.fileno())
+        records[iid] = record
 
 
 def _render_shape(spec: CollectionSpec, vol: torch.Tensor, views: torch.Tensor,
-                  lights: Optional[list]) -> Tuple[torch.Tensor, List[float]]:
+                  lights: Optional[list], seed_offset: int = 0) -> Tuple[torch.Tensor, List[float]]:
     """Render one shape from several views → ``(K, C, N, N)`` linear premultiplied, exposures."""
     if spec.formation == "physical":
         batch = vol[None].expand(len(views), -1, -1, -1, -1)
         return render_physical(batch, views, lights, spp=spec.spp, max_depth=spec.max_depth,
-                               seed=spec.seed, filter=spec.filter, exposure=spec.exposure)
+                               seed=spec.seed + seed_offset, filter=spec.filter, exposure=spec.exposure)
     v = vol if CHANNELS[spec.formation] == 4 else vol[3:]
     with torch.no_grad():
         images = render(v[None].expand(len(views), -1, -1, -1, -1).contiguous(), views,

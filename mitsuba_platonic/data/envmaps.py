@@ -12,6 +12,8 @@ from __future__ import annotations
 from pathlib import Path
 from typing import Dict, List, Tuple, Union
 
+import numpy as np
+
 from ..errors import UserError
 from ..images import exr_channel_names
 from ..render.sky import ENVMAPS, baked_envmaps
@@ -57,28 +59,49 @@ def check_envmap(path: Union[str, Path], what: str = "environment map") -> None:
     if not ({"R", "G", "B"} <= set(channels) or "Y" in channels):
         raise UserError(f"{what} {str(path)!r} has no colour channels (R, G, B or Y), only "
                         f"{', '.join(channels) or 'none'}; {expected}")
-    problem = _unreadable_pixels(p)
-    if problem:
+    damaged, values = _pixel_problems(p)
+    if damaged:
         raise UserError(f"{what} {str(path)!r} is truncated or damaged: its pixels cannot be read in full "
-                        f"({problem}); {expected}")
+                        f"({damaged}); {expected}")
+    if values:
+        raise UserError(f"{what} {str(path)!r} cannot light a scene: {values}; expected finite radiance ≥ 0 "
+                        f"with some light (a lat-long map like scenes/envmaps/*.exr)")
 
 
-#: Files whose pixels :func:`_unreadable_pixels` read in full: (path, size, mtime) → the problem or ''.
-_READ_PIXELS: Dict[Tuple[str, int, int], str] = {}
+#: Files whose pixels :func:`_pixel_problems` read in full: (path, size, mtime) → its problems.
+_READ_PIXELS: Dict[Tuple[str, int, int], Tuple[str, str]] = {}
 
 
-def _unreadable_pixels(path: Path) -> str:
+def _pixel_problems(path: Path) -> Tuple[str, str]:
     """Read every pixel of the EXR ``path`` with Mitsuba's own loader on this thread, where a
     damaged file raises (when the ``envmap`` emitter reads it while a scene loads, on a worker
-    thread, a truncated file aborts the process). Returns what is wrong, '' if nothing."""
+    thread, a truncated file aborts the process). Returns (why the pixels cannot be read, what is
+    wrong with their values: NaN or Inf, negative, or no light at all), '' for each that is fine."""
 
     stat = path.stat()
     key = (str(path.resolve()), stat.st_size, stat.st_mtime_ns)
     if key not in _READ_PIXELS:
         mi = ensure_variant()
         try:
-            mi.Bitmap(str(path))
-            _READ_PIXELS[key] = ""
+            bitmap = mi.Bitmap(str(path))
         except Exception as e:                               # Mitsuba raises RuntimeError with the reader's words
-            _READ_PIXELS[key] = " ".join(str(e).replace(f'"{path}": ', "").split())
+            _READ_PIXELS[key] = (" ".join(str(e).replace(f'"{path}": ', "").split()), "")
+        else:
+            _READ_PIXELS[key] = ("", _value_problem(np.array(bitmap, dtype=np.float64)))
     return _READ_PIXELS[key]
+
+
+def _value_problem(pixels: np.ndarray) -> str:
+    """What makes radiance ``pixels`` (H, W, C) unusable as a light, '' if nothing."""
+    colour = pixels[..., :3] if pixels.ndim == 3 and pixels.shape[-1] >= 3 else pixels
+    finite = np.isfinite(colour)
+    if not finite.all():
+        bad = np.argwhere(~finite)[0]
+        kind = "NaN" if np.isnan(colour).any() else "Inf"
+        return (f"{int((~finite).sum())} pixel value(s) are NaN or Inf ({kind} at row {int(bad[0])}, column "
+                f"{int(bad[1]) if len(bad) > 1 else 0})")
+    if (colour < 0).any():
+        return f"{int((colour < 0).sum())} pixel value(s) are negative (as low as {float(colour.min()):.3g})"
+    if not (colour > 0).any():
+        return "every pixel is black (0): it gives no light"
+    return ""

@@ -22,7 +22,8 @@ from .augment import AUGMENTS, PHOTO_AUGMENTS
 from .losses import LOSSES
 from .roll import ROLLS
 
-__all__ = ["TrainConfig", "TASKS", "MODES", "MODES_3D", "REC_TARGETS", "REC_LOSSES", "REC_CHANNELS", "POSES", "LIGHTS", "PRGAN"]
+__all__ = ["TrainConfig", "TASKS", "MODES", "MODES_3D", "REC_TARGETS", "REC_LOSSES", "REC_CHANNELS", "POSES", "LIGHTS", "PRGAN",
+           "LOSS_WEIGHTS"]
 
 #: What E/G learn: reconstruct the input image, or generate from z ~ N(0, I).
 TASKS = ("reconstruction", "generation")
@@ -44,6 +45,9 @@ REC_CHANNELS = ("all", "alpha")
 POSES = ("input", "elevation")
 #: train.light: where the light of the input view's render comes from
 LIGHTS = ("prior", "head")
+#: The weights of the loss terms: each ≥ 0 (0: the term is off), checked by name.
+LOSS_WEIGHTS = ("gp_weight", "rec_weight", "adv_input", "weight_3d", "pose_weight", "r1_weight", "colour_tv",
+                "colour_match", "colour_offset", "depth_spread")
 #: How messages name ``train.mode: prgan``.
 PRGAN = "the PrGAN-style baseline ('prgan')"
 
@@ -179,7 +183,8 @@ class TrainConfig:
                               "camera's frame, so it needs train.task 'reconstruction' and a 2D critic "
                               f"(not mode 'gan3d'), got task {self.task!r}, mode {self.mode!r}")
         choice("train.pose", self.pose, POSES)
-        non_negative("train.pose_weight", self.pose_weight)
+        for key in LOSS_WEIGHTS:                             # a negative weight turns a loss into a reward
+            non_negative(f"train.{key}", getattr(self, key))
         if self.pose == "elevation":
             if self.task != "reconstruction" or self.mode != "platonic":
                 raise ConfigError("train.pose: 'elevation' reads the input camera's elevation from the photo, so it "
@@ -197,15 +202,10 @@ class TrainConfig:
                 raise ConfigError(f"train.{key}: expected a positive learning rate, got {getattr(self, key)!r}")
         if len(self.betas) != 2 or not all(0.0 <= b < 1.0 for b in self.betas):
             raise ConfigError(f"train.betas: expected two numbers in [0, 1), got {self.betas!r}")
-        non_negative("train.r1_weight", self.r1_weight)
         positive("train.r1_every", self.r1_every)
         if self.r1_weight > 0 and self.loss != "nonsaturating":
             raise ConfigError("train.r1_weight: the R1 penalty is for the non-saturating loss; "
                               f"train.loss {self.loss!r} has its own (train.gp_weight)")
-        non_negative("train.colour_tv", self.colour_tv)
-        non_negative("train.colour_match", self.colour_match)
-        non_negative("train.colour_offset", self.colour_offset)
-        non_negative("train.depth_spread", self.depth_spread)
         if self.colour_match > 0 and (self.task != "reconstruction" or self.mode != "platonic"):
             raise ConfigError("train.colour_match: the random views answer to the input photo's colour, so it needs "
                               f"train.task 'reconstruction' and mode 'platonic', got task {self.task!r}, mode {self.mode!r}")
@@ -249,7 +249,6 @@ class TrainConfig:
                               "the image term compares its colour; it needs train.task 'reconstruction', mode "
                               f"'platonic', rec_target 'image' and rec_channels 'all', got task {self.task!r}, mode "
                               f"{self.mode!r}, rec_target {self.rec_target!r}, rec_channels {self.rec_channels!r}")
-        non_negative("train.adv_input", self.adv_input)
         if self.adv_input > 0 and (self.task != "reconstruction" or self.mode != "platonic"
                                    or self.rec_target != "image" or self.d_roll != "none"):
             raise ConfigError("train.adv_input: D judges the render of the input view, so it needs train.task "

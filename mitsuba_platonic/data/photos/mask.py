@@ -29,7 +29,7 @@ in every format and is only scaled, ``α = a / (2^bits − 1)``.
   ``erode=k`` shrinks the mask by ``k`` source pixels (a minimum filter), which trims a rim
   of background that a cut-out carries along its outline (off by default).
 - Otherwise (no transparency, ``background=None``) the file is rejected as ``no_alpha`` with
-  a message that says to pass ``background="white"``. A training collection needs masks,
+  a message that says to set ``data.background: white`` (``--background white`` for ``reconstruct``). A training collection needs masks,
   and a fully opaque photo would teach the networks a square silhouette.
 - A mask that is empty (alpha 0 everywhere, nothing but white, or nothing left after
   cleaning) is rejected as ``fully_transparent``.
@@ -210,6 +210,7 @@ def premultiplied_linear(decoded: DecodedImage, *, background: Optional[str] = N
     else:
         what = ("an alpha channel that is opaque everywhere" if decoded.has_alpha
                 else "no alpha channel")
-        raise ImageRejected("no_alpha", f"{name}: has {what}, so there is no mask; pass "
-                                        f"background='white' to mask a white background")
+        raise ImageRejected("no_alpha", f"{name}: has {what}, so there is no mask; to mask a white background "
+                                        f"set data.background: white (--set data.background=white), or pass "
+                                        f"--background white to reconstruct")
     return np.concatenate([rgb, alpha[..., None]], axis=2)

@@ -23,7 +23,7 @@ REASONS: Dict[str, str] = {
     "corrupt": "a corrupt or truncated image",
     "too_large": "an image larger than Pillow's decompression-bomb limit",
     "unreadable": "a file that could not be read (permissions, I/O error)",
-    "no_alpha": "an image without transparency, loaded without background='white'",
+    "no_alpha": "an image without transparency, loaded without data.background: white (--background white)",
     "fully_transparent": "an image whose mask is empty (alpha 0 everywhere, or all white)",
     "extreme_aspect": "an image (with crop='bbox': its object) whose longer side is more than "
                       "8 times its shorter side (MAX_ASPECT)",
