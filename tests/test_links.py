@@ -299,7 +299,7 @@ def test_generate_overwrite_removes_a_linked_sample_itself_never_its_target(tmp_
 
     from mitsuba_platonic.export import export_samples
 
-    model = SimpleNamespace(generate=lambda n, seed: torch.rand(n, 4, 8, 8, 8), formation="ea")
+    model = SimpleNamespace(generate=lambda n, seed: torch.rand(n, 4, 8, 8, 8), formation="ea", channels=4, resolution=8)
     out = tmp_path / "gen"
     out.mkdir()
     target = _outside(tmp_path, "file")
