@@ -19,14 +19,11 @@ from mitsuba_platonic.config import load_config
 from mitsuba_platonic.pickle_scan import foreign_objects, pickled_globals
 from mitsuba_platonic.train import run as R
 from cli_runner import one_line, run_cli
-from tiny_shapes import TINY
+from tiny_shapes import tiny_run_overrides
 
 
 def _overrides(out: Path, data: Path):
-    return [f"run.out_dir={out}", "run.name=r", "run.steps=4", "run.log_every=1", "run.sample_every=100000",
-            "run.checkpoint_every=2", f"data.cache={data}", f"data.shape_class={TINY}", "data.n_shapes=2",
-            "data.views_per_shape=1", "model.resolution=16", "model.width=4", "model.latent=8",
-            "train.batch_size=2"]
+    return tiny_run_overrides(out, data, "run.steps=4")
 
 
 @pytest.fixture(scope="module")

@@ -17,7 +17,7 @@ from mitsuba_platonic.config import load_config
 from mitsuba_platonic.errors import Interrupted
 from mitsuba_platonic.train import run as R
 from cli_runner import one_line, run_cli
-from tiny_shapes import TINY
+from tiny_shapes import tiny_run_overrides
 
 
 def _interrupted_line(stderr: str, command: str) -> str:
@@ -109,10 +109,7 @@ def test_the_quickstart_stops_when_training_is_interrupted(tmp_path, monkeypatch
 
 
 def _overrides(out: Path, data: Path, *extra):
-    return [f"run.out_dir={out}", "run.name=r", "run.steps=2", "run.log_every=1", "run.sample_every=100000",
-            "run.checkpoint_every=2", f"data.cache={data}", f"data.shape_class={TINY}", "data.n_shapes=2",
-            "data.views_per_shape=1", "model.resolution=16", "model.width=4", "model.latent=8",
-            "train.batch_size=2", *extra]
+    return tiny_run_overrides(out, data, *extra)
 
 
 @pytest.fixture(scope="module")

@@ -16,7 +16,7 @@ from mitsuba_platonic import fileio
 from mitsuba_platonic.config import load_config
 from mitsuba_platonic.train import run as R
 from cli_runner import one_line, run_cli, set_flags
-from tiny_shapes import TINY
+from tiny_shapes import TINY, tiny_run_overrides
 
 
 def _snapshot(path: Path):
@@ -99,10 +99,7 @@ def test_outside_a_confined_folder_nothing_is_checked(tmp_path):
 
 
 def _overrides(out: Path, data: Path, *extra):
-    return [f"run.out_dir={out}", "run.name=r", "run.steps=2", "run.log_every=1", "run.sample_every=1",
-            "run.checkpoint_every=1", "run.keep_checkpoints=1", f"data.cache={data}", f"data.shape_class={TINY}",
-            "data.n_shapes=2", "data.views_per_shape=1", "model.resolution=16", "model.width=4", "model.latent=8",
-            "train.batch_size=2", *extra]
+    return tiny_run_overrides(out, data, "run.sample_every=1", "run.checkpoint_every=1", "run.keep_checkpoints=1", *extra)
 
 
 @pytest.fixture(scope="module")

@@ -14,7 +14,7 @@ from mitsuba_platonic.config import ConfigError, load_config
 from mitsuba_platonic.train import run as R
 from mitsuba_platonic.train.fits import batch_bytes, check_batch_fits
 from cli_runner import one_line, run_cli
-from tiny_shapes import TINY
+from tiny_shapes import TINY, tiny_run_overrides
 
 pytestmark = pytest.mark.usefixtures("tiny_class")
 
@@ -58,10 +58,7 @@ def test_the_batch_estimate_grows_with_the_batch_and_a_default_batch_fits(monkey
 
 
 def _overrides(out: Path, data: Path):
-    return [f"run.out_dir={out}", "run.name=r", "run.steps=2", "run.log_every=1", "run.sample_every=100000",
-            "run.checkpoint_every=2", f"data.cache={data}", f"data.shape_class={TINY}", "data.n_shapes=2",
-            "data.views_per_shape=1", "model.resolution=16", "model.width=4", "model.latent=8",
-            "train.batch_size=2"]
+    return tiny_run_overrides(out, data)
 
 
 @pytest.fixture(scope="module")

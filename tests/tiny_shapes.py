@@ -20,3 +20,12 @@ def ellipsoid(rng, n: int) -> torch.Tensor:
 
 #: The class name :func:`ellipsoid` is registered under while a module uses the ``tiny_class`` fixture.
 TINY = "tiny_ellipsoid"
+
+
+def tiny_run_overrides(out, data, *extra: str) -> list:
+    """``--set`` overrides of a tiny reconstruction run ``out/r`` on two :data:`TINY` shapes cached in
+    ``data`` (16³, 2 steps, a checkpoint at step 2); ``extra`` overrides come last and win."""
+    return [f"run.out_dir={out}", "run.name=r", "run.steps=2", "run.log_every=1", "run.sample_every=100000",
+            "run.checkpoint_every=2", f"data.cache={data}", f"data.shape_class={TINY}", "data.n_shapes=2",
+            "data.views_per_shape=1", "model.resolution=16", "model.width=4", "model.latent=8",
+            "train.batch_size=2", *extra]
