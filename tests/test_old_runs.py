@@ -74,3 +74,21 @@ def test_a_run_saved_with_retired_options_off_loads_and_one_with_an_option_on_na
     run_dir, _ = _old_run(tmp_path / "on", retired={("model", "texture_blur"): 2.0})
     with pytest.raises(RunError, match=r"model\.texture_blur: 2\.0 was tried and retired .*commit 3afe14f"):
         Model.from_checkpoint(run_dir)
+
+
+def test_a_run_folders_config_yaml_with_retired_options_off_reads_and_with_one_on_names_its_commit(tmp_path):
+    """``RUN/config.yaml`` as a run of the versions before issue 44 wrote it (every key, the retired
+    ones at their off value) reads back as the config without them; one with ``train.adv_input: 1``
+    is refused naming the commit that has its code."""
+    import yaml
+    from mitsuba_platonic.train.folder import read_run_config
+    saved = Config().to_dict()
+    for (section, key), (off, _) in RETIRED.items():
+        saved[section][key] = off
+    path = tmp_path / "config.yaml"
+    path.write_text(yaml.safe_dump(saved))
+    assert read_run_config(path).to_dict() == Config().to_dict()
+    saved["train"]["adv_input"] = 1.0
+    path.write_text(yaml.safe_dump(saved))
+    with pytest.raises(RunError, match=r"train\.adv_input: 1\.0 was tried and retired .*commit 3afe14f"):
+        read_run_config(path)
