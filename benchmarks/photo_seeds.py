@@ -1,4 +1,4 @@
-"""Benchmark: the real-photo judge's figures over seeds, per config (the table of docs/training.md, "Real photos").
+"""Benchmark: the real-photo judge's figures over seeds, per config (the table of docs/experiments/photos.md).
 
     .venv/bin/python benchmarks/photo_seeds.py LABEL=EVAL_DIR[,EVAL_DIR...] [LABEL=...]
 

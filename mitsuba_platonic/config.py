@@ -79,17 +79,10 @@ class Config:
         except ValueError as e:
             raise ConfigError(f"render.{e}") from None
         self.train.validate()
-        if (self.train.light_warmup or self.train.light_fade) and self.render.backend not in LIT:
-            raise ConfigError(f"train.light_warmup, train.light_fade: they enter a lit renderer through "
-                              f"emission–absorption; expected render.backend one of {list(LIT)}, got "
-                              f"{self.render.backend!r}")
         if self.train.light == "head":
             if self.render.backend not in SINGLE_SCATTERING:
                 raise ConfigError(f"train.light: 'head' reads a sun and a sky, the light of single scattering; "
                                   f"expected render.backend one of {list(SINGLE_SCATTERING)}, got {self.render.backend!r}")
-            if self.train.light_warmup or self.train.light_fade:
-                raise ConfigError("train.light: 'head' renders the input view under the photo's light, which an "
-                                  "emissive start (train.light_warmup, train.light_fade) does not have; expected both 0")
         if self.train.colour_tv > 0 and self.render.model != "ea":
             raise ConfigError(f"train.colour_tv: colour needs render.model 'ea', got {self.render.model!r}")
         if self.model.photo_texture and self.render.camera != "orthographic":

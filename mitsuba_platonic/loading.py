@@ -3,10 +3,12 @@
 The checkpoint file format (:mod:`mitsuba_platonic.checkpoint`) stores and returns plain data, the
 config as the mapping ``Config.to_dict()`` wrote; this module sits above it, the config and the
 model, and builds them from it. Old run folders load as they did: a saved config that lacks keys
-added since gets their defaults, as a YAML file would.
+added since gets their defaults, as a YAML file would, and one that holds a retired option at the
+value that left it off (:data:`RETIRED`) loads without it; one that had it on names the commit that
+still has its code.
 
 :meth:`Model.from_checkpoint <mitsuba_platonic.model.Model.from_checkpoint>` is the public entry
-point; it hands its class to :func:`load_model`, so this module never imports the model's.
+point, one layer up; it hands its class to :func:`load_model`, so this module never imports the model's.
 """
 
 from __future__ import annotations
@@ -20,9 +22,35 @@ from .checkpoint import Checkpoint, RunError, load_weights, read_checkpoint, sav
 from .config import Config, ConfigError, config_from_dict
 
 __all__ = ["saved_config", "checkpoint_config", "config_difference", "RESUME_SECTIONS", "model_from_checkpoint",
-           "load_model"]
+           "load_model", "RETIRED", "without_retired"]
 
 M = TypeVar("M")
+
+#: Options tried, measured and not adopted, then removed from the config (issue 44): their value
+#: when off, and the last commit with their code (the experiment log, docs/experiments/, has each).
+RETIRED = {
+    ("model", "texture_surface"): (False, "3afe14f"),
+    ("model", "texture_sides"): (False, "3afe14f"),
+    ("model", "texture_blur"): (0.0, "3afe14f"),
+    ("train", "adv_input"): (0.0, "3afe14f"),
+    ("train", "light_warmup"): (0, "3afe14f"),
+    ("train", "light_fade"): (0, "3afe14f"),
+    ("train", "r1_every"): (1, "3afe14f"),
+}
+
+
+def without_retired(saved: Dict[str, Any]) -> Dict[str, Any]:
+    """A saved config (the mapping a run wrote) without the :data:`RETIRED` keys it holds at their off
+    value; :class:`ConfigError` naming the key and the commit to check out if one was on."""
+    out = {name: dict(section) if isinstance(section, dict) else section for name, section in saved.items()}
+    for (section, key), (off, commit) in RETIRED.items():
+        values = out.get(section)
+        if isinstance(values, dict) and key in values:
+            value = values.pop(key)
+            if value != off:
+                raise ConfigError(f"{section}.{key}: {value!r} was tried and retired (docs/experiments/); "
+                                  f"this run needs the code of commit {commit}")
+    return out
 
 
 def saved_config(state: Dict[str, Any], path: Path, run_name: Optional[str] = None) -> Config:
@@ -30,7 +58,7 @@ def saved_config(state: Dict[str, Any], path: Path, run_name: Optional[str] = No
     :class:`RunError` naming ``path`` if it is not a mapping of sections or not valid."""
     saved = saved_config_dict(state, path, run_name)
     try:
-        return config_from_dict(saved)
+        return config_from_dict(without_retired(saved))
     except ConfigError as e:
         raise RunError(f"{path}: the config saved in this checkpoint is not valid: {e}") from None
 

@@ -7,10 +7,11 @@ learnt. It is built from a config (a fresh model, which the trainer trains) or r
 checkpoint (:meth:`Model.from_checkpoint`, no training code involved), and it turns images into
 volumes (:meth:`Model.reconstruct`) or draws volumes from the prior (:meth:`Model.generate`).
 
-This module sits below the config and the checkpoint reader: a ``cfg`` argument is a
-:class:`~mitsuba_platonic.config.Config`, read by its sections' attributes, never imported here;
-reading a checkpoint is :mod:`mitsuba_platonic.loading`'s, and whether a config's networks fit
-in memory :mod:`mitsuba_platonic.train.fits`'.
+This module sits above the config and the checkpoint reader (:mod:`mitsuba_platonic.loading`,
+which it imports and which never imports it): a ``cfg`` argument is a
+:class:`~mitsuba_platonic.config.Config`, read by its sections' attributes; reading a checkpoint
+is :mod:`mitsuba_platonic.loading`'s, and whether a config's networks fit in memory
+:mod:`mitsuba_platonic.train.fits`'.
 
 A PrGAN-style model (``train.mode: prgan``) takes the view as part of its latent: G's input is
 z followed by a one-hot code of one of :data:`RING_VIEWS` views on a ring (:meth:`Model.code`).
@@ -21,11 +22,11 @@ A model trained with ``train.pose: elevation`` also has a pose head P (z → the
 elevation θ̂, :class:`~mitsuba_platonic.models.PoseHead`): its G builds the object upright, in
 an object frame, and :meth:`Model.reconstruct` turns that volume into the input camera's frame by
 θ̂ (:func:`~mitsuba_platonic.render.closed_form.tilt`), so every model's reconstructions live in
-the frame of their input view (docs/training.md, "An elevation read from the photo").
+the frame of their input view (docs/experiments/pose-elevation.md).
 
 A model trained with ``train.light: head`` has a light head L (z → the photo's sun direction
-and sky share, :class:`~mitsuba_platonic.models.LightHead`; docs/training.md, "A light read from
-the photo").
+and sky share, :class:`~mitsuba_platonic.models.LightHead`; docs/experiments/training-through-light.md,
+"A light read from the photo").
 
 Its state dict keys are the checkpoint's (``E.*``, ``G.*``, ``P.*``, ``L.*``): a checkpoint's ``nets``
 holds E, G (and P, L) under the same names, next to the critics D and D3 that only training needs.
@@ -42,6 +43,7 @@ from torch import nn
 
 from .data.photos import decode_image, prepare_image
 from .errors import UserError
+from .loading import load_model
 from .models import Encoder, Generator, LightHead, NetConfig, PoseHead, init_weights
 from .photo_colours import photo_volume
 from .render.closed_form import tilt
@@ -113,13 +115,9 @@ class Model(nn.Module):
         config is not valid or its weights do not fit that config's networks.
 
         The moving average of E's and G's weights is loaded when the run kept one (``train.ema``).
-        Reading is :func:`mitsuba_platonic.loading.load_model`'s (it validates the saved config, so
-        it sits above the config and this module); this is its entry point on the class.
+        Reading is :func:`mitsuba_platonic.loading.load_model`'s (it validates the saved config and
+        is handed this class); this is its entry point on the class.
         """
-        # loading sits above the model (the config it builds does): imported when a checkpoint is
-        # read, and handed this class, so it imports no model and there is no cycle
-        from .loading import load_model
-
         return load_model(cls, source, device)
 
     # -- what inference needs ---------------------------------------------------------------

@@ -1,7 +1,7 @@
 """The model section of a config (``model:``): the networks' sizes, arithmetic and how they start.
 
 :class:`ModelConfig` is the section's dataclass, beside the networks it configures
-(:mod:`mitsuba_platonic.models`). Eight of its keys (:data:`NET_KEYS`) are the networks' own settings
+(:mod:`mitsuba_platonic.models`). Ten of its keys (:data:`NET_KEYS`) are the networks' own settings
 (their shapes and arithmetic), :class:`~mitsuba_platonic.models.NetConfig`'s fields of the same names;
 :meth:`ModelConfig.net_config` hands them over, with what the other sections decide (the
 image formation's channels, the PrGAN view code, the pose head), so the two never disagree.
@@ -22,7 +22,7 @@ __all__ = ["ModelConfig", "NET_KEYS"]
 
 #: The model keys that :class:`~mitsuba_platonic.models.NetConfig` takes as they are.
 NET_KEYS = ("resolution", "latent", "width", "norm", "encoder_hidden", "upsample", "precision", "photo_colour",
-            "photo_texture", "texture_surface", "texture_sides", "texture_blur", "texture_conv")
+            "photo_texture", "texture_conv")
 
 
 @dataclass
@@ -43,12 +43,6 @@ class ModelConfig:
     "A colour read from the photo").
     photo_texture: with photo_colour, the offset is from the photo's own colour at each voxel's pixel,
     carried along the input camera's rays, not from its mean (:func:`~mitsuba_platonic.photo_colours.photo_texture`).
-    texture_surface: with photo_texture, that colour only where the input camera's rays enter or leave
-    the object, the mean colour inside (:func:`~mitsuba_platonic.photo_colours.texture_on_surface`).
-    texture_sides: with photo_texture, the photo also on the object's left and right sides, where the
-    input camera's line does not see (:func:`~mitsuba_platonic.photo_colours.texture_on_sides`).
-    texture_blur: with texture_surface, inside the photo blurred by this many of its pixels (a Gaussian's σ)
-    instead of its mean colour; 0: the mean colour.
     texture_conv: with photo_texture, G's last logits corrected by a 3³ convolution that sees the photo's
     colour, G's own logits and how much of each voxel the input camera sees
     (:func:`~mitsuba_platonic.photo_colours.texture_corrected`; "G's colour seeing the photo").
@@ -66,9 +60,6 @@ class ModelConfig:
     precision: str = "fp32"
     photo_colour: bool = False
     photo_texture: bool = False
-    texture_surface: bool = False
-    texture_sides: bool = False
-    texture_blur: float = 0.0
     texture_conv: bool = False
 
     def validate(self) -> "ModelConfig":
@@ -88,25 +79,9 @@ class ModelConfig:
         if self.photo_texture and not self.photo_colour:
             raise ConfigError("model.photo_texture: the offset per voxel is G's photo colour read per pixel, so it "
                               "needs model.photo_colour: true")
-        if self.texture_surface and not self.photo_texture:
-            raise ConfigError("model.texture_surface: it places the photo's texture on the surfaces, so it needs "
-                              "model.photo_texture: true")
-        if self.texture_sides and not self.photo_texture:
-            raise ConfigError("model.texture_sides: it places the photo's texture on the sides, so it needs "
-                              "model.photo_texture: true")
-        if self.texture_sides and self.texture_surface:
-            raise ConfigError("model.texture_sides: the sides' texture and model.texture_surface recolour the same "
-                              "volume two ways; set one of them")
-        non_negative("model.texture_blur", self.texture_blur)
-        if self.texture_blur > 0 and not self.texture_surface:
-            raise ConfigError("model.texture_blur: it blurs the photo inside the surface, so it needs "
-                              "model.texture_surface: true")
         if self.texture_conv and not self.photo_texture:
             raise ConfigError("model.texture_conv: the convolution reads the photo's texture, so it needs "
                               "model.photo_texture: true")
-        if self.texture_conv and (self.texture_surface or self.texture_sides):
-            raise ConfigError("model.texture_conv: it corrects the texture carried along the input camera's rays, "
-                              "not model.texture_surface's or model.texture_sides'; set one of them")
         return self
 
     def net_config(self, channels: int, view_codes: int = 0, pose: bool = False, light: bool = False) -> NetConfig:

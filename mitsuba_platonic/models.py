@@ -53,7 +53,7 @@ INITS = ("dcgan", "he")
 #: matrix products in bfloat16 under :func:`torch.autocast` (weights, optimiser state and every
 #: network's output stay float32; the renderers never see bfloat16). bfloat16 keeps float32's range
 #: with an 8-bit mantissa: on a CPU with AVX-512 BF16 (or a GPU) the paper-scale step is 1.5×
-#: faster; what it does to training is measured in docs/training.md, "Where a step's time goes".
+#: faster; what it does to training is measured in docs/experiments/step-time.md.
 PRECISIONS = ("fp32", "bf16")
 
 
@@ -78,7 +78,7 @@ class NetConfig:
     head``); precision: the networks' arithmetic (:data:`PRECISIONS`); photo_colour: G's colour is an
     offset from the input photo's mean colour (:meth:`Generator.forward`); photo_texture: from the
     photo's colour at each voxel's pixel instead (:func:`~mitsuba_platonic.photo_colours.photo_texture`);
-    texture_surface, texture_sides, texture_blur: that colour recoloured; texture_conv: G's logits
+    texture_conv: G's logits
     corrected by a convolution that sees it (:mod:`~mitsuba_platonic.photo_colours`). A config's model section
     builds it (:meth:`~mitsuba_platonic.model_settings.ModelConfig.net_config`, its keys of the same names)."""
 
@@ -96,9 +96,6 @@ class NetConfig:
     precision: str = "fp32"
     photo_colour: bool = False
     photo_texture: bool = False
-    texture_surface: bool = False
-    texture_sides: bool = False
-    texture_blur: float = 0.0
     texture_conv: bool = False
 
     def validate(self) -> "NetConfig":
@@ -132,24 +129,9 @@ class NetConfig:
         if not isinstance(self.photo_texture, bool) or (self.photo_texture and not self.photo_colour):
             raise ValueError(f"photo_texture must be True or False, and True only with photo_colour; got "
                              f"{self.photo_texture!r} (photo_colour {self.photo_colour!r})")
-        if not isinstance(self.texture_surface, bool) or (self.texture_surface and not self.photo_texture):
-            raise ValueError(f"texture_surface must be True or False, and True only with photo_texture; got "
-                             f"{self.texture_surface!r} (photo_texture {self.photo_texture!r})")
-        if not isinstance(self.texture_sides, bool) or (self.texture_sides and not self.photo_texture) \
-                or (self.texture_sides and self.texture_surface):
-            raise ValueError(f"texture_sides must be True or False, and True only with photo_texture and without "
-                             f"texture_surface; got {self.texture_sides!r} (photo_texture {self.photo_texture!r}, "
-                             f"texture_surface {self.texture_surface!r})")
-        if isinstance(self.texture_blur, bool) or not isinstance(self.texture_blur, (int, float)) \
-                or not self.texture_blur >= 0 or (self.texture_blur > 0 and not self.texture_surface):
-            raise ValueError(f"texture_blur must be a number ≥ 0, and > 0 only with texture_surface; got "
-                             f"{self.texture_blur!r} (texture_surface {self.texture_surface!r})")
-        if not isinstance(self.texture_conv, bool) or (self.texture_conv and not self.photo_texture) \
-                or (self.texture_conv and (self.texture_surface or self.texture_sides)):
-            raise ValueError(f"texture_conv must be True or False, and True only with photo_texture and without "
-                             f"texture_surface or texture_sides; got {self.texture_conv!r} (photo_texture "
-                             f"{self.photo_texture!r}, texture_surface {self.texture_surface!r}, texture_sides "
-                             f"{self.texture_sides!r})")
+        if not isinstance(self.texture_conv, bool) or (self.texture_conv and not self.photo_texture):
+            raise ValueError(f"texture_conv must be True or False, and True only with photo_texture; got "
+                             f"{self.texture_conv!r} (photo_texture {self.photo_texture!r})")
         return self
 
     @property
@@ -195,8 +177,8 @@ class ResizeConv3d(nn.Conv3d):
     padding of the upsampled grid is zero padding of x. The parameters (so initialisation,
     :func:`fan_in`, checkpoints and their gradients) stay the k3 convolution's; the work is a
     transposed convolution's at the input's resolution instead of 27 taps per output at twice it:
-    4× faster forward and backward for G's last stage at 32³ (docs/training.md, "Where a step's
-    time goes"). The sums of taps keep the k3 form's smoothness: no period-2 checkerboard.
+    4× faster forward and backward for G's last stage at 32³ (docs/experiments/step-time.md). The
+    sums of taps keep the k3 form's smoothness: no period-2 checkerboard.
     """
 
     def __init__(self, c_in: int, c_out: int, bias: bool):
@@ -246,7 +228,7 @@ class Generator(nn.Module):
         #: needs the input camera's elevation
         self.texture_conv: Optional[nn.Conv3d] = nn.Conv3d(8, 4, 3, padding=1) if cfg.texture_conv else None
         # channels-last 3D weights and activations: oneDNN's 3D convolutions on a CPU run about twice
-        # as fast in this layout (docs/training.md, "Where a step's time goes"); the maths is the same
+        # as fast in this layout (docs/experiments/step-time.md); the maths is the same
         self.to(memory_format=torch.channels_last_3d)
 
     def init_density(self) -> None:
@@ -259,7 +241,7 @@ class Generator(nn.Module):
         steps come the generator can overshoot to an empty volume with its sigmoid saturated,
         where it stays: the VH baseline (reconstruction loss 0.136 after 200 steps, empty images;
         0.031 from v₀ = 1/R) and EA on path-traced images (0.049 after 400 steps, empty; 0.0077).
-        Measured in docs/training.md, "Initial density".
+        Measured in docs/experiments/initial-density.md.
         """
         out = self.convolutions()[-1]
         v0 = 1.0 / self.cfg.resolution
@@ -442,8 +424,8 @@ def init_critic_he(m: nn.Module) -> None:
 
     Without normalisation the DCGAN initialisation N(0, 0.02) shrinks activations by about
     0.02 √fan-in ≈ 0.3 a layer: an untrained D's logits have a standard deviation of 5e-4, and at
-    lr_D 2e-5 it does not learn in thousands of steps (docs/training.md, "A discriminator that
-    never learns"). He's variance 2 / ((1 + 0.2²) fan-in) keeps them O(0.1).
+    lr_D 2e-5 it does not learn in thousands of steps (docs/experiments/critic-that-learns.md). He's
+    variance 2 / ((1 + 0.2²) fan-in) keeps them O(0.1).
     """
     if isinstance(m, (nn.Conv2d, nn.Conv3d, nn.Linear)):
         nn.init.kaiming_normal_(m.weight, a=0.2, nonlinearity="leaky_relu")
@@ -474,7 +456,7 @@ def init_he(net: nn.Module) -> None:
     normalisation the DCGAN initialisation shrinks the signal by ≈ 0.02 √fan_in a layer: in the
     quickstart's E and G (width 16), the spread of G's last hidden layer over 16 images is 3e-6
     (0.08 with this initialisation), so every image starts with the same volume
-    (docs/training.md, "E and G that start blind").
+    (docs/experiments/init-and-critic-width.md).
     """
     if not isinstance(net, Generator):                       # E: strided convolutions and LeakyReLU(0.2),
         net.apply(init_critic_he)                            # a critic's trunk: the critics' He initialisation

@@ -15,7 +15,7 @@ def _error(*overrides: str) -> str:
 
 def test_an_unknown_key_lists_the_known_keys():
     message = _error("train.bogus=1")
-    assert message.startswith("train.bogus: unknown key (known: adv_input, batch_size, betas, colour_match, colour_offset, "
+    assert message.startswith("train.bogus: unknown key (known: batch_size, betas, colour_match, colour_offset, "
                               "colour_tv, d_augment, d_gate, d_roll, d_steps, depth_spread, elevation, ema, "), message
     assert "lr_d" in message and "weight_3d" in message
     assert _error("bogus.key=1") == "bogus: unknown key (known: data, model, render, run, train)"

@@ -119,7 +119,7 @@ def _critic_accuracy_after_training(init, steps=200):
 
 
 def test_a_he_initialised_critic_learns_where_a_dcgan_one_without_norm_barely_moves():
-    """docs/training.md, "A discriminator that never learns": at lr_D 2e-5 and no normalisation,
+    """docs/experiments/critic-that-learns.md: at lr_D 2e-5 and no normalisation,
     200 updates on an easy task (discs against bars) leave a DCGAN-initialised D near chance and
     take a He-initialised one well above it (measured 0.51 and 0.69)."""
     assert _critic_accuracy_after_training("dcgan") < 0.56
@@ -202,15 +202,14 @@ def test_r1_penalty_matches_finite_differences_on_a_nonlinear_critic():
     assert abs(analytic - (up - down) / (2 * h)) < 1e-6 * max(1.0, abs(analytic))
 
 
-@pytest.mark.parametrize("every, step, applied", [(1, 0, True), (4, 0, True), (4, 1, False), (4, 8, True)])
-def test_r1_weight_adds_half_gamma_times_the_penalty_at_the_reals_to_the_critic_loss(tmp_path, every, step, applied):
+@pytest.mark.parametrize("step", [0, 1])
+def test_r1_weight_adds_half_gamma_times_the_penalty_at_the_reals_to_the_critic_loss(tmp_path, step):
     """One trainer step with r1_weight γ = 5 makes the Adam step of the loss
-    d_loss + k γ/2 ‖∇ₓD(x_real)‖² on the batch D saw (penalty at the reals, not at the fakes) on
-    every k-th step (k = r1_every; lazy R1), and of d_loss alone on the others."""
+    d_loss + γ/2 ‖∇ₓD(x_real)‖² on the batch D saw (penalty at the reals, not at the fakes), on
+    every step."""
     from mitsuba_platonic.train.losses import r1_penalty
     γ = 5.0
-    trainer = _trainer(tmp_path, f"train.r1_weight={γ}", "train.d_gate=null", "train.lr_d=1e-3",
-                       f"train.r1_every={every}")
+    trainer = _trainer(tmp_path, f"train.r1_weight={γ}", "train.d_gate=null", "train.lr_d=1e-3")
     net = trainer.nets["D"]
     reference, at_fakes = copy.deepcopy(net), copy.deepcopy(net)
     seen = {}
@@ -226,14 +225,12 @@ def test_r1_weight_adds_half_gamma_times_the_penalty_at_the_reals_to_the_critic_
     for copy_, where in ((reference, "real"), (at_fakes, "fake")):
         opt = torch.optim.Adam(copy_.parameters(), lr=1e-3, betas=betas)
         loss = d_loss("nonsaturating", copy_(seen["real"]), copy_(seen["fake"]))
-        if applied:
-            loss = loss + 0.5 * γ * every * r1_penalty(copy_, seen[where])[2]
+        loss = loss + 0.5 * γ * r1_penalty(copy_, seen[where])[2]
         opt.zero_grad()
         loss.backward()
         opt.step()
     assert all(torch.allclose(a, b, atol=1e-6) for a, b in zip(net.parameters(), reference.parameters()))
-    if applied:
-        assert not all(torch.allclose(a, b, atol=1e-6) for a, b in zip(net.parameters(), at_fakes.parameters()))
+    assert not all(torch.allclose(a, b, atol=1e-6) for a, b in zip(net.parameters(), at_fakes.parameters()))
 
 
 def test_r1_penalty_over_reals_and_fakes_together_is_the_reals_own():
@@ -258,5 +255,3 @@ def test_r1_weight_is_refused_when_negative_or_with_wgan_gp():
     with pytest.raises(ConfigError, match="train.r1_weight: the R1 penalty is for the non-saturating loss"):
         load_config(None, ["train.r1_weight=1", "train.loss=wgan-gp"])
     assert load_config(None, []).train.r1_weight == 0.0
-    with pytest.raises(ConfigError, match=r"train.r1_every: expected a positive value, got 0"):
-        load_config(None, ["train.r1_every=0"])

@@ -165,8 +165,6 @@ def test_the_light_head_is_refused_where_there_is_no_sun_and_sky_or_no_colour_to
         _cfg(cache, "train.rec_channels=alpha")
     with pytest.raises(ConfigError, match=r"^train\.light: 'head' renders the input view .*task 'generation'"):
         _cfg(cache, "train.task=generation")
-    with pytest.raises(ConfigError, match=r"^train\.light: 'head' .*emissive start.*expected both 0"):
-        _cfg(cache, "train.light_warmup=5")
     with pytest.raises(ConfigError, match=r"^train\.light: "):
         _cfg(cache, "train.light=photo")
 

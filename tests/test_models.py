@@ -321,7 +321,7 @@ def _spread_through_g(init):
 
 
 def test_he_initialised_e_and_g_carry_the_image_to_the_volume_and_start_in_the_fog():
-    """docs/training.md, "E and G that start blind": with the DCGAN initialisation and no
+    """docs/experiments/init-and-critic-width.md: with the DCGAN initialisation and no
     normalisation the spread of G's last hidden layer over 16 images is ≈ 3e-6 (every image
     starts with the same volume), with He's it stays ≈ 0.1 through every layer; the first volume
     is still the fog of density 1/R and colour about ½ (G's output layer keeps its start)."""
@@ -614,186 +614,22 @@ def test_a_photo_texture_model_starts_from_the_photo_at_the_input_view():
         load_config(None, ["model.photo_colour=true", "model.photo_texture=true", "render.camera=perspective"])
 
 
-def test_surface_weight_is_one_where_the_input_cameras_rays_enter_or_leave_and_falls_off_inside():
-    """A slab of density v across planes 5–10 of the input camera's frame (θ None): s = 1 in the
-    empty planes and on the slab's first and last plane; inside, s_k = (1 − v)^(k−5) + (1 − v)^(10−k)
-    (the product of the planes in front, plus those behind), exactly 0 inside an opaque slab. At
-    θ = 0 the tilted computation gives the same."""
-    from mitsuba_platonic.photo_colours import surface_weight
-    n, v = 16, 0.5
-    density = torch.zeros(1, 1, n, n, n, dtype=torch.float64)
-    density[:, :, 5:11] = v
-    s = surface_weight(density)[0, 0, :, 8, 8]
-    want = torch.ones(n, dtype=torch.float64)
-    for k in range(5, 11):
-        want[k] = min(1.0, (1 - v) ** (k - 5) + (1 - v) ** (10 - k))
-    assert torch.allclose(s, want, atol=1e-12), s
-    density[:, :, 5:11] = 1.0
-    s = surface_weight(density)[0, 0, :, 8, 8]
-    assert s[5] == 1.0 and s[10] == 1.0 and torch.all(s[6:10] == 0.0) and torch.all(s[:5] == 1.0)
-    assert torch.allclose(surface_weight(density, torch.zeros(1, dtype=torch.float64)), surface_weight(density),
-                          atol=1e-6)
-
-
-def test_texture_on_surface_puts_the_photo_on_the_slabs_faces_and_the_mean_colour_inside():
-    """With G's offsets at 0, an opaque slab's first and last planes take the photo's texture and its
-    inside the photo's mean colour; the density is G's, untouched."""
-    from mitsuba_platonic.photo_colours import COLOUR_MIN, photo_colour, photo_texture, texture_on_surface
-    n = 16
-    x = _ramp_photo(n, b=1)
-    volume = torch.zeros(1, 4, n, n, n)
-    volume[:, 3, 5:11] = 1.0
-    out = texture_on_surface(volume, torch.zeros(1, 3, n, n, n), photo_texture(x, n), photo_colour(x))
-    tex = photo_texture(x, n).clamp(COLOUR_MIN, 1 - COLOUR_MIN)
-    m = photo_colour(x).clamp(COLOUR_MIN, 1 - COLOUR_MIN)[0]
-    for face in (5, 10):
-        assert torch.allclose(out[:, :3, face], tex[:, :, face], atol=1e-5)
-    assert torch.allclose(out[0, :3, 7], m[:, None, None].expand(3, n, n), atol=1e-5)
-    assert torch.equal(out[:, 3], volume[:, 3])
-    with pytest.raises(ConfigError, match="model.texture_surface: .*needs model.photo_texture: true"):
-        load_config(None, ["model.photo_colour=true", "model.texture_surface=true"])
-
-
-# -- the photo on the object's sides (model.texture_sides) ----------------------------------------------------
-
-
-def test_photo_texture_sides_are_the_photo_seen_by_cameras_turned_left_and_right():
-    """At elevation 0 a voxel at depth z (G's d along −z) takes, from the camera turned right, the
-    photo's column at −z and, from the one turned left, its column at +z, in its own row: on a
-    photo whose colour is linear in the column, t_right along depth is the column ramp read
-    backwards from the front and t_left forwards, the same in every column x. At elevation θ a
-    colour linear in the row only reads the same row as photo_texture (both at Y)."""
-    from mitsuba_platonic.photo_colours import photo_colour, photo_texture, photo_texture_sides
-    n = 16
-    x = _ramp_photo(n, b=1)
-    x[:, :3], x[:, 3] = x[:, :3] / x[:, 3:].clamp_min(1.0), 1.0       # the whole photo covered
-    x[:, 0], x[:, 1] = torch.linspace(0.2, 0.8, n)[:, None], torch.linspace(0.2, 0.8, n)[None, :]
-    x[:, 2] = 0.5 * x[:, 0] + 0.3
-    left, right = photo_texture_sides(x, n)
-    assert left.shape == right.shape == (1, 3, n, n, n)
-    column = x[0, 1, 0]                                               # green: linear in the column
-    # plane d sits at z = 1 − (d + ½)·2/n; column at +z is n − 1 − d, at −z it is d
-    for d in range(n):
-        assert torch.allclose(left[0, 1, d], column[n - 1 - d].expand(n, n), atol=1e-6)
-        assert torch.allclose(right[0, 1, d], column[d].expand(n, n), atol=1e-6)
-    red = photo_texture(x, n)[:, 0]                                   # red: linear in the row
-    θ = torch.tensor([0.4], dtype=torch.float64)
-    for t in photo_texture_sides(x, n, θ):
-        assert torch.allclose(t[:, 0], photo_texture(x, n, θ)[:, 0], atol=1e-6)
-    assert (photo_texture_sides(x, n, θ)[0][:, 0] - red).abs().max() > 0.03
-    flat = x[:, :3] + (1.0 - x[:, 3:]) * photo_colour(x)[:, :, None, None]
-    assert torch.allclose(left[:, :, 0, :, 0], flat[:, :, :, -1], atol=1e-6)   # the front plane's edge column
-    with pytest.raises(ValueError, match=r"photo_texture_sides: one elevation per photo expected"):
-        photo_texture_sides(x, n, torch.zeros(2))
-
-
-def test_transmittances_out_of_a_slab_are_the_products_of_the_voxels_before():
+def test_front_transmittance_out_of_a_slab_is_the_product_of_the_voxels_before():
     """A slab of density v across planes 5–10 and columns 3–12 of the input camera's frame: out of
-    voxel (k, j) inside it the transmittance towards the camera is (1 − v)^(k−5), away from it
-    (1 − v)^(10−k), to the left (1 − v)^(j−3) and to the right (1 − v)^(12−j); 1 outside the slab
-    on the side it faces. With θ the weights are in the camera's frame: θ = 0 gives the same."""
-    from mitsuba_platonic.photo_colours import transmittances
+    voxel (k, j) inside it the transmittance towards the camera is (1 − v)^(k−5); 1 in front of the
+    slab, (1 − v)^6 behind it. With θ the weight is in the camera's frame: θ = 0 gives the same."""
+    from mitsuba_platonic.photo_colours import front_transmittance
     n, v = 16, 0.3
     density = torch.zeros(1, 1, n, n, n, dtype=torch.float64)
     density[:, :, 5:11, :, 3:13] = v
-    front, back, left, right = (t[0, 0, :, 8, :] for t in transmittances(density))
+    front = front_transmittance(density)[0, 0, :, 8, :]
     for k in range(5, 11):
         for j in range(3, 13):
             assert front[k, j] == pytest.approx((1 - v) ** (k - 5), abs=1e-12)
-            assert back[k, j] == pytest.approx((1 - v) ** (10 - k), abs=1e-12)
-            assert left[k, j] == pytest.approx((1 - v) ** (j - 3), abs=1e-12)
-            assert right[k, j] == pytest.approx((1 - v) ** (12 - j), abs=1e-12)
-    assert torch.all(front[:5] == 1.0) and torch.all(back[11:] == 1.0)
-    assert torch.all(left[:, :4] == 1.0) and torch.all(right[:, 12:] == 1.0)
+    assert torch.all(front[:5] == 1.0)
     assert torch.allclose(front[11:, 3:13], torch.full_like(front[11:, 3:13], (1 - v) ** 6), atol=1e-12)
-    tilted = transmittances(density, torch.zeros(1, dtype=torch.float64))
-    for a, b in zip(tilted, transmittances(density)):
-        assert torch.allclose(a, b, atol=1e-6)
-
-
-def _ball(n: int, radius: float) -> torch.Tensor:
-    c = -1.0 + (torch.arange(n) + 0.5) * (2.0 / n)
-    inside = c[None, None, :] ** 2 + c.flip(0)[None, :, None] ** 2 + c.flip(0)[:, None, None] ** 2 < radius ** 2
-    return inside.float()[None, None]
-
-
-def test_texture_on_sides_gives_the_side_cameras_photo_where_only_they_see_and_keeps_the_input_views():
-    """An opaque ball (radius 0.75, 32³) with G's offsets at 0: where the input camera's line sees
-    a voxel (its front and back faces) it keeps photo_texture's colour, so the input view is
-    photo_texture's; its left and right faces at mid-depth, which only the side cameras see, take
-    t_left and t_right; its inside keeps photo_texture's. At an elevation the side weights stay
-    in [0, 1] and sum to at most 1 (the colour stays a blend of the three textures), the density is
-    G's, and model.texture_sides needs model.photo_texture and refuses model.texture_surface."""
-    from mitsuba_platonic.photo_colours import COLOUR_MIN, photo_texture, photo_texture_sides, texture_on_sides
-    n = 32
-    x = _ramp_photo(n, b=1)
-    ball = _ball(n, 0.75)
-    volume = torch.cat([torch.rand(1, 3, n, n, n), ball], dim=1)
-    zero = torch.zeros(1, 3, n, n, n)
-    t, (t_left, t_right) = photo_texture(x, n), photo_texture_sides(x, n)
-    out = texture_on_sides(volume, zero, t, (t_left, t_right))
-    clamp = (lambda c: c.clamp(COLOUR_MIN, 1 - COLOUR_MIN))
-    row = 16
-    columns = ball[0, 0, 16, row].nonzero()[:, 0]
-    first, last = columns.min().item(), columns.max().item()
-    assert torch.allclose(out[0, :3, 16, row, first], clamp(t_left)[0, :, 16, row, first], atol=1e-5)
-    assert torch.allclose(out[0, :3, 16, row, last], clamp(t_right)[0, :, 16, row, last], atol=1e-5)
-    assert (t_left[0, :, 16, row, first] - t[0, :, 16, row, first]).abs().max() > 0.05
-    planes = ball[0, 0, :, row, 16].nonzero()[:, 0]
-    for d in (planes.min().item(), planes.max().item()):             # the faces the input camera's line sees
-        assert torch.allclose(out[0, :3, d, row, 16], clamp(t)[0, :, d, row, 16], atol=1e-5)
-    assert torch.allclose(out[0, :3, 16, row, 16], clamp(t)[0, :, 16, row, 16], atol=1e-5)   # the centre
-    assert torch.equal(out[:, 3], volume[:, 3])
-    θ = torch.tensor([0.35])
-    sides = photo_texture_sides(x, n, θ)
-    tilted = texture_on_sides(volume, zero, photo_texture(x, n, θ), sides, θ)
-    textures = torch.stack([clamp(photo_texture(x, n, θ)), clamp(sides[0]), clamp(sides[1])])
-    assert torch.all(tilted[:, :3] >= textures.min(0).values - 1e-5)
-    assert torch.all(tilted[:, :3] <= textures.max(0).values + 1e-5)
-    with pytest.raises(ConfigError, match="model.texture_sides: .*needs model.photo_texture: true"):
-        load_config(None, ["model.photo_colour=true", "model.texture_sides=true"])
-    with pytest.raises(ConfigError, match="model.texture_sides: .*set one of them"):
-        load_config(None, ["model.photo_colour=true", "model.photo_texture=true", "model.texture_sides=true",
-                           "model.texture_surface=true"])
-
-
-def test_blurred_is_a_normalised_gaussian_of_sigma_pixels():
-    """A constant image stays itself; a single bright pixel in the middle spreads into weights that
-    sum to its value, symmetric, with variance σ² along each axis (within 3 %: it stops at 3σ)."""
-    from mitsuba_platonic.photo_colours import blurred
-    flat = torch.full((1, 3, 16, 16), 0.3, dtype=torch.float64)
-    assert torch.allclose(blurred(flat, 1.5), flat, atol=1e-12)
-    x = torch.zeros(1, 3, 33, 33, dtype=torch.float64)
-    x[:, :, 16, 16] = 1.0
-    for σ in (1.0, 2.0):
-        y = blurred(x, σ)[0, 0]
-        assert float(y.sum()) == pytest.approx(1.0, abs=1e-9)
-        assert torch.allclose(y, y.flip(0)) and torch.allclose(y, y.t())
-        d = torch.arange(33, dtype=torch.float64) - 16
-        assert float((y.sum(0) * d ** 2).sum()) == pytest.approx(σ ** 2, rel=0.03)
-
-
-def test_texture_on_surface_with_a_blurred_inside_takes_the_blurred_photo_inside():
-    """``model.texture_blur``: an opaque slab's faces keep the photo's texture, its inside takes the
-    photo blurred (carried along the same rays), not the mean colour; the config needs
-    texture_surface for it and refuses a negative σ."""
-    from mitsuba_platonic.photo_colours import COLOUR_MIN, photo_colour, photo_texture, texture_on_surface
-    n = 16
-    x = _ramp_photo(n, b=1)
-    x[:, 0, 5:9, 5:9] = 1.0                                  # a bright square: blurring changes it
-    volume = torch.zeros(1, 4, n, n, n)
-    volume[:, 3, 5:11] = 1.0
-    sharp, soft = photo_texture(x, n), photo_texture(x, n, blur=2.0)
-    out = texture_on_surface(volume, torch.zeros(1, 3, n, n, n), sharp, soft)
-    clamp = (lambda c: c.clamp(COLOUR_MIN, 1 - COLOUR_MIN))
-    assert torch.allclose(out[:, :3, 5], clamp(sharp)[:, :, 5], atol=1e-5)
-    assert torch.allclose(out[:, :3, 7], clamp(soft)[:, :, 7], atol=1e-5)
-    assert (soft - sharp).abs().max() > 0.1 and (soft[0, :, 7] - photo_colour(x)[0, :, None, None]).abs().max() > 0.05
-    with pytest.raises(ConfigError, match="model.texture_blur: .*needs model.texture_surface: true"):
-        load_config(None, ["model.photo_colour=true", "model.photo_texture=true", "model.texture_blur=2.0"])
-    with pytest.raises(ConfigError, match="model.texture_blur: expected a non-negative"):
-        load_config(None, ["model.photo_colour=true", "model.photo_texture=true", "model.texture_surface=true",
-                           "model.texture_blur=-1"])
+    assert torch.allclose(front_transmittance(density, torch.zeros(1, dtype=torch.float64)),
+                          front_transmittance(density), atol=1e-6)
 
 
 def test_texture_corrected_adds_the_convolutions_output_to_gs_logits():
@@ -837,9 +673,9 @@ def test_texture_corrected_adds_the_convolutions_output_to_gs_logits():
 
 def test_texture_conv_is_a_layer_of_g_that_training_reaches_and_the_config_checks():
     """G has the layer only with texture_conv; the model's initialisation draws it as G's other
-    convolutions (N(0, 0.02), not zero: the configuration measured in docs/training.md); the
+    convolutions (N(0, 0.02), not zero: the configuration measured in docs/experiments/texture-conv.md); the
     photo recipe (photo_volume) applies it, and the gradient of the volume reaches its weights;
-    the config refuses it without photo_texture and beside texture_surface or texture_sides."""
+    the config refuses it without photo_texture."""
     from mitsuba_platonic.model import Model
     from mitsuba_platonic.photo_colours import photo_volume
     base = ["model.resolution=16", "model.width=4", "model.latent=8", "model.photo_colour=true",
@@ -859,6 +695,3 @@ def test_texture_conv_is_a_layer_of_g_that_training_reaches_and_the_config_check
     assert w.grad is not None and float(w.grad.abs().max()) > 0.0
     with pytest.raises(ConfigError, match="model.texture_conv: .*needs model.photo_texture: true"):
         load_config(None, ["model.photo_colour=true", "model.texture_conv=true"])
-    for other in ("texture_surface", "texture_sides"):
-        with pytest.raises(ConfigError, match="model.texture_conv: .*set one of them"):
-            load_config(None, base + ["model.texture_conv=true", f"model.{other}=true"])

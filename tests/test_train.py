@@ -136,34 +136,22 @@ def test_a_photo_colour_step_hands_g_the_mean_colour_of_es_own_input(tmp_path, m
     assert all(_changed(before[k], trainer.nets[k]) for k in ("E", "G", "D"))
 
 
-@pytest.mark.parametrize("sides", [[], ["model.texture_sides=true"]], ids=["texture", "texture_sides"])
-def test_a_photo_texture_step_hands_g_the_texture_of_es_input_at_the_heads_elevation(tmp_path, monkeypatch, sides):
+def test_a_photo_texture_step_hands_g_the_texture_of_es_input_at_the_heads_elevation(tmp_path, monkeypatch):
     """``model.photo_texture`` with the pose head: in a step, G gets the colour per voxel of exactly
     the photos E read, as a camera at the elevation P reads from E's code sees them
-    (:func:`~mitsuba_platonic.photo_colours.photo_texture`), and E, G, D and P all move; also
-    with the sides' texture recolouring G's volume at that elevation (``model.texture_sides``)."""
+    (:func:`~mitsuba_platonic.photo_colours.photo_texture`), and E, G, D and P all move."""
     from mitsuba_platonic import photo_colours
     cfg = _cfg(tmp_path, "model.photo_colour=true", "model.photo_texture=true", "render.backend=mitsuba",
                "render.model=ea", "data.formation=ea", "train.task=reconstruction", "train.pose=elevation",
-               "train.pose_weight=1.0", *sides)
+               "train.pose_weight=1.0")
     trainer = Trainer(cfg, load_training_data(cfg, progress=False), torch.device("cpu"))
     with torch.no_grad():
         trainer.nets["P"].bias.fill_(0.3)                    # an elevation far from 0 from the first step
-    recoloured = []
-    original = photo_colours.texture_on_sides
-
-    def spy(volume, offsets, texture, sides, elevation=None):
-        recoloured.append(elevation.detach().clone())
-        return original(volume, offsets, texture, sides, elevation)
-
-    monkeypatch.setattr(photo_colours, "texture_on_sides", spy)
     seen, before = _colour_step(trainer, monkeypatch)
     with torch.no_grad():
         θ = _frozen_head(before["P"])(seen["z"])
     assert float(θ.abs().min()) > 0.4
     assert torch.allclose(seen["colour"], photo_colours.photo_texture(seen["x"], 16, θ), atol=1e-6)
-    assert len(recoloured) == (1 if sides else 0)            # once a step, at the head's elevation
-    assert not recoloured or torch.allclose(recoloured[0], θ, atol=1e-6)
     assert all(_changed(before[k], trainer.nets[k]) for k in ("E", "G", "D", "P"))
 
 
@@ -225,116 +213,6 @@ def test_rec_loss_is_refused_unless_it_is_known_and_compares_images(tmp_path):
     with pytest.raises(ConfigError, match=r"^train\.rec_channels: 'alpha' applies to the input-view image term"):
         _cfg(tmp_path, "train.mode=platonic3d", "train.rec_target=volume", "train.rec_channels=alpha",
              "train.task=reconstruction")
-
-
-def test_light_share_holds_ea_through_the_warmup_then_ramps_linearly_over_the_fade():
-    from mitsuba_platonic.train.renderer import light_share
-    assert [light_share(s, 3, 4) for s in (0, 2, 3, 4, 5, 7, 100)] == [0.0, 0.0, 0.0, 0.25, 0.5, 1.0, 1.0]
-    assert [light_share(s, 2, 0) for s in (0, 1, 2, 3)] == [0.0, 0.0, 1.0, 1.0]       # no fade: a switch
-    assert light_share(0, 0, 0) == 1.0                                                  # lit from the start
-    with pytest.raises(ValueError, match="warmup, fade"):
-        light_share(0, -1, 0)
-
-
-def test_the_blend_is_ea_then_both_then_the_lit_image_with_gradients_through_both():
-    """blend(EA, lit, λ): at λ 0 the EA marcher's image exactly, at 1 the lit one exactly, at ½
-    ½ EA + ½ lit (each rendered on its own); a loss on the blend has the gradient of the same blend
-    of both renderers' losses."""
-    from mitsuba_platonic.render import RenderSettings
-    from mitsuba_platonic.train.renderer import EA_WARMUP, blend, make_renderer
-    from mitsuba_platonic.views import sample_views
-    g = torch.Generator().manual_seed(0)
-    v = (torch.rand(2, 4, 8, 8, 8, generator=g) * 0.6).requires_grad_()
-    views = sample_views(2, seed=1)
-    ea_fn = make_renderer(EA_WARMUP)
-    lit_fn = make_renderer(RenderSettings(backend="scatter_march", model="ea", steps_per_voxel=2))
-    ea, ss = ea_fn(v, views, 5), lit_fn(v, views, 5)
-    assert not torch.allclose(ea, ss, atol=1e-3)                                         # two different images
-    assert torch.equal(blend(ea_fn, lit_fn, 0.0)(v, views, 5), ea)
-    assert torch.equal(blend(ea_fn, lit_fn, 1.0)(v, views, 5), ss)
-    half = blend(ea_fn, lit_fn, 0.5)(v, views, 5)
-    torch.testing.assert_close(half, 0.5 * ea + 0.5 * ss, rtol=0, atol=1e-6)
-    w = torch.randn(half.shape, generator=g)
-    (grad,) = torch.autograd.grad((half * w).sum(), v)
-    (g_ea,) = torch.autograd.grad((ea * w).sum(), v)
-    (g_ss,) = torch.autograd.grad((ss * w).sum(), v)
-    torch.testing.assert_close(grad, 0.5 * g_ea + 0.5 * g_ss, rtol=1e-5, atol=1e-7)
-
-
-def test_trainer_renders_through_ea_for_the_light_warmup(tmp_path, monkeypatch):
-    """train.light_warmup 2, light_fade 2 with a lit backend: the trainer's renders (random views
-    and the input view) of steps 0–2 go through the EA marcher alone (λ 0, 0, 0), of step 3 through
-    both (λ ½), of steps 4–5 through the lit renderer alone."""
-    import mitsuba_platonic.train.renderer as renderer
-    cfg = _cfg(tmp_path, "render.backend=scatter_march", "render.steps_per_voxel=2", "train.task=reconstruction",
-               "train.light_warmup=2", "train.light_fade=2", "run.steps=6")
-    trainer = Trainer(cfg, load_training_data(cfg, progress=False), torch.device("cpu"))
-    seen = []
-    real = renderer.render_with
-    monkeypatch.setattr(renderer, "render_with", lambda v, w, s, seed: seen.append(s.backend) or real(v, w, s, seed))
-    per_step = []
-    for step in range(6):
-        trainer.step(step)
-        per_step.append(sorted(set(seen)))
-        seen.clear()
-    lit = ["scatter_march"]
-    assert per_step == [["mitsuba"]] * 3 + [["mitsuba", "scatter_march"], lit, lit], per_step
-
-
-def test_light_warmup_is_refused_without_a_lit_renderer_or_below_zero(tmp_path):
-    from mitsuba_platonic.settings_checks import ConfigError
-    with pytest.raises(ConfigError, match=r"^train\.light_warmup, train\.light_fade: .*'scatter_march'.*got 'mitsuba'"):
-        _cfg(tmp_path, "render.backend=mitsuba", "train.light_fade=10")
-    with pytest.raises(ConfigError, match=r"^train\.light_warmup: expected a number of steps ≥ 0, got -1"):
-        _cfg(tmp_path, "render.backend=scatter_march", "train.light_warmup=-1")
-
-
-def test_adv_input_shows_d_the_input_view_and_adds_its_term_to_gs_objective(tmp_path, monkeypatch):
-    """``train.adv_input: w``: D's update sees the photos, the random views and, as further fakes,
-    the input-view renders, which equal G(E(x)) rendered from the input view by the Mitsuba marcher
-    (computed here with the weights before the step; the trainer renders with the closed form);
-    G's objective holds w · mean softplus(−D(I_front)) with the updated D. Without the key, D sees
-    no input view and G has no such term."""
-    import copy
-
-    import torch.nn.functional as F
-    from mitsuba_platonic import render
-    from mitsuba_platonic.views import front_view
-    base = ("render.backend=closed_form", "render.model=ea", "data.formation=ea", "train.task=reconstruction")
-    for w in (0.5, 0.0):
-        cfg = _cfg(tmp_path / str(w), *base, f"train.adv_input={w}")
-        trainer = Trainer(cfg, load_training_data(cfg, progress=False), torch.device("cpu"))
-        nets = copy.deepcopy(trainer.nets)
-        seen, terms = {"D": []}, {}
-        trainer.nets["E"].register_forward_hook(lambda m, i, o: [seen.setdefault("x", i[0].detach().clone())] and None)
-        trainer.nets["D"].register_forward_hook(lambda m, i, o: seen["D"].append(i[0].detach().clone()))
-        original = trainer._g_objective
-        monkeypatch.setattr(trainer, "_g_objective", lambda t: terms.update(t) or original(t))
-        trainer.step(0)
-        x, B = seen["x"], len(seen["x"])
-        first = seen["D"][0]                                 # D's update: reals | random views | input views
-        assert len(first) == (3 if w else 2) * B
-        assert torch.equal(first[:B], x)
-        with torch.no_grad():
-            nets.train()
-            front = render(nets["G"](nets["E"](x)), front_view(B), "ea", "mitsuba")
-        if not w:
-            assert "adv_input" not in terms
-            continue
-        assert torch.allclose(first[2 * B:], front, atol=1e-3), float((first[2 * B:] - front).abs().max())
-        with torch.no_grad():
-            expected = w * F.softplus(-trainer.nets["D"](front)).mean()
-        assert float(terms["adv_input"].detach()) == pytest.approx(float(expected), rel=1e-3)
-
-
-def test_adv_input_is_refused_without_an_input_view_image_term(tmp_path):
-    from mitsuba_platonic.settings_checks import ConfigError
-    with pytest.raises(ConfigError, match=r"^train\.adv_input: expected"):
-        _cfg(tmp_path, "train.adv_input=-1")
-    with pytest.raises(ConfigError, match=r"^train\.adv_input: D judges the render of the input view.*'generation'"):
-        _cfg(tmp_path, "train.task=generation", "train.adv_input=1")
-    with pytest.raises(ConfigError, match=r"^train\.adv_input: .*d_roll 'uniform'"):
-        _cfg(tmp_path, "train.task=reconstruction", "train.d_roll=uniform", "train.adv_input=1")
 
 
 def test_d_step_lowers_d_loss_on_its_batch(tmp_path):
@@ -492,7 +370,7 @@ def _ddp_worker(rank, world, port, cfg_overrides, tmp, result_file):
 
 
 PHOTO_TERMS = ["train.pose=elevation", "train.pose_weight=1.0", "model.photo_colour=true", "model.photo_texture=true",
-               "model.texture_surface=true", "train.colour_offset=0.1", "train.colour_match=1.0", "train.adv_input=1.0"]
+               "model.texture_conv=true", "train.colour_offset=0.1", "train.colour_match=1.0"]
 
 
 @pytest.mark.parametrize("pose", [[], ["train.pose=elevation", "train.pose_weight=1.0"], PHOTO_TERMS],
@@ -500,8 +378,8 @@ PHOTO_TERMS = ["train.pose=elevation", "train.pose_weight=1.0", "model.photo_col
 def test_two_processes_with_half_the_batch_make_the_single_process_update(tmp_path, pose):
     """gloo, 2 processes, no batch-statistics layers (norm: none): same parameters after 2 steps,
     also with the pose head, which E's and P's second forward pass (G's renders) reaches, and
-    with the photo config's terms (the texture read at P's elevation, the colour priors, D on the
-    input view)."""
+    with the photo config's terms (the texture read at P's elevation and its convolution, the colour
+    priors)."""
     import torch.multiprocessing as mp
     overrides = ["model.norm=none", "train.batch_size=4", "train.task=reconstruction", *pose]
     cfg = _cfg(tmp_path, *overrides)

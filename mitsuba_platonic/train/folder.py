@@ -28,7 +28,7 @@ from .. import __version__
 from ..checkpoint import RunError, checkpoint_files
 from ..config import Config, ConfigError, config_from_dict, yaml_problem
 from ..fileio import atomic_write, make_folder, open_file, remove_temporaries
-from ..loading import config_difference
+from ..loading import config_difference, without_retired
 
 __all__ = ["RUN_MARKER", "RUN_PARTS", "is_run_folder", "claim_run_folder", "run_lock", "prepare_run_folder", "read_run_config"]
 
@@ -185,6 +185,6 @@ def read_run_config(path: Path) -> Config:
         raise RunError(f"{path}: expected a mapping of sections (run, data, model, render, train), got {got}; "
                        f"{expected}")
     try:
-        return config_from_dict(data)
+        return config_from_dict(without_retired(data))
     except ConfigError as e:
         raise RunError(f"{path}: {e}; {expected}") from None

@@ -2,8 +2,7 @@
 
 Non-saturating (logits l):  L_D = softplus(−l_real) + softplus(l_fake)   (= −log D(x) − log(1 − D(G)))
                             L_G = softplus(−l_fake)                      (= −log D(G))
-R1 (optional, non-saturating): L_D += γ/2 · mean over reals of ‖∇_x l(x)‖²  (Mescheder et al. 2018);
-                            lazy (k = train.r1_every): k γ/2 · … on every k-th step only (Karras et al. 2020)
+R1 (optional, non-saturating): L_D += γ/2 · mean over reals of ‖∇_x l(x)‖²  (Mescheder et al. 2018)
 Colour TV (optional prior on G, EA volumes [r, g, b, ρ]): over every pair (i, j) of face-neighbouring
 voxels, w_ij = min(ρ_i, ρ_j) (held constant) and
                             L_tv = Σ w_ij ‖c_i − c_j‖₁ / (3 Σ w_ij)
@@ -167,8 +166,7 @@ def soft_accuracy_counts(real: torch.Tensor, fake: torch.Tensor) -> Tuple[torch.
     """(Σ σ(l_real) + Σ (1 − σ(l_fake)), count) as float tensors, summable across processes.
 
     Their ratio is the soft accuracy ½(mean σ(l_real) + 1 − mean σ(l_fake)) when both halves have
-    the same size (they do in the trainer unless ``train.adv_input`` adds the input views to the
-    fakes); otherwise it weighs each logit equally.
+    the same size (they do in the trainer); otherwise it weighs each logit equally.
     """
     score = torch.sigmoid(real).sum() + (1.0 - torch.sigmoid(fake)).sum()
     return score.detach().float(), torch.tensor(float(real.numel() + fake.numel()))

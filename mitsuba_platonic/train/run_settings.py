@@ -25,7 +25,7 @@ class RunConfig:
     device: 'auto' | 'cpu' | 'cuda'; steps: training steps; log_every / sample_every / checkpoint_every: in steps;
     threads: torch and Dr.Jit CPU threads (0 = all cores); drjit_threads: Dr.Jit's worker threads
     while training, 'auto' or a count (1: its launches run on the training thread alone; 'auto' picks
-    1 for the marcher at N ≤ 32 on a CPU, docs/training.md "Threads"); keep_checkpoints: how many to keep."""
+    1 for the marcher at N ≤ 32 on a CPU, docs/experiments/threads.md); keep_checkpoints: how many to keep."""
 
     name: str = "run"
     out_dir: str = "runs"

@@ -35,18 +35,18 @@ MODES_3D = ("platonic3d", "gan3d")
 #: input view, or v with the input image's ground-truth volume (3D modes)
 REC_TARGETS = ("image", "volume")
 #: train.rec_loss: the input-view term's distance, the paper's mean squared error or the mean
-#: absolute error (docs/training.md, "Tried on top of photos.yaml")
+#: absolute error (docs/experiments/rec-loss-l1.md)
 REC_LOSSES = ("l2", "l1")
 #: train.rec_channels: what of the input image the image term compares, all its channels or its
-#: opacity alone (for a lit renderer whose light is not the photo's: docs/training.md, "Training
-#: through light")
+#: opacity alone (for a lit renderer whose light is not the photo's:
+#: docs/experiments/training-through-light.md)
 REC_CHANNELS = ("all", "alpha")
 #: train.pose: G's volume in the input camera's frame, or upright and tilted by an elevation E reads
 POSES = ("input", "elevation")
 #: train.light: where the light of the input view's render comes from
 LIGHTS = ("prior", "head")
 #: The weights of the loss terms: each ≥ 0 (0: the term is off), checked by name.
-LOSS_WEIGHTS = ("gp_weight", "rec_weight", "adv_input", "weight_3d", "pose_weight", "r1_weight", "colour_tv",
+LOSS_WEIGHTS = ("gp_weight", "rec_weight", "weight_3d", "pose_weight", "r1_weight", "colour_tv",
                 "colour_match", "colour_offset", "depth_spread")
 #: How messages name ``train.mode: prgan``.
 PRGAN = "the PrGAN-style baseline ('prgan')"
@@ -69,19 +69,13 @@ class TrainConfig:
     what the code cannot tell apart; image targets only); rec_channels: what the image term compares,
     'all' channels (the paper's) or 'alpha' (the opacity alone, EA images: the silhouette and its
     soft edge; colour and shading answer to D only, as they must where the renderer's light is drawn
-    from a prior and not the photo's); light_warmup, light_fade: a lit renderer (render.backend
-    'single_scatter', 'scatter_march' or 'physical') entered from emission–absorption: the first
-    ``light_warmup`` steps render through the EA marcher, the next ``light_fade`` blend the two
-    images linearly towards the lit one (0, 0: lit from the start;
-    :mod:`mitsuba_platonic.train.renderer`, docs/training.md, "Training through light"); light: the
+    from a prior and not the photo's); light: the
     light of the input view's render under single scattering (render.backend 'single_scatter' or
     'scatter_march'), 'prior' (drawn from the prior, as every random view's is) or 'head': a light
     head reads the photo's sun direction and sky share from E's code, learnt from G's renders under
     the prior's lights, and the input view is rendered under it, so that the image term can compare
-    colour and shading (rec_channels 'all'; docs/training.md, "A light read from the photo"); adv_input: weight of a second adversarial
-    term on the render of the input view, which D also learns to tell from the photos (0: none, the
-    paper's: the input view answers to the reconstruction term alone; image targets, mode
-    'platonic'); weight_3d: weight of the 3D adversarial term;
+    colour and shading (rec_channels 'all'; docs/experiments/training-through-light.md, "A light read
+    from the photo"); weight_3d: weight of the 3D adversarial term;
     lr_g, lr_e, lr_d: Adam learning rates (lr_d 2e-5, not the authors' 1e-5: measured in
     docs/training.md); betas: Adam betas; d_gate: update D only while its *soft* accuracy
     ½(mean σ(l_real) + 1 − mean σ(l_fake)) ≤ this (0.6, the authors' gate; null: always). It never
@@ -98,13 +92,10 @@ class TrainConfig:
     code, the input-view term renders the volume tilted by θ̂ and the random views are drawn
     around the upright object, as the photos' cameras were; pose_weight: λ of the term that
     teaches the head the elevations of G's own renders from those random views (0: none; only
-    with 'elevation') (:mod:`mitsuba_platonic.train.trainer`, docs/training.md, "An elevation read
-    from the photo");
+    with 'elevation') (:mod:`mitsuba_platonic.train.trainer`, docs/experiments/pose-elevation.md);
     r1_weight: γ of the R1 penalty γ/2 · E‖∇ₓD(x)‖² on real images (Mescheder et al. 2018),
     added to every critic's non-saturating loss (0: none; WGAN-GP has its own penalty)
-    (:func:`mitsuba_platonic.train.losses.r1_penalty`, docs/training.md); r1_every: k of a lazy R1,
-    the penalty on every k-th step only, weighted k times (1: every step; docs/training.md, "Where a
-    step's time goes"); colour_tv: weight of
+    (:func:`mitsuba_platonic.train.losses.r1_penalty`, docs/training.md); colour_tv: weight of
     G's density-weighted colour total variation (EA, not 'gan3d'; 0: none)
     (:func:`mitsuba_platonic.train.losses.colour_tv`, docs/training.md); colour_match: weight of the term
     that holds the mean colour of each random view's object to the input photo's (reconstruction,
@@ -122,7 +113,7 @@ class TrainConfig:
     transforms of each step's photos before E, the reconstruction target and D read them, from
     'flip', 'colour' (none by default; modes 'platonic' and 'prgan', image targets; 'colour' needs
     EA), so that E reads colour from a photo instead of memorising a few dozen photos
-    (:func:`mitsuba_platonic.train.augment.augment_photos`, docs/training.md, "Real photos")."""
+    (:func:`mitsuba_platonic.train.augment.augment_photos`, docs/experiments/photos.md)."""
 
     task: str = "reconstruction"
     mode: str = "platonic"
@@ -136,10 +127,7 @@ class TrainConfig:
     rec_target: str = "image"
     rec_loss: str = "l2"
     rec_channels: str = "all"
-    light_warmup: int = 0
-    light_fade: int = 0
     light: str = "prior"
-    adv_input: float = 0.0
     weight_3d: float = 1.0
     lr_g: float = 1e-3
     lr_e: float = 1e-3
@@ -151,7 +139,6 @@ class TrainConfig:
     pose: str = "input"
     pose_weight: float = 0.0
     r1_weight: float = 0.0
-    r1_every: int = 1
     colour_tv: float = 0.0
     colour_match: float = 0.0
     colour_offset: float = 0.0
@@ -202,7 +189,6 @@ class TrainConfig:
                 raise ConfigError(f"train.{key}: expected a positive learning rate, got {getattr(self, key)!r}")
         if len(self.betas) != 2 or not all(0.0 <= b < 1.0 for b in self.betas):
             raise ConfigError(f"train.betas: expected two numbers in [0, 1), got {self.betas!r}")
-        positive("train.r1_every", self.r1_every)
         if self.r1_weight > 0 and self.loss != "nonsaturating":
             raise ConfigError("train.r1_weight: the R1 penalty is for the non-saturating loss; "
                               f"train.loss {self.loss!r} has its own (train.gp_weight)")
@@ -238,10 +224,6 @@ class TrainConfig:
         if self.rec_loss != "l2" and self.rec_target != "image":
             raise ConfigError(f"train.rec_loss: {self.rec_loss!r} applies to the input-view image term; "
                               f"rec_target {self.rec_target!r} compares volumes by their mean squared error")
-        for key in ("light_warmup", "light_fade"):
-            value = getattr(self, key)
-            if isinstance(value, bool) or not isinstance(value, int) or value < 0:
-                raise ConfigError(f"train.{key}: expected a number of steps ≥ 0, got {value!r}")
         choice("train.light", self.light, LIGHTS)
         if self.light == "head" and (self.task != "reconstruction" or self.mode != "platonic"
                                      or self.rec_target != "image" or self.rec_channels != "all"):
@@ -249,11 +231,6 @@ class TrainConfig:
                               "the image term compares its colour; it needs train.task 'reconstruction', mode "
                               f"'platonic', rec_target 'image' and rec_channels 'all', got task {self.task!r}, mode "
                               f"{self.mode!r}, rec_target {self.rec_target!r}, rec_channels {self.rec_channels!r}")
-        if self.adv_input > 0 and (self.task != "reconstruction" or self.mode != "platonic"
-                                   or self.rec_target != "image" or self.d_roll != "none"):
-            raise ConfigError("train.adv_input: D judges the render of the input view, so it needs train.task "
-                              "'reconstruction', mode 'platonic', rec_target 'image' and d_roll 'none', got task "
-                              f"{self.task!r}, mode {self.mode!r}, rec_target {self.rec_target!r}, d_roll {self.d_roll!r}")
         if self.rec_target == "volume" and self.mode not in MODES_3D:
             raise ConfigError(f"train.rec_target: 'volume' needs 3D ground truth, i.e. train.mode one of "
                               f"{list(MODES_3D)}, got {self.mode!r}")

@@ -15,15 +15,14 @@ uninterrupted one would:
    squared difference; with ``rec_loss: l1`` the mean absolute one, λ_rec mean |x − I_front|;
    with ``rec_channels: alpha`` on the opacity channel alone.
    With ``colour_match`` = w > 0, L_G adds w · mean |c̄(I_view) − c̄(x)|, c̄ the mean colour of an
-   image's object (:func:`.losses.colour_match`). With ``adv_input`` = w > 0, D's fakes also hold
-   I_front and L_G adds w · adv(D(I_front)): the input view answers to D as well as to the photo.
+   image's object (:func:`.losses.colour_match`).
 
 Where the volume stands (``train.pose``). With 'input' (the paper's view-space reconstruction)
 v lives in the input camera's frame: I_front renders it from ω₀ and the random views ω are drawn
 around that frame. A camera above the object sees its up axis tilted, so a right volume is tilted
 by the input's elevation θ₀ in that frame, its views from random ω are rolled, and D, whose photos
 were all taken by upright cameras, pushes G to build the object upright in every input frame
-instead (docs/training.md, "The pose of a reconstruction"). With 'elevation' G builds the object
+instead (docs/experiments/pose.md). With 'elevation' G builds the object
 upright, in its own frame; a pose head P reads the input camera's elevation θ̂ = P(z) from E's
 code, and
 
@@ -31,7 +30,7 @@ code, and
     I_view  = R(ω, v),  ω ~ p_view     (around the upright object, as the photos' cameras were)
 
 The input-view term alone does not teach P the elevation (it stays uncorrelated with θ₀,
-docs/training.md), so P also learns from G's own renders, whose elevations are known:
+docs/experiments/pose-elevation.md), so P also learns from G's own renders, whose elevations are known:
 
     L_pose = λ_pose · mean (P(E(I_view)) − asin ω_y)²      (I_view detached: it trains E and P)
 
@@ -48,7 +47,7 @@ elevations:
 
 ((s₀, s₁) the prior's range of shares); the input view is then rendered under L(z), held constant,
 so the input-view term compares colour and shading under the photo's light, not a random one
-(docs/training.md, "A light read from the photo").
+(docs/experiments/training-through-light.md, "A light read from the photo").
 
 The reconstruction term compares images by default (``train.rec_target: image``, as above). With
 ``rec_target: volume`` (the 3D modes) it compares volumes instead: λ_rec ‖v − v*‖², where v* is
@@ -114,7 +113,7 @@ from .augment import augment, augment_photos
 from .data import TrainingData
 from .losses import (colour_match, colour_offset, colour_tv, d_loss, depth_spread, g_loss, gradient_penalty,
                      hard_accuracy_counts, r1_penalty, soft_accuracy_counts)
-from .renderer import EA_WARMUP, blend, in_camera, light_share, make_lit_renderer, make_renderer
+from .renderer import in_camera, make_lit_renderer, make_renderer
 from .roll import input_frame_roll, roll
 from .settings import MODES, MODES_3D, POSES, REC_TARGETS, TASKS  # noqa: F401  (the choice lists, also named here)
 
@@ -189,8 +188,6 @@ class Trainer:
         self.opt_d3 = (torch.optim.Adam(self.nets["D3"].parameters(), lr=t.lr_d, betas=betas)
                        if "D3" in self.nets else None)
         self.render = make_renderer(cfg.render)
-        #: the EA marcher of an emissive start (train.light_warmup, light_fade), else None
-        self.render_ea = make_renderer(EA_WARMUP) if cfg.train.light_warmup or cfg.train.light_fade else None
         #: train.light: head: single scattering under a given light, for the input view; else None
         self.render_lit = make_lit_renderer(cfg.render) if cfg.train.light == "head" else None
         self.images = data.images.to(device)
@@ -318,16 +315,14 @@ class Trainer:
             v = G(codes)
             v_view, v_input = v[:b * K], v[b * K:]
         seed = int(np.random.SeedSequence([cfg.run.seed, step, 7, self.rank]).generate_state(1)[0] >> 2)
-        render = self.render if self.render_ea is None else \
-            blend(self.render_ea, self.render, light_share(step, t.light_warmup, t.light_fade))
-        i_view = render(v_view, views.to(self.device), seed)
+        i_view = self.render(v_view, views.to(self.device), seed)
         i_front = None
         if rec and t.rec_target == "image" and self.render_lit is not None:
             with torch.no_grad():                            # the photo's light as L reads it, held constant
                 ω_s, share = self.nets["L"](z.detach())      # (the plain module: DDP sees one use of L)
             i_front = self.render_lit(v_input, front_view(b).to(self.device), daylights(ω_s, share))
-        elif rec and t.rec_target == "image":                # the input view (rendered before D: adv_input)
-            i_front = render(v_input, front_view(b).to(self.device), seed + 1)
+        elif rec and t.rec_target == "image":                # the input view
+            i_front = self.render(v_input, front_view(b).to(self.device), seed + 1)
         out: Dict[str, float] = {}
 
         # -- D: real photos vs rendered views, gated by its soft accuracy -----------------------
@@ -337,28 +332,21 @@ class Trainer:
             real_d = roll(real_d, ψ_real.to(self.device))
         if ψ_fake is not None:
             fake_d = roll(i_view, ψ_fake.to(self.device))
-        if t.adv_input > 0:                                  # the input view's renders are D's fakes too
-            fake_d = torch.cat([fake_d, i_front])
         if t.d_augment:                                      # train/augment.py: the same kind of T on both sides
             g_aug = torch.Generator()
             g_aug.manual_seed(int(np.random.SeedSequence([cfg.run.seed, step, 11, self.rank]).generate_state(1)[0]))
             real_d, fake_d = augment(real_d, t.d_augment, g_aug), augment(fake_d, t.d_augment, g_aug)
-        self._critic_update("D", self.opt_d, real_d, fake_d.detach(), eps, t.d_gate, out, step)
+        self._critic_update("D", self.opt_d, real_d, fake_d.detach(), eps, t.d_gate, out)
 
         # -- D3 (Platonic3D): ground-truth volumes vs generated ----------------------------------
         loss_g3 = torch.zeros((), device=self.device)
         if t.mode == "platonic3d":
-            loss_g3 = self._update_d3(v, g, eps, out, step)
+            loss_g3 = self._update_d3(v, g, eps, out)
 
         # -- G and E: fool D from random views (and D3), reconstruct the input view --------------
         l_fake = D(fake_d)
-        if t.adv_input > 0:                                  # random views | input views
-            l_fake, l_front = l_fake.split([len(i_view), b])
-            terms = {"adv_input": t.adv_input * g_loss(t.loss, l_front)}
-        else:
-            terms = {}
         loss_adv = g_loss(t.loss, l_fake)
-        terms["adv2d"] = loss_adv
+        terms = {"adv2d": loss_adv}
         if t.mode == "platonic3d":
             terms["adv3d"] = t.weight_3d * loss_g3
         if t.colour_tv > 0:                                  # colour carried into the unseen body
@@ -386,7 +374,7 @@ class Trainer:
 
     def _g_objective(self, terms: Dict[str, torch.Tensor]) -> torch.Tensor:
         """G's (and E's) loss: the sum of its weighted terms, named 'adv2d' (D on rendered views),
-        'adv3d' (D3 on volumes), 'adv_input' (D on the input view), 'rec' (the input view), 'rec3d'
+        'adv3d' (D3 on volumes), 'rec' (the input view), 'rec3d'
         (the input image's ground-truth volume), 'pose' (the elevations of G's renders), 'colour_tv',
         'colour_match', 'colour_offset' and 'depth_spread' (priors, when their weights are set), 'light' (the lights of
         G's renders). One place that sees
@@ -427,12 +415,12 @@ class Trainer:
             self._update_ema(step)
 
     def _critic_update(self, name: str, opt: torch.optim.Optimizer, real: torch.Tensor, fake: torch.Tensor,
-                       eps: torch.Tensor, gate: Optional[float], out: Dict[str, float], step: int) -> None:
+                       eps: torch.Tensor, gate: Optional[float], out: Dict[str, float]) -> None:
         """``d_steps`` updates of critic ``name`` ('D' or 'D3') on real vs (detached) fake.
 
         Each update evaluates a fresh loss with the critic's current weights (WGAN-GP adds its
-        penalty at x̂ = ε real + (1 − ε) fake; ``r1_weight`` > 0 adds k γ/2 ‖∇ₓD(x)‖² at the reals
-        on every k-th ``step``, k = ``r1_every``), reals and fakes in one forward pass unless the
+        penalty at x̂ = ε real + (1 − ε) fake; ``r1_weight`` > 0 adds γ/2 ‖∇ₓD(x)‖² at the reals),
+        reals and fakes in one forward pass unless the
         critic has BatchNorm (whose batch statistics would then mix them).
         With a ``gate``, an update happens only while the
         critic's soft accuracy on this batch is ≤ gate; the first refusal ends the loop. Logs
@@ -442,8 +430,7 @@ class Trainer:
         t, critic = self.cfg.train, self.modules[name]
         key = name.lower()
         updates = 0
-        # lazy R1 (train.r1_every = k): the penalty on every k-th step only, weighted k times
-        r1_now = t.r1_weight > 0 and step % t.r1_every == 0
+        r1_now = t.r1_weight > 0
         # one forward pass over reals and fakes together where no BatchNorm mixes them
         together = not any(isinstance(m, nn.modules.batchnorm._BatchNorm) for m in critic.modules())
         for i in range(t.d_steps):
@@ -458,9 +445,9 @@ class Trainer:
                 l_real, l_fake, r1 = critic(real), critic(fake), None
             loss = d_loss(t.loss, l_real, l_fake)
             if r1 is not None:
-                loss = loss + 0.5 * t.r1_weight * t.r1_every * r1
+                loss = loss + 0.5 * t.r1_weight * r1
             if t.loss == "wgan-gp":
-                loss = loss + t.gp_weight * gradient_penalty(critic, real, fake[: len(real)],   # adv_input: more fakes
+                loss = loss + t.gp_weight * gradient_penalty(critic, real, fake[: len(real)],
                                                                  eps[: len(real)].to(self.device))
             acc = self._ratio(soft_accuracy_counts(l_real, l_fake))
             if i == 0:
@@ -479,10 +466,9 @@ class Trainer:
         """Σ numerator / Σ denominator over all processes."""
         return float(self._all_sum(counts[0].detach().cpu()) / self._all_sum(counts[1]))
 
-    def _update_d3(self, v: torch.Tensor, g: torch.Generator, eps: torch.Tensor, out: Dict[str, float],
-                   step: int) -> torch.Tensor:
+    def _update_d3(self, v: torch.Tensor, g: torch.Generator, eps: torch.Tensor, out: Dict[str, float]) -> torch.Tensor:
         """D3 updates (ground truth vs v.detach()); returns G's 3D adversarial loss on v."""
-        self._critic_update("D3", self.opt_d3, self._real_volumes(g), v.detach(), eps, None, out, step)
+        self._critic_update("D3", self.opt_d3, self._real_volumes(g), v.detach(), eps, None, out)
         return g_loss(self.cfg.train.loss, self.modules["D3"](v))
 
     def _real_volumes(self, g: torch.Generator) -> torch.Tensor:
@@ -522,7 +508,7 @@ class Trainer:
         out: Dict[str, float] = {}
         z = self.modules["E"](self._shard(self.images[idx.to(self.device)])) if rec else z_prior
         v = G(z)
-        self._critic_update("D3", self.opt_d3, real, v.detach(), eps, None, out, step)
+        self._critic_update("D3", self.opt_d3, real, v.detach(), eps, None, out)
         terms = {"adv3d": g_loss(t.loss, D3(v))}
         if rec:
             terms["rec3d"] = t.rec_weight * self._volume_rec(v, idx, out)

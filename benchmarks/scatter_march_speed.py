@@ -1,7 +1,7 @@
 """Benchmark: single scattering at the marcher's speed (render/scatter_march.py) against Mitsuba's
 volpath and the torch formation (render/single_scatter.py), and its cost beside the EA marcher.
 
-    .venv/bin/python benchmarks/scatter_march.py [--cost-only] [--repeats R]
+    .venv/bin/python benchmarks/scatter_march_speed.py [--cost-only] [--repeats R]
 
 Prints three tables (figures only; tests/test_scatter_march.py asserts the agreement):
 

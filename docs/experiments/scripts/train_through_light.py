@@ -1,6 +1,6 @@
 """Benchmark: the cost of a training step through each renderer on a path-traced collection.
 
-    .venv/bin/python benchmarks/train_through_light.py [--steps 10] [--shapes 60] [--cache data] [--width 32]
+    .venv/bin/python docs/experiments/scripts/train_through_light.py [--steps 10] [--shapes 60] [--cache data] [--width 32]
         [--device cuda|cpu] [--rows marcher,m = 2]
 
 One process, one collection (``configs/procedural_physical.yaml``: mushrooms at 32³ path-traced
@@ -39,7 +39,7 @@ from mitsuba_platonic.config import load_config
 from mitsuba_platonic.train.data import load_training_data
 from mitsuba_platonic.train.trainer import Trainer
 
-CONFIG = Path(__file__).resolve().parents[1] / "configs" / "procedural_physical.yaml"
+CONFIG = Path(__file__).resolve().parents[3] / "configs" / "procedural_physical.yaml"
 
 ROWS = {
     "EA, Mitsuba ray marcher": ["render.backend=mitsuba"],

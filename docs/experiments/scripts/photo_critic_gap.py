@@ -1,6 +1,6 @@
 """Benchmark: does a run's D memorise its training photos? (the diagnosis behind train.d_augment)
 
-    .venv/bin/python benchmarks/photo_critic_gap.py RUN [RUN ...] [--data-path DIR]
+    .venv/bin/python docs/experiments/scripts/photo_critic_gap.py RUN [RUN ...] [--data-path DIR]
 
 For each run folder trained on photos (``data.source: folder``), its trained D (from the newest
 checkpoint) scores the run's training photos, its held-out photos (never trained on), and renders

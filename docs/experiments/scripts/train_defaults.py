@@ -1,6 +1,6 @@
 """Benchmark: training choices (D gate, lr_D, normalisation, views per step, …), judged on held-out shapes.
 
-    .venv/bin/python benchmarks/train_defaults.py [--steps 1000] [--variants ungated,gate06,...]
+    .venv/bin/python docs/experiments/scripts/train_defaults.py [--steps 1000] [--variants ungated,gate06,...]
 
 Each variant trains the quickstart's configuration (``configs/quickstart.yaml``: mushrooms,
 32³, EA through the marcher, reconstruction) for ``--steps`` steps from the same seed (``--seeds``: several), on the

@@ -1,6 +1,6 @@
 """Benchmark: single scattering's accuracy against Mitsuba's volpath, and its cost.
 
-    .venv/bin/python benchmarks/single_scatter.py [--cost-only]
+    .venv/bin/python benchmarks/single_scatter_accuracy.py [--cost-only]
 
 Prints three tables (figures only; tests/test_single_scatter.py asserts the agreement):
 

@@ -2,7 +2,7 @@
 
 Prints figures only (no assertions), measured in one run:
 
-    .venv/bin/python benchmarks/d_probe.py [--g-steps 1000] [--d-steps 600] [--cache data/bench_defaults]
+    .venv/bin/python docs/experiments/scripts/d_probe.py [--g-steps 1000] [--d-steps 600] [--cache data/bench_defaults]
 
 Trains the quickstart (``configs/quickstart.yaml``, seed 0) for ``--g-steps`` steps, freezes E and
 G, and then trains a *fresh* D alone for ``--d-steps`` updates (batch 8, Adam, the trainer's
@@ -36,7 +36,7 @@ from mitsuba_platonic.train.trainer import Trainer
 from mitsuba_platonic.views import front_view, sample_views
 from presets import add_preset_argument, expand
 
-CONFIG = Path(__file__).resolve().parents[1] / "configs" / "quickstart.yaml"
+CONFIG = Path(__file__).resolve().parents[3] / "configs" / "quickstart.yaml"
 
 #: The probed discriminators: (initialisation, learning rate)
 CRITICS = (("he", 1e-4), ("dcgan", 2e-5))

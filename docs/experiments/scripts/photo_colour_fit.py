@@ -1,6 +1,6 @@
 """Benchmark: does a photo run get colour wrong because of the unseen side, or already in front?
 
-    .venv/bin/python benchmarks/photo_colour_fit.py RUN [RUN ...] [--data-path DIR]
+    .venv/bin/python docs/experiments/scripts/photo_colour_fit.py RUN [RUN ...] [--data-path DIR]
 
 For each run folder trained on photos, its inference model (the newest checkpoint) reconstructs
 the run's training photos and its held-out photos, and renders each at its input view. Printed

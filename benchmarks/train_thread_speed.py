@@ -2,11 +2,11 @@
 
 Prints figures only (no assertions); every ratio is measured within one run on one machine.
 
-    .venv/bin/python benchmarks/train_threads.py [--resolutions 32 64] [--steps 10] [--repeats 3]
+    .venv/bin/python benchmarks/train_thread_speed.py [--resolutions 32 64] [--steps 10] [--repeats 3]
 
 Per resolution: seconds per training step (reconstruction, EA, width 16, batch 8, random images)
 through the closed form, through the marcher with Dr.Jit's thread pool on every core, and through
-the marcher with ``run.drjit_threads: auto`` (the default; docs/training.md, "Threads"). Dr.Jit's
+the marcher with ``run.drjit_threads: auto`` (the default; docs/experiments/threads.md). Dr.Jit's
 idle workers keep spinning for 20 ms after each launch; where a launch is short, that spinning
 costs torch's convolutions more than the second thread gains the marcher.
 """

@@ -2,7 +2,7 @@
 
 Prints figures only (no assertions), measured in one run:
 
-    .venv/bin/python benchmarks/lookup_floor.py [--resolutions 32 64] [--batch 8] [--repeats 5]
+    .venv/bin/python docs/experiments/scripts/lookup_floor.py [--resolutions 32 64] [--batch 8] [--repeats 5]
 
 A trilinear EA lookup is 8 corner gathers of an RGBA packet (32 floats) per sample, and the
 march takes N samples per ray (step 1, 1 spp). "lookups only" is a Dr.Jit kernel that makes

@@ -1,6 +1,6 @@
 """Benchmark: what tells the judge's critic a photo run's side views from photos? Shape or texture?
 
-    .venv/bin/python benchmarks/judge_cues.py RUN [RUN ...] [--axis object|camera] [--figure F.png] [--data-path DIR]
+    .venv/bin/python docs/experiments/scripts/judge_cues.py RUN [RUN ...] [--axis object|camera] [--figure F.png] [--data-path DIR]
 
 For each photo run (a ``platonic train`` folder on a photo collection) the judge's critics
 (``evaluate/judge.py``: its number of critics, seeds 0, 1, …, its budget) are trained as ``platonic

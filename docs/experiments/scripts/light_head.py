@@ -1,6 +1,6 @@
 """Benchmark: does a light head (``train.light: head``) read the sun from path-traced images it never saw?
 
-    .venv/bin/python benchmarks/light_head.py RUN [RUN ...]
+    .venv/bin/python docs/experiments/scripts/light_head.py RUN [RUN ...]
 
 Each RUN was trained with ``train.light: head`` on a procedural collection with ``data.formation:
 physical`` (path-traced under random Mitsuba skies: a sun and a sky of some turbidity, multiple

@@ -1,6 +1,6 @@
 """Benchmark: where a training step's CPU time goes, by operator (torch.profiler), for a packaged config.
 
-    .venv/bin/python benchmarks/train_profile.py [--config quickstart] [--steps 10] [--warmup 3] [--set KEY=VALUE ...]
+    .venv/bin/python benchmarks/train_step_profile.py [--config quickstart] [--steps 10] [--warmup 3] [--set KEY=VALUE ...]
 
 Trains ``--warmup`` steps, then profiles ``--steps`` steps of the config's trainer on random
 images (the speed of a step does not depend on what the images show) with the run's thread
@@ -9,7 +9,7 @@ settings, and prints:
 - the seconds per step without the profiler (timed over the same number of steps first) and the
   renderer / networks / optimiser split of :class:`mitsuba_platonic.bench.train.StepClock`;
 - the operators with the largest self CPU time, as a share of all self CPU time (the table of
-  docs/training.md, "Where a step's time goes").
+  docs/experiments/step-time.md).
 
 Figures only: nothing is asserted.
 """

@@ -28,7 +28,7 @@ PRESETS: Dict[str, List[str]] = {
 def add_preset_argument(ap) -> None:
     """``--preset NAME`` (repeatable) on an argparse parser; see :func:`expand`."""
     ap.add_argument("--preset", dest="presets", action="append", default=[], choices=sorted(PRESETS),
-                    help="a named group of overrides applied before --set (benchmarks/presets.py): "
+                    help="a named group of overrides applied before --set (docs/experiments/scripts/presets.py): "
                          "the quickstart as it was for the older tables of docs/training.md")
 
 

@@ -2,7 +2,7 @@
 
 Prints figures only (no assertions), measured in one run:
 
-    .venv/bin/python benchmarks/texture_ad_march.py [--resolutions 32 64] [--batch 8] [--repeats 5]
+    .venv/bin/python docs/experiments/scripts/texture_ad_march.py [--resolutions 32 64] [--batch 8] [--repeats 5]
 
 The speed targets of the marcher's issue (64³ EA forward + backward ≤ 2 ms per image, 32³ ≤ 0.5 ms)
 came from a march built as this one is: the B volumes stacked in one zero-padded ``Texture3f``
