@@ -153,7 +153,7 @@ def test_a_missing_or_damaged_source_is_one_line(tmp_path):
     (tmp_path / "bad.vol").write_bytes(b"VOL\x03" + b"\x00" * 10)
     (tmp_path / "notes.txt").write_text("hello")
     (tmp_path / "empty_run").mkdir()
-    for source, message in ((tmp_path / "missing.npz", "does not exist"), (tmp_path / "bad.npz", "could not read"),
+    for source, message in ((tmp_path / "missing.npz", "does not exist"), (tmp_path / "bad.npz", "not a valid .npz"),
                             (tmp_path / "bad.vol", "not a Mitsuba .vol"), (tmp_path / "notes.txt", ".npz or .vol"),
                             (tmp_path / "empty_run", "checkpoint")):
         code, out, err = run_cli(["view", str(source), "--port", "0"])
