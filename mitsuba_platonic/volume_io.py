@@ -51,17 +51,23 @@ def to_mitsuba_grid(v: torch.Tensor) -> torch.Tensor:
 # --------------------------------------------------------------------------- reading
 
 
-def read_npz(path: Path) -> torch.Tensor:
-    """Read and validate the array ``volume`` of a ``.npz`` file → ``(1, C, N, N, N)`` float32.
-
-    Raises :class:`VolumeFileError` naming the file and what is wrong (missing, not an archive, no
-    array ``volume``, a wrong shape, values outside [0, 1], …)."""
+def _existing_file(path: Path) -> "tuple[Path, str]":
+    """``(Path, its name)``; :class:`VolumeFileError` where it is missing or not a file."""
     path = Path(path)
     name = str(path)
     if not path.exists():
         raise VolumeFileError(f"volume file {name!r} does not exist")
     if not path.is_file():
         raise VolumeFileError(f"volume file {name!r} is not a file")
+    return path, name
+
+
+def read_npz(path: Path) -> torch.Tensor:
+    """Read and validate the array ``volume`` of a ``.npz`` file → ``(1, C, N, N, N)`` float32.
+
+    Raises :class:`VolumeFileError` naming the file and what is wrong (missing, not an archive, no
+    array ``volume``, a wrong shape, values outside [0, 1], …)."""
+    path, name = _existing_file(path)
     try:
         archive = np.load(path, allow_pickle=False)
     except OSError as e:    # the file itself (permissions, I/O)
@@ -90,12 +96,7 @@ def read_vol(path: Path) -> torch.Tensor:
 
     Raises :class:`VolumeFileError` naming the file and what is wrong (missing, not a ``.vol``, an
     encoding other than float32, a size that does not match its header, …)."""
-    path = Path(path)
-    name = str(path)
-    if not path.exists():
-        raise VolumeFileError(f"volume file {name!r} does not exist")
-    if not path.is_file():
-        raise VolumeFileError(f"volume file {name!r} is not a file")
+    path, name = _existing_file(path)
     data = path.read_bytes()
     header = len(_VOL_MAGIC) + 4 * 4 + 6 * 4
     if len(data) < header or data[:3] != b"VOL":
