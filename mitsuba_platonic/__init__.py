@@ -7,8 +7,8 @@ Importing the package is cheap and needs no Dr.Jit: ``render``, ``render_with``,
 ``RenderSettings``, ``views`` and ``volume`` are imported on first use, so that ``platonic
 --help`` answers at once and a Ctrl-C while torch loads reaches the command line's handler.
 Where Dr.Jit is needed (a Mitsuba render, the first read of ``BACKEND``) its backend is checked
-(:func:`~mitsuba_platonic.backend.check_backend`), raising
-:class:`~mitsuba_platonic.backend.BackendError` with install instructions if it has none; the
+(:func:`~mitsuba_platonic.runtime.backend.check_backend`), raising
+:class:`~mitsuba_platonic.runtime.backend.BackendError` with install instructions if it has none; the
 closed-form layers, photo loading and ``--help`` work without a usable LLVM.
 """
 
@@ -19,7 +19,7 @@ import sys
 import types
 from typing import Any
 
-from .backend import BackendError, check_backend, preselect_libllvm
+from .runtime.backend import BackendError, check_backend, preselect_libllvm
 
 __version__ = "0.1.0"
 __all__ = ["render", "render_with", "RenderSettings", "views", "volume", "BackendError", "BACKEND", "__version__"]

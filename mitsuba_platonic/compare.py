@@ -29,11 +29,11 @@ from typing import Any, Callable, Dict, List, Mapping, Optional, Sequence, Tuple
 import numpy as np
 import torch
 
-from .budget import available_memory
+from .runtime.budget import available_memory
 from .errors import UserError
 from .fileio import atomic_write, make_folder, write_text
 from .images import composite, heatmap, save_exr, to_hwc
-from .progress import progress_bar
+from .runtime.progress import progress_bar
 from .render import MODELS, render
 from .render.settings import OPTIONS_OF, RenderSettings
 from .render.variant import ensure_variant
@@ -256,7 +256,7 @@ def compare(volume: torch.Tensor, views: torch.Tensor, models: Sequence[str] = M
             ``None`` writes nothing.
         repeats: timed runs per backend after one warm-up run; the best is reported.
         progress: a progress line on stderr at once (the comparison's size) and after each
-            backend's runs and each model's files (:func:`~mitsuba_platonic.progress.progress_bar`).
+            backend's runs and each model's files (:func:`~mitsuba_platonic.runtime.progress.progress_bar`).
 
     Returns:
         One dict per model: ``model``, ``resolution``, ``views``, ``filter``, ``options``,

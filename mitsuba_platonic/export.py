@@ -24,12 +24,12 @@ import numpy as np
 import torch
 import torch.nn.functional as F
 
-from . import budget
+from .runtime import budget
 from .errors import UserError
 from .fileio import atomic_write, make_folder, remove
 from .frames import display_frames, save_gif, turntable_frames
 from .images import composite, linear_to_srgb, save_grid, save_png, to_hwc
-from .progress import progress_bar
+from .runtime.progress import progress_bar
 from .views import turntable
 from .volume import voxel_size, world_to_grid
 from .volume_io import save_volume
@@ -246,7 +246,7 @@ def export_samples(model: "Model", n: int, out: PathLike, seed: int = 0, overwri
     A folder holding an earlier call's samples is refused (:class:`UserError`, before any work),
     so that no old ``sample_NNN`` is left beside new ones; ``overwrite`` deletes them first. With
     ``progress``, a line on stderr at once (how many) and as the samples are written
-    (:func:`~mitsuba_platonic.progress.progress_bar`)."""
+    (:func:`~mitsuba_platonic.runtime.progress.progress_bar`)."""
     out = Path(out)
     check_samples_fit(model, n, out)
     earlier = sorted(p for p in out.iterdir() if _SAMPLE.fullmatch(p.name)) if out.is_dir() else []

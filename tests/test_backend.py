@@ -6,7 +6,7 @@ import sys
 
 import pytest
 
-from mitsuba_platonic.backend import INSTALL_HINT, MIN_LLVM, _version_of, find_libllvm
+from mitsuba_platonic.runtime.backend import INSTALL_HINT, MIN_LLVM, _version_of, find_libllvm
 
 
 def _import_in_child(tmp_path, **env):

@@ -483,7 +483,7 @@ def test_make_dataset_into_a_full_filesystem(tmp_path, tiny_fs, monkeypatch):
     2, what is there is whole; with room again the same command finishes the collection. The disk
     fills after the up-front size check (test_size_checks tests that check), as when another writer
     takes the space: the check is told of ample room."""
-    from mitsuba_platonic import budget
+    from mitsuba_platonic.runtime import budget
 
     monkeypatch.setattr(budget, "free_disk", lambda path: (1 << 40, "a stand-in"))
     out = tiny_fs("128k") / "d"

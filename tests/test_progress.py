@@ -7,7 +7,7 @@ import io
 import pytest
 from tqdm.std import tqdm
 
-from mitsuba_platonic.progress import LineProgress, progress_bar
+from mitsuba_platonic.runtime.progress import LineProgress, progress_bar
 from cli_runner import run_cli
 from tiny_shapes import TINY
 
@@ -81,7 +81,7 @@ def test_make_dataset_into_a_log_writes_lines_not_redraws(tmp_path):
 def test_a_first_line_says_the_size_at_once_and_long_tenths_get_timed_lines(monkeypatch):
     """Work whose first tenth takes hours (make-dataset at 10⁶ views, compare at 10⁵) prints its size
     at once and a line every ``seconds`` between the tenths; the clock is the test's."""
-    from mitsuba_platonic import progress as P
+    from mitsuba_platonic.runtime import progress as P
 
     now = [0.0]
     monkeypatch.setattr(P.time, "perf_counter", lambda: now[0])

@@ -1,6 +1,6 @@
 """Sizes that cannot fit are refused up front, in one line naming the flag or key (issue 46):
 ``generate -n``, ``train.batch_size``, ``make-dataset --views/--shapes`` (memory and disk), and the
-checks share one owner of "available memory" (:mod:`mitsuba_platonic.budget`)."""
+checks share one owner of "available memory" (:mod:`mitsuba_platonic.runtime.budget`)."""
 
 from __future__ import annotations
 
@@ -9,7 +9,7 @@ from pathlib import Path
 
 import pytest
 
-from mitsuba_platonic import budget
+from mitsuba_platonic.runtime import budget
 from mitsuba_platonic.config import ConfigError, load_config
 from mitsuba_platonic.train import run as R
 from mitsuba_platonic.train.fits import batch_bytes, check_batch_fits

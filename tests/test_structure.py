@@ -130,7 +130,7 @@ def test_the_package_has_no_import_cycle():
 #: never one above. Names are module prefixes under ``mitsuba_platonic``; the package itself (its
 #: face, which re-exports the renderer) sits on top.
 LAYERS = [
-    ("foundation", ["errors", "fileio", "outputs", "backend", "resources", "progress", "_data", "budget", "pickle_scan"]),
+    ("foundation", ["errors", "fileio", "outputs", "runtime", "resources", "_data", "pickle_scan"]),
     ("conventions: views, volume (and its files), images", ["views", "volume", "volume_io", "images"]),
     ("the checks every settings section shares", ["settings_checks"]),
     ("renderer", ["render", "compare", "compare_light", "frames"]),

@@ -37,7 +37,7 @@ import sys
 from typing import Callable, Optional, Sequence
 
 from .. import __version__
-from ..backend import BackendError
+from ..runtime.backend import BackendError
 from ..errors import UserError, interrupt_caught, interrupt_exit_code, remembering_ctrl_c
 from .args import PROG, CLIError, parse_models
 from .checkpoints import add_convert_checkpoint

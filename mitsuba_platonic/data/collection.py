@@ -30,11 +30,11 @@ from typing import Any, Callable, Dict, List, Optional, Tuple, Union
 import numpy as np
 import torch
 
-from .. import budget
+from ..runtime import budget
 from ..errors import Interrupted, UserError, raise_if_ctrl_c
 from ..fileio import atomic_write, confined, make_folder, open_file, remove
 from ..images import save_exr, save_png, to_hwc, to_png_rgba
-from ..progress import progress_bar
+from ..runtime.progress import progress_bar
 from ..render import render
 from ..render.physical import render_physical
 from ..volume import CHANNELS

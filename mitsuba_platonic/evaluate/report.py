@@ -43,7 +43,7 @@ from ..fileio import confined, make_folder, write_text
 from ..loading import checkpoint_config, model_from_checkpoint
 from ..model import Model
 from ..outputs import MARKER, check_output_folder, claim_output_folder
-from ..progress import progress_bar
+from ..runtime.progress import progress_bar
 from ..render import render
 from ..train.data import collection_folder, load_training_data
 from ..views import turntable

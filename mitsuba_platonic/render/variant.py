@@ -11,7 +11,7 @@ from __future__ import annotations
 import os
 from typing import Any, Optional
 
-from ..backend import check_backend
+from ..runtime.backend import check_backend
 from ..errors import UserError
 
 __all__ = ["VARIANTS", "ensure_variant", "variant_device"]
@@ -42,7 +42,7 @@ def _pick() -> str:
 def ensure_variant() -> Any:
     """Import Mitsuba, set the project's variant (once) and return the ``mitsuba`` module.
 
-    Raises :class:`~mitsuba_platonic.backend.BackendError` (before Mitsuba or Dr.Jit is imported)
+    Raises :class:`~mitsuba_platonic.runtime.backend.BackendError` (before Mitsuba or Dr.Jit is imported)
     where Dr.Jit has no working backend, and :class:`~mitsuba_platonic.errors.UserError` if ``MITSUBA_PLATONIC_VARIANT`` names a
     variant this machine cannot run (nothing is remembered then: fix the variable and call again).
     """

@@ -12,7 +12,7 @@ from typing import Optional, Tuple, Union
 
 import torch
 
-from .. import budget
+from ..runtime import budget
 from ..config import Config, ConfigError
 from ..model import Model, critic_config
 from ..model_settings import ModelConfig

@@ -62,7 +62,7 @@ from ..errors import Interrupted, StopBetweenSteps, UserError
 from ..fileio import confined
 from ..loading import checkpoint_config, model_from_checkpoint
 from ..model import Model
-from ..progress import progress_bar
+from ..runtime.progress import progress_bar
 from .data import TrainingData, load_training_data
 from .fits import check_model_fits
 from .folder import RUN_MARKER, RUN_PARTS, claim_run_folder, prepare_run_folder, read_run_config, run_lock

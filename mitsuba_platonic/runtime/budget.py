@@ -16,7 +16,7 @@ import shutil
 from pathlib import Path
 from typing import List, Optional, Tuple, Union
 
-from .errors import UserError
+from ..errors import UserError
 
 __all__ = ["available_memory", "free_disk", "check_fits", "gigabytes"]
 
