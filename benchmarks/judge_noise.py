@@ -18,7 +18,7 @@ from pathlib import Path
 
 import numpy as np
 
-from mitsuba_platonic.checkpoint import read_checkpoint
+from mitsuba_platonic.files.checkpoint import read_checkpoint
 from mitsuba_platonic.evaluate import judge as J
 from mitsuba_platonic.evaluate.photos import photo_splits
 from mitsuba_platonic.loading import checkpoint_config, model_from_checkpoint

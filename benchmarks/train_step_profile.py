@@ -24,7 +24,7 @@ from torch.profiler import ProfilerActivity, profile
 
 from mitsuba_platonic.bench.train import StepClock
 from mitsuba_platonic.config import load_config
-from mitsuba_platonic.resources import config_path
+from mitsuba_platonic.files.resources import config_path
 from mitsuba_platonic.train.data import TrainingData
 from mitsuba_platonic.train.run import training_threads
 from mitsuba_platonic.train.trainer import Trainer

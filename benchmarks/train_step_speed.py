@@ -27,7 +27,7 @@ ROOT = Path(__file__).resolve().parents[1]
 CHILD = r"""
 import sys, time, torch
 from mitsuba_platonic.config import load_config
-from mitsuba_platonic.resources import config_path
+from mitsuba_platonic.files.resources import config_path
 from mitsuba_platonic.train.data import TrainingData
 from mitsuba_platonic.train.run import training_threads
 from mitsuba_platonic.train.trainer import Trainer

@@ -31,7 +31,7 @@ import torch
 
 from .runtime.budget import available_memory
 from .errors import UserError
-from .fileio import atomic_write, make_folder, write_text
+from .files.fileio import atomic_write, make_folder, write_text
 from .images import composite, heatmap, save_exr, to_hwc
 from .runtime.progress import progress_bar
 from .render import MODELS, render

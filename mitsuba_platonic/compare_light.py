@@ -44,7 +44,7 @@ import torch.nn.functional as F
 
 from .compare import time_render
 from .errors import UserError
-from .fileio import atomic_write, make_folder, write_text
+from .files.fileio import atomic_write, make_folder, write_text
 from .images import linear_to_srgb
 from .runtime.progress import progress_bar
 from .render.single_scatter import SunAndSky, reference_render, sample_sun_and_sky

@@ -38,7 +38,7 @@ from pydantic_core import SchemaValidator, core_schema
 from .data.settings import DataConfig
 from .model_settings import ModelConfig
 from .render.settings import LIT, SINGLE_SCATTERING, RenderSettings as RenderConfig
-from .resources import config_names, config_path
+from .files.resources import config_names, config_path
 from .settings_checks import ConfigError, quoted
 from .train.run_settings import RunConfig
 from .train.settings import MODES_3D, PRGAN, TrainConfig

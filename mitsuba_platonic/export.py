@@ -1,7 +1,7 @@
 """Export: a volume's files (.npz, Mitsuba .vol), turntable GIFs, and meshes (PLY with vertex colours).
 
 :func:`export_volume` writes all of them for one volume (the volume files through
-:func:`~mitsuba_platonic.volume_io.save_volume`, which owns their formats);
+:func:`~mitsuba_platonic.files.volume_io.save_volume`, which owns their formats);
 :func:`export_reconstructions` and :func:`export_samples` are the ``reconstruct`` and ``generate``
 pipelines (a model's volumes, then :func:`export_volume`), which the command line and the
 quickstart call.
@@ -26,13 +26,13 @@ import torch.nn.functional as F
 
 from .runtime import budget
 from .errors import UserError
-from .fileio import atomic_write, make_folder, remove
+from .files.fileio import atomic_write, make_folder, remove
 from .frames import display_frames, save_gif, turntable_frames
 from .images import composite, linear_to_srgb, save_grid, save_png, to_hwc
 from .runtime.progress import progress_bar
 from .views import turntable
 from .volume import voxel_size, world_to_grid
-from .volume_io import save_volume
+from .files.volume_io import save_volume
 
 if TYPE_CHECKING:
     from .model import Model

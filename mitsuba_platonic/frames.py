@@ -15,7 +15,7 @@ import numpy as np
 import torch
 from PIL import Image
 
-from .fileio import atomic_write, make_folder
+from .files.fileio import atomic_write, make_folder
 from .images import composite, linear_to_srgb, to_hwc
 from .render import render
 from .views import turntable

@@ -26,7 +26,7 @@ import numpy as np
 import OpenEXR
 from PIL import Image
 
-from .fileio import atomic_write
+from .files.fileio import atomic_write
 
 __all__ = [
     "to_hwc",

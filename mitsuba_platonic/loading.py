@@ -1,6 +1,6 @@
 """What training saved, read back: a checkpoint's config as a validated :class:`Config`, and its model.
 
-The checkpoint file format (:mod:`mitsuba_platonic.checkpoint`) stores and returns plain data, the
+The checkpoint file format (:mod:`mitsuba_platonic.files.checkpoint`) stores and returns plain data, the
 config as the mapping ``Config.to_dict()`` wrote; this module sits above it, the config and the
 model, and builds them from it. Old run folders load as they did: a saved config that lacks keys
 added since gets their defaults, as a YAML file would, and one that holds a retired option at the
@@ -18,7 +18,7 @@ from typing import Any, Dict, Optional, Tuple, Type, TypeVar, Union
 
 import torch
 
-from .checkpoint import Checkpoint, RunError, load_weights, read_checkpoint, saved_config_dict
+from .files.checkpoint import Checkpoint, RunError, load_weights, read_checkpoint, saved_config_dict
 from .config import Config, ConfigError, config_from_dict
 
 __all__ = ["saved_config", "checkpoint_config", "config_difference", "RESUME_SECTIONS", "model_from_checkpoint",
@@ -64,7 +64,7 @@ def saved_config(state: Dict[str, Any], path: Path, run_name: Optional[str] = No
 
 
 def checkpoint_config(ckpt: Checkpoint) -> Config:
-    """The validated config of a checkpoint already read (:func:`~mitsuba_platonic.checkpoint.read_checkpoint`);
+    """The validated config of a checkpoint already read (:func:`~mitsuba_platonic.files.checkpoint.read_checkpoint`);
     :class:`RunError` naming its file if it is not valid."""
     return saved_config({"config": ckpt.config}, ckpt.path)
 

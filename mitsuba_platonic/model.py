@@ -109,8 +109,8 @@ class Model(nn.Module):
     def from_checkpoint(cls, source: Union[str, Path], device: Union[str, torch.device] = "cpu") -> "Model":
         """The model of a run folder (its newest loadable checkpoint) or of one checkpoint file.
 
-        The file is loaded safely (no code runs, :func:`~mitsuba_platonic.checkpoint.load_checkpoint`).
-        Raises :class:`~mitsuba_platonic.checkpoint.RunError` (one line naming the file) if there
+        The file is loaded safely (no code runs, :func:`~mitsuba_platonic.files.checkpoint.load_checkpoint`).
+        Raises :class:`~mitsuba_platonic.files.checkpoint.RunError` (one line naming the file) if there
         is no loadable checkpoint, the safe loader refused one (``UnsafeCheckpoint``), its saved
         config is not valid or its weights do not fit that config's networks.
 

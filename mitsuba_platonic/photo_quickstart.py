@@ -23,10 +23,10 @@ from .evaluate.judge import BANDS
 from .evaluate.photos import photo_splits
 from .evaluate import report as evaluation_report
 from .export import export_held_out
-from .fileio import confined, write_text
+from .files.fileio import confined, write_text
 from .model import Model
 from .quickstart import QUICKSTART_PARTS, claim_quickstart_folder, stopped
-from .resources import config_path
+from .files.resources import config_path
 from .train.fits import check_model_fits
 from .train import run as training_run
 

@@ -27,10 +27,10 @@ from .config import load_config
 from .errors import Interrupted
 from .evaluate.protocol import held_out_scores
 from .export import export_held_out
-from .fileio import confined, write_text
+from .files.fileio import confined, write_text
 from .model import Model
-from .outputs import MARKER, claim_output_folder
-from .resources import config_path
+from .files.outputs import MARKER, claim_output_folder
+from .files.resources import config_path
 from .train import data as training_data
 from .train import run as training_run
 from .train.fits import check_model_fits
@@ -76,13 +76,13 @@ def stopped(e: KeyboardInterrupt, stage: Dict[str, str], command: str, steps: Op
 
 
 def claim_quickstart_folder(out: Path, run_dir: Path, overwrite: bool) -> None:
-    """Make ``out`` the quickstart's output folder (:func:`~mitsuba_platonic.outputs.claim_output_folder`):
+    """Make ``out`` the quickstart's output folder (:func:`~mitsuba_platonic.files.outputs.claim_output_folder`):
     new, empty or an earlier quickstart's (marked, or from before the mark: ``run_dir`` is a run
     folder), else refused unless ``overwrite``."""
     claim_output_folder(out, "quickstart", overwrite, earlier=lambda _: is_run_folder(run_dir))
 
 
-#: What the quickstarts write into ``--out`` (:func:`~mitsuba_platonic.fileio.confined`: none may be a link).
+#: What the quickstarts write into ``--out`` (:func:`~mitsuba_platonic.files.fileio.confined`: none may be a link).
 QUICKSTART_PARTS = (MARKER, "report.md", "run", "data", "reconstructions", "evaluation")
 
 

@@ -14,9 +14,9 @@ from pathlib import Path
 import pytest
 import torch
 
-from mitsuba_platonic.checkpoint import UnsafeCheckpoint, load_checkpoint, objects_to_convert
+from mitsuba_platonic.files.checkpoint import UnsafeCheckpoint, load_checkpoint, objects_to_convert
 from mitsuba_platonic.config import load_config
-from mitsuba_platonic.pickle_scan import foreign_objects, pickled_globals
+from mitsuba_platonic.files.pickle_scan import foreign_objects, pickled_globals
 from mitsuba_platonic.train import run as R
 from cli_runner import one_line, run_cli
 from tiny_shapes import tiny_run_overrides

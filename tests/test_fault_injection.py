@@ -3,7 +3,7 @@ by a resume, a full disk (a tiny tmpfs where the test may mount one, and a disk 
 the middle of a write, injected in-process), corrupt checkpoints, and bad input files.
 
 What each fault must leave: the command finishes when run again; every file it reports is whole
-(checkpoints load with :mod:`mitsuba_platonic.checkpoint`, images and volumes load); a temporary
+(checkpoints load with :mod:`mitsuba_platonic.files.checkpoint`, images and volumes load); a temporary
 is never left looking like a real file; a resumed run goes on from a saved step; a full disk is
 one line (exit code 2) and the previous files stay as they were.
 
@@ -33,11 +33,11 @@ import pytest
 import torch
 from PIL import Image
 
-from mitsuba_platonic.checkpoint import (CHECKPOINT_VERSION, checkpoint_files, read_checkpoint,
+from mitsuba_platonic.files.checkpoint import (CHECKPOINT_VERSION, checkpoint_files, read_checkpoint,
                                          save_checkpoint)
 from mitsuba_platonic.config import load_config
 from mitsuba_platonic.data.collection import load_manifest
-from mitsuba_platonic.fileio import atomic_write
+from mitsuba_platonic.files.fileio import atomic_write
 from mitsuba_platonic.images import load_exr
 from mitsuba_platonic.train import run as R
 from mitsuba_platonic.train.data import load_training_data
@@ -186,7 +186,7 @@ def test_make_dataset_killed_twice_then_resumed(tmp_path):
 
 
 def _checkpoints(run_dir: Path):
-    """{file name: step} of every checkpoint file the run shows, each read with checkpoint.py's
+    """{file name: step} of every checkpoint file the run shows, each read with files/checkpoint.py's
     reader (a torn one fails here); anything else in checkpoints/ must be a hidden temporary."""
     folder = run_dir / "checkpoints"
     listed = checkpoint_files(folder)

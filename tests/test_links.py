@@ -12,7 +12,7 @@ from pathlib import Path
 
 import pytest
 
-from mitsuba_platonic import fileio
+from mitsuba_platonic.files import fileio
 from mitsuba_platonic.config import load_config
 from mitsuba_platonic.train import run as R
 from cli_runner import one_line, run_cli, set_flags

@@ -4,7 +4,7 @@ generates exactly what the trained networks do."""
 import pytest
 import torch
 
-from mitsuba_platonic.checkpoint import RunError, load_checkpoint, save_checkpoint
+from mitsuba_platonic.files.checkpoint import RunError, load_checkpoint, save_checkpoint
 from mitsuba_platonic.config import load_config
 from mitsuba_platonic.errors import UserError
 from mitsuba_platonic.model import Model

@@ -15,7 +15,7 @@ import pytest
 from mitsuba_platonic.config import load_config
 from mitsuba_platonic.errors import Interrupted
 from mitsuba_platonic.evaluate import report as E
-from mitsuba_platonic.outputs import MARKER, made_by
+from mitsuba_platonic.files.outputs import MARKER, made_by
 from cli_runner import one_line, run_cli
 
 

@@ -21,7 +21,7 @@ from pathlib import Path
 
 import pytest
 
-from mitsuba_platonic import resources
+from mitsuba_platonic.files import resources
 from mitsuba_platonic.config import ConfigError, config_file, load_config
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -38,7 +38,7 @@ def test_package_data_are_the_top_level_folders():
 
 
 def test_no_module_finds_data_relative_to_its_own_file():
-    """Data are read through mitsuba_platonic.resources, never as ``../scenes`` next to a module."""
+    """Data are read through mitsuba_platonic.files.resources, never as ``../scenes`` next to a module."""
     offenders = [f"{p.relative_to(ROOT)}:{i}" for p in PACKAGE.rglob("*.py")
                  for i, line in enumerate(p.read_text().splitlines(), 1)
                  if re.search(r"Path\(__file__\)|os\.path\.dirname\(__file__\)", line)]

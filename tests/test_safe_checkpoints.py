@@ -19,7 +19,7 @@ import pytest
 import torch
 import yaml
 
-from mitsuba_platonic.checkpoint import (CHECKPOINT_VERSION, RunError, UnsafeCheckpoint, load_checkpoint,
+from mitsuba_platonic.files.checkpoint import (CHECKPOINT_VERSION, RunError, UnsafeCheckpoint, load_checkpoint,
                                          read_checkpoint, save_checkpoint)
 from mitsuba_platonic.config import load_config
 from mitsuba_platonic.model import Model
@@ -198,7 +198,7 @@ def test_a_checkpoint_with_other_objects_is_refused_then_converted_knowingly(run
 ], ids=["global", "blocked module", "reduce", "garbage"])
 def test_a_refused_object_is_told_from_a_torn_file(message, refused):
     """What torch's safe unpickler says: an object it refused (an error, no fallback), or a torn file."""
-    from mitsuba_platonic.checkpoint import _refused_object
+    from mitsuba_platonic.files.checkpoint import _refused_object
 
     assert _refused_object(message) == refused
 

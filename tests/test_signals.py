@@ -18,7 +18,7 @@ from pathlib import Path
 
 import pytest
 
-from mitsuba_platonic.checkpoint import read_checkpoint
+from mitsuba_platonic.files.checkpoint import read_checkpoint
 
 #: A training that runs far longer than the test and writes a sample after every step (the test
 #: waits for the first) but no periodic checkpoint: what it finds afterwards the signal saved.

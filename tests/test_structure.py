@@ -130,15 +130,17 @@ def test_the_package_has_no_import_cycle():
 #: never one above. Names are module prefixes under ``mitsuba_platonic``; the package itself (its
 #: face, which re-exports the renderer) sits on top.
 LAYERS = [
-    ("foundation", ["errors", "fileio", "outputs", "runtime", "resources", "_data", "pickle_scan"]),
-    ("conventions: views, volume (and its files), images", ["views", "volume", "volume_io", "images"]),
+    ("foundation", ["errors", "_data"]),
+    ("conventions: views, volume", ["views", "volume"]),
+    ("I/O: files (writes, output folders, package data, volume files, checkpoints) and images", ["files", "images"]),
+    ("the machine: Dr.Jit's backend, memory and disk, progress", ["runtime"]),
     ("the checks every settings section shares", ["settings_checks"]),
     ("renderer", ["render", "compare", "compare_light", "frames"]),
     ("data: collections, photos, the data section", ["data"]),
     ("networks, the colour they read from a photo and the model section",
      ["models", "photo_colours", "model_settings"]),
-    ("training's own settings (the train and run sections) and the checkpoint file format",
-     ["train.settings", "train.run_settings", "train.augment", "train.losses", "train.roll", "checkpoint"]),
+    ("training's own settings (the train and run sections)",
+     ["train.settings", "train.run_settings", "train.augment", "train.losses", "train.roll"]),
     ("the config, composing every component's settings", ["config"]),
     ("what runs saved, read back, and the model it builds", ["loading", "model"]),
     ("training: data, trainer, runs", ["train"]),

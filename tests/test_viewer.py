@@ -35,7 +35,7 @@ import torch
 from cli_runner import one_line, run_cli
 from mitsuba_platonic.views import from_angles
 from mitsuba_platonic.volume import test_volume
-from mitsuba_platonic.volume_io import read_vol, read_volume_file, write_vol
+from mitsuba_platonic.files.volume_io import read_vol, read_volume_file, write_vol
 from tiny_shapes import TINY
 
 viser = pytest.importorskip("viser", reason="the 'viewer' extra is not installed (pip install -e '.[viewer]')")

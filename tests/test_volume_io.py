@@ -1,4 +1,4 @@
-"""Volume files (volume_io.py): the .vol writer is Mitsuba's format byte for byte, .npz round-trips,
+"""Volume files (files/volume_io.py): the .vol writer is Mitsuba's format byte for byte, .npz round-trips,
 and a bad .npz is refused with a message naming the file (the CLI's messages: tests/test_compare_cli.py)."""
 
 from __future__ import annotations
@@ -9,7 +9,7 @@ import torch
 
 from mitsuba_platonic.errors import UserError
 from mitsuba_platonic.volume import test_volume
-from mitsuba_platonic.volume_io import (load_volume, read_npz, save_volume, to_mitsuba_grid, write_npz,
+from mitsuba_platonic.files.volume_io import (load_volume, read_npz, save_volume, to_mitsuba_grid, write_npz,
                                         write_vol)
 
 

@@ -25,7 +25,7 @@ from typing import Any, Callable, Dict, List, Sequence
 import torch
 
 from ..config import load_config
-from ..resources import config_path
+from ..files.resources import config_path
 from ..train.data import TrainingData
 from ..train.run import training_threads
 from ..train.trainer import Trainer

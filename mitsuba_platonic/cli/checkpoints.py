@@ -1,4 +1,4 @@
-"""``platonic convert-checkpoint``: :func:`mitsuba_platonic.checkpoint.convert_checkpoint`, for a
+"""``platonic convert-checkpoint``: :func:`mitsuba_platonic.files.checkpoint.convert_checkpoint`, for a
 trusted checkpoint the safe loader refuses (the only command that unpickles with
 ``weights_only=False``)."""
 
@@ -15,7 +15,7 @@ __all__ = ["add_convert_checkpoint"]
 
 
 def _cmd_convert_checkpoint(args: argparse.Namespace) -> int:
-    from ..checkpoint import convert_checkpoint, objects_to_convert
+    from ..files.checkpoint import convert_checkpoint, objects_to_convert
 
     files = _checkpoints_to_convert([Path(p) for p in args.paths])
     if args.out is not None and len(files) != 1:
@@ -65,7 +65,7 @@ def _confirmed(unsafe: Dict[Path, List[str]], yes: bool) -> bool:
 def _checkpoints_to_convert(paths: Sequence[Path]) -> List[Path]:
     """Checkpoint files as given, a run folder's ``checkpoints/*.pt`` in its place; :class:`CLIError`
     for a path that is neither."""
-    from ..checkpoint import checkpoint_files
+    from ..files.checkpoint import checkpoint_files
 
     files: List[Path] = []
     for path in paths:

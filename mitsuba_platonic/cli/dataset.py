@@ -8,7 +8,7 @@ import argparse
 from pathlib import Path
 from typing import Tuple, Union
 
-from ..fileio import confined
+from ..files.fileio import confined
 from .args import CLIError, positive_float, positive_int, seed
 
 __all__ = ["add_make_dataset"]

@@ -15,7 +15,7 @@ import warnings
 from typing import Optional
 
 from ..errors import Interrupted, stopped_by
-from ..fileio import interrupt_behind
+from ..files.fileio import interrupt_behind
 from .args import PROG
 
 __all__ = ["STARTING", "one_line", "interrupt_message", "error_message", "interrupt_behind", "printable_streams",

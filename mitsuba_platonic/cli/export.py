@@ -14,7 +14,7 @@ from pathlib import Path
 from typing import List
 
 from ..errors import Interrupted
-from ..fileio import confined
+from ..files.fileio import confined
 from .args import CLIError, positive_int, seed
 
 __all__ = ["add_reconstruct", "add_generate"]

@@ -16,8 +16,8 @@ import sys
 from pathlib import Path
 from typing import TYPE_CHECKING, Any, Dict, List
 
-from ..fileio import confined
-from ..outputs import MARKER, claim_output_folder
+from ..files.fileio import confined
+from ..files.outputs import MARKER, claim_output_folder
 from .args import CLIError, check_out_folder, parse_models, positive_float, positive_int, resolution, seed
 
 if TYPE_CHECKING:
@@ -25,13 +25,13 @@ if TYPE_CHECKING:
 
 __all__ = ["add_compare", "add_bench"]
 
-#: What compare writes into ``--out`` by fixed names (:func:`~mitsuba_platonic.fileio.confined`: none may be a link).
+#: What compare writes into ``--out`` by fixed names (:func:`~mitsuba_platonic.files.fileio.confined`: none may be a link).
 COMPARE_PARTS = (MARKER, "compare.json", "compare_light.json", "compare_light.png",
                  *(f"compare_{m}.png" for m in ("vh", "ao", "ea")))
 
 
 def _earlier_comparison(out: Path) -> bool:
-    """Whether ``out`` holds a comparison written before :data:`~mitsuba_platonic.outputs.MARKER`
+    """Whether ``out`` holds a comparison written before :data:`~mitsuba_platonic.files.outputs.MARKER`
     existed: a ``compare.json`` or ``compare_light.json`` with the keys compare writes."""
     for name, keys in (("compare.json", {"volume", "repeats", "view_vectors", "results"}),
                        ("compare_light.json", {"volume", "settings", "results"})):
@@ -103,7 +103,7 @@ def _compare_light_into(args: argparse.Namespace, volume: "torch.Tensor", views:
 
 def _cmd_compare(args: argparse.Namespace) -> int:
     from ..compare import check_memory, comparison_views
-    from ..volume_io import BUILTIN_PREFIX, load_volume
+    from ..files.volume_io import BUILTIN_PREFIX, load_volume
 
     if not args.light:
         _check_compare_settings(args)

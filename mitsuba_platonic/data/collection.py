@@ -32,13 +32,13 @@ import torch
 
 from ..runtime import budget
 from ..errors import Interrupted, UserError, raise_if_ctrl_c
-from ..fileio import atomic_write, confined, make_folder, open_file, remove
+from ..files.fileio import atomic_write, confined, make_folder, open_file, remove
 from ..images import save_exr, save_png, to_hwc, to_png_rgba
 from ..runtime.progress import progress_bar
 from ..render import render
 from ..render.physical import render_physical
 from ..volume import CHANNELS
-from ..volume_io import write_vol
+from ..files.volume_io import write_vol
 from . import shapes
 from .collection_files import (RECORDS, SUBFOLDERS, image_id, is_finished, load_manifest, lock, missing_files,
                                overwrite_plan, read_records, read_spec, remove_temporaries, temporaries, write_json)

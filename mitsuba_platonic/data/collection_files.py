@@ -30,7 +30,7 @@ from pathlib import Path
 from typing import Any, Dict, Iterator, List, Optional, Set, Union
 
 from ..errors import UserError
-from ..fileio import atomic_write, open_file, remove
+from ..files.fileio import atomic_write, open_file, remove
 from .collection_spec import CollectionSpec, json_kind
 
 __all__ = ["SUBFOLDERS", "RECORDS", "image_id", "load_manifest", "manifest_problem", "read_spec", "read_records",
@@ -232,7 +232,7 @@ def remove_temporaries(out: Path) -> None:
 @contextmanager
 def lock(path: Path) -> Iterator[None]:
     """An exclusive advisory lock: one writer per collection folder (others wait). The lock file is
-    opened, never truncated, and never through a link (:func:`~mitsuba_platonic.fileio.open_file`)."""
+    opened, never truncated, and never through a link (:func:`~mitsuba_platonic.files.fileio.open_file`)."""
     import fcntl  # lazy: POSIX only, where a collection is locked
     fd = open_file(path, os.O_RDWR | os.O_CREAT)
     try:

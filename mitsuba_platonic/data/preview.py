@@ -8,7 +8,7 @@ from typing import Union
 import torch
 
 from .. import views as V
-from ..fileio import atomic_write, make_folder
+from ..files.fileio import atomic_write, make_folder
 from ..images import composite, linear_to_srgb, to_hwc
 from ..render import render
 from . import shapes

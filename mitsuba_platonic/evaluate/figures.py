@@ -7,7 +7,7 @@ from typing import Optional, Sequence, Tuple, Union
 
 import torch
 
-from ..fileio import atomic_write, make_folder
+from ..files.fileio import atomic_write, make_folder
 from . import metrics as M
 
 __all__ = ["save_image_grid"]

@@ -37,12 +37,12 @@ from typing import Any, Callable, Dict, List, Optional, Sequence, Tuple, Union
 import numpy as np
 import torch
 
-from ..checkpoint import read_checkpoint
+from ..files.checkpoint import read_checkpoint
 from ..errors import UserError, raise_if_ctrl_c
-from ..fileio import confined, make_folder, write_text
+from ..files.fileio import confined, make_folder, write_text
 from ..loading import checkpoint_config, model_from_checkpoint
 from ..model import Model
-from ..outputs import MARKER, check_output_folder, claim_output_folder
+from ..files.outputs import MARKER, check_output_folder, claim_output_folder
 from ..runtime.progress import progress_bar
 from ..render import render
 from ..train.data import collection_folder, load_training_data
@@ -57,7 +57,7 @@ from .protocol import METHODS, N_VIEWS, billboard, evaluate_pair, held_out_truth
 __all__ = ["Row", "score_pairs", "write_table", "write_class_table", "write_figure", "write_report", "evaluate_runs",
            "add_arguments", "run", "main_evaluate", "FIGURE_VIEWS", "SCALE"]
 
-#: What evaluate writes into ``--out`` (:func:`~mitsuba_platonic.fileio.confined`: none may be a link).
+#: What evaluate writes into ``--out`` (:func:`~mitsuba_platonic.files.fileio.confined`: none may be a link).
 REPORT_PARTS = (MARKER, "report.md", "results.json", "figures")
 
 #: The paper's display scales (Table 2): DSSIM and VGG × 10, RMSE × 10².
@@ -310,7 +310,7 @@ def evaluate_runs(run_dirs: Sequence[PathLike], out_dir: PathLike, n_views: int 
 
     ``out_dir`` must be new, empty or an earlier evaluation's; any other folder that holds something
     is refused before any work (:class:`UserError`) unless ``overwrite``
-    (:func:`~mitsuba_platonic.outputs.claim_output_folder`), and nothing is written through a link
+    (:func:`~mitsuba_platonic.files.outputs.claim_output_folder`), and nothing is written through a link
     it holds."""
     if not run_dirs:
         raise UserError("no run to evaluate: pass at least one --run DIR")
@@ -325,7 +325,7 @@ def evaluate_runs(run_dirs: Sequence[PathLike], out_dir: PathLike, n_views: int 
 
 
 def _earlier_evaluation(out: Path) -> bool:
-    """Whether ``out`` holds an evaluation written before :data:`~mitsuba_platonic.outputs.MARKER`
+    """Whether ``out`` holds an evaluation written before :data:`~mitsuba_platonic.files.outputs.MARKER`
     existed: a ``results.json`` beside a ``report.md`` that starts as evaluate's do."""
     try:
         return (out / "results.json").is_file() and (out / "report.md").read_text().startswith("# Evaluation\n")

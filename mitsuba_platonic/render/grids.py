@@ -6,8 +6,8 @@ imports nothing of theirs.
 
 Grid layout (docs/rendering.md, "The Mitsuba side"): a torch ``(C, D, H, W)`` volume becomes a
 Mitsuba ``[Z, Y, X, C]`` grid by a permute and two flips (Z = N−1−d, Y = N−1−h, X = w):
-:func:`~mitsuba_platonic.volume_io.to_mitsuba_grid`, defined with the ``.vol`` files that store
-it (:mod:`mitsuba_platonic.volume_io`, which writes them) and named here for the renderers.
+:func:`~mitsuba_platonic.files.volume_io.to_mitsuba_grid`, defined with the ``.vol`` files that store
+it (:mod:`mitsuba_platonic.files.volume_io`, which writes them) and named here for the renderers.
 """
 
 from __future__ import annotations
@@ -15,7 +15,7 @@ from __future__ import annotations
 import torch
 
 from ..volume import voxel_size
-from ..volume_io import to_mitsuba_grid
+from ..files.volume_io import to_mitsuba_grid
 
 __all__ = ["to_mitsuba_grid", "extinction", "V_MAX_PHYSICAL"]
 

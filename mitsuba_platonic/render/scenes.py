@@ -27,14 +27,14 @@ from typing import Any, Dict, Mapping, Optional, Sequence, Union
 
 import torch
 
-from ..resources import scenes_folder
-from ..volume_io import read_npz, write_vol
+from ..files.resources import scenes_folder
+from ..files.volume_io import read_npz, write_vol
 from .grids import extinction
 from .variant import ensure_variant
 
 __all__ = ["SCENES", "scene_path", "load_scene", "xml_value", "write_scene_grids"]
 
-#: The scene files: the repository's top-level ``scenes/``, carried inside the package (:mod:`..resources`).
+#: The scene files: the repository's top-level ``scenes/``, carried inside the package (:mod:`mitsuba_platonic.files.resources`).
 SCENES = scenes_folder()
 
 
@@ -115,7 +115,7 @@ def write_scene_grids(volume: Any, folder: Union[str, Path]) -> Dict[str, Path]:
 
     ``density.vol`` (the density, raymarch*.xml), ``albedo.vol`` (the colour, EA volumes only) and
     ``sigma_t.vol`` (the path tracer's extinction, physical.xml; RGBA volumes only), each with
-    :func:`mitsuba_platonic.volume_io.write_vol`. Returns ``{parameter: path}``.
+    :func:`mitsuba_platonic.files.volume_io.write_vol`. Returns ``{parameter: path}``.
     """
     v = torch.as_tensor(volume).detach().float().cpu()
     if v.dim() != 4 or v.shape[0] not in (1, 4):

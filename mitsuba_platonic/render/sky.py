@@ -12,7 +12,7 @@ each, so the map carries the sun's power, not a point sample of it.
 :func:`baked_envmaps` bakes the skies in :data:`SKIES` (a few sun elevations and turbidities,
 the sun towards +z) on first use and returns their paths: a package built after they were baked
 carries them in ``scenes/envmaps/`` (the folder ``platonic make-dataset --lighting envmap`` reads;
-``*.exr`` is git-ignored); missing ones are baked into :func:`~mitsuba_platonic.resources.sky_cache`
+``*.exr`` is git-ignored); missing ones are baked into :func:`~mitsuba_platonic.files.resources.sky_cache`
 (that folder in a checkout, the user's cache folder in an installed package). From a shell:
 ``python -m mitsuba_platonic.render.sky`` (``--help`` for the folder and size).
 """
@@ -26,8 +26,8 @@ from typing import List, Optional, Sequence, Tuple, Union
 
 import numpy as np
 
-from ..fileio import atomic_write
-from ..resources import sky_cache
+from ..files.fileio import atomic_write
+from ..files.resources import sky_cache
 from .scenes import SCENES, load_scene
 from .variant import ensure_variant
 
@@ -133,7 +133,7 @@ def baked_envmaps(folder: Union[str, Path, None] = None, skies: Sequence[Tuple[f
     ``force``) first. Returns their paths.
 
     By default (``folder`` None) a sky the package carries (:data:`ENVMAPS`) is used as it is and
-    a missing one is baked into :func:`~mitsuba_platonic.resources.sky_cache`."""
+    a missing one is baked into :func:`~mitsuba_platonic.files.resources.sky_cache`."""
     out = []
     for elevation, turbidity in skies:
         name = sky_name(elevation, turbidity)

@@ -145,7 +145,7 @@ def check_backend() -> Dict[str, object]:
     """
     import json  # lazy: the check's alone; `import mitsuba_platonic` stays quick (issue 29)
 
-    from ..fileio import atomic_write        # here, not at the top: importing the package stays cheap (issue 29)
+    from ..files.fileio import atomic_write        # here, not at the top: importing the package stays cheap (issue 29)
 
     if os.environ.get("MITSUBA_PLATONIC_SKIP_BACKEND_CHECK") == "1":
         return {"llvm": True, "cuda": False, "libllvm": os.environ.get("DRJIT_LIBLLVM_PATH")}

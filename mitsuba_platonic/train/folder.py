@@ -25,9 +25,9 @@ from typing import Iterator, Optional
 import yaml
 
 from .. import __version__
-from ..checkpoint import RunError, checkpoint_files
+from ..files.checkpoint import RunError, checkpoint_files
 from ..config import Config, ConfigError, config_from_dict, yaml_problem
-from ..fileio import atomic_write, make_folder, open_file, remove_temporaries
+from ..files.fileio import atomic_write, make_folder, open_file, remove_temporaries
 from ..loading import config_difference, without_retired
 
 __all__ = ["RUN_MARKER", "RUN_PARTS", "is_run_folder", "claim_run_folder", "run_lock", "prepare_run_folder", "read_run_config"]
@@ -36,7 +36,7 @@ __all__ = ["RUN_MARKER", "RUN_PARTS", "is_run_folder", "claim_run_folder", "run_
 RUN_MARKER = "run.json"
 
 #: What ``train`` writes, locks and deletes in a run folder: none of them may be a symbolic link
-#: (:func:`~mitsuba_platonic.fileio.confined`; a folder copied from a colleague may hold links).
+#: (:func:`~mitsuba_platonic.files.fileio.confined`; a folder copied from a colleague may hold links).
 RUN_PARTS = (RUN_MARKER, "run.lock", "config.yaml", "scalars.csv", "checkpoints", "samples", "tb")
 
 

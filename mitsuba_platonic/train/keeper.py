@@ -8,7 +8,7 @@ checkpoint. :class:`Checkpoints` remembers the newest good checkpoint on disk, s
 error and interrupt can say which step it holds (:meth:`Checkpoints.kept`). ``--resume`` loads
 the newest loadable one into the trainer and refuses one saved with other data, model, render or
 train settings, naming the first key (:meth:`Checkpoints.resume`). The file format itself is
-:mod:`mitsuba_platonic.checkpoint`'s.
+:mod:`mitsuba_platonic.files.checkpoint`'s.
 """
 
 from __future__ import annotations
@@ -18,9 +18,9 @@ from typing import Any, Dict, Optional
 
 import torch
 
-from ..checkpoint import CHECKPOINT_VERSION, RunError, load_latest_checkpoint, load_weights, save_checkpoint
+from ..files.checkpoint import CHECKPOINT_VERSION, RunError, load_latest_checkpoint, load_weights, save_checkpoint
 from ..config import Config
-from ..fileio import remove
+from ..files.fileio import remove
 from ..loading import config_difference, saved_config
 
 __all__ = ["Checkpoints", "non_finite", "same_settings"]

@@ -16,7 +16,7 @@ from typing import Iterator, Optional, Tuple
 import torch
 import torch.distributed as dist
 
-from ..checkpoint import RunError
+from ..files.checkpoint import RunError
 from ..config import Config
 from ..render.variant import ensure_variant
 

@@ -37,7 +37,7 @@ training saves nothing (the good checkpoints stay as they are; its message says 
 ``last.pt`` holds), and a state with NaN or Inf ends the run with :class:`RunError`. If
 ``last.pt`` cannot be loaded (truncated, corrupt), ``--resume``, ``reconstruct`` and ``generate``
 use the newest loadable ``step_*.pt`` and warn on stderr. Checkpoints are unpickled safely
-(``weights_only=True``, :mod:`mitsuba_platonic.checkpoint`): one that would run code is an error
+(``weights_only=True``, :mod:`mitsuba_platonic.files.checkpoint`): one that would run code is an error
 naming it, never a fallback; ``--resume`` refuses a checkpoint saved with other data, model,
 render or train settings, naming the first key.
 
@@ -56,10 +56,10 @@ from typing import Optional, Tuple
 import torch
 import torch.distributed as dist
 
-from ..checkpoint import RunError, load_checkpoint, load_latest_checkpoint, read_checkpoint, save_checkpoint
+from ..files.checkpoint import RunError, load_checkpoint, load_latest_checkpoint, read_checkpoint, save_checkpoint
 from ..config import Config
 from ..errors import Interrupted, StopBetweenSteps, UserError
-from ..fileio import confined
+from ..files.fileio import confined
 from ..loading import checkpoint_config, model_from_checkpoint
 from ..model import Model
 from ..runtime.progress import progress_bar
@@ -247,7 +247,7 @@ def _say_what_failed(e: BaseException, where: str, trainer: Trainer, checkpoints
 
 def load_run(run_dir: Path, device: str = "cpu") -> Tuple[Config, Model, int]:
     """A trained run's config, :class:`~mitsuba_platonic.model.Model` and step (no training data
-    is loaded): :func:`~mitsuba_platonic.checkpoint.read_checkpoint` of the run folder."""
+    is loaded): :func:`~mitsuba_platonic.files.checkpoint.read_checkpoint` of the run folder."""
     ckpt = read_checkpoint(Path(run_dir), device)
     cfg = checkpoint_config(ckpt)
     return cfg, model_from_checkpoint(Model, ckpt, cfg), ckpt.step

@@ -30,10 +30,10 @@ from PIL import Image
 
 from ..errors import UserError
 from ..export import extract_mesh, save_ply
-from ..fileio import atomic_write
+from ..files.fileio import atomic_write
 from ..render import RenderSettings, render_with
 from ..volume import CHANNELS
-from ..volume_io import read_volume_file, save_volume
+from ..files.volume_io import read_volume_file, save_volume
 
 __all__ = ["RENDERERS", "FORMATIONS", "BACKGROUND", "Frame", "Scene", "Exports", "open_source", "render_frame",
            "formations_for", "renderers_for", "resolutions_for", "to_display", "clean_name"]
@@ -283,7 +283,7 @@ def open_source(source: PathLike, photo: Optional[PathLike] = None) -> Scene:
         raise UserError(f"SOURCE {str(path)!r} is neither a file nor a folder")
     # lazy, the three: checkpoints, configs and networks are for run folders only (a volume file's
     # first frame waits for none of them)
-    from ..checkpoint import read_checkpoint                  # lazy: runs only
+    from ..files.checkpoint import read_checkpoint                  # lazy: runs only
     from ..loading import checkpoint_config, model_from_checkpoint   # lazy: runs only
     from ..model import Model                                 # lazy: runs only
 
@@ -356,7 +356,7 @@ class Exports:
         return path
 
     def volume(self, volume: torch.Tensor, name: str = "volume", level: float = 0.5) -> List[Path]:
-        """``name.npz`` and ``name.vol`` (:func:`~mitsuba_platonic.volume_io.save_volume`) and a marching-cubes
+        """``name.npz`` and ``name.vol`` (:func:`~mitsuba_platonic.files.volume_io.save_volume`) and a marching-cubes
         mesh ``name.ply`` at ``level`` (none where the density never crosses it)."""
         stem = self._free(name, (".npz", ".vol", ".ply"))
         written = save_volume(volume, stem)

@@ -40,7 +40,7 @@ from typing import Any, Dict, List, Optional, Tuple, Union
 import numpy as np
 import torch
 
-from .errors import UserError
+from ..errors import UserError
 from .fileio import atomic_write
 from .pickle_scan import foreign_objects
 

@@ -22,9 +22,9 @@ from typing import List, Optional, Union
 import numpy as np
 import torch
 
-from .errors import UserError
+from ..errors import UserError
 from .fileio import atomic_write, make_folder
-from .volume import TEST_VOLUMES, test_volume
+from ..volume import TEST_VOLUMES, test_volume
 
 __all__ = ["BUILTIN_PREFIX", "VolumeFileError", "to_mitsuba_grid", "read_npz", "read_vol", "read_volume_file",
            "load_volume", "write_npz", "write_vol", "save_volume"]
@@ -182,7 +182,7 @@ def load_volume(spec: str, resolution: Optional[int] = None) -> torch.Tensor:
 
 def write_npz(volume: torch.Tensor, path: PathLike) -> Path:
     """Write a ``(C, N, N, N)`` volume to ``path`` as a compressed ``.npz`` with the array ``volume``
-    (directly: wrap it in :func:`~mitsuba_platonic.fileio.atomic_write` for a whole-or-nothing file)."""
+    (directly: wrap it in :func:`~mitsuba_platonic.files.fileio.atomic_write` for a whole-or-nothing file)."""
     np.savez_compressed(path, volume=volume.detach().float().cpu().numpy())
     return Path(path)
 
@@ -201,7 +201,7 @@ def write_vol(volume: torch.Tensor, path: PathLike) -> Path:
 
 def save_volume(volume: torch.Tensor, stem: PathLike) -> List[Path]:
     """Write a ``(C, N, N, N)`` volume as ``stem.npz`` (array ``volume``) and ``stem.vol`` (Mitsuba),
-    each whole or not at all (:func:`~mitsuba_platonic.fileio.atomic_write`); ``stem`` keeps its dots
+    each whole or not at all (:func:`~mitsuba_platonic.files.fileio.atomic_write`); ``stem`` keeps its dots
     (``shot.v1`` → ``shot.v1.npz``)."""
     stem = Path(stem)
     make_folder(stem.parent)

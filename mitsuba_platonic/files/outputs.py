@@ -17,7 +17,7 @@ import os
 from pathlib import Path
 from typing import Callable, Optional, Union
 
-from .errors import UserError
+from ..errors import UserError
 from .fileio import check_path, make_folder, write_text
 
 __all__ = ["MARKER", "made_by", "check_output_folder", "claim_output_folder"]
@@ -63,7 +63,7 @@ def claim_output_folder(out: Union[str, Path], command: str, overwrite: bool = F
                         earlier: Optional[Callable[[Path], bool]] = None) -> Path:
     """:func:`check_output_folder`, then make ``out`` the output folder of ``platonic <command>``
     (create it and write :data:`MARKER`) unless it is one already; return it. Call it inside
-    :func:`~mitsuba_platonic.fileio.confined` ``(out)``, so a link named :data:`MARKER` is refused too."""
+    :func:`~mitsuba_platonic.files.fileio.confined` ``(out)``, so a link named :data:`MARKER` is refused too."""
     out = check_output_folder(out, command, overwrite, earlier)
     name = f"platonic {command}"
     check_path(out / MARKER)

@@ -28,7 +28,7 @@ from contextlib import contextmanager
 from pathlib import Path
 from typing import Any, Callable, Iterable, Iterator, List, Optional, Tuple, Union
 
-from .errors import UserError
+from ..errors import UserError
 
 __all__ = ["atomic_write", "temporary_name", "remove_temporaries", "interrupt_behind", "LinkRefused", "confined",
            "check_path", "open_file", "make_folder", "remove", "write_text"]
