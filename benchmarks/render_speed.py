@@ -23,7 +23,7 @@ import torch
 import mitsuba_platonic as mp
 from mitsuba_platonic import views as V
 from mitsuba_platonic.bench import plain_ea
-from mitsuba_platonic.compare import best_of
+from mitsuba_platonic.render.compare import best_of
 from mitsuba_platonic.render.mitsuba_renderer import render_mitsuba
 from mitsuba_platonic.render.variant import ensure_variant
 from mitsuba_platonic.volume import test_volume

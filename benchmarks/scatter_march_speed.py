@@ -36,7 +36,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parent.parent / "tests"))
 from test_single_scatter import (FRONT, HORIZON, OBLIQUE, SKY, SUN_ABOVE, SUN_OBLIQUE, _coords,  # noqa: E402
                                  _scene, _sun)
 
-from mitsuba_platonic.compare import _sync  # noqa: E402
+from mitsuba_platonic.render.compare import _sync  # noqa: E402
 from mitsuba_platonic.render import render  # noqa: E402
 from mitsuba_platonic.render.variant import ensure_variant, variant_device  # noqa: E402
 from mitsuba_platonic.render.scatter_march import light_packet, render_scatter_march  # noqa: E402

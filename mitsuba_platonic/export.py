@@ -27,7 +27,7 @@ import torch.nn.functional as F
 from .runtime import budget
 from .errors import UserError
 from .files.fileio import atomic_write, make_folder, remove
-from .frames import display_frames, save_gif, turntable_frames
+from .render.frames import display_frames, save_gif, turntable_frames
 from .images import composite, linear_to_srgb, save_grid, save_png, to_hwc
 from .runtime.progress import progress_bar
 from .views import turntable

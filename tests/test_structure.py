@@ -135,7 +135,7 @@ LAYERS = [
     ("I/O: files (writes, output folders, package data, volume files, checkpoints) and images", ["files", "images"]),
     ("the machine: Dr.Jit's backend, memory and disk, progress", ["runtime"]),
     ("the checks every settings section shares", ["settings_checks"]),
-    ("renderer", ["render", "compare", "compare_light", "frames"]),
+    ("renderer, its backends compared, turntables", ["render"]),
     ("data: collections, photos, the data section", ["data"]),
     ("networks, the colour they read from a photo and the model section",
      ["models", "photo_colours", "model_settings"]),

@@ -4,7 +4,7 @@ import math
 
 import pytest
 
-from mitsuba_platonic.compare import best_kernel_ms, kernel_time
+from mitsuba_platonic.render.compare import best_kernel_ms, kernel_time
 from mitsuba_platonic.render.variant import ensure_variant
 
 mi = ensure_variant()

@@ -13,7 +13,7 @@ from typing import Any, Callable, Dict, Optional, Tuple
 
 import torch
 
-from ..compare import _sync, best_of
+from ..render.compare import _sync, best_of
 
 __all__ = ["PeakRSS", "measure_bandwidth", "RenderFn"]
 

@@ -14,7 +14,7 @@ from typing import Any, Dict, List, Tuple
 import torch
 
 from ..files.fileio import atomic_write, make_folder
-from ..frames import display_frames, save_gif, turntable_frames
+from ..render.frames import display_frames, save_gif, turntable_frames
 from ..images import composite, linear_to_srgb, save_grid, to_hwc
 from ..model import Model
 from ..views import front_view, turntable

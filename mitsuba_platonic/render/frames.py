@@ -2,8 +2,8 @@
 
 :func:`display_frames` renders a ``(C, N, N, N)`` volume in closed form from given views and
 composites it over a background as sRGB images; :func:`turntable_frames` does so around +y;
-:func:`save_gif` writes frames as a GIF. Below both training (its sample turntables) and
-:mod:`mitsuba_platonic.export` (which names them too), above the renderer and the image helpers.
+:func:`save_gif` writes frames as a GIF. The renderer's own pictures of a volume, below both training
+(its sample turntables) and :mod:`mitsuba_platonic.export` (which names them too).
 """
 
 from __future__ import annotations
@@ -15,10 +15,10 @@ import numpy as np
 import torch
 from PIL import Image
 
-from .files.fileio import atomic_write, make_folder
-from .images import composite, linear_to_srgb, to_hwc
-from .render import render
-from .views import turntable
+from ..files.fileio import atomic_write, make_folder
+from ..images import composite, linear_to_srgb, to_hwc
+from . import render
+from ..views import turntable
 
 __all__ = ["display_frames", "turntable_frames", "save_gif"]
 
