@@ -6,7 +6,7 @@ dataclass beside the component that owns it, whose docstring says what its field
 
 - ``run``: :class:`~mitsuba_platonic.train.run_settings.RunConfig` (the run folder, seed, device, cadence)
 - ``data``: :class:`~mitsuba_platonic.data.settings.DataConfig` (a procedural collection or a photo folder)
-- ``model``: :class:`~mitsuba_platonic.model_settings.ModelConfig` (the networks' sizes and initialisations)
+- ``model``: :class:`~mitsuba_platonic.networks.settings.ModelConfig` (the networks' sizes and initialisations)
 - ``render``: :class:`~mitsuba_platonic.render.settings.RenderSettings` (the renderer's own settings)
 - ``train``: :class:`~mitsuba_platonic.train.settings.TrainConfig` (task, mode, losses, optimisers)
 
@@ -36,7 +36,7 @@ import yaml
 from pydantic_core import SchemaValidator, core_schema
 
 from .data.settings import DataConfig
-from .model_settings import ModelConfig
+from .networks.settings import ModelConfig
 from .render.settings import LIT, SINGLE_SCATTERING, RenderSettings as RenderConfig
 from .files.resources import config_names, config_path
 from .settings_checks import ConfigError, quoted

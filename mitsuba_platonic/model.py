@@ -1,6 +1,6 @@
 """The model: encoder E and generator G with what using them needs, for inference and training.
 
-:class:`Model` holds E (image → z) and G (z → volume) of :mod:`mitsuba_platonic.models` and
+:class:`Model` holds E (image → z) and G (z → volume) of :mod:`mitsuba_platonic.networks.nets` and
 the settings inference needs: the network shapes (resolution, channels, latent size), the
 render settings a run trained through (image formation, backend, filter) and the task E/G
 learnt. It is built from a config (a fresh model, which the trainer trains) or read from a
@@ -19,13 +19,13 @@ Its volumes are in the frame of ring view 0, which is the input view ω₀ for r
 :meth:`Model.reconstruct` and :meth:`Model.generate` append the code of view 0.
 
 A model trained with ``train.pose: elevation`` also has a pose head P (z → the input camera's
-elevation θ̂, :class:`~mitsuba_platonic.models.PoseHead`): its G builds the object upright, in
+elevation θ̂, :class:`~mitsuba_platonic.networks.nets.PoseHead`): its G builds the object upright, in
 an object frame, and :meth:`Model.reconstruct` turns that volume into the input camera's frame by
 θ̂ (:func:`~mitsuba_platonic.render.closed_form.tilt`), so every model's reconstructions live in
 the frame of their input view (docs/experiments/pose-elevation.md).
 
 A model trained with ``train.light: head`` has a light head L (z → the photo's sun direction
-and sky share, :class:`~mitsuba_platonic.models.LightHead`; docs/experiments/training-through-light.md,
+and sky share, :class:`~mitsuba_platonic.networks.nets.LightHead`; docs/experiments/training-through-light.md,
 "A light read from the photo").
 
 Its state dict keys are the checkpoint's (``E.*``, ``G.*``, ``P.*``, ``L.*``): a checkpoint's ``nets``
@@ -44,8 +44,8 @@ from torch import nn
 from .data.photos import decode_image, prepare_image
 from .errors import UserError
 from .loading import load_model
-from .models import Encoder, Generator, LightHead, NetConfig, PoseHead, init_weights
-from .photo_colours import photo_volume
+from .networks.nets import Encoder, Generator, LightHead, NetConfig, PoseHead, init_weights
+from .networks.photo_colours import photo_volume
 from .render.closed_form import tilt
 from .render.settings import RenderSettings
 from .volume import CHANNELS
@@ -63,7 +63,7 @@ def view_codes(cfg: Any) -> int:
 
 def net_config(cfg: Any) -> NetConfig:
     """The networks' shapes for a config: its model section's
-    (:meth:`~mitsuba_platonic.model_settings.ModelConfig.net_config`), with the channels of its
+    (:meth:`~mitsuba_platonic.networks.settings.ModelConfig.net_config`), with the channels of its
     image formation, the PrGAN view code and the pose and light heads its train section asks for."""
     return cfg.model.net_config(CHANNELS[cfg.render.model], view_codes=view_codes(cfg),
                                 pose=cfg.train.pose == "elevation", light=cfg.train.light == "head")
@@ -75,7 +75,7 @@ def critic_config(cfg: Any) -> NetConfig:
 
 
 class Model(nn.Module):
-    """E and G, with ``net`` (their :class:`~mitsuba_platonic.models.NetConfig`), ``render`` (the
+    """E and G, with ``net`` (their :class:`~mitsuba_platonic.networks.nets.NetConfig`), ``render`` (the
     run's :class:`~mitsuba_platonic.render.RenderSettings`), ``task`` ('reconstruction' or
     'generation': only a reconstruction model's E was trained), ``step`` (training steps behind
     the weights; None for a fresh model) and ``origin`` (the checkpoint file it came from).
@@ -177,9 +177,9 @@ class Model(nn.Module):
         mode is restored). A PrGAN-style model's G gets the code of ring view 0, the input view.
         With a pose head, G's upright volume is tilted by the estimated elevation θ̂ = P(z),
         ``tilt(G(z), θ̂)`` clamped to [0, 1] (trilinear round-off). With ``photo_colour``, G also
-        gets each image's mean colour (:func:`~mitsuba_platonic.photo_colours.photo_colour`), or with
+        gets each image's mean colour (:func:`~mitsuba_platonic.networks.photo_colours.photo_colour`), or with
         ``photo_texture`` its colours along the rays of a camera at θ̂
-        (:func:`~mitsuba_platonic.photo_colours.photo_texture`)."""
+        (:func:`~mitsuba_platonic.networks.photo_colours.photo_texture`)."""
         def run() -> torch.Tensor:
             v, θ = self._upright(images)
             return v if θ is None else tilt(v, θ).clamp(0.0, 1.0)
@@ -228,7 +228,7 @@ class Model(nn.Module):
     def estimate_light(self, images: torch.Tensor) -> Tuple[torch.Tensor, torch.Tensor]:
         """The light a model trained with ``train.light: head`` reads from ``(B, C, R, R)`` images:
         the sun's direction in each input camera's frame (right, up, ω) ``(B, 3)`` and the sky's
-        share of the mean luminance ``(B,)`` (:class:`~mitsuba_platonic.models.LightHead`); a
+        share of the mean luminance ``(B,)`` (:class:`~mitsuba_platonic.networks.nets.LightHead`); a
         :class:`~mitsuba_platonic.errors.UserError` for a model without a light head."""
         self._needs_encoder()
         if self.L is None:

@@ -106,7 +106,7 @@ def test_drjit_threads_is_auto_or_a_count(value, ok):
 def test_each_section_checks_itself_with_the_configs_messages():
     """A section's validate() raises what the whole config's does, without a Config around it."""
     from mitsuba_platonic.data.settings import DataConfig
-    from mitsuba_platonic.model_settings import ModelConfig
+    from mitsuba_platonic.networks.settings import ModelConfig
     from mitsuba_platonic.train.run_settings import RunConfig
     from mitsuba_platonic.train.settings import TrainConfig as OwnTrainConfig
 
@@ -136,8 +136,8 @@ def test_the_model_section_builds_the_networks_config():
     import dataclasses
 
     from mitsuba_platonic.model import critic_config, net_config
-    from mitsuba_platonic.model_settings import NET_KEYS, ModelConfig
-    from mitsuba_platonic.models import NetConfig
+    from mitsuba_platonic.networks.settings import NET_KEYS, ModelConfig
+    from mitsuba_platonic.networks.nets import NetConfig
 
     shared = {f.name for f in dataclasses.fields(NetConfig)} & {f.name for f in dataclasses.fields(ModelConfig)}
     assert set(NET_KEYS) == shared

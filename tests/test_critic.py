@@ -98,7 +98,7 @@ def _discs_and_bars(n, g):
 
 
 def _critic_accuracy_after_training(init, steps=200):
-    from mitsuba_platonic.models import Discriminator, NetConfig, init_critic_he, init_weights
+    from mitsuba_platonic.networks.nets import Discriminator, NetConfig, init_critic_he, init_weights
     torch.manual_seed(0)
     D = Discriminator(NetConfig(resolution=32, width=16, norm="none"))
     D.apply(init_weights)

@@ -9,7 +9,7 @@ import torch
 from mitsuba_platonic.config import ConfigError, load_config
 from mitsuba_platonic.errors import UserError
 from mitsuba_platonic.model import Model
-from mitsuba_platonic.models import LightHead, init_he, init_weights
+from mitsuba_platonic.networks.nets import LightHead, init_he, init_weights
 from mitsuba_platonic.render import RenderSettings, render_with
 from mitsuba_platonic.render.single_scatter import (SKY_SHARE, LightBatch, daylights, mean_luminance, sample_lights,
                                                     sample_sun_and_sky, sky_share)

@@ -8,7 +8,7 @@ import yaml
 from torch import nn
 
 from mitsuba_platonic.config import ConfigError, load_config
-from mitsuba_platonic.models import Discriminator, Encoder, Generator, NetConfig, VolumeDiscriminator, init_weights
+from mitsuba_platonic.networks.nets import Discriminator, Encoder, Generator, NetConfig, VolumeDiscriminator, init_weights
 
 
 def build_networks(cfg: NetConfig, volume_discriminator: bool = False) -> nn.ModuleDict:
@@ -212,7 +212,7 @@ def test_the_resize_generator_alternates_less_along_depth():
     convolution do not, in every stage or in the last one only ('resize_last': the period-2
     alternation at R³ is the last stage's). Mean depth_stripes over 5 seeded inits."""
     from mitsuba_platonic.evaluate.metrics import depth_stripes
-    from mitsuba_platonic.models import Generator, NetConfig
+    from mitsuba_platonic.networks.nets import Generator, NetConfig
     mean = {}
     for up in ("transposed", "resize", "resize_last"):
         scores = []
@@ -289,7 +289,7 @@ def test_generators_start_half_transparent_and_learn_a_silhouette(resolution):
 def test_fan_in_counts_the_inputs_one_output_sums(layer):
     """Counted by the layer itself: all weights 1, bias 0, input all 1s: an interior output is the
     number of inputs it sums."""
-    from mitsuba_platonic.models import fan_in
+    from mitsuba_platonic.networks.nets import fan_in
     with torch.no_grad():
         layer.weight.fill_(1.0)
         layer.bias.zero_()
@@ -301,7 +301,7 @@ def test_fan_in_counts_the_inputs_one_output_sums(layer):
 
 def _spread_through_g(init):
     """Per layer of G (after each activation), the spread over 16 images of G(E(x)) at the start."""
-    from mitsuba_platonic.models import Encoder, Generator, init_he, init_weights
+    from mitsuba_platonic.networks.nets import Encoder, Generator, init_he, init_weights
     torch.manual_seed(0)
     cfg = NetConfig(resolution=32, width=16, latent=64, norm="none", upsample="resize_last")
     E, G = Encoder(cfg), Generator(cfg)
@@ -383,7 +383,7 @@ def test_the_resize_stage_is_a_nearest_upsampling_then_its_k3_convolution(layout
     nn.Conv3d k3 p1 with the same weights): the same outputs, including every border voxel (where
     the zero padding enters), and the same gradients for input, weight and bias; also for an input
     of exact 0s and 1s, an odd size and channel counts that are not powers of two."""
-    from mitsuba_platonic.models import ResizeConv3d
+    from mitsuba_platonic.networks.nets import ResizeConv3d
     torch.manual_seed(0)
     fused = ResizeConv3d(5, 3, bias=True).to(memory_format=layout)
     plain = nn.Conv3d(5, 3, 3, 1, 1, bias=True)
@@ -411,7 +411,7 @@ def test_a_checkpoint_of_a_generator_whose_resize_stages_upsampled_apart_still_l
     That generator's state dict (the keys a checkpoint holds) loads strictly into today's G, which
     then computes what the older one did."""
     import copy
-    from mitsuba_platonic.models import ResizeConv3d
+    from mitsuba_platonic.networks.nets import ResizeConv3d
     torch.manual_seed(0)
     G = Generator(NetConfig(resolution=16, width=8, latent=16, norm="none", upsample=upsample))
     old = copy.deepcopy(G.net)
@@ -469,7 +469,7 @@ def test_precision_reaches_every_network_from_the_config():
 def test_photo_colour_is_the_mean_colour_of_the_covered_pixels():
     """Premultiplied RGBA: a half-covered patch of colour (0.8, 0.4, 0.1) at α ½ and a fully
     covered one of (0.2, 0.6, 1.0) average by coverage; an empty image is grey."""
-    from mitsuba_platonic.photo_colours import photo_colour
+    from mitsuba_platonic.networks.photo_colours import photo_colour
     x = torch.zeros(2, 4, 8, 8)
     x[0, :3, :4] = torch.tensor([0.8, 0.4, 0.1])[:, None, None] * 0.5
     x[0, 3, :4] = 0.5
@@ -488,7 +488,7 @@ def test_a_photo_colour_generator_offsets_its_colour_logits_from_the_photos():
     colour is the photo's mean colour m, even at m's extremes (clamped to [1/255, 254/255]: finite
     logits); the density does not depend on m; G without photo_colour refuses a colour, and G with
     it needs one of shape (B, 3)."""
-    from mitsuba_platonic.photo_colours import COLOUR_MIN
+    from mitsuba_platonic.networks.photo_colours import COLOUR_MIN
     torch.manual_seed(0)
     G = Generator(NetConfig(resolution=16, width=8, latent=16, norm="none", upsample="resize_last",
                             photo_colour=True))
@@ -561,7 +561,7 @@ def test_photo_texture_carries_each_pixel_along_the_input_cameras_ray():
     at elevation θ the texture tilted into the input camera's frame (the closed form's tilt, an
     independent resampling) is that same texture, exactly where both read a linear colour
     (a ramp photo, away from the cube's faces), and not the untilted one."""
-    from mitsuba_platonic.photo_colours import photo_colour, photo_texture
+    from mitsuba_platonic.networks.photo_colours import photo_colour, photo_texture
     from mitsuba_platonic.render.closed_form import tilt
     x = _ramp_photo()
     flat = x[:, :3] + (1.0 - x[:, 3:]) * photo_colour(x)[:, :, None, None]
@@ -588,7 +588,7 @@ def test_a_photo_texture_model_starts_from_the_photo_at_the_input_view():
     that texture tilted by θ̂ into the input frame, and not the texture of a camera at 0°.
     model.photo_texture needs model.photo_colour."""
     from mitsuba_platonic.model import Model
-    from mitsuba_platonic.photo_colours import COLOUR_MIN, photo_texture
+    from mitsuba_platonic.networks.photo_colours import COLOUR_MIN, photo_texture
     from mitsuba_platonic.render.closed_form import tilt
     cfg = load_config(None, ["model.photo_colour=true", "model.photo_texture=true", "model.resolution=16",
                              "model.width=4", "model.latent=8", "model.upsample=resize_last",
@@ -618,7 +618,7 @@ def test_front_transmittance_out_of_a_slab_is_the_product_of_the_voxels_before()
     """A slab of density v across planes 5–10 and columns 3–12 of the input camera's frame: out of
     voxel (k, j) inside it the transmittance towards the camera is (1 − v)^(k−5); 1 in front of the
     slab, (1 − v)^6 behind it. With θ the weight is in the camera's frame: θ = 0 gives the same."""
-    from mitsuba_platonic.photo_colours import front_transmittance
+    from mitsuba_platonic.networks.photo_colours import front_transmittance
     n, v = 16, 0.3
     density = torch.zeros(1, 1, n, n, n, dtype=torch.float64)
     density[:, :, 5:11, :, 3:13] = v
@@ -639,7 +639,7 @@ def test_texture_corrected_adds_the_convolutions_output_to_gs_logits():
     (δ = b), the centre tap of T_front into the density (δ_ρ = w T_front, with T_front written out
     for the slab: Π of (1 − v) over the planes in front), and the centre tap of logit t's red into
     the red offset (channel order ℓ, logit ρ, logit t, T_front)."""
-    from mitsuba_platonic.photo_colours import COLOUR_MIN, photo_texture, texture_corrected
+    from mitsuba_platonic.networks.photo_colours import COLOUR_MIN, photo_texture, texture_corrected
     n = 16
     x = _ramp_photo(n, b=1)
     t = photo_texture(x, n)
@@ -677,7 +677,7 @@ def test_texture_conv_is_a_layer_of_g_that_training_reaches_and_the_config_check
     photo recipe (photo_volume) applies it, and the gradient of the volume reaches its weights;
     the config refuses it without photo_texture."""
     from mitsuba_platonic.model import Model
-    from mitsuba_platonic.photo_colours import photo_volume
+    from mitsuba_platonic.networks.photo_colours import photo_volume
     base = ["model.resolution=16", "model.width=4", "model.latent=8", "model.photo_colour=true",
             "model.photo_texture=true", "render.model=ea"]
     cfg = load_config(None, base + ["model.texture_conv=true"])

@@ -212,17 +212,17 @@ def test_the_trainer_hands_g_the_offsets_of_the_volume_it_made(tmp_path, monkeyp
     """With weight w and model.photo_colour, G's 'colour_offset' term is w · L_off of the volume and
     offsets G returned in the step (recorded here), and those offsets are logit c − logit m: the
     colour G made, less the photo's mean colour it offset from."""
-    from mitsuba_platonic import models
+    from mitsuba_platonic.networks import nets
     trainer = _tiny_trainer(tmp_path, "train.task=reconstruction", "model.photo_colour=true", "train.colour_offset=0.5")
     seen = {}
-    original = models.Generator.forward
+    original = nets.Generator.forward
 
     def spy(self, z, colour=None, offsets=False):
         out = original(self, z, colour, offsets)
         seen.update({"v": out[0].detach().clone(), "offsets": out[1].detach().clone(), "m": colour.detach().clone()})
         return out
 
-    monkeypatch.setattr(models.Generator, "forward", spy)
+    monkeypatch.setattr(nets.Generator, "forward", spy)
     terms = _g_terms(trainer)
     v, ℓ, m = seen["v"], seen["offsets"], seen["m"]
     made = torch.logit(v[:, :3].double()) - torch.logit(m.double().clamp(1 / 255, 254 / 255))[:, :, None, None, None]
@@ -296,8 +296,8 @@ def test_the_config_refuses_depth_spread_without_an_input_view_of_ea_rays():
 def test_the_trainer_hands_g_the_depth_spread_of_the_input_view(tmp_path, monkeypatch):
     """With weight w, G's 'depth_spread' term is w · L_ds of the volume G made (at the front view the
     input camera's frame is the volume's own); without it, no such term."""
-    from mitsuba_platonic import models
-    original = models.Generator.forward
+    from mitsuba_platonic.networks import nets
+    original = nets.Generator.forward
     seen = {}
 
     def spy(self, *args, **kwargs):
@@ -305,7 +305,7 @@ def test_the_trainer_hands_g_the_depth_spread_of_the_input_view(tmp_path, monkey
         seen["v"] = out.detach().clone()
         return out
 
-    monkeypatch.setattr(models.Generator, "forward", spy)
+    monkeypatch.setattr(nets.Generator, "forward", spy)
     for weight in (0.0, 3.0):
         terms = _g_terms(_tiny_trainer(tmp_path, "train.task=reconstruction", f"train.depth_spread={weight}"))
         if not weight:

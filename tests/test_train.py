@@ -103,7 +103,7 @@ def test_a_bf16_step_with_r1_and_the_pose_head_changes_every_network(tmp_path):
 def _colour_step(trainer, monkeypatch):
     """One step of ``trainer``, recording what E read (``x``) and wrote (``z``) and the colour G got
     first (``colour``); asserts finite scalars. Returns (what it saw, the parameters before)."""
-    from mitsuba_platonic import models
+    from mitsuba_platonic.networks import nets
     seen = {}
 
     def keep(module, inputs, output):                        # returns None: E's output stays as it is
@@ -111,13 +111,13 @@ def _colour_step(trainer, monkeypatch):
         seen.setdefault("z", output.detach().clone())
 
     trainer.nets["E"].register_forward_hook(keep)
-    original = models.Generator.forward
+    original = nets.Generator.forward
 
     def spy(self, z, colour=None, offsets=False):
         seen.setdefault("colour", colour.detach().clone())
         return original(self, z, colour, offsets)
 
-    monkeypatch.setattr(models.Generator, "forward", spy)
+    monkeypatch.setattr(nets.Generator, "forward", spy)
     before = {k: _params(m) for k, m in trainer.nets.items()}
     out = trainer.step(0)
     assert all(np.isfinite(v) for v in out.values()), out
@@ -127,7 +127,7 @@ def _colour_step(trainer, monkeypatch):
 def test_a_photo_colour_step_hands_g_the_mean_colour_of_es_own_input(tmp_path, monkeypatch):
     """``model.photo_colour``: in a step, G gets the mean colour of exactly the photos E read
     (after ``photo_augment``'s recolouring), and E, G and D all move."""
-    from mitsuba_platonic import photo_colours
+    from mitsuba_platonic.networks import photo_colours
     cfg = _cfg(tmp_path, "model.photo_colour=true", "render.backend=mitsuba", "render.model=ea", "data.formation=ea",
                "train.task=reconstruction", "train.photo_augment=[flip, colour]")
     trainer = Trainer(cfg, load_training_data(cfg, progress=False), torch.device("cpu"))
@@ -139,8 +139,8 @@ def test_a_photo_colour_step_hands_g_the_mean_colour_of_es_own_input(tmp_path, m
 def test_a_photo_texture_step_hands_g_the_texture_of_es_input_at_the_heads_elevation(tmp_path, monkeypatch):
     """``model.photo_texture`` with the pose head: in a step, G gets the colour per voxel of exactly
     the photos E read, as a camera at the elevation P reads from E's code sees them
-    (:func:`~mitsuba_platonic.photo_colours.photo_texture`), and E, G, D and P all move."""
-    from mitsuba_platonic import photo_colours
+    (:func:`~mitsuba_platonic.networks.photo_colours.photo_texture`), and E, G, D and P all move."""
+    from mitsuba_platonic.networks import photo_colours
     cfg = _cfg(tmp_path, "model.photo_colour=true", "model.photo_texture=true", "render.backend=mitsuba",
                "render.model=ea", "data.formation=ea", "train.task=reconstruction", "train.pose=elevation",
                "train.pose_weight=1.0")
@@ -157,7 +157,7 @@ def test_a_photo_texture_step_hands_g_the_texture_of_es_input_at_the_heads_eleva
 
 def _frozen_head(params):
     """A pose head with the given parameters (its weights before a step)."""
-    from mitsuba_platonic.models import PoseHead
+    from mitsuba_platonic.networks.nets import PoseHead
     head = PoseHead(params["weight"].shape[0])
     head.load_state_dict(params)
     return head

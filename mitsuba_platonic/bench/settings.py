@@ -6,7 +6,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 from typing import Any, Dict, List, Optional, Sequence, Tuple
 
-from ..models import RESOLUTIONS
+from ..networks.nets import RESOLUTIONS
 from ..volume import CHANNELS
 
 __all__ = ["BenchSettings", "marcher_configs", "REFERENCE_OPTIONS", "RESOLUTIONS"]

@@ -106,7 +106,7 @@ already add per lane.
 
 EA's gradient leaves as it was scattered, channels last: torch wraps Dr.Jit's array without a
 copy as a ``(B, 4, N, N, N)`` tensor with channels-last strides, the layout the generator computes
-in (:class:`~mitsuba_platonic.models.Generator`); a gather launch into torch's default layout
+in (:class:`~mitsuba_platonic.networks.nets.Generator`); a gather launch into torch's default layout
 cost 0.9 ms per image at 64³ (batch 8), a third of the backward pass. The pair layout's gradient
 (VH, AO) is summed back into voxels by a second launch (:func:`_torch_layout`) into an array of
 Dr.Jit's allocation cache, which torch also wraps without a copy.

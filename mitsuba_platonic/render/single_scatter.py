@@ -163,7 +163,7 @@ def _grey_daylight(share):
 def daylights(directions: torch.Tensor, shares: torch.Tensor) -> LightBatch:
     """Grey daylights of the prior's kind (:func:`sample_sun_and_sky`) with the given sun
     ``directions`` ``(B, 3)`` (unit vectors, normalised here) and sky ``shares`` ``(B,)``: what a
-    light read from a photo (:class:`~mitsuba_platonic.models.LightHead`) renders with. Detached,
+    light read from a photo (:class:`~mitsuba_platonic.networks.nets.LightHead`) renders with. Detached,
     float64, on the CPU, as :class:`LightBatch` holds its lights."""
     d = directions.detach().to("cpu", torch.float64)
     if d.dim() != 2 or d.shape[1] != 3 or shares.shape != (d.shape[0],):

@@ -15,8 +15,8 @@ import torch
 from ..runtime import budget
 from ..config import Config, ConfigError
 from ..model import Model, critic_config
-from ..model_settings import ModelConfig
-from ..models import Discriminator, VolumeDiscriminator
+from ..networks.settings import ModelConfig
+from ..networks.nets import Discriminator, VolumeDiscriminator
 from .settings import MODES_3D
 
 __all__ = ["parameter_count", "check_model_fits", "batch_bytes", "check_batch_fits", "TRAINING_BYTES_PER_PARAMETER",

@@ -104,8 +104,8 @@ from torch.nn.parallel import DistributedDataParallel as DDP
 
 from ..config import Config, ConfigError
 from ..model import RING_VIEWS, Model, critic_config
-from ..models import Discriminator, VolumeDiscriminator, init_critic_he, init_he, init_weights
-from ..photo_colours import photo_volume
+from ..networks.nets import Discriminator, VolumeDiscriminator, init_critic_he, init_he, init_weights
+from ..networks.photo_colours import photo_volume
 from ..render.closed_form import rotate, tilt
 from ..render.single_scatter import SKY_SHARE, daylights, sample_lights, sky_share
 from ..views import DEFAULT_ELEVATION, from_angles, front_view, sample_views, to_angles

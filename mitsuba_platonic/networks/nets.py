@@ -32,7 +32,7 @@ import torch.nn.functional as F
 from torch import nn
 
 from .photo_colours import COLOUR_MIN
-from .render.single_scatter import SKY_SHARE
+from ..render.single_scatter import SKY_SHARE
 
 __all__ = ["NORMS", "UPSAMPLES", "INITS", "PRECISIONS", "NetConfig", "Encoder", "Generator", "Discriminator",
            "VolumeDiscriminator", "PoseHead", "LightHead", "ResizeConv3d", "init_weights", "init_critic_he", "init_he"]
@@ -77,10 +77,10 @@ class NetConfig:
     elevation``); light: whether a :class:`LightHead` reads the photo's light from z (``train.light:
     head``); precision: the networks' arithmetic (:data:`PRECISIONS`); photo_colour: G's colour is an
     offset from the input photo's mean colour (:meth:`Generator.forward`); photo_texture: from the
-    photo's colour at each voxel's pixel instead (:func:`~mitsuba_platonic.photo_colours.photo_texture`);
+    photo's colour at each voxel's pixel instead (:func:`~mitsuba_platonic.networks.photo_colours.photo_texture`);
     texture_conv: G's logits
-    corrected by a convolution that sees it (:mod:`~mitsuba_platonic.photo_colours`). A config's model section
-    builds it (:meth:`~mitsuba_platonic.model_settings.ModelConfig.net_config`, its keys of the same names)."""
+    corrected by a convolution that sees it (:mod:`~mitsuba_platonic.networks.photo_colours`). A config's model section
+    builds it (:meth:`~mitsuba_platonic.networks.settings.ModelConfig.net_config`, its keys of the same names)."""
 
     resolution: int = 32
     volume_channels: int = 4
@@ -223,8 +223,8 @@ class Generator(nn.Module):
         layers += [*_up(last, c, cfg.volume_channels, bias=True), nn.Sigmoid()]
         self.net = nn.Sequential(*layers)
         #: ``texture_conv``: the correction of G's logits that sees the photo's texture, 8 channels in,
-        #: the 4 logits out; applied by :func:`~mitsuba_platonic.photo_colours.photo_volume`
-        #: (:func:`~mitsuba_platonic.photo_colours.texture_corrected`), not by :meth:`forward`, since it
+        #: the 4 logits out; applied by :func:`~mitsuba_platonic.networks.photo_colours.photo_volume`
+        #: (:func:`~mitsuba_platonic.networks.photo_colours.texture_corrected`), not by :meth:`forward`, since it
         #: needs the input camera's elevation
         self.texture_conv: Optional[nn.Conv3d] = nn.Conv3d(8, 4, 3, padding=1) if cfg.texture_conv else None
         # channels-last 3D weights and activations: oneDNN's 3D convolutions on a CPU run about twice
@@ -255,8 +255,8 @@ class Generator(nn.Module):
     def forward(self, z: torch.Tensor, colour: Optional[torch.Tensor] = None,
                 offsets: bool = False) -> Union[torch.Tensor, Tuple[torch.Tensor, torch.Tensor]]:
         """The volume for codes ``z``. With ``photo_colour`` (and only then) ``colour`` is the input
-        photos' mean colour m ``(B, 3)`` (:func:`~mitsuba_platonic.photo_colours.photo_colour`) or a
-        colour per voxel m ``(B, 3, R, R, R)`` (:func:`~mitsuba_platonic.photo_colours.photo_texture`),
+        photos' mean colour m ``(B, 3)`` (:func:`~mitsuba_platonic.networks.photo_colours.photo_colour`) or a
+        colour per voxel m ``(B, 3, R, R, R)`` (:func:`~mitsuba_platonic.networks.photo_colours.photo_texture`),
         and G's colour logits are offsets from it:
         c = σ(ℓ + logit m) per channel, the density's σ(ℓ) as always. A colour the encoder has not
         learnt (an orange tree among green ones) is then still the photo's, and an untrained G's

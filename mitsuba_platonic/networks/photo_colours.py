@@ -2,7 +2,7 @@
 
 A reconstruction's colour is hardest where the photo says most: E's 64-number code cannot carry a
 tree's leaves. So with ``model.photo_colour`` G's colour logits ℓ are offsets from a colour read
-from the photo itself, c = σ(ℓ + logit base) (:meth:`~mitsuba_platonic.models.Generator.forward`):
+from the photo itself, c = σ(ℓ + logit base) (:meth:`~mitsuba_platonic.networks.nets.Generator.forward`):
 
 - :func:`photo_colour`: base = the photo's mean colour (``model.photo_colour``);
 - :func:`photo_texture`: base = the photo's pixel, carried along the input camera's rays
@@ -24,7 +24,7 @@ import torch
 import torch.nn.functional as F
 from torch import nn
 
-from .render.closed_form import tilt, transmittance_before
+from ..render.closed_form import tilt, transmittance_before
 
 __all__ = ["COLOUR_MIN", "photo_colour", "photo_texture", "front_transmittance", "texture_corrected", "photo_volume"]
 
@@ -133,7 +133,7 @@ def texture_corrected(conv: nn.Module, volume: torch.Tensor, offsets: torch.Tens
                       elevation: Optional[torch.Tensor] = None) -> Tuple[torch.Tensor, torch.Tensor]:
     """``model.texture_conv``: (volume, ℓ') of the volume G made with offsets ℓ from the photos'
     ``texture`` t (:func:`photo_texture`, ``(B, 3, R, R, R)``), its logits corrected by ``conv``
-    (G's :attr:`~mitsuba_platonic.models.Generator.texture_conv`, a 3³ convolution, 8 channels
+    (G's :attr:`~mitsuba_platonic.networks.nets.Generator.texture_conv`, a 3³ convolution, 8 channels
     to 4):
 
         x = [ℓ, logit ρ, logit t, T_front]                      (3 + 1 + 3 + 1 channels per voxel)
@@ -160,7 +160,7 @@ def photo_volume(G: nn.Module, code: torch.Tensor, images: torch.Tensor, recipe:
                  elevation: Optional[torch.Tensor] = None) -> Tuple[torch.Tensor, torch.Tensor]:
     """(volume, ℓ) of a ``photo_colour`` G (or its data-parallel wrapper) for ``code`` and the
     ``images`` it encodes, by ``recipe`` (the model section of a config, or a
-    :class:`~mitsuba_platonic.models.NetConfig`: its ``photo_texture``, ``texture_conv`` and
+    :class:`~mitsuba_platonic.networks.nets.NetConfig`: its ``photo_texture``, ``texture_conv`` and
     ``resolution``): G's colour offset from the photos' mean colour (:func:`photo_colour`) or, with
     ``photo_texture``, from their texture seen from ``elevation`` (:func:`photo_texture`), corrected by
     :func:`texture_corrected` with ``texture_conv``; ℓ the offsets. The one

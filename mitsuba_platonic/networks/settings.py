@@ -1,8 +1,8 @@
 """The model section of a config (``model:``): the networks' sizes, arithmetic and how they start.
 
 :class:`ModelConfig` is the section's dataclass, beside the networks it configures
-(:mod:`mitsuba_platonic.models`). Ten of its keys (:data:`NET_KEYS`) are the networks' own settings
-(their shapes and arithmetic), :class:`~mitsuba_platonic.models.NetConfig`'s fields of the same names;
+(:mod:`mitsuba_platonic.networks.nets`). Ten of its keys (:data:`NET_KEYS`) are the networks' own settings
+(their shapes and arithmetic), :class:`~mitsuba_platonic.networks.nets.NetConfig`'s fields of the same names;
 :meth:`ModelConfig.net_config` hands them over, with what the other sections decide (the
 image formation's channels, the PrGAN view code, the pose head), so the two never disagree.
 The other three (``init``, ``critic_init``, ``critic_width``) are training's: how the networks
@@ -15,12 +15,12 @@ import dataclasses
 from dataclasses import dataclass
 from typing import Optional
 
-from .models import INITS, NORMS, PRECISIONS, RESOLUTIONS, UPSAMPLES, NetConfig
-from .settings_checks import ConfigError, choice, non_negative, positive
+from .nets import INITS, NORMS, PRECISIONS, RESOLUTIONS, UPSAMPLES, NetConfig
+from ..settings_checks import ConfigError, choice, non_negative, positive
 
 __all__ = ["ModelConfig", "NET_KEYS"]
 
-#: The model keys that :class:`~mitsuba_platonic.models.NetConfig` takes as they are.
+#: The model keys that :class:`~mitsuba_platonic.networks.nets.NetConfig` takes as they are.
 NET_KEYS = ("resolution", "latent", "width", "norm", "encoder_hidden", "upsample", "precision", "photo_colour",
             "photo_texture", "texture_conv")
 
@@ -42,10 +42,10 @@ class ModelConfig:
     photo_colour: G's colour as an offset from the input photo's mean colour (reconstruction, EA:
     "A colour read from the photo").
     photo_texture: with photo_colour, the offset is from the photo's own colour at each voxel's pixel,
-    carried along the input camera's rays, not from its mean (:func:`~mitsuba_platonic.photo_colours.photo_texture`).
+    carried along the input camera's rays, not from its mean (:func:`~mitsuba_platonic.networks.photo_colours.photo_texture`).
     texture_conv: with photo_texture, G's last logits corrected by a 3³ convolution that sees the photo's
     colour, G's own logits and how much of each voxel the input camera sees
-    (:func:`~mitsuba_platonic.photo_colours.texture_corrected`; "G's colour seeing the photo").
+    (:func:`~mitsuba_platonic.networks.photo_colours.texture_corrected`; "G's colour seeing the photo").
     """
 
     resolution: int = 32
