@@ -21,7 +21,7 @@ import numpy as np
 from mitsuba_platonic.files.checkpoint import read_checkpoint
 from mitsuba_platonic.evaluate import judge as J
 from mitsuba_platonic.evaluate.photos import photo_splits
-from mitsuba_platonic.loading import checkpoint_config, model_from_checkpoint
+from mitsuba_platonic.config.loading import checkpoint_config, model_from_checkpoint
 from mitsuba_platonic.model import Model
 
 KEYS = [("c2st_near", "acc. near"), ("c2st_side", "acc. side"), ("c2st_back", "acc. back"),

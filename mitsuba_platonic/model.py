@@ -7,10 +7,10 @@ learnt. It is built from a config (a fresh model, which the trainer trains) or r
 checkpoint (:meth:`Model.from_checkpoint`, no training code involved), and it turns images into
 volumes (:meth:`Model.reconstruct`) or draws volumes from the prior (:meth:`Model.generate`).
 
-This module sits above the config and the checkpoint reader (:mod:`mitsuba_platonic.loading`,
+This module sits above the config and the checkpoint reader (:mod:`mitsuba_platonic.config.loading`,
 which it imports and which never imports it): a ``cfg`` argument is a
 :class:`~mitsuba_platonic.config.Config`, read by its sections' attributes; reading a checkpoint
-is :mod:`mitsuba_platonic.loading`'s, and whether a config's networks fit in memory
+is :mod:`mitsuba_platonic.config.loading`'s, and whether a config's networks fit in memory
 :mod:`mitsuba_platonic.train.fits`'.
 
 A PrGAN-style model (``train.mode: prgan``) takes the view as part of its latent: G's input is
@@ -43,7 +43,7 @@ from torch import nn
 
 from .data.photos import decode_image, prepare_image
 from .errors import UserError
-from .loading import load_model
+from .config.loading import load_model
 from .networks.nets import Encoder, Generator, LightHead, NetConfig, PoseHead, init_weights
 from .networks.photo_colours import photo_volume
 from .render.closed_form import tilt
@@ -115,7 +115,7 @@ class Model(nn.Module):
         config is not valid or its weights do not fit that config's networks.
 
         The moving average of E's and G's weights is loaded when the run kept one (``train.ema``).
-        Reading is :func:`mitsuba_platonic.loading.load_model`'s (it validates the saved config and
+        Reading is :func:`mitsuba_platonic.config.loading.load_model`'s (it validates the saved config and
         is handed this class); this is its entry point on the class.
         """
         return load_model(cls, source, device)

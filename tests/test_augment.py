@@ -7,7 +7,9 @@ import pytest
 import torch
 
 from mitsuba_platonic.config import ConfigError, load_config
-from mitsuba_platonic.train.augment import AUGMENTS, BRIGHTNESS, augment, augment_photos, colour_matrices
+from mitsuba_platonic.config.train_settings import AUGMENTS, PHOTO_AUGMENTS
+from mitsuba_platonic.train import augment as A
+from mitsuba_platonic.train.augment import BRIGHTNESS, augment, augment_photos, colour_matrices
 from mitsuba_platonic.train.data import load_training_data
 from mitsuba_platonic.train.trainer import Trainer
 from tiny_shapes import TINY
@@ -76,6 +78,12 @@ def test_cutout_zeroes_one_square_of_half_the_side():
         assert len(rows) <= 7 and len(cols) <= 7                # |Δ| < H/4 = 4: at most 7 pixels a side
         assert hole.sum() == len(rows) * len(cols)              # a rectangle (a square clipped by the border)
         assert torch.equal(img[~hole], torch.ones(int((~hole).sum()), dtype=torch.float64))
+
+
+def test_the_train_section_lists_the_transforms_in_the_order_they_apply():
+    """The lists ``train.d_augment`` and ``train.photo_augment`` are checked against live in the train
+    section (config/train_settings.py); the transforms, in train/augment.py, are the same names in the same order."""
+    assert tuple(A._TRANSFORMS) == AUGMENTS and tuple(A._PHOTO_TRANSFORMS) == PHOTO_AUGMENTS
 
 
 def test_augmentations_are_exactly_differentiable():

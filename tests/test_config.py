@@ -107,8 +107,8 @@ def test_each_section_checks_itself_with_the_configs_messages():
     """A section's validate() raises what the whole config's does, without a Config around it."""
     from mitsuba_platonic.data.settings import DataConfig
     from mitsuba_platonic.networks.settings import ModelConfig
-    from mitsuba_platonic.train.run_settings import RunConfig
-    from mitsuba_platonic.train.settings import TrainConfig as OwnTrainConfig
+    from mitsuba_platonic.config.run_settings import RunConfig
+    from mitsuba_platonic.config.train_settings import TrainConfig as OwnTrainConfig
 
     assert OwnTrainConfig is TrainConfig                    # config.py re-exports the owner's class
     for section, key, bad in [(RunConfig(steps=0), "run.steps", "run.steps=0"),

@@ -7,7 +7,7 @@ import pytest
 
 from mitsuba_platonic.config import OVERRIDE_EXAMPLE, ConfigError, apply_overrides, load_config
 from mitsuba_platonic.settings_checks import QUOTE_LIMIT, quoted
-from mitsuba_platonic.train.settings import LOSS_WEIGHTS
+from mitsuba_platonic.config.train_settings import LOSS_WEIGHTS
 from cli_runner import one_line, run_cli
 
 

@@ -1,7 +1,7 @@
 """Run folders written before the imports were made to flow one way (issue 26) still load.
 
 A checkpoint stores the run's config as the plain mapping ``Config.to_dict()`` wrote
-(:mod:`mitsuba_platonic.files.checkpoint` returns it as such); :mod:`mitsuba_platonic.loading` builds the
+(:mod:`mitsuba_platonic.files.checkpoint` returns it as such); :mod:`mitsuba_platonic.config.loading` builds the
 :class:`Config` from it, filling keys added since with their defaults, and the model from its weights.
 """
 
@@ -13,7 +13,7 @@ import pytest
 
 from mitsuba_platonic.files.checkpoint import CHECKPOINT_VERSION, RunError, read_checkpoint
 from mitsuba_platonic.config import Config, ModelConfig, TrainConfig
-from mitsuba_platonic.loading import RETIRED, checkpoint_config
+from mitsuba_platonic.config.loading import RETIRED, checkpoint_config
 from mitsuba_platonic.model import Model
 from mitsuba_platonic.train import run as R
 

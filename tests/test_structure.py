@@ -138,10 +138,8 @@ LAYERS = [
     ("renderer, its backends compared, turntables", ["render"]),
     ("data: collections, photos, the data section", ["data"]),
     ("networks, the colour they read from a photo and the model section", ["networks"]),
-    ("training's own settings (the train and run sections)",
-     ["train.settings", "train.run_settings", "train.augment", "train.losses", "train.roll"]),
-    ("the config, composing every component's settings", ["config"]),
-    ("what runs saved, read back, and the model it builds", ["loading", "model"]),
+    ("the config: every section composed, training's own (train, run), what runs saved read back", ["config"]),
+    ("the model: E and G for inference", ["model"]),
     ("training: data, trainer, runs", ["train"]),
     ("evaluation and export", ["evaluate", "export", "bench", "viewer"]),
     ("command line", ["quickstart", "photo_quickstart", "cli", "console", "__main__"]),
@@ -177,16 +175,27 @@ def test_no_module_imports_a_layer_above_its_own():
 
 
 def test_the_checkpoint_loader_imports_no_training_code_and_the_model_imports_it():
-    """What runs saved is read without the trainer, its data or its runs (``train.*`` beyond the train
-    and run sections' settings, which the config composes, are above it), and the model reads its
+    """What runs saved is read without the trainer, its data or its runs, and the model reads its
     checkpoints through it at the top of its module, as a layer above."""
     edges = imports(modules())
-    below = {"mitsuba_platonic.train.settings", "mitsuba_platonic.train.run_settings"}
-    from_loading = {e.target for e in edges if e.source == "mitsuba_platonic.loading"}
-    assert not {t for t in from_loading if t.startswith("mitsuba_platonic.train") and t not in below}, from_loading
-    assert any(e.target == "mitsuba_platonic.loading" and not e.lazy for e in edges
+    from_loading = {e.target for e in edges if e.source == "mitsuba_platonic.config.loading"}
+    assert not {t for t in from_loading if t.startswith("mitsuba_platonic.train")}, from_loading
+    assert any(e.target == "mitsuba_platonic.config.loading" and not e.lazy for e in edges
                if e.source == "mitsuba_platonic.model")
-    assert layer("mitsuba_platonic.loading") < layer("mitsuba_platonic.train.trainer")
+    assert layer("mitsuba_platonic.config.loading") < layer("mitsuba_platonic.train.trainer")
+
+
+def test_the_config_imports_nothing_of_training():
+    """The back-import is gone (issue 44): the config composed the train and run sections from inside
+    ``train/``, whose runs and trainer import the config, so the training package straddled the config
+    (its ``__init__`` had to import lazily, and the structure listed five of its modules apart). The
+    two sections and every training choice list are the config's now: nothing in ``config/`` (nor
+    anything else below training) imports ``train/``, which sits whole in one layer."""
+    edges = imports(modules())
+    back = [f"  {modules()[e.source].relative_to(PACKAGE.parent)}:{e.line} → {e.target}" for e in edges
+            if e.source.split(".")[:2] == ["mitsuba_platonic", "config"] and e.target.startswith("mitsuba_platonic.train")]
+    assert not back, "the config imports training:\n" + "\n".join(back)
+    assert [p for _, prefixes in LAYERS for p in prefixes if p == "train" or p.startswith("train.")] == ["train"]
 
 
 def test_an_import_up_a_layer_is_found_and_named(tmp_path):

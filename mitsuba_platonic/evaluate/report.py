@@ -40,7 +40,7 @@ import torch
 from ..files.checkpoint import read_checkpoint
 from ..errors import UserError, raise_if_ctrl_c
 from ..files.fileio import confined, make_folder, write_text
-from ..loading import checkpoint_config, model_from_checkpoint
+from ..config.loading import checkpoint_config, model_from_checkpoint
 from ..model import Model
 from ..files.outputs import MARKER, check_output_folder, claim_output_folder
 from ..runtime.progress import progress_bar

@@ -13,7 +13,7 @@ Training writes checkpoints (:mod:`mitsuba_platonic.train.run`); inference reads
 (:meth:`mitsuba_platonic.model.Model.from_checkpoint`) without the training code. This module is
 the file format alone: it stores and returns plain data and imports no config; the config saved
 in a checkpoint becomes a :class:`~mitsuba_platonic.config.Config`, and its weights a model, in
-:mod:`mitsuba_platonic.loading`, above the config and the model.
+:mod:`mitsuba_platonic.config.loading`, in the config's package.
 
 Loading runs no code: every reader goes through :func:`load_checkpoint`, ``torch.load(...,
 weights_only=True)``, whose unpickler builds tensors and plain data (dicts, lists, tuples,
@@ -349,7 +349,7 @@ def _mismatch(e: BaseException, limit: int = 240) -> str:
 
 def saved_config_dict(state: Dict[str, Any], path: Path, run_name: Optional[str] = None) -> Dict[str, Any]:
     """The config saved in a checkpoint as the plain mapping it is stored as (``run.name`` replaced
-    by ``run_name`` if given; not validated: :func:`mitsuba_platonic.loading.saved_config` builds the
+    by ``run_name`` if given; not validated: :func:`mitsuba_platonic.config.loading.saved_config` builds the
     :class:`~mitsuba_platonic.config.Config`); :class:`RunError` naming ``path`` if it is not a
     mapping of sections."""
     if not isinstance(state["config"], dict) or not isinstance(state["config"].get("run") or {}, dict):
@@ -399,7 +399,7 @@ def load_latest_checkpoint(folder: Path, device: torch.device = torch.device("cp
 @dataclass
 class Checkpoint:
     """A read checkpoint: its saved config (the plain mapping, ``run.name`` set to the run folder's
-    name; :func:`mitsuba_platonic.loading.checkpoint_config` validates it), its raw state, the file
+    name; :func:`mitsuba_platonic.config.loading.checkpoint_config` validates it), its raw state, the file
     and the step."""
 
     config: Dict[str, Any]
@@ -413,7 +413,7 @@ def read_checkpoint(source: Union[str, Path], device: Union[str, torch.device] =
 
     The config is the one saved in the checkpoint (``config.yaml`` is not read), as a plain
     mapping with ``run.name`` set to the run folder's name (one that is no mapping of sections is a
-    :class:`RunError` naming the file; :func:`mitsuba_platonic.loading.checkpoint_config` validates it).
+    :class:`RunError` naming the file; :func:`mitsuba_platonic.config.loading.checkpoint_config` validates it).
     """
     source, device = Path(source), torch.device(device)
     if source.is_file():

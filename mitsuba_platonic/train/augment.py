@@ -45,10 +45,7 @@ from typing import Sequence
 import torch
 import torch.nn.functional as F
 
-__all__ = ["AUGMENTS", "augment", "PHOTO_AUGMENTS", "augment_photos", "colour_matrices"]
-
-#: The transforms ``train.d_augment`` may list, applied in this order.
-AUGMENTS = ("flip", "translation", "cutout")
+__all__ = ["augment", "augment_photos", "colour_matrices"]
 
 
 def _flip(x: torch.Tensor, g: torch.Generator) -> torch.Tensor:
@@ -83,8 +80,8 @@ _TRANSFORMS = {"flip": _flip, "translation": _translation, "cutout": _cutout}
 
 
 def augment(x: torch.Tensor, transforms: Sequence[str], g: torch.Generator) -> torch.Tensor:
-    """``x`` ``(B, C, H, W)`` through ``transforms`` (names from :data:`AUGMENTS`, applied in that
-    order), each image with its own random draw from ``g``; differentiable in ``x``."""
+    """``x`` ``(B, C, H, W)`` through ``transforms`` (names from ``train.d_augment``'s list, applied in
+    that order), each image with its own random draw from ``g``; differentiable in ``x``."""
     return _apply(x, transforms, g, _TRANSFORMS, "augment", "augmentation")
 
 
@@ -101,9 +98,6 @@ def _apply(x: torch.Tensor, transforms: Sequence[str], g: torch.Generator, table
             x = transform(x, g)
     return x
 
-
-#: The transforms ``train.photo_augment`` may list, applied in this order.
-PHOTO_AUGMENTS = ("flip", "colour")
 
 #: The ranges of the ``colour`` transform: hue angle (degrees), saturation and brightness factors.
 HUE_DEGREES, SATURATION, BRIGHTNESS = 30.0, (0.7, 1.3), (0.8, 1.2)
@@ -137,7 +131,7 @@ _PHOTO_TRANSFORMS = {"flip": _flip, "colour": _colour}
 
 def augment_photos(x: torch.Tensor, transforms: Sequence[str], g: torch.Generator) -> torch.Tensor:
     """A step's photos ``(B, C, H, W)`` (premultiplied RGBA for ``colour``) through ``transforms``
-    (names from :data:`PHOTO_AUGMENTS`, applied in that order), each photo with its own draw from ``g``."""
+    (names from ``train.photo_augment``'s list, applied in that order), each photo with its own draw from ``g``."""
     if "colour" in transforms and x.dim() == 4 and x.shape[1] != 4:
         raise ValueError(f"the 'colour' photo augmentation needs RGBA photos, got {x.shape[1]} channel(s)")
     return _apply(x, transforms, g, _PHOTO_TRANSFORMS, "augment_photos", "photo augmentation")

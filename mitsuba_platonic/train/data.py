@@ -24,7 +24,7 @@ from ..data.photos import PhotoCollection, decode_image, prepare_image
 from ..data.settings import SOURCES  # noqa: F401  (the choice list, also named here)
 from ..errors import UserError
 from ..volume import CHANNELS
-from .settings import MODES_3D
+from ..config.train_settings import MODES_3D
 
 __all__ = ["TrainingData", "load_training_data", "collection_folder", "SOURCES"]
 

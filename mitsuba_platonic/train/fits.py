@@ -17,7 +17,7 @@ from ..config import Config, ConfigError
 from ..model import Model, critic_config
 from ..networks.settings import ModelConfig
 from ..networks.nets import Discriminator, VolumeDiscriminator
-from .settings import MODES_3D
+from ..config.train_settings import MODES_3D
 
 __all__ = ["parameter_count", "check_model_fits", "batch_bytes", "check_batch_fits", "TRAINING_BYTES_PER_PARAMETER",
            "SIZE_KEYS"]

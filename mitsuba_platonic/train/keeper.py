@@ -21,7 +21,7 @@ import torch
 from ..files.checkpoint import CHECKPOINT_VERSION, RunError, load_latest_checkpoint, load_weights, save_checkpoint
 from ..config import Config
 from ..files.fileio import remove
-from ..loading import config_difference, saved_config
+from ..config.loading import config_difference, saved_config
 
 __all__ = ["Checkpoints", "non_finite", "same_settings"]
 

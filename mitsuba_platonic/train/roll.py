@@ -50,10 +50,7 @@ import torch.nn.functional as F
 
 from ..views import camera_frames, validate_views
 
-__all__ = ["roll", "input_frame_roll", "ROLLS"]
-
-#: train.d_roll: 'none' (D sees the images as rendered) | 'uniform' | 'matched' (module docstring).
-ROLLS = ("none", "uniform", "matched")
+__all__ = ["roll", "input_frame_roll"]
 
 
 def roll(images: torch.Tensor, angles: torch.Tensor) -> torch.Tensor:

@@ -284,7 +284,7 @@ def open_source(source: PathLike, photo: Optional[PathLike] = None) -> Scene:
     # lazy, the three: checkpoints, configs and networks are for run folders only (a volume file's
     # first frame waits for none of them)
     from ..files.checkpoint import read_checkpoint                  # lazy: runs only
-    from ..loading import checkpoint_config, model_from_checkpoint   # lazy: runs only
+    from ..config.loading import checkpoint_config, model_from_checkpoint   # lazy: runs only
     from ..model import Model                                 # lazy: runs only
 
     ckpt = read_checkpoint(path)

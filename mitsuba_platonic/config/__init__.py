@@ -1,14 +1,15 @@
 """Experiment configuration: every knob in one validated tree, loaded from YAML.
 
 A config has five sections (``run``, ``data``, ``model``, ``render``, ``train``), each a
-dataclass beside the component that owns it, whose docstring says what its fields mean and whose
-``validate()`` checks them:
+dataclass whose docstring says what its fields mean and whose ``validate()`` checks them. The
+sections of the components below the config sit beside them (data, networks, renderer); training's
+two sit here, in this package, because training reads the whole config (its code is above it):
 
-- ``run``: :class:`~mitsuba_platonic.train.run_settings.RunConfig` (the run folder, seed, device, cadence)
+- ``run``: :class:`~mitsuba_platonic.config.run_settings.RunConfig` (the run folder, seed, device, cadence)
 - ``data``: :class:`~mitsuba_platonic.data.settings.DataConfig` (a procedural collection or a photo folder)
 - ``model``: :class:`~mitsuba_platonic.networks.settings.ModelConfig` (the networks' sizes and initialisations)
 - ``render``: :class:`~mitsuba_platonic.render.settings.RenderSettings` (the renderer's own settings)
-- ``train``: :class:`~mitsuba_platonic.train.settings.TrainConfig` (task, mode, losses, optimisers)
+- ``train``: :class:`~mitsuba_platonic.config.train_settings.TrainConfig` (task, mode, losses, optimisers)
 
 This module composes them (:class:`Config`), loads YAML, applies command-line overrides and checks
 how the sections combine (:meth:`Config.validate`: colour needs the EA image formation, a 3D mode
@@ -19,6 +20,7 @@ and types (on the plain dataclasses: other modules construct them directly); the
 ``validate()`` and :meth:`Config.validate` check ranges, choices and combinations. Command-line
 overrides use dotted keys, ``--set run.steps=500``; values are parsed as YAML scalars (``true``,
 ``1e-4``, ``[0.5, 0.9]``, ``null``). Every section and :class:`ConfigError` stay importable from here.
+What runs saved is read back into a config, and its model, by :mod:`.loading`.
 """
 
 from __future__ import annotations
@@ -35,14 +37,14 @@ import pydantic
 import yaml
 from pydantic_core import SchemaValidator, core_schema
 
-from .data.settings import DataConfig
-from .networks.settings import ModelConfig
-from .render.settings import LIT, SINGLE_SCATTERING, RenderSettings as RenderConfig
-from .files.resources import config_names, config_path
-from .settings_checks import ConfigError, quoted
-from .train.run_settings import RunConfig
-from .train.settings import MODES_3D, PRGAN, TrainConfig
-from .views import DEFAULT_ELEVATION
+from ..data.settings import DataConfig
+from ..networks.settings import ModelConfig
+from ..render.settings import LIT, SINGLE_SCATTERING, RenderSettings as RenderConfig
+from ..files.resources import config_names, config_path
+from ..settings_checks import ConfigError, quoted
+from .run_settings import RunConfig
+from .train_settings import MODES_3D, PRGAN, TrainConfig
+from ..views import DEFAULT_ELEVATION
 
 __all__ = ["Config", "RunConfig", "DataConfig", "ModelConfig", "RenderConfig", "TrainConfig",
            "load_config", "config_file", "config_from_dict", "apply_overrides", "ConfigError"]

@@ -1,8 +1,8 @@
 """The run section of a config (``run:``): where a run's folder is, its seed, device, length and cadence.
 
-:class:`RunConfig` is the section's dataclass and :data:`DEVICES` its choice of device, beside
-the run layer that reads them (:mod:`mitsuba_platonic.train.run` and the modules beside it); a
-leaf that imports no config (the config composes it), no trainer and no run.
+:class:`RunConfig` is the section's dataclass and :data:`DEVICES` its choice of device, read by
+the runs (:mod:`mitsuba_platonic.train.run` and the modules beside it). In the config, not beside
+them: the runs read the whole config (:mod:`mitsuba_platonic.config.train_settings` says why).
 """
 
 from __future__ import annotations

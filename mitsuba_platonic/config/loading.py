@@ -1,8 +1,8 @@
 """What training saved, read back: a checkpoint's config as a validated :class:`Config`, and its model.
 
 The checkpoint file format (:mod:`mitsuba_platonic.files.checkpoint`) stores and returns plain data, the
-config as the mapping ``Config.to_dict()`` wrote; this module sits above it, the config and the
-model, and builds them from it. Old run folders load as they did: a saved config that lacks keys
+config as the mapping ``Config.to_dict()`` wrote; this module, in the config's package, builds the
+config and the model from it. Old run folders load as they did: a saved config that lacks keys
 added since gets their defaults, as a YAML file would, and one that holds a retired option at the
 value that left it off (:data:`RETIRED`) loads without it; one that had it on names the commit that
 still has its code.
@@ -18,8 +18,8 @@ from typing import Any, Dict, Optional, Tuple, Type, TypeVar, Union
 
 import torch
 
-from .files.checkpoint import Checkpoint, RunError, load_weights, read_checkpoint, saved_config_dict
-from .config import Config, ConfigError, config_from_dict
+from ..files.checkpoint import Checkpoint, RunError, load_weights, read_checkpoint, saved_config_dict
+from . import Config, ConfigError, config_from_dict
 
 __all__ = ["saved_config", "checkpoint_config", "config_difference", "RESUME_SECTIONS", "model_from_checkpoint",
            "load_model", "RETIRED", "without_retired"]

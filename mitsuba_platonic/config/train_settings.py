@@ -1,14 +1,15 @@
-"""The train section of a config (``train:``) and the training components' choice lists.
+"""The train section of a config (``train:``) and every training choice list.
 
 :class:`TrainConfig` is the section's dataclass, with the checks that concern it alone
 (:meth:`TrainConfig.validate`); the config composes it and checks it against the other sections.
-A leaf of the training package: it imports no config, no trainer, no run and no data loader
-(which import the config), only the choice lists beside their code (``train.losses.LOSSES``,
-``train.roll.ROLLS``, ``train.augment.AUGMENTS``), whose modules import no config either.
+It sits in the config, not beside the training code, because that code reads the whole config:
+a section inside ``train/`` made the config import the package that imports it. So the lists
+the section checks live here, the losses', rolls' and augmentations' too, and the modules that
+implement them import them from here (``train.losses.LOSSES`` is :data:`LOSSES`).
 
 Each list stays importable from the module that uses it (``train.trainer.MODES``); the data
 source's and the device's lists are their sections' (``data.settings.SOURCES``,
-``train.run_settings.DEVICES``).
+``config.run_settings.DEVICES``).
 """
 
 from __future__ import annotations
@@ -18,12 +19,9 @@ from typing import List, Optional, Union
 
 from ..settings_checks import ConfigError, check_elevation, choice, non_negative, positive
 from ..views import DISTRIBUTIONS
-from .augment import AUGMENTS, PHOTO_AUGMENTS
-from .losses import LOSSES
-from .roll import ROLLS
 
 __all__ = ["TrainConfig", "TASKS", "MODES", "MODES_3D", "REC_TARGETS", "REC_LOSSES", "REC_CHANNELS", "POSES", "LIGHTS", "PRGAN",
-           "LOSS_WEIGHTS"]
+           "LOSS_WEIGHTS", "LOSSES", "ROLLS", "AUGMENTS", "PHOTO_AUGMENTS"]
 
 #: What E/G learn: reconstruct the input image, or generate from z ~ N(0, I).
 TASKS = ("reconstruction", "generation")
@@ -50,6 +48,14 @@ LOSS_WEIGHTS = ("gp_weight", "rec_weight", "weight_3d", "pose_weight", "r1_weigh
                 "colour_match", "colour_offset", "depth_spread")
 #: How messages name ``train.mode: prgan``.
 PRGAN = "the PrGAN-style baseline ('prgan')"
+#: The GAN losses of :func:`~mitsuba_platonic.train.losses.d_loss` / ``g_loss`` (anything but the first is WGAN-GP).
+LOSSES = ("nonsaturating", "wgan-gp")
+#: train.d_roll: 'none' (D sees the images as rendered) | 'uniform' | 'matched' (:mod:`mitsuba_platonic.train.roll`).
+ROLLS = ("none", "uniform", "matched")
+#: The transforms ``train.d_augment`` may list, applied in this order (:mod:`mitsuba_platonic.train.augment`).
+AUGMENTS = ("flip", "translation", "cutout")
+#: The transforms ``train.photo_augment`` may list, applied in this order.
+PHOTO_AUGMENTS = ("flip", "colour")
 
 
 @dataclass
