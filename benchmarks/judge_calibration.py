@@ -36,7 +36,7 @@ from mitsuba_platonic.evaluate import held_out_truths
 from mitsuba_platonic.evaluate import metrics as M
 from mitsuba_platonic.evaluate.judge import judge, judge_table, stats_table
 from mitsuba_platonic.evaluate.protocol import billboard, rerender_views
-from mitsuba_platonic.quickstart import CONFIG
+from mitsuba_platonic.quickstart.procedural import CONFIG
 from mitsuba_platonic.render import render
 from mitsuba_platonic.train.data import load_training_data
 from mitsuba_platonic.train.trainer import Trainer

@@ -82,7 +82,7 @@ def test_an_interrupt_dr_jit_wrapped_in_its_own_error_is_still_an_interrupt(monk
 
 
 def test_the_quickstart_stops_when_training_is_interrupted(tmp_path, monkeypatch):
-    from mitsuba_platonic import quickstart as Q
+    from mitsuba_platonic.quickstart import procedural as Q
     from mitsuba_platonic.train import data as D
 
     evaluated = []

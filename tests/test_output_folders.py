@@ -88,7 +88,7 @@ def test_evaluate_with_a_bad_run_leaves_no_new_folder(tmp_path):
 def stopped_training(monkeypatch):
     """The quickstart with its data and training replaced: training stops with a Ctrl-C at step 7,
     so the test sees where it was allowed to start (exit 130) and where it was refused (exit 2)."""
-    from mitsuba_platonic import quickstart as Q
+    from mitsuba_platonic.quickstart import procedural as Q
     from mitsuba_platonic.train import data as D
     from mitsuba_platonic.train import run as R
 

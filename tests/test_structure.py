@@ -142,7 +142,8 @@ LAYERS = [
     ("the model: E and G for inference", ["model"]),
     ("training: data, trainer, runs", ["train"]),
     ("evaluation and export", ["evaluate", "export", "bench", "viewer"]),
-    ("command line", ["quickstart", "photo_quickstart", "cli", "console", "__main__"]),
+    ("the quickstart pipelines", ["quickstart"]),
+    ("command line", ["cli", "console"]),
 ]
 
 

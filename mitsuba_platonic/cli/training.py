@@ -1,7 +1,7 @@
 """``platonic quickstart``, ``train`` and ``evaluate``: the pipeline, its training and its scores.
 
-- ``quickstart``: :func:`mitsuba_platonic.quickstart.quickstart` (a procedural collection) or
-  :func:`mitsuba_platonic.photo_quickstart.photo_quickstart` (``--photos DIR``).
+- ``quickstart``: :func:`mitsuba_platonic.quickstart.procedural.quickstart` (a procedural collection) or
+  :func:`mitsuba_platonic.quickstart.photos.photo_quickstart` (``--photos DIR``).
 - ``train``: :func:`mitsuba_platonic.train.train` with a YAML config and ``--set`` overrides.
 - ``evaluate``: :mod:`mitsuba_platonic.evaluate.report`, which declares its own flags.
 """
@@ -19,12 +19,12 @@ __all__ = ["add_quickstart", "add_train", "add_evaluate"]
 
 def _cmd_quickstart(args: argparse.Namespace) -> int:
     if args.photos is not None:
-        from ..photo_quickstart import photo_quickstart
+        from ..quickstart.photos import photo_quickstart
 
         report = photo_quickstart(Path(args.photos), Path(args.out or "quickstart-photos"), steps=args.steps,
                                   progress=not args.quiet, overrides=args.set or (), overwrite=args.overwrite)
     else:
-        from ..quickstart import quickstart
+        from ..quickstart.procedural import quickstart
 
         report = quickstart(Path(args.out or "quickstart"), steps=args.steps, progress=not args.quiet,
                             overrides=args.set or (), overwrite=args.overwrite)
