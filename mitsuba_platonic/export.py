@@ -24,15 +24,15 @@ import numpy as np
 import torch
 import torch.nn.functional as F
 
-from .runtime import budget
 from .errors import UserError
 from .files.fileio import atomic_write, make_folder, remove
-from .render.frames import display_frames, save_gif, turntable_frames
+from .files.volume_io import save_volume
 from .images import composite, linear_to_srgb, save_grid, save_png, to_hwc
+from .render.frames import display_frames, save_gif, turntable_frames
+from .runtime import budget
 from .runtime.progress import progress_bar
 from .views import turntable
 from .volume import voxel_size, world_to_grid
-from .files.volume_io import save_volume
 
 if TYPE_CHECKING:
     from .model import Model

@@ -41,9 +41,9 @@ import torch
 import torch.nn.functional as F
 from torch import nn
 
+from .config.loading import load_model
 from .data.photos import decode_image, prepare_image
 from .errors import UserError
-from .config.loading import load_model
 from .networks.nets import Encoder, Generator, LightHead, NetConfig, PoseHead, init_weights
 from .networks.photo_colours import photo_volume
 from .render.closed_form import tilt

@@ -37,8 +37,8 @@ import sys
 from typing import Callable, Optional, Sequence
 
 from .. import __version__
-from ..runtime.backend import BackendError
 from ..errors import UserError, interrupt_caught, interrupt_exit_code, remembering_ctrl_c
+from ..runtime.backend import BackendError
 from .args import PROG, CLIError, parse_models
 from .checkpoints import add_convert_checkpoint
 from .dataset import add_make_dataset

@@ -38,13 +38,13 @@ import yaml
 from pydantic_core import SchemaValidator, core_schema
 
 from ..data.settings import DataConfig
+from ..files.resources import config_names, config_path
 from ..networks.settings import ModelConfig
 from ..render.settings import LIT, SINGLE_SCATTERING, RenderSettings as RenderConfig
-from ..files.resources import config_names, config_path
 from ..settings_checks import ConfigError, quoted
+from ..views import DEFAULT_ELEVATION
 from .run_settings import RunConfig
 from .train_settings import MODES_3D, PRGAN, TrainConfig
-from ..views import DEFAULT_ELEVATION
 
 __all__ = ["Config", "RunConfig", "DataConfig", "ModelConfig", "RenderConfig", "TrainConfig",
            "load_config", "config_file", "config_from_dict", "apply_overrides", "ConfigError"]

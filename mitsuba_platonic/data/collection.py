@@ -30,15 +30,15 @@ from typing import Any, Callable, Dict, List, Optional, Tuple, Union
 import numpy as np
 import torch
 
-from ..runtime import budget
 from ..errors import Interrupted, UserError, raise_if_ctrl_c
 from ..files.fileio import atomic_write, confined, make_folder, open_file, remove
+from ..files.volume_io import write_vol
 from ..images import save_exr, save_png, to_hwc, to_png_rgba
-from ..runtime.progress import progress_bar
 from ..render import render
 from ..render.physical import render_physical
+from ..runtime import budget
+from ..runtime.progress import progress_bar
 from ..volume import CHANNELS
-from ..files.volume_io import write_vol
 from . import shapes
 from .collection_files import (RECORDS, SUBFOLDERS, image_id, is_finished, load_manifest, lock, missing_files,
                                overwrite_plan, read_records, read_spec, remove_temporaries, temporaries, write_json)

@@ -37,14 +37,14 @@ from typing import Any, Callable, Dict, List, Optional, Sequence, Tuple, Union
 import numpy as np
 import torch
 
-from ..files.checkpoint import read_checkpoint
-from ..errors import UserError, raise_if_ctrl_c
-from ..files.fileio import confined, make_folder, write_text
 from ..config.loading import checkpoint_config, model_from_checkpoint
-from ..model import Model
+from ..errors import UserError, raise_if_ctrl_c
+from ..files.checkpoint import read_checkpoint
+from ..files.fileio import confined, make_folder, write_text
 from ..files.outputs import MARKER, check_output_folder, claim_output_folder
-from ..runtime.progress import progress_bar
+from ..model import Model
 from ..render import render
+from ..runtime.progress import progress_bar
 from ..train.data import collection_folder, load_training_data
 from ..views import turntable
 from . import metrics as M

@@ -23,8 +23,8 @@ import numpy as np
 import torch
 
 from ..errors import UserError
-from .fileio import atomic_write, make_folder
 from ..volume import TEST_VOLUMES, test_volume
+from .fileio import atomic_write, make_folder
 
 __all__ = ["BUILTIN_PREFIX", "VolumeFileError", "to_mitsuba_grid", "read_npz", "read_vol", "read_volume_file",
            "load_volume", "write_npz", "write_vol", "save_volume"]

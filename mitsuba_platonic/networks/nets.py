@@ -31,8 +31,8 @@ import torch
 import torch.nn.functional as F
 from torch import nn
 
-from .photo_colours import COLOUR_MIN
 from ..render.single_scatter import SKY_SHARE
+from .photo_colours import COLOUR_MIN
 
 __all__ = ["NORMS", "UPSAMPLES", "INITS", "PRECISIONS", "NetConfig", "Encoder", "Generator", "Discriminator",
            "VolumeDiscriminator", "PoseHead", "LightHead", "ResizeConv3d", "init_weights", "init_critic_he", "init_he"]

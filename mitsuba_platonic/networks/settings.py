@@ -15,8 +15,8 @@ import dataclasses
 from dataclasses import dataclass
 from typing import Optional
 
-from .nets import INITS, NORMS, PRECISIONS, RESOLUTIONS, UPSAMPLES, NetConfig
 from ..settings_checks import ConfigError, choice, non_negative, positive
+from .nets import INITS, NORMS, PRECISIONS, RESOLUTIONS, UPSAMPLES, NetConfig
 
 __all__ = ["ModelConfig", "NET_KEYS"]
 

@@ -19,16 +19,16 @@ from typing import Any, Dict, List, Optional, Sequence
 
 from ..config import load_config
 from ..errors import UserError
+from ..evaluate import report as evaluation_report
 from ..evaluate.judge import BANDS
 from ..evaluate.photos import photo_splits
-from ..evaluate import report as evaluation_report
 from ..export import export_held_out
 from ..files.fileio import confined, write_text
-from ..model import Model
-from .procedural import QUICKSTART_PARTS, claim_quickstart_folder, stopped
 from ..files.resources import config_path
-from ..train.fits import check_model_fits
+from ..model import Model
 from ..train import run as training_run
+from ..train.fits import check_model_fits
+from .procedural import QUICKSTART_PARTS, claim_quickstart_folder, stopped
 
 __all__ = ["photo_quickstart", "PHOTO_CONFIG"]
 

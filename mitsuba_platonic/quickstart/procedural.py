@@ -28,9 +28,9 @@ from ..errors import Interrupted
 from ..evaluate.protocol import held_out_scores
 from ..export import export_held_out
 from ..files.fileio import confined, write_text
-from ..model import Model
 from ..files.outputs import MARKER, claim_output_folder
 from ..files.resources import config_path
+from ..model import Model
 from ..train import data as training_data
 from ..train import run as training_run
 from ..train.fits import check_model_fits

@@ -29,16 +29,16 @@ from typing import Any, Callable, Dict, List, Mapping, Optional, Sequence, Tuple
 import numpy as np
 import torch
 
-from ..runtime.budget import available_memory
 from ..errors import UserError
 from ..files.fileio import atomic_write, make_folder, write_text
 from ..images import composite, heatmap, save_exr, to_hwc
+from ..runtime.budget import available_memory
 from ..runtime.progress import progress_bar
+from ..views import front_view, sample_views, to_angles, validate_views
+from ..volume import CHANNELS
 from . import MODELS, render
 from .settings import OPTIONS_OF, RenderSettings
 from .variant import ensure_variant
-from ..views import front_view, sample_views, to_angles, validate_views
-from ..volume import CHANNELS
 
 __all__ = ["compare", "format_table", "time_render", "best_of", "kernel_time", "best_kernel_ms", "DISPLAY_BACKGROUND", "HEATMAP_CMAP",
            "memory_estimate", "available_memory", "check_memory", "comparison_views", "write_summary"]

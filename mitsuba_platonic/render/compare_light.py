@@ -42,13 +42,13 @@ import numpy as np
 import torch
 import torch.nn.functional as F
 
-from .compare import time_render
 from ..errors import UserError
 from ..files.fileio import atomic_write, make_folder, write_text
 from ..images import linear_to_srgb
 from ..runtime.progress import progress_bar
-from .single_scatter import SunAndSky, reference_render, sample_sun_and_sky
 from ..views import front_view
+from .compare import time_render
+from .single_scatter import SunAndSky, reference_render, sample_sun_and_sky
 
 __all__ = ["LightCase", "light_cases", "compare_light", "format_light_table", "write_light_summary",
            "light_figure", "block_z", "BLOCK", "FD_EPSILON", "SE_FLOOR"]

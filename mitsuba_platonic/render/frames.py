@@ -17,8 +17,8 @@ from PIL import Image
 
 from ..files.fileio import atomic_write, make_folder
 from ..images import composite, linear_to_srgb, to_hwc
-from . import render
 from ..views import turntable
+from . import render
 
 __all__ = ["display_frames", "turntable_frames", "save_gif"]
 

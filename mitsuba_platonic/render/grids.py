@@ -14,8 +14,8 @@ from __future__ import annotations
 
 import torch
 
-from ..volume import voxel_size
 from ..files.volume_io import to_mitsuba_grid
+from ..volume import voxel_size
 
 __all__ = ["to_mitsuba_grid", "extinction", "V_MAX_PHYSICAL"]
 

@@ -11,8 +11,8 @@ from __future__ import annotations
 import os
 from typing import Any, Optional
 
-from ..runtime.backend import check_backend
 from ..errors import UserError
+from ..runtime.backend import check_backend
 
 __all__ = ["VARIANTS", "ensure_variant", "variant_device"]
 

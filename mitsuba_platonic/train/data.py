@@ -19,12 +19,12 @@ import numpy as np
 import torch
 
 from ..config import Config, ConfigError
+from ..config.train_settings import MODES_3D
 from ..data.collection import CollectionSpec, load_manifest, make_collection
 from ..data.photos import PhotoCollection, decode_image, prepare_image
 from ..data.settings import SOURCES  # noqa: F401  (the choice list, also named here)
 from ..errors import UserError
 from ..volume import CHANNELS
-from ..config.train_settings import MODES_3D
 
 __all__ = ["TrainingData", "load_training_data", "collection_folder", "SOURCES"]
 

@@ -12,12 +12,12 @@ from typing import Optional, Tuple, Union
 
 import torch
 
-from ..runtime import budget
 from ..config import Config, ConfigError
-from ..model import Model, critic_config
-from ..networks.settings import ModelConfig
-from ..networks.nets import Discriminator, VolumeDiscriminator
 from ..config.train_settings import MODES_3D
+from ..model import Model, critic_config
+from ..networks.nets import Discriminator, VolumeDiscriminator
+from ..networks.settings import ModelConfig
+from ..runtime import budget
 
 __all__ = ["parameter_count", "check_model_fits", "batch_bytes", "check_batch_fits", "TRAINING_BYTES_PER_PARAMETER",
            "SIZE_KEYS"]

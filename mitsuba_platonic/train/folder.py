@@ -25,10 +25,10 @@ from typing import Iterator, Optional
 import yaml
 
 from .. import __version__
-from ..files.checkpoint import RunError, checkpoint_files
 from ..config import Config, ConfigError, config_from_dict, yaml_problem
-from ..files.fileio import atomic_write, make_folder, open_file, remove_temporaries
 from ..config.loading import config_difference, without_retired
+from ..files.checkpoint import RunError, checkpoint_files
+from ..files.fileio import atomic_write, make_folder, open_file, remove_temporaries
 
 __all__ = ["RUN_MARKER", "RUN_PARTS", "is_run_folder", "claim_run_folder", "run_lock", "prepare_run_folder", "read_run_config"]
 

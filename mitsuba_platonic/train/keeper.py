@@ -18,10 +18,10 @@ from typing import Any, Dict, Optional
 
 import torch
 
-from ..files.checkpoint import CHECKPOINT_VERSION, RunError, load_latest_checkpoint, load_weights, save_checkpoint
 from ..config import Config
-from ..files.fileio import remove
 from ..config.loading import config_difference, saved_config
+from ..files.checkpoint import CHECKPOINT_VERSION, RunError, load_latest_checkpoint, load_weights, save_checkpoint
+from ..files.fileio import remove
 
 __all__ = ["Checkpoints", "non_finite", "same_settings"]
 

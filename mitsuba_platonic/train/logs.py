@@ -14,9 +14,9 @@ from typing import Any, Dict, List, Tuple
 import torch
 
 from ..files.fileio import atomic_write, make_folder
-from ..render.frames import display_frames, save_gif, turntable_frames
 from ..images import composite, linear_to_srgb, save_grid, to_hwc
 from ..model import Model
+from ..render.frames import display_frames, save_gif, turntable_frames
 from ..views import front_view, turntable
 
 __all__ = ["ScalarLog", "write_samples", "SAMPLE_VIEWS"]

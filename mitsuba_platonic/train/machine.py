@@ -16,8 +16,8 @@ from typing import Iterator, Optional, Tuple
 import torch
 import torch.distributed as dist
 
-from ..files.checkpoint import RunError
 from ..config import Config
+from ..files.checkpoint import RunError
 from ..render.variant import ensure_variant
 
 __all__ = ["run_device", "distributed", "drjit_threads", "training_threads", "SERIAL_MARCHER_MAX_RESOLUTION"]

@@ -56,11 +56,12 @@ from typing import Optional, Tuple
 import torch
 import torch.distributed as dist
 
-from ..files.checkpoint import RunError, load_checkpoint, load_latest_checkpoint, read_checkpoint, save_checkpoint
 from ..config import Config
-from ..errors import Interrupted, StopBetweenSteps, UserError
-from ..files.fileio import confined
 from ..config.loading import checkpoint_config, model_from_checkpoint
+from ..config.run_settings import DEVICES  # noqa: F401  (the choice list, also named here)
+from ..errors import Interrupted, StopBetweenSteps, UserError
+from ..files.checkpoint import RunError, load_checkpoint, load_latest_checkpoint, read_checkpoint, save_checkpoint
+from ..files.fileio import confined
 from ..model import Model
 from ..runtime.progress import progress_bar
 from .data import TrainingData, load_training_data
@@ -69,7 +70,6 @@ from .folder import RUN_MARKER, RUN_PARTS, claim_run_folder, prepare_run_folder,
 from .keeper import Checkpoints, non_finite
 from .logs import SAMPLE_VIEWS, ScalarLog, write_samples
 from .machine import SERIAL_MARCHER_MAX_RESOLUTION, distributed, drjit_threads, run_device, training_threads
-from ..config.run_settings import DEVICES  # noqa: F401  (the choice list, also named here)
 from .trainer import Trainer
 
 __all__ = ["train", "load_run", "RunError", "save_checkpoint", "load_checkpoint", "load_latest_checkpoint",

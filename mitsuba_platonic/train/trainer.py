@@ -103,6 +103,7 @@ from torch import nn
 from torch.nn.parallel import DistributedDataParallel as DDP
 
 from ..config import Config, ConfigError
+from ..config.train_settings import MODES, MODES_3D, POSES, REC_TARGETS, TASKS  # noqa: F401  (the choice lists, also named here)
 from ..model import RING_VIEWS, Model, critic_config
 from ..networks.nets import Discriminator, VolumeDiscriminator, init_critic_he, init_he, init_weights
 from ..networks.photo_colours import photo_volume
@@ -115,7 +116,6 @@ from .losses import (colour_match, colour_offset, colour_tv, d_loss, depth_sprea
                      hard_accuracy_counts, r1_penalty, soft_accuracy_counts)
 from .renderer import in_camera, make_lit_renderer, make_renderer
 from .roll import input_frame_roll, roll
-from ..config.train_settings import MODES, MODES_3D, POSES, REC_TARGETS, TASKS  # noqa: F401  (the choice lists, also named here)
 
 __all__ = ["Trainer", "TASKS", "MODES", "MODES_3D", "REC_TARGETS", "POSES", "ring_views"]
 

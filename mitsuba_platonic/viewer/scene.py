@@ -31,9 +31,9 @@ from PIL import Image
 from ..errors import UserError
 from ..export import extract_mesh, save_ply
 from ..files.fileio import atomic_write
+from ..files.volume_io import read_volume_file, save_volume
 from ..render import RenderSettings, render_with
 from ..volume import CHANNELS
-from ..files.volume_io import read_volume_file, save_volume
 
 __all__ = ["RENDERERS", "FORMATIONS", "BACKGROUND", "Frame", "Scene", "Exports", "open_source", "render_frame",
            "formations_for", "renderers_for", "resolutions_for", "to_display", "clean_name"]
