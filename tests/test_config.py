@@ -110,7 +110,7 @@ def test_each_section_checks_itself_with_the_configs_messages():
     from mitsuba_platonic.config.run_settings import RunConfig
     from mitsuba_platonic.config.train_settings import TrainConfig as OwnTrainConfig
 
-    assert OwnTrainConfig is TrainConfig                    # config.py re-exports the owner's class
+    assert OwnTrainConfig is TrainConfig                    # the config re-exports the owner's class
     for section, key, bad in [(RunConfig(steps=0), "run.steps", "run.steps=0"),
                               (DataConfig(split=0.0), "data.split", "data.split=0"),
                               (ModelConfig(resolution=24), "model.resolution", "model.resolution=24"),
