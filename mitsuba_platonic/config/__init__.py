@@ -19,8 +19,8 @@ expected int, got 'eight'``); numbers must be finite (no ``.inf``, ``.nan``). py
 and types (on the plain dataclasses: other modules construct them directly); the sections'
 ``validate()`` and :meth:`Config.validate` check ranges, choices and combinations. Command-line
 overrides use dotted keys, ``--set run.steps=500``; values are parsed as YAML scalars (``true``,
-``1e-4``, ``[0.5, 0.9]``, ``null``). Every section and :class:`ConfigError` stay importable from here.
-What runs saved is read back into a config, and its model, by :mod:`.loading`.
+``1e-4``, ``[0.5, 0.9]``, ``null``). Every section and :class:`ConfigError` stay importable from here;
+:mod:`.loading` reads what runs saved back into a config.
 """
 
 from __future__ import annotations

@@ -1,5 +1,4 @@
-"""The networks: PlatonicGAN's encoder E, generator G, critics D and D3 and the pose and light heads
-(:mod:`.nets`), the colour G offsets from, read from the input photo (:mod:`.photo_colours`), and the
-config's ``model:`` section that sizes them (:mod:`.settings`). Above the renderer (G's colour is read
-along the input camera's rays), below the config. Nothing is imported here.
+"""The networks: E, G, D, D3 and the pose and light heads (:mod:`.nets`), the colour G offsets from, read
+from the input photo (:mod:`.photo_colours`), and the ``model:`` section that sizes them (:mod:`.settings`).
+Above the renderer (G's colour is read along the input camera's rays), below the config. Imports nothing.
 """

@@ -4,8 +4,7 @@
 w.r.t. ``volume``. See :mod:`.closed_form` and :mod:`.marcher` (the batched Mitsuba/Dr.Jit ray
 marcher: one launch per call) for the maths. :func:`render_with` (settings already checked) is
 the one place that dispatches to a backend; the backends import nothing of this module. Above them:
-:mod:`.compare` and :mod:`.compare_light`, the backends checked against each other (``platonic compare``),
-and :mod:`.frames`, a volume's turntable.
+:mod:`.compare` and :mod:`.compare_light` (``platonic compare``), and :mod:`.frames`, a volume's turntable.
 """
 
 from __future__ import annotations
