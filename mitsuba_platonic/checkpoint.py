@@ -301,7 +301,7 @@ def _checked(path: Path, device: torch.device) -> Dict[str, Any]:
     return state
 
 
-#: The trainer state's parts every training checkpoint has (``opt_d3``, ``opt_da`` and ``ema`` only some).
+#: The trainer state's parts every training checkpoint has (``opt_d3`` and ``ema`` only some).
 _TRAINER_PARTS = ("nets", "opt_g", "opt_d")
 
 
@@ -313,7 +313,7 @@ def _contents_problem(state: Dict[str, Any]) -> Optional[str]:
     trainer = state["trainer"]
     if not isinstance(trainer, dict):
         return f"its trainer state is a {type(trainer).__name__}, expected a dict of network and optimiser states"
-    for part in _TRAINER_PARTS + tuple(k for k in ("opt_d3", "opt_da", "ema") if k in trainer):
+    for part in _TRAINER_PARTS + tuple(k for k in ("opt_d3", "ema") if k in trainer):
         if not isinstance(trainer.get(part), dict):
             got = "missing" if part not in trainer else f"a {type(trainer[part]).__name__}"
             return f"its trainer state's {part!r} is {got}, expected a dict"

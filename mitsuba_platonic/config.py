@@ -98,9 +98,6 @@ class Config:
                               "render.model 'ea' and render.camera 'orthographic'; got "
                               f"{self.train.task!r}, {self.train.rec_target!r}, {self.render.model!r} and "
                               f"{self.render.camera!r}")
-        if self.train.silhouette_weight > 0 and self.render.model != "ea":
-            raise ConfigError("train.silhouette_weight: a second critic of the opacity alone adds something only where "
-                              f"D sees colour too; expected render.model 'ea', got {self.render.model!r}")
         if self.train.colour_match > 0 and self.render.model != "ea":
             raise ConfigError(f"train.colour_match: colour needs render.model 'ea', got {self.render.model!r}")
         if "colour" in self.train.photo_augment and self.render.model != "ea":

@@ -47,7 +47,7 @@ POSES = ("input", "elevation")
 LIGHTS = ("prior", "head")
 #: The weights of the loss terms: each ≥ 0 (0: the term is off), checked by name.
 LOSS_WEIGHTS = ("gp_weight", "rec_weight", "weight_3d", "pose_weight", "r1_weight", "colour_tv",
-                "colour_match", "colour_offset", "depth_spread", "silhouette_weight")
+                "colour_match", "colour_offset", "depth_spread")
 #: How messages name ``train.mode: prgan``.
 PRGAN = "the PrGAN-style baseline ('prgan')"
 
@@ -104,9 +104,7 @@ class TrainConfig:
     colour (``model.photo_colour``; 0: none) (:func:`mitsuba_platonic.train.losses.colour_offset`);
     depth_spread: weight of the distortion of the input view's EA weights along its rays, a prior
     that each ray's colour come from a thin surface (reconstruction, image targets; 0: none)
-    (:func:`mitsuba_platonic.train.losses.depth_spread`, docs/training.md); silhouette_weight: weight of
-    G's term from a second critic Dα that sees the opacity channel alone of every image D sees
-    (mode 'platonic', RGBA images; 0: none) (:mod:`mitsuba_platonic.train.trainer`); ema: null, or the decay β
+    (:func:`mitsuba_platonic.train.losses.depth_spread`, docs/training.md); ema: null, or the decay β
     of an exponential moving average of E's and G's weights, which samples, checkpoints' inference
     weights and evaluation then use (:meth:`mitsuba_platonic.train.trainer.Trainer.inference_model`,
     docs/training.md); d_augment: the differentiable augmentations of every image D sees, real or
@@ -145,7 +143,6 @@ class TrainConfig:
     colour_match: float = 0.0
     colour_offset: float = 0.0
     depth_spread: float = 0.0
-    silhouette_weight: float = 0.0
     ema: Optional[float] = None
     d_augment: List[str] = field(default_factory=list)
     photo_augment: List[str] = field(default_factory=list)
@@ -198,9 +195,6 @@ class TrainConfig:
         if self.colour_match > 0 and (self.task != "reconstruction" or self.mode != "platonic"):
             raise ConfigError("train.colour_match: the random views answer to the input photo's colour, so it needs "
                               f"train.task 'reconstruction' and mode 'platonic', got task {self.task!r}, mode {self.mode!r}")
-        if self.silhouette_weight > 0 and self.mode != "platonic":
-            raise ConfigError("train.silhouette_weight: the silhouette critic judges the random views' opacity, "
-                              f"so it needs train.mode 'platonic', got {self.mode!r}")
         if self.colour_tv > 0 and self.mode == "gan3d":
             raise ConfigError("train.colour_tv: the 'gan3d' baseline trains G on volumes alone, without priors")
         unknown = [a for a in self.d_augment if a not in AUGMENTS]

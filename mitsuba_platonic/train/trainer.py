@@ -14,10 +14,6 @@ uninterrupted one would:
 5. G (and E) update on  L_G = adv(D(I_view)) + λ_rec ‖x − I_front‖² (+ w₃ adv₃(D3(v))), the mean
    squared difference; with ``rec_loss: l1`` the mean absolute one, λ_rec mean |x − I_front|;
    with ``rec_channels: alpha`` on the opacity channel alone.
-   With ``silhouette_weight`` = w_α > 0 a second critic Dα, D's trunk on one channel, is updated
-   on the opacity channel alone of the images D sees (as D, same gate), and L_G adds
-   w_α adv(Dα(α(I_view))): the random views' silhouettes judged on their own, where D's verdict
-   may rest on colour and texture while a view is broken into strands or gaps.
    With ``colour_match`` = w > 0, L_G adds w · mean |c̄(I_view) − c̄(x)|, c̄ the mean colour of an
    image's object (:func:`.losses.colour_match`).
 
@@ -96,7 +92,6 @@ fake batch, gated by the soft accuracy when a gate is set.
 from __future__ import annotations
 
 import copy
-import dataclasses
 import math
 from typing import Dict, Optional, Tuple
 
@@ -161,8 +156,6 @@ class Trainer:
             nets["L"] = self.model.L
         if needs_3d:
             nets["D3"] = VolumeDiscriminator(critic)
-        if cfg.train.silhouette_weight > 0:                 # Dα: D's trunk on the opacity channel alone
-            nets["Da"] = Discriminator(dataclasses.replace(critic, image_channels=1))
         self.nets = nn.ModuleDict(nets)
         self.nets.apply(init_weights)
         if cfg.model.init == "he":                           # E and G re-drawn, from the run's seed
@@ -171,7 +164,7 @@ class Trainer:
             init_he(self.model.G)
         if cfg.model.critic_init == "he":                    # the critics re-drawn, from the run's seed
             torch.manual_seed(cfg.run.seed)
-            for name in ("D", "D3", "Da"):
+            for name in ("D", "D3"):
                 if name in self.nets:
                     self.nets[name].apply(init_critic_he)
         self.nets.to(device)
@@ -194,8 +187,6 @@ class Trainer:
         self.opt_d = torch.optim.Adam(self.nets["D"].parameters(), lr=t.lr_d, betas=betas)
         self.opt_d3 = (torch.optim.Adam(self.nets["D3"].parameters(), lr=t.lr_d, betas=betas)
                        if "D3" in self.nets else None)
-        self.opt_da = (torch.optim.Adam(self.nets["Da"].parameters(), lr=t.lr_d, betas=betas)
-                       if "Da" in self.nets else None)
         self.render = make_renderer(cfg.render)
         #: train.light: head: single scattering under a given light, for the input view; else None
         self.render_lit = make_lit_renderer(cfg.render) if cfg.train.light == "head" else None
@@ -211,8 +202,6 @@ class Trainer:
         state = {"nets": self.nets.state_dict(), "opt_g": self.opt_g.state_dict(), "opt_d": self.opt_d.state_dict()}
         if self.opt_d3 is not None:
             state["opt_d3"] = self.opt_d3.state_dict()
-        if self.opt_da is not None:
-            state["opt_da"] = self.opt_da.state_dict()
         if self.ema is not None:
             state["ema"] = self.ema.state_dict()
         return state
@@ -223,8 +212,6 @@ class Trainer:
         self.opt_d.load_state_dict(state["opt_d"])
         if self.opt_d3 is not None:
             self.opt_d3.load_state_dict(state["opt_d3"])
-        if self.opt_da is not None:
-            self.opt_da.load_state_dict(state["opt_da"])
         if self.ema is not None:
             self.ema.load_state_dict(state["ema"])
 
@@ -350,8 +337,6 @@ class Trainer:
             g_aug.manual_seed(int(np.random.SeedSequence([cfg.run.seed, step, 11, self.rank]).generate_state(1)[0]))
             real_d, fake_d = augment(real_d, t.d_augment, g_aug), augment(fake_d, t.d_augment, g_aug)
         self._critic_update("D", self.opt_d, real_d, fake_d.detach(), eps, t.d_gate, out)
-        if self.opt_da is not None:                          # Dα: the same images' opacity alone
-            self._critic_update("Da", self.opt_da, real_d[:, -1:], fake_d[:, -1:].detach(), eps, t.d_gate, out)
 
         # -- D3 (Platonic3D): ground-truth volumes vs generated ----------------------------------
         loss_g3 = torch.zeros((), device=self.device)
@@ -362,8 +347,6 @@ class Trainer:
         l_fake = D(fake_d)
         loss_adv = g_loss(t.loss, l_fake)
         terms = {"adv2d": loss_adv}
-        if self.opt_da is not None:                          # the silhouettes judged on their own
-            terms["adv_silhouette"] = t.silhouette_weight * g_loss(t.loss, self.modules["Da"](fake_d[:, -1:]))
         if t.mode == "platonic3d":
             terms["adv3d"] = t.weight_3d * loss_g3
         if t.colour_tv > 0:                                  # colour carried into the unseen body
@@ -391,7 +374,7 @@ class Trainer:
 
     def _g_objective(self, terms: Dict[str, torch.Tensor]) -> torch.Tensor:
         """G's (and E's) loss: the sum of its weighted terms, named 'adv2d' (D on rendered views),
-        'adv3d' (D3 on volumes), 'adv_silhouette' (Dα on the random views' opacity), 'rec' (the input view), 'rec3d'
+        'adv3d' (D3 on volumes), 'rec' (the input view), 'rec3d'
         (the input image's ground-truth volume), 'pose' (the elevations of G's renders), 'colour_tv',
         'colour_match', 'colour_offset' and 'depth_spread' (priors, when their weights are set), 'light' (the lights of
         G's renders). One place that sees
