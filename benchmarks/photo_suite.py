@@ -20,7 +20,8 @@ The collections:
   apply. For these the table also has the truth at the views the photo never showed
   (:mod:`mitsuba_platonic.evaluate.photo_truth`): silhouette IoU and MAE of EA renders at ±90°
   (side) and 180° (back) about the object's true axis, the IoU at the photo's own view (how
-  well the truth was framed as the photo was) and the 3D IoU.
+  well the truth was framed as the photo was), the 3D IoU, and the thickness: the matter behind the
+  photo's surface along its rays, as a share of the object's (1: as solid as the truth).
 
 Everything resumes: a finished run, evaluation or truth file is read, not redone, so a re-run
 prints the table at once, and an interrupted suite continues where it stopped. Runs of a config
@@ -65,7 +66,7 @@ JUDGE = [("c2st_near", "acc. near", 3), ("c2st_side", "acc. side", 3), ("c2st_ba
          ("roughness_side", "rough. side", 2), ("delta_e_side", "ΔE side", 1), ("delta_e_back", "ΔE back", 1),
          ("input_view_mae", "input MAE", 4), ("not_cards", "not cards", 0)]
 TRUTH = [("truth_front_iou", "IoU 0°", 3), ("truth_side_iou", "IoU ±90°", 3), ("truth_back_iou", "IoU 180°", 3),
-         ("truth_side_mae", "MAE ±90°", 4), ("truth_volume_iou", "3D IoU", 3)]
+         ("truth_side_mae", "MAE ±90°", 4), ("truth_volume_iou", "3D IoU", 3), ("truth_thickness", "thickness", 2)]
 
 
 def collection_spec(shape_class: str, shapes: int = 62, resolution: int = 64) -> CollectionSpec:
@@ -96,7 +97,7 @@ def run_one(config: str, sets: Sequence[str], photos: Path, run_dir: Path, eval_
     row = figures(eval_dir)
     if truth:
         truth_file = eval_dir / "truth.json"
-        if not truth_file.exists():
+        if not truth_file.exists() or set(k for k, _, _ in TRUTH) - set(json.loads(truth_file.read_text())["means"]):
             scores = score_against_truth(Model.from_checkpoint(run_dir), cfg)
             truth_file.write_text(json.dumps({"means": scores.means(), "per_photo": scores.__dict__}, indent=1))
         row.update(json.loads(truth_file.read_text())["means"])

@@ -14,7 +14,7 @@ from mitsuba_platonic.data.photos import decode_image
 from mitsuba_platonic.data.photos.frame import frame_and_resample, framing
 from mitsuba_platonic.data.photos.prepare import photo_framing
 from mitsuba_platonic.evaluate.metrics import volume_iou
-from mitsuba_platonic.evaluate.photo_truth import framed_truth, score_against_truth, turntable_in_camera
+from mitsuba_platonic.evaluate.photo_truth import framed_truth, score_against_truth, thickness, turntable_in_camera
 from mitsuba_platonic.evaluate.photos import photo_splits
 from mitsuba_platonic.evaluate.protocol import billboard
 from mitsuba_platonic.render import render
@@ -148,3 +148,27 @@ def test_score_against_truth_needs_a_rendered_collection(tmp_path):
     cfg = load_config("photos", [f"data.path={tmp_path}", "model.resolution=16"])
     with pytest.raises(UserError, match="manifest.json"):
         score_against_truth(_Fixed([]), cfg)
+
+
+def test_thickness_is_one_for_the_truth_and_the_share_of_a_shell_that_fills_the_photo():
+    n = 32
+    ball = _sphere(n, (0.0, 0.0, 0.0), 0.6)
+    ball[3] = (ball[3] >= 0.5).float()                          # opaque or empty: nothing shows behind a voxel
+    assert thickness(ball, ball) == pytest.approx(1.0)
+    # the ball's front shell, 3 voxels deep behind its surface along each input ray (dim 1: depth)
+    solid = ball[3] >= 0.5
+    first = solid.double().cumsum(0)
+    shell = ball.clone()
+    shell[3] = torch.where(first <= 3, ball[3], torch.zeros(()))
+    per_ray = solid.sum(0)
+    covered = (1.0 - torch.prod(1.0 - ball[3].double(), dim=0)) >= 0.5
+    expected = float(per_ray.clamp(max=3)[covered].sum() / per_ray[covered].sum())
+    assert thickness(shell, ball) == pytest.approx(expected)
+    assert thickness(shell, ball) < 0.4                          # a ball 19 voxels across, a shell of 3
+    # its EA render from the input view is the ball's own: the photo cannot tell them apart
+    front = front_view(1)
+    a, b = render(shell[None], front, "ea")[0, 3], render(ball[None], front, "ea")[0, 3]
+    assert torch.allclose(a, b, atol=1e-6)
+    assert math.isnan(thickness(ball, torch.zeros_like(ball)))
+    with pytest.raises(ValueError, match="one shape"):
+        thickness(ball, ball[:, :16])

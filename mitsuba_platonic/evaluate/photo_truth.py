@@ -30,8 +30,15 @@ view covers the photo's silhouette as the truth's own render covers the photo.
 ω_cam = (ω·right₀, ω·up₀, ω·ω₀) with right₀ = (1, 0, 0), up₀ = (0, cos θ, −sin θ),
 ω₀ = (0, sin θ, cos θ). Scores per photo (:class:`TruthScores`): silhouette IoU and MAE of the two
 volumes' EA renders (closed form, :func:`~.protocol.novel_view_errors`) at φ = ±90° (side), 180°
-(back) and 0° (the photo's own view: how well the framing matched), and the 3D IoU at density
-½ (:func:`~.metrics.volume_iou`).
+(back) and 0° (the photo's own view: how well the framing matched), the 3D IoU at density
+½ (:func:`~.metrics.volume_iou`), and the thickness along the input rays,
+
+    thickness = Σ_r #{k : ρ_rec(r, k) ≥ ½} / Σ_r #{k : ρ_truth(r, k) ≥ ½}
+
+over the input rays r the truth covers (1 − Π_k (1 − ρ_truth(r, k)) ≥ ½), k the voxels along r:
+1 where the reconstruction holds as much matter behind the photo's surface as the object, and
+small for a shell that satisfies the photo and is seen edge-on from the side
+(:func:`thickness`).
 """
 
 from __future__ import annotations
@@ -56,7 +63,7 @@ from . import metrics as M
 from .photos import photo_splits
 from .protocol import novel_view_errors
 
-__all__ = ["TruthScores", "framed_truth", "turntable_in_camera", "score_against_truth", "SIDE", "BACK"]
+__all__ = ["TruthScores", "framed_truth", "thickness", "turntable_in_camera", "score_against_truth", "SIDE", "BACK"]
 
 PathLike = Union[str, Path]
 
@@ -76,10 +83,11 @@ class TruthScores:
     back_iou: List[float] = field(default_factory=list)
     back_mae: List[float] = field(default_factory=list)
     volume_iou: List[float] = field(default_factory=list)
+    thickness: List[float] = field(default_factory=list)
 
     def means(self) -> Dict[str, float]:
         """The mean of each score over the photos (``truth_<score>``)."""
-        keys = ("front_iou", "side_iou", "side_mae", "back_iou", "back_mae", "volume_iou")
+        keys = ("front_iou", "side_iou", "side_mae", "back_iou", "back_mae", "volume_iou", "thickness")
         return {f"truth_{k}": float(np.mean(getattr(self, k))) for k in keys}
 
 
@@ -128,6 +136,19 @@ def framed_truth(truth: torch.Tensor, view: Sequence[float], square: Tuple[float
     return out.clamp(0.0, 1.0)
 
 
+def thickness(reconstruction: torch.Tensor, truth: torch.Tensor) -> float:
+    """The thickness score of the module docstring for two ``(C, R, R, R)`` volumes on one grid, in the
+    input camera's frame (dim 1 the depth along the input rays, the last channel the density);
+    nan where the truth covers no ray."""
+    if reconstruction.shape != truth.shape or reconstruction.dim() != 4:
+        raise UserError(f"thickness needs two (C, R, R, R) volumes of one shape, got {tuple(reconstruction.shape)} "
+                        f"and {tuple(truth.shape)}")
+    ρ_rec, ρ_truth = reconstruction[-1].double(), truth[-1].double()
+    covered = 1.0 - torch.prod(1.0 - ρ_truth, dim=0) >= 0.5                 # the truth's input-view silhouette
+    solid_truth = float((ρ_truth >= 0.5).sum(0)[covered].sum())
+    return float("nan") if solid_truth == 0 else float((ρ_rec >= 0.5).sum(0)[covered].sum()) / solid_truth
+
+
 def _manifest(folder: Path) -> Tuple[Path, Dict[str, Dict[str, Any]]]:
     """The collection root holding ``manifest.json`` (``folder`` or its parent) and its records by image path."""
     for root in (folder, folder.parent):
@@ -173,4 +194,5 @@ def score_against_truth(model: Any, cfg: Any, data_path: Optional[PathLike] = No
         scores.back_iou.append(back_iou)
         scores.back_mae.append(back_mae)
         scores.volume_iou.append(M.volume_iou(r[3], t[3]))
+        scores.thickness.append(thickness(r, t))
     return scores
