@@ -88,6 +88,54 @@ def test_the_marchers_finer_frames_are_its_sub_pixel_rays():
     np.testing.assert_array_equal(frame.image, to_display(fine[0]))
 
 
+def test_the_camera_gives_the_window_zoom_by_distance_pan_by_look_at():
+    """camera_window: m = clamp(DISTANCE / d, ¼, 8), centre = look_at's coordinates along the view's
+    (right, up); the initial camera (and float32 echoes of it) has none; bad input is a ValueError."""
+    from mitsuba_platonic.viewer.scene import ZOOM_RANGE, Window, camera_window
+
+    assert camera_window((0, 0, 4), (0, 0, 0), 4.0) is None
+    assert camera_window(np.float32([0, 0, 4.0000005]), np.float32([1e-7, 0, 0]), 4.0) is None
+    assert camera_window((0, 0, 2), (0, 0, 0), 4.0) == Window(2.0)
+    assert camera_window((0, 0, 100), (0, 0, 0), 4.0) == Window(ZOOM_RANGE[0])
+    assert camera_window((0, 0, 0.01), (0, 0, 0), 4.0) == Window(ZOOM_RANGE[1])
+    win = camera_window((0.5, 0.25, 4.0), (0.5, 0.25, 0.0), 4.0)           # the front view panned: right +x, up +y
+    assert win == Window(1.0, (0.5, 0.25))
+    w = from_angles(90.0, 0.0).double().numpy()                          # from +x: right = −z, up = +y
+    win = camera_window(np.array([0.0, 0.3, 0.2]) + 2.0 * w, (0.0, 0.3, 0.2), 4.0)
+    assert np.isclose(win.zoom, 2.0) and np.allclose(win.centre, (-0.2, 0.3))
+    for position, look, distance, message in (((0, 0, 1), (0, 0, 1), 4.0, "look-at point"),
+                                              ((0, np.nan, 1), (0, 0, 0), 4.0, "finite"),
+                                              ((0, 0, 4), (0, 0, 0), 0.0, "distance"),
+                                              ((0, 0, 4), (0, 0, 0), float("inf"), "distance")):
+        with pytest.raises(ValueError, match=message):
+            camera_window(position, look, distance)
+
+
+def test_a_windowed_frame_is_the_renderers_frame_through_the_window():
+    """render_frame passes the window to every renderer (and the marcher's finer frames), says so in
+    its settings line, and without one (or with the full one) is the frame it was."""
+    from mitsuba_platonic.render import RenderSettings, render_with
+    from mitsuba_platonic.render.marcher import march_pixels
+    from mitsuba_platonic.viewer.scene import Window
+
+    v = test_volume(N, "figure", "ea")[0]
+    w = from_angles(30.0, 20.0)
+    window = Window(2.0, (0.1, -0.2))
+    for renderer, backend in (("closed form", "closed_form"), ("marcher", "mitsuba"),
+                              ("single scattering", "scatter_march")):
+        frame = render_frame(v, tuple(w.tolist()), renderer, "EA", window=window)
+        assert frame.window == window and "zoom 2×, centre (+0.100, -0.200)" in frame.settings
+        settings = RenderSettings.for_call(backend, "ea")
+        np.testing.assert_array_equal(frame.image, to_display(render_with(v[None], w[None], settings, 0, window)[0]))
+        whole = render_frame(v, tuple(w.tolist()), renderer, "EA", window=Window())
+        assert whole.window is None and "zoom" not in whole.settings
+        np.testing.assert_array_equal(whole.image, render_frame(v, tuple(w.tolist()), renderer, "EA").image)
+        assert not np.array_equal(frame.image, whole.image)
+    fine = render_frame(v, tuple(w.tolist()), "marcher", "EA", 2 * N, window=window)
+    np.testing.assert_array_equal(fine.image, to_display(march_pixels(v[None], w[None], RenderSettings.for_call(
+        "mitsuba", "ea"), 2, window)[0]))
+
+
 def test_frames_follow_the_formation_and_the_volume_channels():
     v = test_volume(N, "figure", "ea")[0]
     assert resolutions_for(N) == [16, 32, 64, 128]
@@ -460,3 +508,4 @@ def test_a_reconstruction_run_steps_through_its_held_out_inputs(browser, runs, t
         page.close()
     finally:
         app.stop()
+
