@@ -12,11 +12,20 @@ centres of the R×R cells, where the drawn texture takes its pixel's value, and 
 closed form's 8-bit sRGB frame within :data:`TOLERANCE` levels on average and
 :data:`TOLERANCE_MAX` at 95 % of the pixels (measured with software WebGL: identical); the same
 comparison against the view 30° away must fail by far, so the check sees which view is shown.
+
+Zoom and pan (the orthographic camera's window, mitsuba_platonic/render/window.py): the page's
+buttons and viser's own wheel and right-drag move the browser's camera; each frame must be the
+renderer's frame through the window the page prints (the same tolerance), and on a ball of radius
+0.2 the silhouette (pixels brighter than halfway from the background to the ball) must scale by
+the zoom m (√ of its area, within :data:`SCALE_TOLERANCE`) and its centroid move by
+(+c_y, −c_x) m R/2 pixels (rows, columns) for a window centre (c_x, c_y), within
+:data:`SHIFT_TOLERANCE` pixels.
 """
 
 from __future__ import annotations
 
 import io
+import math
 import os
 import re
 import shutil
@@ -49,6 +58,13 @@ WAIT_MS = 30_000                      # one wait for the page (the marcher's fir
 TOLERANCE = 1.0                       # mean |Δ| in 8-bit sRGB levels (measured: 0, the same pixels)
 TOLERANCE_MAX = 3.0                   # at the 95th percentile
 FRAME = re.compile(r"frame (\d+): ([0-9.]+) ms, (full|moving), (\d+)×\d+ px, az (-?[0-9.]+)° el (-?[0-9.]+)°")
+WINDOW = re.compile(r"zoom ([0-9.]+)×, centre \(([-+][0-9.]+), ([-+][0-9.]+)\)")
+#: √(silhouette area ratio) / zoom − 1: measured 1.1 % (2× by the button) and 0.8 % (1.36× by the
+#: wheel): the silhouette's whole pixels; allowed 4 %.
+SCALE_TOLERANCE = 0.04
+#: Silhouette centroid against the expected shift, pixels of a 64² frame: measured 0 (the buttons'
+#: whole-pixel pans) and 0.07 (a right-drag's); allowed 0.6.
+SHIFT_TOLERANCE = 0.6
 
 
 def closed_form(volume: torch.Tensor, azimuth: float, elevation: float) -> np.ndarray:
@@ -86,6 +102,54 @@ def test_the_marchers_finer_frames_are_its_sub_pixel_rays():
     frame = render_frame(v[0], tuple(w[0].tolist()), "marcher", "EA", 4 * N)
     assert frame.image.shape == (4 * N, 4 * N, 3)
     np.testing.assert_array_equal(frame.image, to_display(fine[0]))
+
+
+def test_the_camera_gives_the_window_zoom_by_distance_pan_by_look_at():
+    """camera_window: m = clamp(DISTANCE / d, ¼, 8), centre = look_at's coordinates along the view's
+    (right, up); the initial camera (and float32 echoes of it) has none; bad input is a ValueError."""
+    from mitsuba_platonic.viewer.scene import ZOOM_RANGE, Window, camera_window
+
+    assert camera_window((0, 0, 4), (0, 0, 0), 4.0) is None
+    assert camera_window(np.float32([0, 0, 4.0000005]), np.float32([1e-7, 0, 0]), 4.0) is None
+    assert camera_window((0, 0, 2), (0, 0, 0), 4.0) == Window(2.0)
+    assert camera_window((0, 0, 100), (0, 0, 0), 4.0) == Window(ZOOM_RANGE[0])
+    assert camera_window((0, 0, 0.01), (0, 0, 0), 4.0) == Window(ZOOM_RANGE[1])
+    win = camera_window((0.5, 0.25, 4.0), (0.5, 0.25, 0.0), 4.0)           # the front view panned: right +x, up +y
+    assert win == Window(1.0, (0.5, 0.25))
+    w = from_angles(90.0, 0.0).double().numpy()                          # from +x: right = −z, up = +y
+    win = camera_window(np.array([0.0, 0.3, 0.2]) + 2.0 * w, (0.0, 0.3, 0.2), 4.0)
+    assert np.isclose(win.zoom, 2.0) and np.allclose(win.centre, (-0.2, 0.3))
+    for position, look, distance, message in (((0, 0, 1), (0, 0, 1), 4.0, "look-at point"),
+                                              ((0, np.nan, 1), (0, 0, 0), 4.0, "finite"),
+                                              ((0, 0, 4), (0, 0, 0), 0.0, "distance"),
+                                              ((0, 0, 4), (0, 0, 0), float("inf"), "distance")):
+        with pytest.raises(ValueError, match=message):
+            camera_window(position, look, distance)
+
+
+def test_a_windowed_frame_is_the_renderers_frame_through_the_window():
+    """render_frame passes the window to every renderer (and the marcher's finer frames), says so in
+    its settings line, and without one (or with the full one) is the frame it was."""
+    from mitsuba_platonic.render import RenderSettings, render_with
+    from mitsuba_platonic.render.marcher import march_pixels
+    from mitsuba_platonic.viewer.scene import Window
+
+    v = test_volume(N, "figure", "ea")[0]
+    w = from_angles(30.0, 20.0)
+    window = Window(2.0, (0.1, -0.2))
+    for renderer, backend in (("closed form", "closed_form"), ("marcher", "mitsuba"),
+                              ("single scattering", "scatter_march")):
+        frame = render_frame(v, tuple(w.tolist()), renderer, "EA", window=window)
+        assert frame.window == window and "zoom 2×, centre (+0.100, -0.200)" in frame.settings
+        settings = RenderSettings.for_call(backend, "ea")
+        np.testing.assert_array_equal(frame.image, to_display(render_with(v[None], w[None], settings, 0, window)[0]))
+        whole = render_frame(v, tuple(w.tolist()), renderer, "EA", window=Window())
+        assert whole.window is None and "zoom" not in whole.settings
+        np.testing.assert_array_equal(whole.image, render_frame(v, tuple(w.tolist()), renderer, "EA").image)
+        assert not np.array_equal(frame.image, whole.image)
+    fine = render_frame(v, tuple(w.tolist()), "marcher", "EA", 2 * N, window=window)
+    np.testing.assert_array_equal(fine.image, to_display(march_pixels(v[None], w[None], RenderSettings.for_call(
+        "mitsuba", "ea"), 2, window)[0]))
 
 
 def test_frames_follow_the_formation_and_the_volume_channels():
@@ -460,3 +524,181 @@ def test_a_reconstruction_run_steps_through_its_held_out_inputs(browser, runs, t
         page.close()
     finally:
         app.stop()
+
+
+# --------------------------------------------------------------------------- zoom and pan in the browser
+
+#: The ball's volume: 32³ (a smooth silhouette), its frames 64² (R = 2N).
+N_BALL = 32
+
+
+def ball(n: int = N_BALL, radius: float = 0.15) -> torch.Tensor:
+    """A light grey ball of the given radius at the centre, its edge a quarter-voxel logistic ramp:
+    ``(4, N, N, N)``. Its EA silhouette (opacity ½, summed over depth) has a radius of about 0.2."""
+    from mitsuba_platonic.volume import voxel_centres
+
+    r = voxel_centres(n).norm(dim=-1)
+    density = torch.sigmoid(-(r - radius) / (2.0 / n / 4.0))
+    return torch.cat([torch.full((3, n, n, n), 0.8, dtype=torch.float64), density[None]]).float()
+
+
+@pytest.fixture(scope="module")
+def ball_file(tmp_path_factory) -> Path:
+    path = tmp_path_factory.mktemp("ball") / "ball.npz"
+    np.savez(path, volume=ball().numpy())
+    return path
+
+
+@pytest.fixture(scope="module")
+def ball_server(ball_file, tmp_path_factory):
+    s = Server([ball_file], tmp_path_factory.mktemp("ball-cwd"))
+    yield s
+    s.stop()
+
+
+def _window_of(page, pattern: str = "full") -> tuple:
+    """The latest frame line matching ``pattern``: (its match, the Window it names: None when full)."""
+    from mitsuba_platonic.viewer.scene import Window
+
+    m = _frame(page, pattern)
+    line = page.get_by_text(re.compile(r"^frame \d+: .*" + pattern)).inner_text()
+    z = WINDOW.search(line)
+    assert z, line
+    window = Window(float(z.group(1)), (float(z.group(2)), float(z.group(3))))
+    return m, (None if window.full else window)
+
+
+def _silhouette(image: np.ndarray) -> tuple:
+    """(area in pixels, (row, column) centroid) of the pixels brighter than halfway from the
+    background grey to the ball's brightest."""
+    grey = image.astype(float).mean(-1)
+    bg = float(np.median(grey[0]))                                         # the top row: background
+    mask = grey > (bg + grey.max()) / 2
+    rows, cols = np.nonzero(mask)
+    return float(mask.sum()), np.array([rows.mean(), cols.mean()])
+
+
+def _expected(volume, renderer: str, r: int, window) -> np.ndarray:
+    return render_frame(volume, (0.0, 0.0, 1.0), renderer, "EA", r, window=window).image
+
+
+def _same(shown: np.ndarray, expected: np.ndarray, what) -> None:
+    mean, p95 = _difference(shown, expected)
+    assert mean <= TOLERANCE and p95 <= TOLERANCE_MAX, (what, mean, p95)
+
+
+def _page(browser, server):
+    page = browser.new_page(viewport={"width": 1400, "height": 600})
+    page.set_default_timeout(WAIT_MS)
+    page.goto(server.url)
+    return page
+
+
+def test_zoom_and_pan_buttons_change_the_frame_as_the_renderer_says(browser, ball_server, ball_file):
+    """The page's pan and zoom buttons move the browser's camera (as the orbit buttons do); every
+    frame is the renderer's through the window the page prints; the ball's centroid moves against
+    the pan, a quarter of the frame (R/4 pixels) per click, and its silhouette grows 2× per zoom."""
+    from mitsuba_platonic.viewer.scene import Window
+
+    volume = read_volume_file(ball_file)[0]
+    r = 2 * N_BALL
+    page = _page(browser, ball_server)
+    try:
+        _frame(page)
+        _choose(page, 2, str(r))
+        _, window = _window_of(page, rf"full, {r}×.*zoom 1\.000×, centre \(\+0\.000, \+0\.000\)")
+        assert window is None
+        shown = _shown(page, r)
+        _same(shown, _expected(volume, "closed form", r, None), "whole")
+        area0, centre0 = _silhouette(shown)
+        assert abs(centre0 - (r - 1) / 2).max() < SHIFT_TOLERANCE, centre0        # the ball sits in the middle
+
+        page.get_by_role("button", name="pan right").click()                # a quarter of the frame: 0.5
+        _window_of(page, rf"full, {r}×.*zoom 1\.000×, centre \(\+0\.500, \+0\.000\)")
+        page.get_by_role("button", name="pan up").click()
+        _, window = _window_of(page, rf"full, {r}×.*zoom 1\.000×, centre \(\+0\.500, \+0\.500\)")
+        assert window == Window(1.0, (0.5, 0.5))
+        panned = _shown(page, r)
+        _same(panned, _expected(volume, "closed form", r, window), window)
+        _, moved = _silhouette(panned)
+        expected = np.array([+window.centre[1], -window.centre[0]]) * window.zoom * r / 2
+        assert np.allclose(expected, [r / 4, -r / 4])                       # down and left: the camera went up, right
+        assert abs(moved - centre0 - expected).max() < SHIFT_TOLERANCE, (moved - centre0, expected)
+
+        page.get_by_role("button", name="reset zoom and pan").click()
+        _window_of(page, rf"full, {r}×.*zoom 1\.000×, centre \(\+0\.000, \+0\.000\)")
+        _same(_shown(page, r), shown, "reset")
+
+        page.get_by_role("button", name="zoom in").click()
+        _, window = _window_of(page, rf"full, {r}×.*zoom 2\.000×, centre \(\+0\.000, \+0\.000\)")
+        assert window == Window(2.0)
+        zoomed = _shown(page, r)
+        _same(zoomed, _expected(volume, "closed form", r, window), window)
+        area, centre = _silhouette(zoomed)
+        scale = math.sqrt(area / area0)
+        assert abs(scale / 2.0 - 1) < SCALE_TOLERANCE, scale
+        assert abs(centre - centre0).max() < SHIFT_TOLERANCE, (centre, centre0)
+        print(f"zoom 2: silhouette ×{scale:.3f}; pan (0.5, 0.5): centroid moved {moved - centre0} pixels")
+
+        page.get_by_role("button", name="pan left").click()                 # a quarter of the 2× frame: 0.25
+        _choose(page, 2, str(N_BALL))                                        # the lit renderers at 32²
+        _, window = _window_of(page, rf"full, {N_BALL}×.*zoom 2\.000×, centre \(-0\.250, \+0\.000\)")
+        assert window == Window(2.0, (-0.25, 0.0))
+        for renderer in ("closed form", "marcher", "single scattering", "path tracer"):   # each draws the window
+            if renderer != "closed form":
+                _choose(page, 0, renderer)
+                page.get_by_text(re.compile(rf"^{renderer} \(.*zoom 2×, centre \(-0\.250, \+0\.000\)")).wait_for()
+            _, seen = _window_of(page, rf"full, {N_BALL}×.*zoom 2\.000×, centre \(-0\.250, \+0\.000\)")
+            assert seen == window
+            _same(_shown(page, N_BALL), _expected(volume, renderer, N_BALL, window), renderer)
+    finally:
+        page.close()
+
+
+def test_the_wheel_zooms_and_a_right_drag_pans_the_frame(browser, ball_server, ball_file):
+    """viser's own controls: the wheel dollies the browser's camera (the frame zooms by DISTANCE / d),
+    a right-button drag trucks it (look_at and position together: the frame pans); the frame is
+    the renderer's through the window the page prints, the silhouette scales by its zoom and its
+    centroid moves as its centre says."""
+    volume = read_volume_file(ball_file)[0]
+    r = 2 * N_BALL
+    page = _page(browser, ball_server)
+    try:
+        _frame(page)
+        _choose(page, 2, str(r))
+        _window_of(page, rf"full, {r}×.*zoom 1\.000×")
+        area0, centre0 = _silhouette(_shown(page, r))
+        box = page.locator("canvas").first.bounding_box()
+        x, y = box["x"] + box["width"] / 2, box["y"] + box["height"] / 2
+        page.mouse.move(x, y)
+        for _ in range(6):
+            page.mouse.wheel(0, -100)                                        # towards the ball
+            time.sleep(0.2)
+        time.sleep(1.0)                                                      # the dolly's smoothing settles
+        _, window = _window_of(page, rf"full, {r}×.*zoom (?!1\.000)")
+        assert window is not None and 1.1 < window.zoom < 4.0 and window.centre == (0.0, 0.0), window
+        zoomed = _shown(page, r)
+        _same(zoomed, _expected(volume, "closed form", r, window), window)
+        area, centre = _silhouette(zoomed)
+        scale = math.sqrt(area / area0)
+        assert abs(scale / window.zoom - 1) < SCALE_TOLERANCE, (scale, window)
+
+        page.mouse.move(x, y)
+        page.mouse.down(button="right")
+        for step in range(1, 11):
+            page.mouse.move(x - 3 * step, y + 2 * step)                      # drag the scene left and down
+            time.sleep(0.05)
+        page.mouse.up(button="right")
+        time.sleep(1.0)
+        _, panned = _window_of(page, rf"full, {r}×")
+        assert panned is not None and panned.centre != (0.0, 0.0), panned
+        assert abs(panned.zoom - window.zoom) < 1e-2                          # a pan keeps the distance
+        shot = _shown(page, r)
+        _same(shot, _expected(volume, "closed form", r, panned), panned)
+        _, moved = _silhouette(shot)
+        expected = np.array([+panned.centre[1], -panned.centre[0]]) * panned.zoom * r / 2
+        assert abs(moved - centre - expected).max() < SHIFT_TOLERANCE, (moved - centre, expected, panned)
+        assert expected[1] < -1.0 and expected[0] > 1.0, expected             # the ball followed the drag
+        print(f"wheel: {window}, silhouette ×{scale:.3f}; right-drag: {panned}, centroid moved {moved - centre}")
+    finally:
+        page.close()

@@ -51,9 +51,11 @@ def _cmd_view(args: argparse.Namespace) -> int:
 
 def add_view(sub: "argparse._SubParsersAction") -> None:
     p = sub.add_parser(
-        "view", help="an interactive web viewer: orbit a volume or a run's volumes, rendered live by the project's renderers",
+        "view", help="an interactive web viewer: orbit, zoom and pan a volume or a run's volumes, rendered live by the "
+             "project's renderers",
         description="Start a local web page that shows SOURCE rendered on this machine by the project's renderers "
-                    "(closed form, the ray marcher, single scattering, the path tracer) from the browser's camera: "
+                    "(closed form, the ray marcher, single scattering, the path tracer) from the browser's camera "
+                    "(orbit, zoom, pan): "
                     "a low-resolution frame while the camera moves, the full one when it stops, with the frame time "
                     "and the renderer's settings. SOURCE: a volume file (.npz, .vol), or a run folder (a "
                     "reconstruction run: step through its held-out inputs; a generation run: draw latents, walk "

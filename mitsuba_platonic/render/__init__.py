@@ -3,13 +3,15 @@
 ``render(volume, views, model, backend, **options)`` → ``(B, C, H, W)``, differentiable
 w.r.t. ``volume``. See :mod:`.closed_form` and :mod:`.marcher` (the batched Mitsuba/Dr.Jit ray
 marcher: one launch per call) for the maths. :func:`render_with` (settings already checked) is
-the one place that dispatches to a backend; the backends import nothing of this module. Above them:
-:mod:`.compare` and :mod:`.compare_light` (``platonic compare``), and :mod:`.frames`, a volume's turntable.
+the one place that dispatches to a backend; the backends import nothing of this module. Its
+``window`` (:class:`~.window.Window`) zooms and pans the orthographic camera of every backend but
+the torch single scattering (``platonic view``'s camera). Above them: :mod:`.compare` and
+:mod:`.compare_light` (``platonic compare``), and :mod:`.frames`, a volume's turntable.
 """
 
 from __future__ import annotations
 
-from typing import Any
+from typing import Any, Optional
 
 import torch
 
@@ -18,8 +20,9 @@ from ..views import validate_views
 from ..volume import validate_volume
 from .closed_form import render_closed_form
 from .settings import BACKENDS, MODELS, RenderSettings, check_lanes
+from .window import Window, window_or_none
 
-__all__ = ["render", "render_with", "render_under", "RenderSettings", "BACKENDS", "MODELS"]
+__all__ = ["render", "render_with", "render_under", "RenderSettings", "BACKENDS", "MODELS", "Window"]
 
 
 def render(volume: torch.Tensor, views: torch.Tensor, model: str = "ea",
@@ -67,35 +70,47 @@ def render(volume: torch.Tensor, views: torch.Tensor, model: str = "ea",
     return render_with(volume, views, settings, seed)
 
 
-def render_with(volume: torch.Tensor, views: torch.Tensor, settings: RenderSettings, seed: int = 0) -> torch.Tensor:
+def render_with(volume: torch.Tensor, views: torch.Tensor, settings: RenderSettings, seed: int = 0,
+                window: Optional[Window] = None) -> torch.Tensor:
     """Render ``(B, C, N, N, N)`` volumes from ``(B, 3)`` views with ``settings`` (inputs assumed valid).
 
-    ``seed`` drives the marcher's jitter and the path tracer's skies and samples.
+    ``seed`` drives the marcher's jitter and the path tracer's skies and samples. ``window``: the
+    orthographic camera's zoom and pan (:class:`~.window.Window`, the same for every pair; None or
+    the full window: the whole cross-section, each backend's code as without one).
     """
+    window = window_or_none(window)
     if settings.backend == "closed_form":
-        return render_closed_form(volume, views.to(volume.device), settings.model, settings.filter, settings.lens)
+        return render_closed_form(volume, views.to(volume.device), settings.model, settings.filter, settings.lens,
+                                  window)
     if settings.backend == "mitsuba":
         check_lanes(volume.shape[0], volume.shape[-1], settings.spp)   # before Dr.Jit: say why, up front
         from .marcher import march       # imports Dr.Jit and sets Mitsuba's variant: on the first Mitsuba render
-        return march(volume, views, settings, seed)
+        return march(volume, views, settings, seed, window)
     if settings.backend in ("single_scatter", "scatter_march"):
         from .single_scatter import sample_lights             # torch only; kept off the import path
-        return render_under(volume, views, settings, sample_lights(volume.shape[0], seed))
+        return render_under(volume, views, settings, sample_lights(volume.shape[0], seed), window)
     from .physical import render_physical_ad    # the path tracer (its scene files, Mitsuba): on first use
     return render_physical_ad(volume, views, lighting=settings.lighting, spp=settings.physical_spp,
-                              max_depth=settings.max_depth, seed=seed, filter=settings.filter)
+                              max_depth=settings.max_depth, seed=seed, filter=settings.filter, window=window)
 
 
-def render_under(volume: torch.Tensor, views: torch.Tensor, settings: RenderSettings, lights: Any) -> torch.Tensor:
+def render_under(volume: torch.Tensor, views: torch.Tensor, settings: RenderSettings, lights: Any,
+                 window: Optional[Window] = None) -> torch.Tensor:
     """Single scattering (``settings.backend`` 'single_scatter' or 'scatter_march', with its steps
     and samples) of ``(B, 4, N, N, N)`` volumes from ``(B, 3)`` views under given ``lights`` (a
     :class:`~.single_scatter.LightBatch`, one light per pair; inputs assumed valid).
-    :func:`render_with` draws them from the prior for its seed; a light read from a photo passes its own."""
+    :func:`render_with` draws them from the prior for its seed; a light read from a photo passes its own.
+    ``window``: the orthographic camera's zoom and pan, 'scatter_march' only (:class:`~.window.Window`)."""
+    window = window_or_none(window)
     if settings.backend == "single_scatter":
+        if window is not None:
+            raise UserError("window: the single_scatter backend renders the whole cross-section only; zoom and "
+                            "pan with 'scatter_march' (the same light at the marcher's speed)")
         from .single_scatter import render_single_scatter     # torch only; kept off the import path
         return render_single_scatter(volume, views.to(volume.device), lights, steps_per_voxel=settings.steps_per_voxel,
                                      shadow_planes=settings.shadow_planes, spp=settings.spp)
     if settings.backend == "scatter_march":
         from .scatter_march import render_scatter_march       # imports Dr.Jit: on first use
-        return render_scatter_march(volume, views, lights, steps_per_voxel=settings.steps_per_voxel, spp=settings.spp)
+        return render_scatter_march(volume, views, lights, steps_per_voxel=settings.steps_per_voxel, spp=settings.spp,
+                                    window=window)
     raise ValueError(f"render_under: expected backend 'single_scatter' or 'scatter_march', got {settings.backend!r}")

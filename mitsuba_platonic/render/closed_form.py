@@ -28,7 +28,12 @@ Camera-space sample positions (shared with the Mitsuba renderer): for an N³ vol
 
 with (right, up, ω) from :func:`mitsuba_platonic.views.camera_frames` and S ≡ 1 for the
 orthographic camera (the paper's). At the front view these are the voxel centres themselves, so
-the rotation is the identity.
+the rotation is the identity. A :class:`~.window.Window` (zoom m, centre (c_x, c_y); orthographic
+only) moves the lateral positions into it, h = 1/m:
+
+    p = x_j (h right) + y_i (h up) + (c_x right + c_y up) + z_k ω
+
+the same N depth planes; the full window is the formula above, computed as before.
 
 Perspective (:func:`mitsuba_platonic.views.lens`): S(z) = (D − z) tan(F/2), and a pixel's ray
 crosses each plane's slab along a path ℓ = √(1 + tan²(F/2)(x² + y²)) times its depth, so the
@@ -45,6 +50,7 @@ from typing import Optional, Tuple
 
 from ..views import camera_frames
 from ..volume import voxel_size, world_to_grid
+from .window import Window, check_orthographic, window_or_none
 
 __all__ = ["FILTERS", "ORTHOGRAPHIC", "camera_space_points", "path_factor", "rotate", "tilt", "transmittance_before", "reduce_depth",
            "render_closed_form"]
@@ -58,18 +64,25 @@ ORTHOGRAPHIC = (0.0, math.inf)
 
 
 def camera_space_points(views: torch.Tensor, n: int, dtype: torch.dtype = torch.float32,
-                        lens: Tuple[float, float] = ORTHOGRAPHIC) -> torch.Tensor:
+                        lens: Tuple[float, float] = ORTHOGRAPHIC, window: Optional[Window] = None) -> torch.Tensor:
     """World positions of the camera-space samples: ``(B, N, N, N, 3)`` indexed [b, k, i, j].
 
     ``p = S(z_k) (x_j · right + y_i · up) + z_k · ω`` (see the module docstring); float64 maths.
+    ``window``: the orthographic camera's zoom and pan (:class:`~.window.Window`; None: the full one).
     """
-    return _frame_points(*camera_frames(views), n, lens).to(dtype)
+    return _frame_points(*camera_frames(views), n, lens, window).to(dtype)
 
 
 def _frame_points(right: torch.Tensor, up: torch.Tensor, w: torch.Tensor, n: int,
-                  lens: Tuple[float, float] = ORTHOGRAPHIC) -> torch.Tensor:
+                  lens: Tuple[float, float] = ORTHOGRAPHIC, window: Optional[Window] = None) -> torch.Tensor:
     """``p = S(z_k) (x_j · right + y_i · up) + z_k · ω`` for frames ``(B, 3)`` each: ``(B, N, N, N, 3)``
-    in the frames' dtype (differentiable in the frames)."""
+    in the frames' dtype (differentiable in the frames); with a ``window`` (orthographic),
+    ``p = x_j (h right) + y_i (h up) + o + z_k ω`` (:meth:`~.window.Window.frames`)."""
+    window = window_or_none(window)
+    check_orthographic(window, lens)
+    origin = None
+    if window is not None:
+        right, up, origin = window.frames(right, up)
     c = -1.0 + (torch.arange(n, dtype=w.dtype, device=w.device) + 0.5) * voxel_size(n)
     xs, ys, zs = c, -c, -c
     t, d = lens
@@ -77,6 +90,8 @@ def _frame_points(right: torch.Tensor, up: torch.Tensor, w: torch.Tensor, n: int
     p = (zs[None, :, None, None, None] * w[:, None, None, None, :]
          + scale[None, :, None, None, None] * (ys[None, None, :, None, None] * up[:, None, None, None, :]
                                                 + xs[None, None, None, :, None] * right[:, None, None, None, :]))
+    if origin is not None:
+        p = p + origin[:, None, None, None, :]
     return p
 
 
@@ -91,17 +106,18 @@ def path_factor(n: int, lens: Tuple[float, float], dtype: torch.dtype = torch.fl
 
 
 def rotate(volume: torch.Tensor, views: torch.Tensor, filter: str = "trilinear",
-           lens: Tuple[float, float] = ORTHOGRAPHIC) -> torch.Tensor:
+           lens: Tuple[float, float] = ORTHOGRAPHIC, window: Optional[Window] = None) -> torch.Tensor:
     """Resample ``volume`` ``(B, C, N, N, N)`` into the camera space of ``views`` ``(B, 3)``.
 
     Output ``(B, C, N, N, N)`` indexed [b, c, k, i, j]: depth plane k (k = 0 nearest the
     camera), image row i, column j. Outside [−1, 1]³ the volume is empty (zero padding), so
-    trilinear lookups within half a voxel of the boundary blend towards 0.
+    trilinear lookups within half a voxel of the boundary blend towards 0. ``window``: the
+    orthographic camera's zoom and pan (:class:`~.window.Window`), None for the full one.
     """
     if filter not in FILTERS:
         raise ValueError(f"filter must be one of {tuple(FILTERS)}, got {filter!r}")
     n = volume.shape[-1]
-    grid = world_to_grid(camera_space_points(views, n, torch.float64, lens)).to(volume.dtype)
+    grid = world_to_grid(camera_space_points(views, n, torch.float64, lens, window)).to(volume.dtype)
     return F.grid_sample(volume, grid.to(volume.device), mode=FILTERS[filter],
                          padding_mode="zeros", align_corners=False)
 
@@ -172,13 +188,16 @@ def reduce_depth(camera_volume: torch.Tensor, model: str, path: Optional[torch.T
 
 
 def render_closed_form(volume: torch.Tensor, views: torch.Tensor, model: str,
-                       filter: str = "trilinear", lens: Tuple[float, float] = ORTHOGRAPHIC) -> torch.Tensor:
+                       filter: str = "trilinear", lens: Tuple[float, float] = ORTHOGRAPHIC,
+                       window: Optional[Window] = None) -> torch.Tensor:
     """The closed-form layer R(ω, v) = ρ(T(ω) v) for a batch of (volume, view) pairs.
 
     ``lens``: ``(tan(F/2), D)`` of a perspective camera (:func:`mitsuba_platonic.views.lens`).
-    Inputs are assumed valid (see :func:`mitsuba_platonic.render`, which checks them).
+    ``window``: the orthographic camera's zoom and pan (:class:`~.window.Window`; None or the full
+    window: the whole cross-section, as before). Inputs are assumed valid (see
+    :func:`mitsuba_platonic.render`, which checks them).
     """
     n = volume.shape[-1]
     path = path_factor(n, lens, volume.dtype)
-    return reduce_depth(rotate(volume, views, filter, lens), model,
+    return reduce_depth(rotate(volume, views, filter, lens, window), model,
                         None if path is None else path.to(volume.device))

@@ -21,6 +21,15 @@ Without jitter the sub-samples form a regular √spp × √spp grid, (o_x, o_y) 
 orthographic front view p lands on voxel centres exactly (N a power of two): the lookups
 reproduce the closed form's to the last bit.
 
+Window (:class:`~.window.Window`: zoom m, centre (c_x, c_y); orthographic only). The pair's frame
+becomes (h right_b, h up_b, ω_b) with h = 1/m, and an origin o_b = c_x right_b + c_y up_b joins it:
+
+    p = x (h right_b) + y (h up_b) + o_b + z ω_b
+
+12 floats per pair instead of 9, read by the same kernels (only whether there is a window is part
+of a recording's key: a new zoom or pan replays it). Without a window (or with the full one) the
+kernels are those above, bit for bit.
+
 Segments. With Δ = 2/N and ``step`` h voxels, segment k covers camera depth [k h, min((k + 1) h, N)]
 voxels from the front face z = 1; its length is s_k = min(h, N − k h) voxels and its sample sits at
 fraction u of it (u = ½, or one u ~ U[0, 1) per ray with ``jitter``; the jitter's numbers are a
@@ -48,7 +57,7 @@ the mean of its spp rays.
 Empty space. A forward-only call (no gradient recorded) marches each ray only through the
 segments that can see density: the box around its pair's occupied voxels (v > 0), widened by
 1½ voxels (a trilinear lookup reads the voxels within one voxel of its point). Along the ray
-p(z) = A + z B is linear in the depth coordinate z (A = x right + y up, B = ω for the
+p(z) = A + z B is linear in the depth coordinate z (A = x right + y up (+ o_b in a window), B = ω for the
 orthographic camera; A = D t (x right + y up), B = ω − t (x right + y up) for the perspective
 one), so the box is the z interval [z₀, z₁] where every axis of p lies inside it, and the ray
 marches segments ⌊d(z₁)/h⌋ − 1 to ⌈d(z₀)/h⌉ + 1 (d(z) = (1 − z)/Δ voxels from the front face),
@@ -130,6 +139,7 @@ import torch
 from ..views import camera_frames
 from .settings import RenderSettings, check_lanes
 from .variant import ensure_variant, variant_device
+from .window import Window, check_orthographic, window_or_none
 
 mi = ensure_variant()
 import drjit as dr  # noqa: E402  (after the variant is set)
@@ -218,14 +228,16 @@ class _Batch:
     """One call's rays, lookups and marches (built per call; all arrays are Dr.Jit arrays).
 
     ``data``: the flat volume batch ``(B, N, N, N, C)``; ``frames``: 9 floats per pair
-    (right, up, ω); ``opt``: the settings (model, filter, step, spp, jitter, termination);
+    (right, up, ω), or with ``windowed`` 12 (h right, h up, ω, o: module docstring, "Window");
+    ``opt``: the settings (model, filter, step, spp, jitter, termination);
     ``seed``: a UInt32 array of width 1 seeding the jitter's random numbers; ``tiled``: lanes in
     the tiled order of the atomic-free backward (:func:`tiled_ray`), else lane r is ray r.
     """
 
     def __init__(self, data: Any, frames: Any, b: int, c: int, n: int, opt: RenderSettings, seed: int,
-                 tiled: bool = False, records_tiled: bool = False):
+                 tiled: bool = False, records_tiled: bool = False, windowed: bool = False):
         self.data, self.frames, self.B, self.C, self.N, self.opt = data, frames, b, c, n, opt
+        self.windowed = windowed
         self.tiled = tiled
         #: the forward pass writes its records in the tiled backward's lane order (:meth:`forward`)
         self.records_tiled = records_tiled
@@ -273,8 +285,15 @@ class _Batch:
         self.ℓ = dr.sqrt(1.0 + self.t * self.t * (self.x * self.x + self.y * self.y)) if self.t else None
         self.pair = b                                             # which (volume, view) pair
         self.base = b * (N * N * N)                               # first voxel of this lane's volume
-        f = [dr.gather(mi.Float, self.frames, b * 9 + k, self.real) for k in range(9)]
+        stride = FRAME_FLOATS[self.windowed]
+        f = [dr.gather(mi.Float, self.frames, b * stride + k, self.real) for k in range(stride)]
         self.right, self.up, self.ω = mi.Vector3f(*f[0:3]), mi.Vector3f(*f[3:6]), mi.Vector3f(*f[6:9])
+        self.origin = mi.Vector3f(*f[9:12]) if self.windowed else None   # o_b: the window's centre
+
+    def lateral(self) -> Any:
+        """The ray's point on the plane z = 0: x right + y up, plus the window's origin o_b."""
+        lateral = self.x * self.right + self.y * self.up
+        return lateral if self.origin is None else lateral + self.origin
 
     def segment(self, k: Any) -> Tuple[Any, Any]:
         """Sample point p of segment k and the length of the ray's path through it, in voxels
@@ -283,7 +302,7 @@ class _Batch:
         kf = mi.Float(k)
         s = dr.minimum(h, N - kf * h)                             # the last segment may be short
         z = 1.0 - (kf * h + self.u * s) * self.Δ
-        lateral = self.x * self.right + self.y * self.up
+        lateral = self.lateral()
         if self.ℓ is None:
             return lateral + z * self.ω, s
         return (self.D - z) * self.t * lateral + z * self.ω, s * self.ℓ   # S(z) = (D − z) t
@@ -433,7 +452,7 @@ class _Batch:
         pair's box (module docstring, "Empty space"); an empty range for a ray that misses it."""
         lo = mi.Vector3f(*(dr.gather(mi.Float, boxes, self.pair * 6 + a, self.real) for a in range(3)))
         hi = mi.Vector3f(*(dr.gather(mi.Float, boxes, self.pair * 6 + 3 + a, self.real) for a in range(3)))
-        lateral = self.x * self.right + self.y * self.up
+        lateral = self.lateral()
         if self.ℓ is None:
             A, B = lateral, self.ω                                # p(z) = A + z B
         else:
@@ -600,10 +619,18 @@ def _shared(t: torch.Tensor, keep: list) -> Any:
     return mi.Float(t)
 
 
-def _frames(views: torch.Tensor, keep: list) -> Any:
-    """(B, 3) views → a Float of 9 per pair: right, up, ω (float64 maths, stored as float32)."""
+#: Floats per pair in a call's frames, without and with a window (:func:`_frames`).
+FRAME_FLOATS = {False: 9, True: 12}
+
+
+def _frames(views: torch.Tensor, keep: list, window: Optional[Window] = None) -> Any:
+    """(B, 3) views → a Float of 9 per pair: right, up, ω; with a ``window`` (not the full one) 12:
+    h right, h up, ω, o (module docstring, "Window"). float64 maths, stored as float32."""
     right, up, w = camera_frames(views)
-    return _shared(torch.cat([right, up, w], dim=1).to(torch.float32).contiguous(), keep)
+    if window is None:
+        return _shared(torch.cat([right, up, w], dim=1).to(torch.float32).contiguous(), keep)
+    right, up, origin = window.frames(right, up)
+    return _shared(torch.cat([right, up, w, origin], dim=1).to(torch.float32).contiguous(), keep)
 
 
 def _per_ray_to_image(values, b: int, n: int, spp: int) -> torch.Tensor:
@@ -624,12 +651,14 @@ class _Static:
     re-records when its hash changes (a new batch size, resolution, setting or thread count) and
     replays otherwise."""
 
-    def __init__(self, shape: Tuple[int, int, int], opt: RenderSettings, record: bool, tiled: bool = False):
-        # tiled: the backward's lanes in the tiled order; the forward's records in that order
-        self.shape, self.opt, self.record, self.tiled = shape, opt, record, tiled
+    def __init__(self, shape: Tuple[int, int, int], opt: RenderSettings, record: bool, tiled: bool = False,
+                 windowed: bool = False):
+        # tiled: the backward's lanes in the tiled order; the forward's records in that order;
+        # windowed: 12 floats per pair's frame (a window's values are data, not part of the key)
+        self.shape, self.opt, self.record, self.tiled, self.windowed = shape, opt, record, tiled, windowed
         # Dr.Jit's thread count too: the backward's Expand scatters size their per-thread copies of
         # the gradient when a kernel is recorded, so a replay under more threads would overrun them
-        self.key = (shape, opt, record, tiled, dr.thread_count(), RECORD_LOOKUPS)
+        self.key = (shape, opt, record, tiled, dr.thread_count(), RECORD_LOOKUPS, windowed)
 
     def __hash__(self) -> int:
         return hash(self.key)
@@ -644,7 +673,7 @@ def _forward_pass(data: Any, frames: Any, seed: Any, boxes: Optional[Any], stati
     on its Dr.Jit arrays (volume, camera frames, seed, boxes) and ``static``, so ``dr.freeze`` can
     replay its kernel without re-tracing (see :data:`FREEZE`)."""
     (b, c, n), opt, record = static.shape, static.opt, static.record
-    batch = _Batch(data, frames, b, c, n, opt, seed, records_tiled=static.tiled)
+    batch = _Batch(data, frames, b, c, n, opt, seed, records_tiled=static.tiled, windowed=static.windowed)
     vh = opt.model == "vh"
     # every T_k (and lookup) the backward reads (k < segments marched) is written first: no clearing
     Ts = dr.empty(mi.Float, batch.n_rays * batch.n_steps) if record and not vh else None
@@ -663,7 +692,7 @@ def _backward_pass(data: Any, frames: Any, seed: Any, Ts: Any, marched: Any, δ:
     layout by a second launch, :func:`_torch_layout`)."""
     (b, c, n), opt = static.shape, static.opt
     Ts, looks = Ts
-    batch = _Batch(data, frames, b, c, n, opt, seed, tiled=static.tiled)
+    batch = _Batch(data, frames, b, c, n, opt, seed, tiled=static.tiled, windowed=static.windowed)
     if static.tiled:                  # per-ray inputs in the lanes' order; idle lanes march 0 segments
         δ = [dr.gather(mi.Float, x, batch.ray, batch.real) for x in δ]
         marched = dr.gather(mi.UInt32, marched, batch.ray, batch.real)
@@ -752,8 +781,10 @@ class _March(torch.autograd.Function):
     """torch ↔ Dr.Jit: the forward launch, and the backward launch with the recorded T_k."""
 
     @staticmethod
-    def forward(ctx, volume: torch.Tensor, views: torch.Tensor, opt: RenderSettings, seed: int) -> torch.Tensor:
+    def forward(ctx, volume: torch.Tensor, views: torch.Tensor, opt: RenderSettings, seed: int,
+                window: Optional[Window]) -> torch.Tensor:
         b, c, n = volume.shape[0], volume.shape[1], volume.shape[-1]
+        windowed = window is not None
         lanes, steps = b * n * n * opt.spp, n_segments(n, opt.step)
         record = ctx.needs_input_grad[0]
         floats = recorded_floats(opt.model, c)
@@ -762,7 +793,7 @@ class _March(torch.autograd.Function):
                              f"{4 * floats * lanes * steps / 2**30:.1f} GiB; use fewer pairs, spp or a larger step")
         keep: list = []                                           # torch memory Dr.Jit reads
         data = _shared(_channels_last(volume, keep), keep)        # the (B, N, N, N, C) batch
-        frames = _frames(views, keep)
+        frames = _frames(views, keep, window)
         _spread_over_threads(lanes, 4)
         run = _frozen_forward if FREEZE else _forward_pass
         seed_arr = dr.opaque(mi.UInt32, seed if opt.jitter else 0)   # an input array: a new seed replays
@@ -770,9 +801,11 @@ class _March(torch.autograd.Function):
         boxes = _shared(occupied_boxes(volume), keep) if skip else None
         # the records in the order of the backward's lanes: tiled where the backward will be
         records_tiled = record and tiled_backward(n, opt.spp)
-        values, Ts, marched = run(data, frames, seed_arr, boxes, _Static((b, c, n), opt, record, records_tiled))
+        values, Ts, marched = run(data, frames, seed_arr, boxes,
+                                  _Static((b, c, n), opt, record, records_tiled, windowed))
         image = _per_ray_to_image(values, b, n, opt.spp)
-        ctx.args = (data, frames, seed_arr, Ts, marched, _Static((b, c, n), opt, False), lanes, records_tiled)
+        ctx.args = (data, frames, seed_arr, Ts, marched, _Static((b, c, n), opt, False, windowed=windowed), lanes,
+                    records_tiled)
         ctx.keep = keep
         return image
 
@@ -787,30 +820,42 @@ class _March(torch.autograd.Function):
         else:
             _spread_over_threads(lanes, 1)
         run = _frozen_backward if FREEZE else _backward_pass
-        grad = run(data, frames, seed_arr, Ts, marched, δ, _Static(static.shape, static.opt, False, tiled))
+        grad = run(data, frames, seed_arr, Ts, marched, δ,
+                   _Static(static.shape, static.opt, False, tiled, static.windowed))
         # in Dr.Jit's memory, no copy: EA's gradient channels last as it was scattered (the layout G
         # computes in), VH's and AO's in torch's default layout
         out = grad.torch().view(b, n, n, n, c).permute(0, 4, 1, 2, 3)
         del δ
         dr.sync_thread()                                          # nothing in flight reads ``keep``
-        return out, None, None, None
+        return out, None, None, None, None
 
 
-def march(volume: torch.Tensor, views: torch.Tensor, settings: RenderSettings, seed: int = 0) -> torch.Tensor:
+def _window(window: Optional[Window], opt: RenderSettings) -> Optional[Window]:
+    """The call's window: None for none or the full one; a pinhole's window is refused."""
+    window = window_or_none(window)
+    check_orthographic(window, opt.lens)
+    return window
+
+
+def march(volume: torch.Tensor, views: torch.Tensor, settings: RenderSettings, seed: int = 0,
+          window: Optional[Window] = None) -> torch.Tensor:
     """Render ``(B, C, N, N, N)`` volumes from ``(B, 3)`` views with the batched ray marcher.
 
     Uses ``settings``' model, filter, step, spp, jitter and termination; ``seed`` drives the
-    jitter. Returns ``(B, 1, N, N)`` (VH, AO) or ``(B, 4, N, N)`` (EA: premultiplied RGB, alpha),
-    differentiable w.r.t. ``volume`` (also twice from one forward, with ``retain_graph``).
-    Inputs are assumed valid (see :func:`mitsuba_platonic.render`).
+    jitter; ``window``: the orthographic camera's zoom and pan (:class:`~.window.Window`, module
+    docstring "Window"; None: the full cross-section). Returns ``(B, 1, N, N)`` (VH, AO) or
+    ``(B, 4, N, N)`` (EA: premultiplied RGB, alpha), differentiable w.r.t. ``volume`` (also twice
+    from one forward, with ``retain_graph``). Inputs are assumed valid (see :func:`mitsuba_platonic.render`).
     """
     opt = settings.validate()
+    window = _window(window, opt)
     src = volume.to(device=variant_device(), dtype=torch.float32)
-    out = _March.apply(src, views.detach().to(torch.float64).cpu(), opt, int(seed))
+    out = _March.apply(src, views.detach().to(torch.float64).cpu(), opt, int(seed), window)
     return out.to(volume.device)
 
 
-def march_pixels(volume: torch.Tensor, views: torch.Tensor, settings: RenderSettings, factor: int) -> torch.Tensor:
+def march_pixels(volume: torch.Tensor, views: torch.Tensor, settings: RenderSettings, factor: int,
+                 window: Optional[Window] = None) -> torch.Tensor:
     """Forward only: ``(B, C, N, N, N)`` volumes from ``(B, 3)`` views as ``(B, C, kN, kN)`` images, k = ``factor``.
 
     The marcher's regular sub-pixel grid of spp = k² rays per pixel, each ray kept as a pixel of its
@@ -818,22 +863,25 @@ def march_pixels(volume: torch.Tensor, views: torch.Tensor, settings: RenderSett
     the centre of pixel (kj + sx) of a kN-pixel image, so this is the marcher's render at k times the
     volume's resolution (``march`` with spp k², averaged over k × k blocks, is the same image downsampled).
     One launch of the same frozen kernel as :func:`march`; ``settings``' spp and jitter are replaced.
+    ``window``: the orthographic camera's zoom and pan (:class:`~.window.Window`), as in :func:`march`.
     """
     k = int(factor)
     if k < 1:
         raise ValueError(f"factor: expected a positive int, got {factor!r}")
     opt = replace(settings, spp=k * k, jitter=False).validate()
+    window = _window(window, opt)
     src = volume.detach().to(device=variant_device(), dtype=torch.float32)
     b, c, n = src.shape[0], src.shape[1], src.shape[-1]
     check_lanes(b, n, opt.spp)
     keep: list = []
     with torch.no_grad():
         data = _shared(_channels_last(src, keep), keep)
-        frames = _frames(views.detach().to(torch.float64).cpu(), keep)
+        frames = _frames(views.detach().to(torch.float64).cpu(), keep, window)
         _spread_over_threads(b * n * n * opt.spp, 4)
         run = _frozen_forward if FREEZE else _forward_pass
         boxes = _shared(occupied_boxes(src), keep) if SKIP_EMPTY else None
-        values, _, _ = run(data, frames, dr.opaque(mi.UInt32, 0), boxes, _Static((b, c, n), opt, False, False))
+        values, _, _ = run(data, frames, dr.opaque(mi.UInt32, 0), boxes,
+                           _Static((b, c, n), opt, False, False, window is not None))
         rays = torch.stack([v.torch().view(b, n, n, k, k) for v in values], dim=1)     # (B, C, i, j, sy, sx)
         image = rays.permute(0, 1, 2, 4, 3, 5).reshape(b, len(values), n * k, n * k).clone()
         del values

@@ -59,6 +59,7 @@ from .mitsuba_renderer import _sensor_transform, differentiable_render
 from .scenes import load_scene
 from .settings import RenderSettings, check_lanes
 from .variant import ensure_variant, variant_device
+from .window import Window, window_or_none
 
 __all__ = ["Lighting", "sample_lighting", "render_physical", "render_physical_ad", "extinction",
            "V_MAX_PHYSICAL", "luminance", "auto_exposure", "sky_mean_luminance", "metered_exposure",
@@ -180,10 +181,10 @@ def metered_exposure(lighting: Lighting) -> float:
     return 1.0 / sky_mean_luminance(lighting)
 
 
-def _alpha(density: torch.Tensor, views: torch.Tensor, filter: str) -> torch.Tensor:
+def _alpha(density: torch.Tensor, views: torch.Tensor, filter: str, window: Optional[Window] = None) -> torch.Tensor:
     """The alpha pass: the ray marcher's AO image of the (capped) ``density``, its inputs checked
     as :func:`~mitsuba_platonic.render.render` checks them (this backend calls the marcher itself,
-    not the package's dispatcher, which dispatches to it)."""
+    not the package's dispatcher, which dispatches to it), through the same ``window``."""
     try:
         settings = RenderSettings.for_call("mitsuba", "ao", filter=filter)
     except UserError:
@@ -194,7 +195,7 @@ def _alpha(density: torch.Tensor, views: torch.Tensor, filter: str) -> torch.Ten
     validate_views(views, batch=density.shape[0])
     check_lanes(density.shape[0], density.shape[-1], settings.spp)   # before Dr.Jit: say why, up front
     from .marcher import march       # imports Dr.Jit and sets Mitsuba's variant: on the first alpha pass
-    return march(density, views, settings, 0)
+    return march(density, views, settings, 0, window)
 
 
 def _medium_grids(v: torch.Tensor) -> Tuple[np.ndarray, np.ndarray]:
@@ -275,8 +276,25 @@ def _ad_scene(n: int, spp: int, max_depth: int, filter: str) -> Tuple[Any, Any]:
     return _AD_SCENES[key]
 
 
+def _window_transform(mi: Any, right: torch.Tensor, up: torch.Tensor, w: torch.Tensor, window: Window) -> Any:
+    """The orthographic sensor's to_world through a :class:`~.window.Window` (zoom m, centre (c_x, c_y)):
+
+        to_world = look_at(o + 2ω → o, up) · scale(h, h, 1),   o = c_x right + c_y up,  h = 1/m
+
+    Mitsuba's orthographic film covers the sensor's local [−1, 1]² (rays along its local +z), which
+    the scale widens to [−h, h]² about o: the pixel at image coordinates (x, y) starts at
+    o + 2ω + (h x) right + (h y) up, as the marcher's ray (module :mod:`.window`)."""
+    _, _, origin = window.frames(right, up)
+    o = [float(x) for x in origin]
+    h = window.half_width
+    look = mi.ScalarTransform4f().look_at(origin=[o[k] + 2.0 * float(w[k]) for k in range(3)], target=o,
+                                          up=[float(x) for x in up])
+    return look @ mi.ScalarTransform4f().scale([h, h, 1.0])
+
+
 def render_physical_ad(volume: torch.Tensor, views: torch.Tensor, lighting: str = "sunsky", spp: int = 4,
-                       max_depth: int = 4, seed: int = 0, filter: str = "trilinear") -> torch.Tensor:
+                       max_depth: int = 4, seed: int = 0, filter: str = "trilinear",
+                       window: Optional[Window] = None) -> torch.Tensor:
     """Differentiable path tracing of ``(B, 4, N, N, N)`` RGBA volumes under random skies.
 
     Each pair gets a random sun (drawn from ``seed``, see :func:`sample_lighting`), Mitsuba's
@@ -284,7 +302,10 @@ def render_physical_ad(volume: torch.Tensor, views: torch.Tensor, lighting: str 
     and the image is scaled by the sky's metered exposure (:func:`metered_exposure`, as the
     collections are: it depends on the light only, so it is a true constant of the gradient). Returns ``(B, 4, N, N)`` premultiplied RGB + alpha; gradients flow to
     ``volume`` through σ_t, the albedo and the alpha. Only ``lighting='sunsky'`` is supported.
+    ``window``: the orthographic camera's zoom and pan (:class:`~.window.Window`: the sensor's
+    to_world, :func:`_window_transform`, and the alpha pass's rays; None: the whole cross-section).
     """
+    window = window_or_none(window)
     if lighting != "sunsky":
         raise ValueError(f"differentiable physical rendering supports lighting 'sunsky' only, got {lighting!r}")
     if volume.dim() != 5 or volume.shape[1] != 4:
@@ -294,13 +315,15 @@ def render_physical_ad(volume: torch.Tensor, views: torch.Tensor, lighting: str 
     n = volume.shape[-1]
     scene, params = _ad_scene(n, spp, max_depth, filter)
     σ = extinction(volume[:, 3:])
-    alpha = _alpha(volume[:, 3:].clamp(0.0, V_MAX_PHYSICAL), views, filter)
+    alpha = _alpha(volume[:, 3:].clamp(0.0, V_MAX_PHYSICAL), views, filter, window)
     right, up, w = camera_frames(views.detach().cpu())                 # read into Mitsuba's sensors
     rng = np.random.default_rng(seed)
     images = []
     for b in range(volume.shape[0]):
         light = sample_lighting(rng, "sunsky")
-        settings = {"sensor.to_world": _sensor_transform(mi, right[b], up[b], w[b]),
+        to_world = (_sensor_transform(mi, right[b], up[b], w[b]) if window is None
+                    else _window_transform(mi, right[b], up[b], w[b], window))
+        settings = {"sensor.to_world": to_world,
                     "emitter.sun_direction": mi.Vector3f(*light.sun_direction),
                     "emitter.turbidity": mi.Float(light.turbidity)}
         grids = {"volume.interior_medium.sigma_t.data": to_mitsuba_grid(σ[b].float().to(device)),

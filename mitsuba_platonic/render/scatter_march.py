@@ -46,6 +46,10 @@ samples per voxel at the midpoints of steps h = Δ/m, front to back, in the exti
 
     C = Σ_k T_k (1 − τ_k) a_k S_k,   τ_k = e^{−σ_k h},   T_k = Π_{j<k} τ_j,   α = 1 − T_K
 
+A :class:`~.window.Window` (zoom, pan) moves the rays as the marcher's ("Window" in
+:mod:`.marcher`: the frame (h right, h up, ω) and origin o, 12 floats per pair); the light
+volumes do not depend on the camera and stay as they are.
+
 Adjoint (one launch, no record, no division by τ). Each ray is marched front to back again with
 its forward totals C and α: since dτ_k/dσ_k = −h τ_k,
 
@@ -63,16 +67,18 @@ Left out: what :mod:`.single_scatter` leaves out (multiple scattering, sky direc
 from __future__ import annotations
 
 import math
-from typing import Any, Tuple
+from typing import Any, Optional, Tuple
 
 import torch
 
 from ..errors import UserError
 from .grids import extinction
-from .marcher import _MODE, FREEZE, _frames, _image_to_per_ray, _per_ray_to_image, _shared, _spread_over_threads
+from .marcher import (_MODE, FRAME_FLOATS, FREEZE, _frames, _image_to_per_ray, _per_ray_to_image, _shared,
+                      _spread_over_threads)
 from .single_scatter import SKY_DIRECTIONS, SKY_WEIGHTS, LightBatch, _check, mean_luminance, sweep
 from .sky_light import _Key, local_depth, local_depth_partials, sky_occlusion, sky_offsets
 from .variant import ensure_variant, variant_device
+from .window import Window, window_or_none
 
 mi = ensure_variant()
 import drjit as dr  # noqa: E402  (after the variant is set)
@@ -213,9 +219,11 @@ def _sky_constants(Δ: float, reach: float) -> list:
 
 
 class _Rays:
-    """One call's rays (lane r: pair r // (N²·spp), pixel, sub-sample), their samples and lookups."""
+    """One call's rays (lane r: pair r // (N²·spp), pixel, sub-sample), their samples and lookups;
+    ``windowed``: 12 floats per pair's frame, with the window's origin (:func:`.marcher._frames`)."""
 
-    def __init__(self, data: Any, frames: Any, light: Any, b: int, n: int, m: int, spp: int, reach: float):
+    def __init__(self, data: Any, frames: Any, light: Any, b: int, n: int, m: int, spp: int, reach: float,
+                 windowed: bool = False):
         self.data, self.N, self.m, self.B = data, n, m, b
         self.Δ = 2.0 / n
         self.h = self.Δ / m                                       # a step, in world units
@@ -231,8 +239,10 @@ class _Rays:
         s = math.isqrt(spp)
         self.x = -1.0 + (mi.Float(j) + (mi.Float(sub % s) + 0.5) / s) * self.Δ
         self.y = 1.0 - (mi.Float(i) + (mi.Float(sub // s) + 0.5) / s) * self.Δ
-        f = [dr.gather(mi.Float, frames, pair * 9 + k) for k in range(9)]
+        stride = FRAME_FLOATS[windowed]
+        f = [dr.gather(mi.Float, frames, pair * stride + k) for k in range(stride)]
         self.right, self.up, self.ω = mi.Vector3f(*f[0:3]), mi.Vector3f(*f[3:6]), mi.Vector3f(*f[6:9])
+        self.origin = mi.Vector3f(*f[9:12]) if windowed else None          # the window's centre o
         g = [dr.gather(mi.Float, light, pair * 9 + k) for k in range(9)]
         # the sun's direction in index units (w, h, d) per world unit; p E_s and L_sky, exposed
         self.ω_s = mi.Vector3f(g[0] / self.Δ, -g[1] / self.Δ, -g[2] / self.Δ)
@@ -244,6 +254,8 @@ class _Rays:
         """The continuous voxel index q (w, h, d) of sample k of each ray."""
         z = 1.0 - (mi.Float(k) + 0.5) * self.h
         p = self.x * self.right + self.y * self.up + z * self.ω
+        if self.origin is not None:
+            p = p + self.origin
         half = self.N / 2.0
         return mi.Vector3f((p.x + 1.0) * half - 0.5, (1.0 - p.y) * half - 0.5, (1.0 - p.z) * half - 0.5)
 
@@ -416,34 +428,38 @@ class _ScatterMarch(torch.autograd.Function):
 
     @staticmethod
     def forward(ctx, packet: torch.Tensor, views: torch.Tensor, light: torch.Tensor, m: int, spp: int,
-                reach: float) -> torch.Tensor:
+                reach: float, *window: Optional[Window]) -> torch.Tensor:
         b, n = packet.shape[0], packet.shape[1]
+        ctx.inputs = 6 + len(window)                               # apply's arguments: one gradient (or None) each
+        window = window[0] if window else None                    # optional: (…, reach) or (…, reach, window)
         keep: list = []
         data = _shared(packet.detach().contiguous(), keep)
-        frames = _frames(views, keep)
+        frames = _frames(views, keep, window)
+        windowed = window is not None
         light_arr = _shared(light.detach().to(torch.float32).contiguous(), keep)
         _spread_over_threads(b * n * n * spp, 4)
         run = _frozen_camera_forward if FREEZE else _camera_forward
-        values = run(data, frames, light_arr, _Key(b, n, m, spp, reach))
+        values = run(data, frames, light_arr, _Key(b, n, m, spp, reach, windowed))
         image = _per_ray_to_image(values, b, n, spp)
-        ctx.args = (data, frames, light_arr, values, (b, n, m, spp, reach))
+        ctx.args = (data, frames, light_arr, values, (b, n, m, spp, reach, windowed))
         ctx.keep = keep
         return image
 
     @staticmethod
     def backward(ctx, grad_image: torch.Tensor):
-        data, frames, light_arr, values, (b, n, m, spp, reach) = ctx.args
+        data, frames, light_arr, values, (b, n, m, spp, reach, windowed) = ctx.args
         δ = list(_image_to_per_ray(grad_image.to(torch.float32).contiguous(), spp, ctx.keep))
         _spread_over_threads(b * n * n * spp, 1)
         run = _frozen_camera_backward if FREEZE else _camera_backward
-        grad = run(data, frames, light_arr, values, δ, _Key(b, n, m, spp, reach))
+        grad = run(data, frames, light_arr, values, δ, _Key(b, n, m, spp, reach, windowed))
         out = grad.torch().view(b, n, n, n, PACKET)
         dr.sync_thread()                                          # nothing in flight reads ``keep``
-        return out, None, None, None, None, None
+        return (out,) + (None,) * (ctx.inputs - 1)
 
 
 def render_scatter_march(volume: torch.Tensor, views: torch.Tensor, lights: Any, exposure: str = "metered",
-                         steps_per_voxel: int = 2, spp: int = 1, reach: float = REACH) -> torch.Tensor:
+                         steps_per_voxel: int = 2, spp: int = 1, reach: float = REACH,
+                         window: Optional[Window] = None) -> torch.Tensor:
     """Render ``(B, 4, N, N, N)`` RGBA volumes from ``(B, 3)`` views (orthographic), lit by single
     scattering of one :class:`~.single_scatter.SunAndSky` each, in one Dr.Jit launch per pass.
 
@@ -451,8 +467,10 @@ def render_scatter_march(volume: torch.Tensor, views: torch.Tensor, lights: Any,
     α = 1 − exp(−∫σ), differentiable w.r.t. ``volume``. ``steps_per_voxel``: camera samples per
     voxel (≥ 2: one sample per voxel lands on voxel centres and never sees a surface's ramp);
     ``spp``: rays per pixel, a square number; ``reach``: the local light's ℓ in voxels (module
-    docstring). Accuracy and cost against ``volpath`` and the EA marcher: docs/rendering.md.
+    docstring); ``window``: the orthographic camera's zoom and pan (:class:`~.window.Window`; None:
+    the full cross-section). Accuracy and cost against ``volpath`` and the EA marcher: docs/rendering.md.
     """
+    window = window_or_none(window)
     batch = _check(volume, views, lights, exposure)
     for name, value, least in (("steps_per_voxel", steps_per_voxel, 2), ("spp", spp, 1)):
         if isinstance(value, bool) or not isinstance(value, int) or value < least:
@@ -467,5 +485,5 @@ def render_scatter_march(volume: torch.Tensor, views: torch.Tensor, lights: Any,
     light = torch.cat([batch.direction, batch.irradiance / (4.0 * math.pi) * scale[:, None],
                        batch.sky * scale[:, None]], dim=1)
     out = _ScatterMarch.apply(packet, views.detach().to(torch.float64).cpu(), light, steps_per_voxel, spp,
-                              float(reach))
+                              float(reach), window)
     return out.to(volume.device)

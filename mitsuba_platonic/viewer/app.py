@@ -2,19 +2,31 @@
 
 Per browser (viser client) a :class:`ClientView` keeps the GUI and a render thread. A camera
 message gives the view ω = normalize(position − look_at) (the scene's up is +y, so viser's
-orbit camera has the project's frame: right = (ω_z, 0, −ω_x), up = ω × right; panning moves
-look_at and position together and leaves ω, the orthographic frame, as it is; zooming changes
-the distance, which an orthographic camera does not see). While the camera keeps moving (a
-message within :data:`SETTLE_S`), the thread renders a low-resolution frame (a quarter of the
-resolution, at least the volume's; the same resolution with "low resolution while moving" off),
-sent as JPEG; once it rests, the full one, as PNG. Frames are drawn as the scene's background image, padded with the background grey to
-the canvas' aspect so that the square render keeps its shape (viser stretches the image over
-the canvas), centred, its side the canvas' shorter side.
+orbit camera has the project's frame: right = (ω_z, 0, −ω_x), up = ω × right) and the window of
+the orthographic camera (:func:`~.scene.camera_window`, every renderer draws it,
+:mod:`mitsuba_platonic.render.window`), with d = |position − look_at|:
+
+    zoom m = clamp(DISTANCE / d, ¼, 8)           (half-width h = d / DISTANCE: a closer camera magnifies)
+    centre = (look_at · right, look_at · up)     (look_at's offset from the cube's centre on the camera plane)
+
+so zooming (viser's wheel: the distance) magnifies the frame about its centre, and panning
+(look_at and position moved together, ω kept) moves the window: the volume moves the other way,
+m R/2 pixels per world unit. A frame of resolution R shows a world point at lateral coordinates
+(X, Y) at pixel column (1 + (X − c_x) m) R/2, row (1 − (Y − c_y) m) R/2. At the initial camera
+(d = DISTANCE, look_at 0) the frames are the renderers' whole-cube frames, bit for bit.
+
+While the camera keeps moving (a message within :data:`SETTLE_S`), the thread renders a
+low-resolution frame (a quarter of the resolution, at least the volume's; the same resolution
+with "low resolution while moving" off), sent as JPEG; once it rests, the full one, as PNG.
+Frames are drawn as the scene's background image, padded with the background grey to the
+canvas' aspect so that the square render keeps its shape (viser stretches the image over the
+canvas), centred, its side the canvas' shorter side.
 
 The GUI: renderer, formation, resolution, the path tracer's spp, buttons that orbit the camera by
-fixed angles (and the front view), the frame time and the renderer's settings (a line of text
-the tests read: ``frame N: T ms, full|moving, R×R px, az A° el E°``), the source's inputs (a
-reconstruction run: previous/next held-out input, shown beside the view) or latents (a
+fixed angles (and the front view), zoom it by 2 about its look-at point, pan it by a quarter of
+the frame (and reset both), the frame time and the renderer's settings (a line of text the tests
+read: ``frame N: T ms, full|moving, R×R px, az A° el E°, zoom M×, centre (X, Y)``), the source's
+inputs (a reconstruction run: previous/next held-out input, shown beside the view) or latents (a
 generation run: seed, new latent, a walk to a second seed), and exports into the output folder.
 """
 
@@ -33,16 +45,18 @@ import torch
 import viser
 
 from ..errors import UserError
-from ..views import from_angles, to_angles
-from .scene import (BACKGROUND, Exports, Frame, Scene, formations_for, render_frame, renderers_for,
-                    resolutions_for)
+from ..views import camera_frames, from_angles, to_angles
+from .scene import (BACKGROUND, ZOOM_RANGE, Exports, Frame, Scene, Window, camera_window, formations_for,
+                    render_frame, renderers_for, resolutions_for)
 
 __all__ = ["ViewerApp", "check_port", "SETTLE_S"]
 
 #: A camera at rest this long gets its full-resolution frame.
 SETTLE_S = 0.2
-#: Distance of the initial camera from the centre (the cube is [−1, 1]³).
+#: Distance of the initial camera from the centre (the cube is [−1, 1]³); the zoom is DISTANCE / d.
 DISTANCE = 4.0
+#: The zoom buttons' factor, and the pan buttons' step as a fraction of the frame's width.
+ZOOM_STEP, PAN_STEP = 2.0, 0.25
 #: Frames are enlarged to at least this many pixels a side before they are padded to the canvas' aspect.
 MIN_SHOWN = 256
 #: The background grey as an 8-bit sRGB value (what :func:`~.scene.to_display` composites over).
@@ -149,12 +163,16 @@ class ClientView:
         self.wake = threading.Event()
         self.stopped = False
         self.view = np.array([0.0, 0.0, 1.0])
+        self.window: Optional[Window] = None              # the full window: the initial camera
         self.last_move = 0.0
         self.shown: Optional[Tuple] = None
         self.count = 0
         self.frame: Optional[Frame] = None
         self.times = {}                                    # renderer → last full frame's seconds
         self._gui()
+        # the browser's own dolly stops where the zoom does (ZOOM_RANGE): the wheel never runs past it
+        client.camera.min_orbit_distance = DISTANCE / ZOOM_RANGE[1]
+        client.camera.max_orbit_distance = DISTANCE / ZOOM_RANGE[0]
         client.camera.on_update(self._camera)
         self.thread = threading.Thread(target=self._loop, name=f"render-{client.client_id}", daemon=True)
         self.thread.start()
@@ -185,6 +203,11 @@ class ClientView:
                                      ("elevation -15", 0.0, -15.0), ("elevation +15", 0.0, 15.0)):
                 gui.add_button(label).on_click(self._orbit_by(daz, delv))
             gui.add_button("front view").on_click(lambda _: self.set_view(0.0, 0.0))
+            gui.add_button("zoom in").on_click(lambda _: self.zoom_by(ZOOM_STEP))
+            gui.add_button("zoom out").on_click(lambda _: self.zoom_by(1.0 / ZOOM_STEP))
+            for label, dx, dy in (("pan left", -1, 0), ("pan right", 1, 0), ("pan up", 0, 1), ("pan down", 0, -1)):
+                gui.add_button(label).on_click(self._pan_by(dx * PAN_STEP, dy * PAN_STEP))
+            gui.add_button("reset zoom and pan").on_click(lambda _: self.move_camera(np.zeros(3), DISTANCE))
         self.source_gui(gui)
         with gui.add_folder("Export"):
             self.name = gui.add_text("name", initial_value="view", hint="a file name inside the output folder")
@@ -241,14 +264,56 @@ class ClientView:
     # -- camera -----------------------------------------------------------------------------------
 
     def _camera(self, camera) -> None:
-        w = np.asarray(camera.position, float) - np.asarray(camera.look_at, float)
+        position, look = np.asarray(camera.position, float), np.asarray(camera.look_at, float)
+        w = position - look
         norm = float(np.linalg.norm(w))
-        if norm < 1e-9:
+        if norm < 1e-9 or not np.isfinite(w).all():
             return
+        window = camera_window(position, look, DISTANCE)
         with self.lock:
             self.view = w / norm
+            self.window = window
             self.last_move = time.monotonic()
         self.wake.set()
+
+    def _place(self) -> Tuple[np.ndarray, float]:
+        """This browser's camera: its look-at point and its distance from it."""
+        cam = self.client.camera
+        look = np.asarray(cam.look_at, float)
+        return look, float(np.linalg.norm(np.asarray(cam.position, float) - look)) or DISTANCE
+
+    def move_camera(self, look: np.ndarray, distance: float, w: Optional[np.ndarray] = None) -> None:
+        """Put this browser's camera at ``look + distance ω`` looking at ``look`` (ω: ``w``, else its own)."""
+        with self.lock:
+            w = np.asarray(self.view if w is None else w, float)
+        position = np.asarray(look, float) + distance * w
+        cam = self.client.camera
+        with self.client.atomic():
+            cam.up_direction = (0.0, 1.0, 0.0)
+            cam.position = tuple(position)                  # viser moves look_at along with the position:
+            cam.look_at = tuple(look)                         # set it back, to orbit about it
+        window = camera_window(position, look, DISTANCE)
+        with self.lock:                                    # render it even before the browser echoes it
+            self.view, self.window = w, window
+            self.last_move = 0.0
+        self.wake.set()
+
+    def zoom_by(self, factor: float) -> None:
+        """Zoom ``factor`` times about the look-at point (the distance ÷ ``factor``, within :data:`ZOOM_RANGE`)."""
+        look, d = self._place()
+        d = min(max(d / factor, DISTANCE / ZOOM_RANGE[1]), DISTANCE / ZOOM_RANGE[0])
+        self.move_camera(look, d)
+
+    def _pan_by(self, dx: float, dy: float) -> Callable:
+        """A button's pan: look_at and the camera move by (dx, dy) frame widths along (right, up)."""
+        def pan(_) -> None:
+            look, d = self._place()
+            with self.lock:
+                right, up, _ = camera_frames(torch.tensor(self.view)[None])
+                half = 1.0 / (self.window.zoom if self.window is not None else 1.0)
+            step = 2.0 * half * (dx * right[0].numpy() + dy * up[0].numpy())
+            self.move_camera(look + step, d)
+        return pan
 
     def _orbit_by(self, daz: float, delv: float) -> Callable:
         def orbit(_) -> None:
@@ -259,30 +324,21 @@ class ClientView:
 
     def set_view(self, azimuth: float, elevation: float) -> None:
         """Move this browser's camera to ω(azimuth, elevation) around its look-at point, at its distance."""
-        w = from_angles(azimuth, elevation).double().numpy()
-        cam = self.client.camera
-        look = np.asarray(cam.look_at, float)
-        d = float(np.linalg.norm(np.asarray(cam.position, float) - look)) or DISTANCE
-        with self.client.atomic():
-            cam.up_direction = (0.0, 1.0, 0.0)
-            cam.position = tuple(look + d * w)              # viser moves look_at along with the position:
-            cam.look_at = tuple(look)                         # set it back, to orbit about it
-        with self.lock:                                    # render it even before the browser echoes it
-            self.view = w
-            self.last_move = 0.0
-        self.wake.set()
+        look, d = self._place()
+        self.move_camera(look, d, from_angles(azimuth, elevation).double().numpy())
 
     # -- frames -----------------------------------------------------------------------------------
 
     def _request(self) -> Tuple:
         with self.lock:
             view, moving = tuple(float(x) for x in self.view), time.monotonic() - self.last_move < SETTLE_S
+            window = self.window
         full = int(self.resolution.value)
         n = self.app.scene.volume.shape[-1]
         low = max(n, full // 4) if self.low.value else full
         res, quality = (low, "moving") if moving else (full, "full")
         return (view, self.renderer.value, self.formation.value, res, int(self.spp.value), self.app.version,
-                self.client.camera.aspect, quality)
+                self.client.camera.aspect, quality, window)
 
     def _loop(self) -> None:
         while not self.stopped:
@@ -306,10 +362,10 @@ class ClientView:
                 self.shown = request
 
     def _render(self, request: Tuple) -> None:
-        view, renderer, formation, res, spp, version, aspect, quality = request
+        view, renderer, formation, res, spp, version, aspect, quality, window = request
         with self.app.render_lock, self.app.scene_lock:
             volume = self.app.scene.volume
-            frame = render_frame(volume, view, renderer, formation, res, spp)
+            frame = render_frame(volume, view, renderer, formation, res, spp, window)
         if self.stopped:
             return
         # full frames lossless (PNG, what the tests compare), moving ones as JPEG (a tenth of the encoding time)
@@ -320,8 +376,9 @@ class ClientView:
         if quality == "full":
             self.times[renderer] = frame.seconds
         az, el = (float(a) for a in to_angles(torch.tensor(view)))
+        zoom, (cx, cy) = (1.0, (0.0, 0.0)) if window is None else (window.zoom, window.centre)
         self.info.content = (f"frame {self.count}: {1000 * frame.seconds:.1f} ms, {quality}, {res}×{res} px, "
-                             f"az {az:.1f}° el {el:.1f}°")
+                             f"az {az:.1f}° el {el:.1f}°, zoom {zoom:.3f}×, centre ({cx:+.3f}, {cy:+.3f})")
         self.settings.content = frame.settings
 
     # -- exports ----------------------------------------------------------------------------------

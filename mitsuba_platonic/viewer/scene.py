@@ -8,7 +8,9 @@
   orthographic camera, docs/conventions.md) through one of the project's renderers at an image
   resolution, as 8-bit sRGB over :data:`BACKGROUND`, with the seconds it took and the settings used.
   An image resolution R = kN above the volume's N: the marcher keeps its k² sub-pixel rays apart;
-  the other renderers render the volume resampled trilinearly to R³ (cached).
+  the other renderers render the volume resampled trilinearly to R³ (cached). A
+  :class:`~mitsuba_platonic.render.window.Window` zooms and pans the orthographic camera, in every
+  renderer; :func:`camera_window` makes it from the browser's camera (its distance, its look-at point).
 - :class:`Exports`: the PNG of a frame and the volume (``.npz`` + ``.vol``, a ``.ply`` mesh) written
   into one output folder, under names cleaned of path characters and never over an earlier file:
   nothing the page sends can name a file outside that folder.
@@ -21,7 +23,7 @@ import re
 import time
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Dict, List, Optional, Tuple, Union
+from typing import Dict, List, Optional, Sequence, Tuple, Union
 
 import numpy as np
 import torch
@@ -33,10 +35,13 @@ from ..export import extract_mesh, save_ply
 from ..files.fileio import atomic_write
 from ..files.volume_io import read_volume_file, save_volume
 from ..render import RenderSettings, render_with
+from ..render.window import Window, window_or_none
+from ..views import camera_frames
 from ..volume import CHANNELS
 
 __all__ = ["RENDERERS", "FORMATIONS", "BACKGROUND", "Frame", "Scene", "Exports", "open_source", "render_frame",
-           "formations_for", "renderers_for", "resolutions_for", "to_display", "clean_name"]
+           "formations_for", "renderers_for", "resolutions_for", "to_display", "clean_name", "camera_window",
+           "ZOOM_RANGE", "Window"]
 
 #: The renderers the page offers: label → backend (mitsuba_platonic.render.BACKENDS).
 RENDERERS: Dict[str, str] = {"closed form": "closed_form", "marcher": "mitsuba",
@@ -52,6 +57,13 @@ MAX_RESOLUTION = 512
 #: Largest image the renderers other than the marcher render (they render the volume resampled to
 #: R³: the closed form takes about 13 s for 256² on 2 cores); a larger choice renders at this one.
 MAX_RESAMPLED = 128
+#: The zoom m the camera's distance can reach: from a quarter (the cube a quarter of the frame wide)
+#: to 8× (an 8N² frame then shows about one voxel per pixel).
+ZOOM_RANGE = (0.25, 8.0)
+#: A camera this close to the initial one (|m − 1|, |c_x|, |c_y| at most this) has the full window:
+#: the browser echoes positions in float32, and the unmoved camera's frames stay the renderers'
+#: own, bit for bit (1e-5 world units: 0.02 pixel of a 512² frame at 8×).
+WINDOW_SNAP = 1e-5
 
 PathLike = Union[str, Path]
 
@@ -92,6 +104,7 @@ class Frame:
     renderer: str
     formation: str
     resolution: int
+    window: Optional[Window] = None
 
 
 #: The last resampled volume: (the source tensor itself, R, the resampled one). The source is kept and
@@ -117,14 +130,50 @@ def resolutions_for(n: int) -> List[int]:
     return [k * n for k in (1, 2, 4, 8) if k * n <= MAX_RESOLUTION] or [n]
 
 
+def camera_window(position: Sequence[float], look_at: Sequence[float], distance: float) -> Optional[Window]:
+    """The orthographic window of a camera at ``position`` looking at ``look_at`` (world units), or
+    None for the full one (:mod:`mitsuba_platonic.render.window`).
+
+    With d = |position − look_at|, ω = (position − look_at)/d and (right, up) ω's camera frame:
+
+        zoom m = clamp(distance / d, :data:`ZOOM_RANGE`)        (half-width h = d / distance: closer, larger)
+        centre (c_x, c_y) = (look_at · right, look_at · up)     (look_at's offset on the camera plane)
+
+    so a camera that pans (moves look_at and position together) sees the volume move the other way,
+    and one that orbits about a look-at point keeps that point at the frame's centre. Values within
+    :data:`WINDOW_SNAP` of the initial camera's (m = 1, centre 0) are taken as them. ``distance``:
+    the initial camera's (m = 1). Raises ``ValueError`` for non-finite coordinates, a camera at its
+    look-at point or a ``distance`` that is not a finite number > 0.
+    """
+    p, a = np.asarray(position, np.float64).reshape(-1), np.asarray(look_at, np.float64).reshape(-1)
+    if p.shape != (3,) or a.shape != (3,) or not (np.isfinite(p).all() and np.isfinite(a).all()):
+        raise UserError(f"camera: expected finite 3-vectors, got position {tuple(p)} and look_at {tuple(a)}")
+    if isinstance(distance, bool) or not isinstance(distance, (int, float)) or not math.isfinite(distance) \
+            or not distance > 0:
+        raise UserError(f"distance: expected a finite number > 0, got {distance!r}")
+    d = float(np.linalg.norm(p - a))
+    if not d > 1e-9:
+        raise UserError("camera: its position is its look-at point (no view direction)")
+    right, up, _ = camera_frames(torch.from_numpy((p - a) / d)[None])
+    zoom = min(max(distance / d, ZOOM_RANGE[0]), ZOOM_RANGE[1])
+    centre = [float(torch.from_numpy(a) @ right[0]), float(torch.from_numpy(a) @ up[0])]
+    if abs(zoom - 1.0) <= WINDOW_SNAP:
+        zoom = 1.0
+    centre = tuple(0.0 if abs(c) <= WINDOW_SNAP else c for c in centre)
+    return window_or_none(Window(zoom, centre))
+
+
 def render_frame(volume: torch.Tensor, view: Tuple[float, float, float], renderer: str = "closed form",
-                 formation: str = "EA", resolution: Optional[int] = None, spp: int = 4) -> Frame:
+                 formation: str = "EA", resolution: Optional[int] = None, spp: int = 4,
+                 window: Optional[Window] = None) -> Frame:
     """Render the ``(C, N, N, N)`` ``volume`` (checked when it was opened) from the unit ``view`` ω.
 
     ``renderer``: a label of :data:`RENDERERS`; ``formation``: one of :data:`FORMATIONS` (a lit
     renderer always forms EA); ``resolution``: the image's R = kN, k a positive int (default N);
-    ``spp``: the path tracer's samples per pixel. The random sky of the lit renderers is the one of
-    seed 0 (the same in every frame).
+    ``spp``: the path tracer's samples per pixel; ``window``: the orthographic camera's zoom and pan
+    (:class:`~mitsuba_platonic.render.window.Window`, every renderer; None: the whole cube's
+    cross-section, the frame as without a window, bit for bit). The random sky of the lit
+    renderers is the one of seed 0 (the same in every frame).
 
     At k > 1 the marcher keeps its k² regular sub-pixel rays per pixel apart
     (:func:`~mitsuba_platonic.render.marcher.march_pixels`: the same kernel, k² times the rays); the
@@ -136,6 +185,7 @@ def render_frame(volume: torch.Tensor, view: Tuple[float, float, float], rendere
     if formation not in FORMATIONS:
         raise UserError(f"formation: expected one of {list(FORMATIONS)}, got {formation!r}")
     backend = RENDERERS[renderer]
+    window = window_or_none(window)
     c, n = volume.shape[0], volume.shape[-1]
     model = "ea" if backend in _LIT else FORMATIONS[formation]
     if CHANNELS[model] == 4 and c != 4:
@@ -161,6 +211,8 @@ def render_frame(volume: torch.Tensor, view: Tuple[float, float, float], rendere
         shown.append(f"spp {spp}, max depth {RenderSettings().max_depth}, sun and sky of seed 0")
     elif backend == "scatter_march":
         shown.append(f"{RenderSettings().steps_per_voxel} samples per voxel, sun and sky of seed 0")
+    if window is not None:
+        shown.append(f"zoom {window.zoom:.3g}×, centre ({window.centre[0]:+.3f}, {window.centre[1]:+.3f})")
     settings = RenderSettings.for_call(backend, model, **options)
     w = torch.tensor([view], dtype=torch.float64)
     w = (w / w.norm()).to(torch.float32)
@@ -172,12 +224,12 @@ def render_frame(volume: torch.Tensor, view: Tuple[float, float, float], rendere
         v = v.contiguous()
         if backend == "mitsuba" and k > 1:
             from ..render.marcher import march_pixels          # lazy: imports Dr.Jit, on the marcher's first frame
-            image = march_pixels(v, w, settings, k)[0]
+            image = march_pixels(v, w, settings, k, window)[0]
         else:
-            image = render_with(v, w, settings, 0)[0]
+            image = render_with(v, w, settings, 0, window)[0]
         image = to_display(image)
     seconds = time.perf_counter() - start
-    return Frame(image, seconds, ", ".join(shown), tuple(float(x) for x in w[0]), renderer, formation, r)
+    return Frame(image, seconds, ", ".join(shown), tuple(float(x) for x in w[0]), renderer, formation, r, window)
 
 
 # --------------------------------------------------------------------------- sources
