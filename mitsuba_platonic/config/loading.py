@@ -26,7 +26,7 @@ __all__ = ["saved_config", "checkpoint_config", "config_difference", "RESUME_SEC
 
 M = TypeVar("M")
 
-#: Options tried, measured and not adopted, then removed from the config (issue 44): their value
+#: Options tried, measured and not adopted, then removed from the config (issues 43, 44): their value
 #: when off, and the last commit with their code (the experiment log, docs/experiments/, has each).
 RETIRED = {
     ("model", "texture_surface"): (False, "3afe14f"),
@@ -36,6 +36,7 @@ RETIRED = {
     ("train", "light_warmup"): (0, "3afe14f"),
     ("train", "light_fade"): (0, "3afe14f"),
     ("train", "r1_every"): (1, "3afe14f"),
+    ("train", "silhouette_weight"): (0.0, "60a45a0"),      # issue 43: docs/experiments/photo-sides.md
 }
 
 
