@@ -47,7 +47,7 @@ import json
 import math
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any, Dict, List, Optional, Sequence, Tuple, Union
+from typing import Any, Dict, Iterator, List, NamedTuple, Optional, Sequence, Tuple, Union
 
 import numpy as np
 import torch
@@ -63,13 +63,25 @@ from . import metrics as M
 from .photos import photo_splits
 from .protocol import novel_view_errors
 
-__all__ = ["TruthScores", "framed_truth", "thickness", "turntable_in_camera", "score_against_truth", "SIDE", "BACK"]
+__all__ = ["PhotoTruth", "TruthScores", "framed_truth", "thickness", "truth_pairs", "turntable_in_camera",
+           "score_against_truth", "SIDE", "BACK"]
 
 PathLike = Union[str, Path]
 
 #: The turntable angles φ (degrees from the input view) of the side and back scores.
 SIDE = (90.0, -90.0)
 BACK = (180.0,)
+
+
+class PhotoTruth(NamedTuple):
+    """One held-out photo of :func:`truth_pairs`: its file, its image ``(4, R, R)``, the reconstruction
+    and the framed truth ``(4, R, R, R)`` (the input camera's frame), its true elevation θ (degrees)."""
+
+    file: str
+    photo: torch.Tensor
+    reconstruction: torch.Tensor
+    truth: torch.Tensor
+    elevation: float
 
 
 @dataclass
@@ -159,19 +171,19 @@ def _manifest(folder: Path) -> Tuple[Path, Dict[str, Dict[str, Any]]]:
                     f"3D truth needs a collection made by platonic make-dataset")
 
 
-def score_against_truth(model: Any, cfg: Any, data_path: Optional[PathLike] = None) -> TruthScores:
+def truth_pairs(model: Any, cfg: Any, data_path: Optional[PathLike] = None) -> Iterator[PhotoTruth]:
     """Reconstruct a folder run's held-out photos (:func:`~.photos.photo_splits`) with ``model`` (a
-    :class:`~mitsuba_platonic.model.Model` of EA) and score each against its ground truth (module
-    docstring). The photos must be a rendered collection's ``images/``; ``data_path`` replaces
-    ``cfg.data.path``."""
+    :class:`~mitsuba_platonic.model.Model` of EA) and yield, per photo, its file, its input image,
+    the reconstruction, its ground truth framed on the reconstruction's grid (:func:`framed_truth`)
+    and the photo's true elevation θ in degrees. The photos must be a rendered collection's
+    ``images/``; ``data_path`` replaces ``cfg.data.path``."""
     if cfg.render.model != "ea":
         raise UserError(f"scoring against 3D truth renders colour: it needs an EA run, got {cfg.render.model!r}")
     folder = Path(data_path if data_path is not None else cfg.data.path)
     root, records = _manifest(folder)
     _, photos, files = photo_splits(cfg, folder)
-    options = {k: v for k, v in cfg.data.image_kwargs().items()}
+    options = cfg.data.image_kwargs()
     recon = model.reconstruct(photos).detach().cpu()
-    scores = TruthScores()
     for k, file in enumerate(files):
         rec = records.get(str(Path(file).resolve()))
         if rec is None:
@@ -183,11 +195,19 @@ def score_against_truth(model: Any, cfg: Any, data_path: Optional[PathLike] = No
         truth = torch.from_numpy(np.load(root / rec["volume"])["volume"]).float()
         θ = math.degrees(math.asin(max(-1.0, min(1.0, float(rec["view"][1])))))
         t = framed_truth(truth, rec["view"], framing.square(), decoded.size[0], recon[k])
-        r = recon[k]
+        yield PhotoTruth(str(file), photos[k].cpu(), recon[k], t, θ)
+
+
+def score_against_truth(model: Any, cfg: Any, data_path: Optional[PathLike] = None) -> TruthScores:
+    """Score each held-out photo's reconstruction against its ground truth (:func:`truth_pairs`,
+    the module docstring)."""
+    scores = TruthScores()
+    for pair in truth_pairs(model, cfg, data_path):
+        r, t, θ = pair.reconstruction, pair.truth, pair.elevation
         front_mae, front_iou = novel_view_errors(r, t, "ea", turntable_in_camera(θ, (0.0,)))
         side_mae, side_iou = novel_view_errors(r, t, "ea", turntable_in_camera(θ, SIDE))
         back_mae, back_iou = novel_view_errors(r, t, "ea", turntable_in_camera(θ, BACK))
-        scores.files.append(str(file))
+        scores.files.append(pair.file)
         scores.front_iou.append(front_iou)
         scores.side_iou.append(side_iou)
         scores.side_mae.append(side_mae)

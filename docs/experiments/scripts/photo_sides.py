@@ -15,7 +15,6 @@ Figures and a picture only; docs/experiments/photo-sides.md reads them.
 from __future__ import annotations
 
 import argparse
-import math
 from pathlib import Path
 
 import numpy as np
@@ -25,10 +24,7 @@ from PIL import Image
 
 from mitsuba_platonic.config import config_from_dict
 from mitsuba_platonic.config.loading import without_retired
-from mitsuba_platonic.data.photos import decode_image
-from mitsuba_platonic.data.photos.prepare import photo_framing
-from mitsuba_platonic.evaluate.photo_truth import _manifest, framed_truth, thickness, turntable_in_camera
-from mitsuba_platonic.evaluate.photos import photo_splits
+from mitsuba_platonic.evaluate.photo_truth import thickness, truth_pairs, turntable_in_camera
 from mitsuba_platonic.model import Model
 from mitsuba_platonic.render import render
 
@@ -50,34 +46,24 @@ def main() -> None:
     args = ap.parse_args()
     cfg = config_from_dict(without_retired(yaml.safe_load((args.run / "config.yaml").read_text())))   # a retired key at its off value is dropped
     model = Model.from_checkpoint(args.run)
-    folder = Path(cfg.data.path)
-    root, records = _manifest(folder)
-    _, photos, files = photo_splits(cfg, folder)
-    recon = model.reconstruct(photos).detach().cpu()
     rows, holes, extra, thick = [], [], [], []
-    for k, file in enumerate(files):
-        rec = records[str(Path(file).resolve())]
-        decoded = decode_image(file)
-        square = photo_framing(decoded, name=str(file), **cfg.data.image_kwargs()).square()
-        truth = torch.from_numpy(np.load(root / rec["volume"])["volume"]).float()
-        θ = math.degrees(math.asin(max(-1.0, min(1.0, float(rec["view"][1])))))
-        t = framed_truth(truth, rec["view"], square, decoded.size[0], recon[k])
-        views = turntable_in_camera(θ, AZIMUTHS)
+    for k, pair in enumerate(truth_pairs(model, cfg)):
+        views = turntable_in_camera(pair.elevation, AZIMUTHS)
         with torch.no_grad():
-            r_img = render(recon[k][None].expand(len(views), -1, -1, -1, -1).contiguous(), views, "ea")
-            t_img = render(t[None].expand(len(views), -1, -1, -1, -1).contiguous(), views, "ea")
+            r_img = render(pair.reconstruction[None].expand(len(views), -1, -1, -1, -1).contiguous(), views, "ea")
+            t_img = render(pair.truth[None].expand(len(views), -1, -1, -1, -1).contiguous(), views, "ea")
         side_r, side_t = r_img[2:4, 3] >= 0.5, t_img[2:4, 3] >= 0.5       # φ = ±90°
         holes.append(float((side_t & ~side_r).sum() / side_t.sum()))
         extra.append(float((side_r & ~side_t).sum() / side_t.sum()))
-        thick.append(thickness(recon[k], t))
+        thick.append(thickness(pair.reconstruction, pair.truth))
         if k < args.photos:
-            rows.append(np.concatenate([srgb_tile(photos[k].cpu())] + [srgb_tile(i) for i in r_img]
+            rows.append(np.concatenate([srgb_tile(pair.photo)] + [srgb_tile(i) for i in r_img]
                                        + [srgb_tile(i) for i in t_img[2:]], axis=1))
     args.out.mkdir(parents=True, exist_ok=True)
     sheet = Image.fromarray(np.concatenate(rows, axis=0))
     sheet.resize((sheet.width * 3, sheet.height * 3), Image.NEAREST).save(args.out / "turntable.png")
     print(f"{args.run}: side holes {np.mean(holes):.3f}, side extra {np.mean(extra):.3f}, "
-          f"thickness {np.mean(thick):.2f} (over {len(files)} held-out photos)")
+          f"thickness {np.mean(thick):.2f} (over {len(thick)} held-out photos)")
     print("columns: photo | reconstruction at 0°, 45°, 90°, −90°, 180° | truth at 90°, −90°, 180°")
 
 
