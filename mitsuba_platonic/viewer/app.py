@@ -4,16 +4,23 @@ Per browser (viser client) a :class:`ClientView` keeps the GUI and a render thre
 message gives the view ω = normalize(position − look_at) (the scene's up is +y, so viser's
 orbit camera has the project's frame: right = (ω_z, 0, −ω_x), up = ω × right) and the window of
 the orthographic camera (:func:`~.scene.camera_window`, every renderer draws it,
-:mod:`mitsuba_platonic.render.window`), with d = |position − look_at|:
+:mod:`mitsuba_platonic.render.window`). viser's camera is a perspective one of vertical field of
+view F (the browser reports it; :data:`FOV` ≈ 28.1° here) on a canvas of width/height a; at the
+distance d = |position − look_at| it shows 2 d tan(F/2) world units over the canvas' height, and
+the window takes that scale:
 
-    zoom m = clamp(DISTANCE / d, ¼, 8)           (half-width h = d / DISTANCE: a closer camera magnifies)
+    half-width h = d tan(F/2) min(1, a), zoom m = 1/h, clamped to ¼ … 8     (a closer camera magnifies)
     centre = (look_at · right, look_at · up)     (look_at's offset from the cube's centre on the camera plane)
 
 so zooming (viser's wheel: the distance) magnifies the frame about its centre, and panning
 (look_at and position moved together, ω kept) moves the window: the volume moves the other way,
-m R/2 pixels per world unit. A frame of resolution R shows a world point at lateral coordinates
-(X, Y) at pixel column (1 + (X − c_x) m) R/2, row (1 − (Y − c_y) m) R/2. At the initial camera
-(d = DISTANCE, look_at 0) the frames are the renderers' whole-cube frames, bit for bit.
+by as many pixels on the canvas as the mouse moved (viser trucks the camera by the mouse's travel
+at the look-at point's scale, the frame's scale). A frame of resolution R shows a world point at
+lateral coordinates (X, Y) at pixel column (1 + (X − c_x) m) R/2, row (1 − (Y − c_y) m) R/2. At
+the initial camera (d = :data:`DISTANCE` = 1/tan(:data:`FOV`/2), look_at 0) on a canvas wider than
+tall the frames are the renderers' whole-cube frames, bit for bit (on a taller one, the cube's
+middle: "reset zoom and pan" moves the camera back to show it whole). The browser's dolly is
+held to the distances of zoom ¼ … 8 for its F and a.
 
 While the camera keeps moving (a message within :data:`SETTLE_S`), the thread renders a
 low-resolution frame (a quarter of the resolution, at least the volume's; the same resolution
@@ -34,6 +41,7 @@ from __future__ import annotations
 
 import contextlib
 import io
+import math
 import socket
 import threading
 import time
@@ -47,14 +55,17 @@ import viser
 from ..errors import UserError
 from ..views import camera_frames, from_angles, to_angles
 from .scene import (BACKGROUND, ZOOM_RANGE, Exports, Frame, Scene, Window, camera_window, formations_for,
-                    render_frame, renderers_for, resolutions_for)
+                    render_frame, renderers_for, resolutions_for, zoom_distance)
 
 __all__ = ["ViewerApp", "check_port", "SETTLE_S"]
 
 #: A camera at rest this long gets its full-resolution frame.
 SETTLE_S = 0.2
-#: Distance of the initial camera from the centre (the cube is [−1, 1]³); the zoom is DISTANCE / d.
+#: Distance of the initial camera from the centre (the cube is [−1, 1]³).
 DISTANCE = 4.0
+#: viser's vertical field of view, 2 atan(1/DISTANCE) ≈ 28.1°: the initial camera shows the cube's
+#: cross-section [−1, 1] over the canvas' height, the frame at zoom 1 (:func:`~.scene.camera_window`).
+FOV = 2.0 * math.atan(1.0 / DISTANCE)
 #: The zoom buttons' factor, and the pan buttons' step as a fraction of the frame's width.
 ZOOM_STEP, PAN_STEP = 2.0, 0.25
 #: Frames are enlarged to at least this many pixels a side before they are padded to the canvas' aspect.
@@ -122,6 +133,7 @@ class ViewerApp:
         self.server.initial_camera.position = (0.0, 0.0, DISTANCE)
         self.server.initial_camera.look_at = (0.0, 0.0, 0.0)
         self.server.initial_camera.up = (0.0, 1.0, 0.0)
+        self.server.initial_camera.fov = FOV
         self.clients = {}
         self.server.on_client_connect(self._connect)
         self.server.on_client_disconnect(self._disconnect)
@@ -169,10 +181,11 @@ class ClientView:
         self.count = 0
         self.frame: Optional[Frame] = None
         self.times = {}                                    # renderer → last full frame's seconds
+        self.limits = (0.01, 1e4)                          # the browser's dolly limits as set (viser's defaults)
         self._gui()
-        # the browser's own dolly stops where the zoom does (ZOOM_RANGE): the wheel never runs past it
-        client.camera.min_orbit_distance = DISTANCE / ZOOM_RANGE[1]
-        client.camera.max_orbit_distance = DISTANCE / ZOOM_RANGE[0]
+        # the camera viser connects a page with is the browser's default, before it takes the initial one
+        # (DISTANCE, FOV): draw the initial camera until the page says where it is
+        self._limit_distance(FOV, 1.0)
         client.camera.on_update(self._camera)
         self.thread = threading.Thread(target=self._loop, name=f"render-{client.client_id}", daemon=True)
         self.thread.start()
@@ -207,7 +220,8 @@ class ClientView:
             gui.add_button("zoom out").on_click(lambda _: self.zoom_by(1.0 / ZOOM_STEP))
             for label, dx, dy in (("pan left", -1, 0), ("pan right", 1, 0), ("pan up", 0, 1), ("pan down", 0, -1)):
                 gui.add_button(label).on_click(self._pan_by(dx * PAN_STEP, dy * PAN_STEP))
-            gui.add_button("reset zoom and pan").on_click(lambda _: self.move_camera(np.zeros(3), DISTANCE))
+            gui.add_button("reset zoom and pan").on_click(
+                lambda _: self.move_camera(np.zeros(3), zoom_distance(1.0, *self._lens())))
         self.source_gui(gui)
         with gui.add_folder("Export"):
             self.name = gui.add_text("name", initial_value="view", hint="a file name inside the output folder")
@@ -263,13 +277,36 @@ class ClientView:
 
     # -- camera -----------------------------------------------------------------------------------
 
+    def _lens(self) -> Tuple[float, float]:
+        """This browser's vertical field of view (radians) and canvas width/height, as it last said
+        (:data:`FOV` and 1 before it has)."""
+        cam = self.client.camera
+        fov, height = float(cam.fov), cam.image_height
+        if not (0.0 < fov < math.pi and height > 0 and cam.image_width > 0):
+            return FOV, 1.0
+        return fov, cam.image_width / height
+
+    def _limit_distance(self, fov: float, aspect: float) -> None:
+        """The browser's own dolly stops where the zoom does (:data:`ZOOM_RANGE`): the wheel never runs past it."""
+        near, far = zoom_distance(ZOOM_RANGE[1], fov, aspect), zoom_distance(ZOOM_RANGE[0], fov, aspect)
+        if np.allclose((near, far), self.limits):
+            return
+        cam = self.client.camera
+        if near > self.limits[1]:                          # each setter refuses a minimum above the maximum
+            cam.max_orbit_distance, cam.min_orbit_distance = far, near
+        else:
+            cam.min_orbit_distance, cam.max_orbit_distance = near, far
+        self.limits = (near, far)
+
     def _camera(self, camera) -> None:
         position, look = np.asarray(camera.position, float), np.asarray(camera.look_at, float)
         w = position - look
         norm = float(np.linalg.norm(w))
         if norm < 1e-9 or not np.isfinite(w).all():
             return
-        window = camera_window(position, look, DISTANCE)
+        fov, aspect = self._lens()
+        window = camera_window(position, look, fov, aspect)
+        self._limit_distance(fov, aspect)
         with self.lock:
             self.view = w / norm
             self.window = window
@@ -292,7 +329,7 @@ class ClientView:
             cam.up_direction = (0.0, 1.0, 0.0)
             cam.position = tuple(position)                  # viser moves look_at along with the position:
             cam.look_at = tuple(look)                         # set it back, to orbit about it
-        window = camera_window(position, look, DISTANCE)
+        window = camera_window(position, look, *self._lens())
         with self.lock:                                    # render it even before the browser echoes it
             self.view, self.window = w, window
             self.last_move = 0.0
@@ -301,7 +338,8 @@ class ClientView:
     def zoom_by(self, factor: float) -> None:
         """Zoom ``factor`` times about the look-at point (the distance ÷ ``factor``, within :data:`ZOOM_RANGE`)."""
         look, d = self._place()
-        d = min(max(d / factor, DISTANCE / ZOOM_RANGE[1]), DISTANCE / ZOOM_RANGE[0])
+        lens = self._lens()
+        d = min(max(d / factor, zoom_distance(ZOOM_RANGE[1], *lens)), zoom_distance(ZOOM_RANGE[0], *lens))
         self.move_camera(look, d)
 
     def _pan_by(self, dx: float, dy: float) -> Callable:
@@ -338,7 +376,7 @@ class ClientView:
         low = max(n, full // 4) if self.low.value else full
         res, quality = (low, "moving") if moving else (full, "full")
         return (view, self.renderer.value, self.formation.value, res, int(self.spp.value), self.app.version,
-                self.client.camera.aspect, quality, window)
+                self._lens()[1], quality, window)
 
     def _loop(self) -> None:
         while not self.stopped:
