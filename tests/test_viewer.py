@@ -363,6 +363,33 @@ def test_run_sources_step_through_inputs_and_latents(runs, tmp_path, monkeypatch
     assert not torch.equal(gen.volume, a)
 
 
+def test_the_server_renders_the_first_frame_while_the_page_loads(volume_file, tmp_path):
+    """As the server starts, a thread renders the frame a page asks for first (the front view, the
+    page's initial controls) under the render lock; the page's request then gets that frame, the
+    closed form's pixels, without rendering again. A camera that only echoes the drawn one in
+    float32 is the same camera (nothing to render); a move of 1e-4 is not."""
+    from mitsuba_platonic.viewer.app import ViewerApp, _same_camera, initial_key
+    from mitsuba_platonic.viewer.scene import Window
+
+    app = ViewerApp(open_source(volume_file), tmp_path / "exports", port=0)
+    try:
+        app.warming.join(timeout=300)
+        key = initial_key(app.scene)
+        assert key == ((0.0, 0.0, 1.0), "closed form", "EA", N, 4, 0, None)
+        assert app.last is not None and app.last[0] == key
+        assert app.frame_for(key) is app.last[1]
+        np.testing.assert_array_equal(app.last[1].image, closed_form(read_volume_file(volume_file)[0], 0.0, 0.0))
+    finally:
+        app.stop()
+    front = np.array([0.0, 0.0, 1.0])
+    echo = np.array([0.0, 2.4492936e-16, 4.0], np.float32) / np.float32(4.0)
+    assert _same_camera(echo, None, front, None)
+    assert _same_camera(front, Window(2.0, (0.5, 0.0)), front, Window(2.0 + 1e-7, (0.5 + 1e-7, 0.0)))
+    assert not _same_camera(front + [1e-4, 0.0, 0.0], None, front, None)
+    assert not _same_camera(front, Window(2.0), front, None)
+    assert not _same_camera(front, Window(2.0, (0.5, 0.0)), front, Window(2.0, (0.5001, 0.0)))
+
+
 # --------------------------------------------------------------------------- in the browser
 
 
@@ -504,6 +531,8 @@ def test_the_page_shows_the_closed_form_and_follows_the_camera(page, server, vol
     assert mean <= TOLERANCE and p95 <= TOLERANCE_MAX, (mean, p95)
     assert _views_apart(shown, side)                                         # the check tells views apart
     print(f"first frame {first:.1f} s after the command; screenshot vs closed form: mean {mean:.2f}, p95 {p95:.1f}")
+    # a page that opens and rests draws one frame: the browser's echoes of its first camera render nothing
+    assert int(_frame(page, r"az 0\.0° el 0\.0°").group(1)) == 1
 
     page.get_by_role("button", name="azimuth +30").click()
     _frame(page, r"az 30\.0° el 0\.0°")

@@ -20,7 +20,13 @@ lateral coordinates (X, Y) at pixel column (1 + (X − c_x) m) R/2, row (1 − (
 the initial camera (d = :data:`DISTANCE` = 1/tan(:data:`FOV`/2), look_at 0) on a canvas wider than
 tall the frames are the renderers' whole-cube frames, bit for bit (on a taller one, the cube's
 middle: "reset zoom and pan" moves the camera back to show it whole). The browser's dolly is
-held to the distances of zoom ¼ … 8 for its F and a.
+held to the distances of zoom ¼ … 8 for its F and a. A camera message that only echoes the
+camera drawn (float32 noise, :data:`VIEW_SNAP`) renders nothing again.
+
+Frames come from :meth:`ViewerApp.frame_for`, one render at a time (a lock), which hands back the
+last frame rendered where it is asked for again (another page's, the same picture at rest). As
+the server starts, a thread renders the frame a page asks for first (:func:`initial_key`) while
+the browser loads the page.
 
 While the camera keeps moving (a message within :data:`SETTLE_S`), the thread renders a
 low-resolution frame (a quarter of the resolution, at least the volume's; the same resolution
@@ -54,8 +60,8 @@ import viser
 
 from ..errors import UserError
 from ..views import camera_frames, from_angles, to_angles
-from .scene import (BACKGROUND, ZOOM_RANGE, Exports, Frame, Scene, Window, camera_window, formations_for,
-                    render_frame, renderers_for, resolutions_for, zoom_distance)
+from .scene import (BACKGROUND, WINDOW_SNAP, ZOOM_RANGE, Exports, Frame, Scene, Window, camera_window,
+                    formations_for, render_frame, renderers_for, resolutions_for, zoom_distance)
 
 __all__ = ["ViewerApp", "check_port", "SETTLE_S"]
 
@@ -66,6 +72,13 @@ DISTANCE = 4.0
 #: viser's vertical field of view, 2 atan(1/DISTANCE) ≈ 28.1°: the initial camera shows the cube's
 #: cross-section [−1, 1] over the canvas' height, the frame at zoom 1 (:func:`~.scene.camera_window`).
 FOV = 2.0 * math.atan(1.0 / DISTANCE)
+#: A camera message whose view differs from the drawn one by at most this (each component of ω)
+#: and whose window by at most :data:`~.scene.WINDOW_SNAP` is the browser's float32 echo of the
+#: camera the server set (or of the first camera): nothing moved, nothing to render again.
+VIEW_SNAP = 1e-6
+#: The page's controls as it opens: the renderer and the path tracer's spp (the formation: the
+#: volume's richest, EA or AO; the resolution: the volume's).
+INITIAL_RENDERER, INITIAL_SPP = "closed form", 4
 #: The zoom buttons' factor, and the pan buttons' step as a fraction of the frame's width.
 ZOOM_STEP, PAN_STEP = 2.0, 0.25
 #: Frames are enlarged to at least this many pixels a side before they are padded to the canvas' aspect.
@@ -87,6 +100,25 @@ def check_port(host: str, port: int) -> None:
         except OSError as e:
             raise UserError(f"--port {port}: {host}:{port} cannot be used ({e.strerror or e}); choose another "
                             f"--port (0 picks a free one)") from None
+
+
+def initial_key(scene: Scene, version: int = 0) -> Tuple:
+    """The frame a page asks for first: the front view through the whole window with the page's
+    initial controls, as :meth:`ClientView._request` keys it."""
+    c, n = scene.volume.shape[0], scene.volume.shape[-1]
+    return ((0.0, 0.0, 1.0), INITIAL_RENDERER, formations_for(c)[-1], resolutions_for(n)[0], INITIAL_SPP, version,
+            None)
+
+
+def _same_camera(view_a: np.ndarray, window_a: Optional[Window], view_b: np.ndarray,
+                 window_b: Optional[Window]) -> bool:
+    """Whether two cameras draw the same frame but for float32 noise (:data:`VIEW_SNAP`, :data:`WINDOW_SNAP`)."""
+    if np.abs(np.asarray(view_a) - np.asarray(view_b)).max() > VIEW_SNAP:
+        return False
+    if window_a is None or window_b is None:
+        return window_a is window_b
+    return (abs(window_a.zoom / window_b.zoom - 1.0) <= WINDOW_SNAP
+            and max(abs(a - b) for a, b in zip(window_a.centre, window_b.centre)) <= WINDOW_SNAP)
 
 
 def _pad_to_aspect(image: np.ndarray, aspect: float) -> np.ndarray:
@@ -123,6 +155,7 @@ class ViewerApp:
         self.render_lock = threading.Lock()               # one render at a time (torch's and Dr.Jit's threads)
         self.scene_lock = threading.RLock()
         self.version = 0                                   # bumped when the volume changes
+        self.last: Optional[Tuple[Tuple, Frame]] = None     # the last frame rendered (any page's) and its key
         with contextlib.redirect_stdout(io.StringIO()):      # viser's own banner: the command prints the address
             self.server = viser.ViserServer(host=host, port=port, label="platonic view", verbose=False)
         if port and self.server.get_port() != port:        # taken between the check and the bind
@@ -137,6 +170,8 @@ class ViewerApp:
         self.clients = {}
         self.server.on_client_connect(self._connect)
         self.server.on_client_disconnect(self._disconnect)
+        self.warming = threading.Thread(target=self._warm_up, name="warm-up", daemon=True)
+        self.warming.start()
 
     @property
     def url(self) -> str:
@@ -150,6 +185,35 @@ class ViewerApp:
         view = self.clients.pop(client.client_id, None)
         if view is not None:
             view.stop()
+
+    def _warm_up(self) -> None:
+        """Render the first frame a page asks for (:func:`initial_key`) while the browser loads the
+        page, and encode it once as the page does (viser's PNG and JPEG encoders load their
+        libraries on first use): the page's own request then finds the frame done
+        (:meth:`frame_for`), or waits on the render lock for it, instead of paying torch's and the
+        encoder's first calls after the page connects."""
+        try:
+            frame = self.frame_for(initial_key(self.scene))
+            from viser._image_encoding import cv2_imencode_with_fallback   # lazy: viser's own encoder, warmed only
+            image = _pad_to_aspect(frame.image, 16 / 9)
+            for fmt in ("png", "jpeg"):
+                cv2_imencode_with_fallback(fmt, image, jpeg_quality=90, channel_ordering="rgb")
+        except Exception:                                  # the page's own request renders it and shows why
+            pass
+
+    def frame_for(self, key: Tuple) -> Frame:
+        """The frame of ``key`` (view, renderer, formation, resolution, spp, volume version, window):
+        the last frame rendered where it has that key (the warm-up's, another page's, the same
+        picture asked for again at rest), else rendered now; one render at a time."""
+        with self.render_lock:
+            if self.last is not None and self.last[0] == key:
+                return self.last[1]
+            view, renderer, formation, res, spp, _, window = key
+            with self.scene_lock:
+                version = self.version                       # the volume it renders (a newer one where it changed)
+                frame = render_frame(self.scene.volume, view, renderer, formation, res, spp, window)
+            self.last = (key[:5] + (version,) + key[6:], frame)
+            return frame
 
     def volume_changed(self) -> None:
         """The scene's volume changed (another input or latent): every page renders again."""
@@ -174,7 +238,7 @@ class ClientView:
         self.lock = threading.Lock()
         self.wake = threading.Event()
         self.stopped = False
-        self.view = np.array([0.0, 0.0, 1.0])
+        self.view = np.array(initial_key(app.scene)[0])
         self.window: Optional[Window] = None              # the full window: the initial camera
         self.last_move = 0.0
         self.shown: Optional[Tuple] = None
@@ -200,13 +264,13 @@ class ClientView:
         self.info = gui.add_markdown("frame: waiting for the first frame")
         self.settings = gui.add_markdown("")
         with gui.add_folder("Renderer"):
-            self.renderer = gui.add_dropdown("renderer", renderers_for(c), initial_value="closed form")
+            self.renderer = gui.add_dropdown("renderer", renderers_for(c), initial_value=INITIAL_RENDERER)
             self.formation = gui.add_dropdown("formation", formations_for(c), initial_value=formations_for(c)[-1],
                                               hint="VH, AO: density only; EA: colour (the lit renderers form EA)")
             choices = [str(r) for r in resolutions_for(n)]
             self.resolution = gui.add_dropdown("resolution", choices, initial_value=choices[0],
                                                hint="image pixels per side")
-            self.spp = gui.add_slider("path tracer spp", min=1, max=64, step=1, initial_value=4)
+            self.spp = gui.add_slider("path tracer spp", min=1, max=64, step=1, initial_value=INITIAL_SPP)
             self.low = gui.add_checkbox("low resolution while moving", initial_value=True,
                                         hint="a quarter of the resolution (at least the volume's) while the camera moves")
             for handle in (self.renderer, self.formation, self.resolution, self.spp, self.low):
@@ -308,6 +372,8 @@ class ClientView:
         window = camera_window(position, look, fov, aspect)
         self._limit_distance(fov, aspect)
         with self.lock:
+            if _same_camera(w / norm, window, self.view, self.window):
+                return                                     # an echo: the frame drawn is this camera's
             self.view = w / norm
             self.window = window
             self.last_move = time.monotonic()
@@ -375,8 +441,8 @@ class ClientView:
         n = self.app.scene.volume.shape[-1]
         low = max(n, full // 4) if self.low.value else full
         res, quality = (low, "moving") if moving else (full, "full")
-        return (view, self.renderer.value, self.formation.value, res, int(self.spp.value), self.app.version,
-                self._lens()[1], quality, window)
+        key = (view, self.renderer.value, self.formation.value, res, int(self.spp.value), self.app.version, window)
+        return key, self._lens()[1], quality
 
     def _loop(self) -> None:
         while not self.stopped:
@@ -400,10 +466,9 @@ class ClientView:
                 self.shown = request
 
     def _render(self, request: Tuple) -> None:
-        view, renderer, formation, res, spp, version, aspect, quality, window = request
-        with self.app.render_lock, self.app.scene_lock:
-            volume = self.app.scene.volume
-            frame = render_frame(volume, view, renderer, formation, res, spp, window)
+        key, aspect, quality = request
+        view, renderer, _, res, _, _, window = key
+        frame = self.app.frame_for(key)
         if self.stopped:
             return
         # full frames lossless (PNG, what the tests compare), moving ones as JPEG (a tenth of the encoding time)
