@@ -19,7 +19,9 @@ renderer's frame through the window the page prints (the same tolerance), and on
 0.2 the silhouette (pixels brighter than halfway from the background to the ball) must scale by
 the zoom m (√ of its area, within :data:`SCALE_TOLERANCE`) and its centroid move by
 (+c_y, −c_x) m R/2 pixels (rows, columns) for a window centre (c_x, c_y), within
-:data:`SHIFT_TOLERANCE` pixels.
+:data:`SHIFT_TOLERANCE` pixels; after a right-drag, as many canvas pixels as the mouse travelled
+(the ball stays under the mouse), within :data:`DRAG_TOLERANCE`. Without a browser,
+camera_window's frame is checked against viser's perspective projection point by point.
 """
 
 from __future__ import annotations
@@ -65,6 +67,9 @@ SCALE_TOLERANCE = 0.04
 #: Silhouette centroid against the expected shift, pixels of a 64² frame: measured 0 (the buttons'
 #: whole-pixel pans) and 0.07 (a right-drag's); allowed 0.6.
 SHIFT_TOLERANCE = 0.6
+#: The ball's move on the canvas against the mouse's travel in a right-drag, as a fraction of the
+#: travel (60 pixels left, 40 down): measured 0.8 % (0.5 pixel); allowed 5 %.
+DRAG_TOLERANCE = 0.05
 
 
 def closed_form(volume: torch.Tensor, azimuth: float, elevation: float) -> np.ndarray:
@@ -104,27 +109,95 @@ def test_the_marchers_finer_frames_are_its_sub_pixel_rays():
     np.testing.assert_array_equal(frame.image, to_display(fine[0]))
 
 
-def test_the_camera_gives_the_window_zoom_by_distance_pan_by_look_at():
-    """camera_window: m = clamp(DISTANCE / d, ¼, 8), centre = look_at's coordinates along the view's
-    (right, up); the initial camera (and float32 echoes of it) has none; bad input is a ValueError."""
-    from mitsuba_platonic.viewer.scene import ZOOM_RANGE, Window, camera_window
+#: The viewer's field of view (mitsuba_platonic.viewer.app.FOV): zoom 1 at distance 4.
+FOV = 2.0 * math.atan(1.0 / 4.0)
 
-    assert camera_window((0, 0, 4), (0, 0, 0), 4.0) is None
-    assert camera_window(np.float32([0, 0, 4.0000005]), np.float32([1e-7, 0, 0]), 4.0) is None
-    assert camera_window((0, 0, 2), (0, 0, 0), 4.0) == Window(2.0)
-    assert camera_window((0, 0, 100), (0, 0, 0), 4.0) == Window(ZOOM_RANGE[0])
-    assert camera_window((0, 0, 0.01), (0, 0, 0), 4.0) == Window(ZOOM_RANGE[1])
-    win = camera_window((0.5, 0.25, 4.0), (0.5, 0.25, 0.0), 4.0)           # the front view panned: right +x, up +y
+
+def test_the_camera_gives_the_window_zoom_by_distance_pan_by_look_at():
+    """camera_window: m = clamp(1 / (d tan(F/2) min(1, aspect)), ¼, 8), centre = look_at's coordinates
+    along the view's (right, up); the initial camera (and float32 echoes of it) has none; bad input
+    is a ValueError."""
+    from mitsuba_platonic.viewer.scene import ZOOM_RANGE, Window, camera_window, zoom_distance
+
+    assert camera_window((0, 0, 4), (0, 0, 0), FOV) is None
+    assert camera_window(np.float32([0, 0, 4.0000005]), np.float32([1e-7, 0, 0]), FOV, 16 / 9) is None
+    assert np.isclose(camera_window((0, 0, 2), (0, 0, 0), FOV).zoom, 2.0)
+    assert np.isclose(camera_window((0, 0, 4), (0, 0, 0), FOV, 0.5).zoom, 2.0)     # portrait: the canvas' width
+    assert np.isclose(camera_window((0, 0, 0.5), (0, 0, 0), math.radians(90.0)).zoom, 2.0)     # tan 45° = 1
+    assert camera_window((0, 0, 100), (0, 0, 0), FOV) == Window(ZOOM_RANGE[0])
+    assert camera_window((0, 0, 0.01), (0, 0, 0), FOV) == Window(ZOOM_RANGE[1])
+    assert np.isclose(zoom_distance(2.0, FOV), 2.0) and np.isclose(zoom_distance(1.0, FOV, 0.5), 8.0)
+    win = camera_window((0.5, 0.25, 4.0), (0.5, 0.25, 0.0), FOV)           # the front view panned: right +x, up +y
     assert win == Window(1.0, (0.5, 0.25))
     w = from_angles(90.0, 0.0).double().numpy()                          # from +x: right = −z, up = +y
-    win = camera_window(np.array([0.0, 0.3, 0.2]) + 2.0 * w, (0.0, 0.3, 0.2), 4.0)
+    win = camera_window(np.array([0.0, 0.3, 0.2]) + 2.0 * w, (0.0, 0.3, 0.2), FOV)
     assert np.isclose(win.zoom, 2.0) and np.allclose(win.centre, (-0.2, 0.3))
-    for position, look, distance, message in (((0, 0, 1), (0, 0, 1), 4.0, "look-at point"),
-                                              ((0, np.nan, 1), (0, 0, 0), 4.0, "finite"),
-                                              ((0, 0, 4), (0, 0, 0), 0.0, "distance"),
-                                              ((0, 0, 4), (0, 0, 0), float("inf"), "distance")):
+    for position, look, fov, aspect, message in (((0, 0, 1), (0, 0, 1), FOV, 1.0, "look-at point"),
+                                                 ((0, np.nan, 1), (0, 0, 0), FOV, 1.0, "finite"),
+                                                 ((0, 0, 4), (0, 0, 0), 0.0, 1.0, "fov"),
+                                                 ((0, 0, 4), (0, 0, 0), math.pi, 1.0, "fov"),
+                                                 ((0, 0, 4), (0, 0, 0), float("nan"), 1.0, "fov"),
+                                                 ((0, 0, 4), (0, 0, 0), FOV, 0.0, "aspect"),
+                                                 ((0, 0, 4), (0, 0, 0), FOV, float("inf"), "aspect")):
         with pytest.raises(ValueError, match=message):
-            camera_window(position, look, distance)
+            camera_window(position, look, fov, aspect)
+
+
+def _viser_pixel(point, position, look_at, fov: float, height: float) -> np.ndarray:
+    """Where viser's perspective camera draws a world point: canvas pixels (right, down) from the
+    canvas' centre. three.js: the camera looks from ``position`` at ``look_at`` with up +y (its x
+    axis up × z, z from the target to the eye), vertical field of view ``fov`` over ``height`` pixels."""
+    z = np.subtract(position, look_at)
+    z = z / np.linalg.norm(z)
+    x = np.cross([0.0, 1.0, 0.0], z)
+    x = x / np.linalg.norm(x)
+    y = np.cross(z, x)
+    rel = np.subtract(point, position)
+    focal = height / (2.0 * math.tan(fov / 2.0))
+    return focal * np.array([rel @ x, -(rel @ y)]) / -(rel @ z)
+
+
+def _page_pixel(point, position, look_at, fov: float, width: float, height: float) -> np.ndarray:
+    """Where the page draws it: the frame of camera_window's window (its image coordinates, window.py)
+    as the centred square the canvas' shorter side wide; canvas pixels (right, down) from the centre."""
+    from mitsuba_platonic.viewer.scene import Window, camera_window
+    from mitsuba_platonic.views import camera_frames
+
+    window = camera_window(position, look_at, fov, width / height) or Window()
+    w = np.subtract(position, look_at)
+    right, up, _ = (f[0].numpy() for f in camera_frames(torch.from_numpy(w / np.linalg.norm(w))[None]))
+    x, y = window.image_point((float(np.dot(point, right)), float(np.dot(point, up))))
+    return np.array([x, -y]) * min(width, height) / 2.0
+
+
+@pytest.mark.parametrize("width, height", [(1400, 600), (600, 900)])
+def test_a_point_at_the_look_at_distance_sits_where_the_browsers_camera_draws_it(width, height):
+    """The frame's scale is viser's perspective scale at the look-at point, 2 d tan(F/2) world units
+    over the canvas' height: a point on the plane through the look-at point, facing the camera, is
+    drawn at the canvas pixel where the browser's camera projects it, for any view, look-at point,
+    distance and canvas. So panning by Δ world units (camera and look-at moved together, what
+    viser's right-drag does for a mouse travel of Δ H / (2 d tan(F/2)) pixels) moves it by that
+    many pixels, as the mouse, and zooming (the distance) scales it about the look-at point as the
+    browser's camera does."""
+    rng = np.random.default_rng(0)
+    for az, el, d, fov in ((0.0, 0.0, 4.0, FOV), (40.0, 25.0, 1.7, FOV), (-120.0, -60.0, 9.0, FOV),
+                           (200.0, 10.0, 1.2, math.radians(75.0))):
+        w = from_angles(az, el).double().numpy()
+        x = np.cross([0.0, 1.0, 0.0], w)
+        x = x / np.linalg.norm(x)
+        y = np.cross(w, x)
+        look = rng.uniform(-0.5, 0.5, 3)
+        world_per_pixel = 2.0 * d * math.tan(fov / 2.0) / height
+        for delta in (np.zeros(2), np.array([0.3, -0.2])):             # a pan of Δ along (right, up)
+            at = look + delta[0] * x + delta[1] * y
+            position = at + d * w
+            for s, t in rng.uniform(-0.8, 0.8, (5, 2)):
+                point = look + s * x + t * y                            # on the look-at plane, fixed on the object
+                seen = _viser_pixel(point, position, at, fov, height)
+                drawn = _page_pixel(point, position, at, fov, width, height)
+                np.testing.assert_allclose(drawn, seen, atol=1e-6)
+                unpanned = _page_pixel(point, look + d * w, look, fov, width, height)
+                np.testing.assert_allclose(drawn - unpanned, -delta * [1, -1] / world_per_pixel, atol=1e-6)
 
 
 def test_a_windowed_frame_is_the_renderers_frame_through_the_window():
@@ -290,6 +363,33 @@ def test_run_sources_step_through_inputs_and_latents(runs, tmp_path, monkeypatch
     assert not torch.equal(gen.volume, a)
 
 
+def test_the_server_renders_the_first_frame_while_the_page_loads(volume_file, tmp_path):
+    """As the server starts, a thread renders the frame a page asks for first (the front view, the
+    page's initial controls) under the render lock; the page's request then gets that frame, the
+    closed form's pixels, without rendering again. A camera that only echoes the drawn one in
+    float32 is the same camera (nothing to render); a move of 1e-4 is not."""
+    from mitsuba_platonic.viewer.app import ViewerApp, _same_camera, initial_key
+    from mitsuba_platonic.viewer.scene import Window
+
+    app = ViewerApp(open_source(volume_file), tmp_path / "exports", port=0)
+    try:
+        app.warming.join(timeout=300)
+        key = initial_key(app.scene)
+        assert key == ((0.0, 0.0, 1.0), "closed form", "EA", N, 4, 0, None)
+        assert app.last is not None and app.last[0] == key
+        assert app.frame_for(key) is app.last[1]
+        np.testing.assert_array_equal(app.last[1].image, closed_form(read_volume_file(volume_file)[0], 0.0, 0.0))
+    finally:
+        app.stop()
+    front = np.array([0.0, 0.0, 1.0])
+    echo = np.array([0.0, 2.4492936e-16, 4.0], np.float32) / np.float32(4.0)
+    assert _same_camera(echo, None, front, None)
+    assert _same_camera(front, Window(2.0, (0.5, 0.0)), front, Window(2.0 + 1e-7, (0.5 + 1e-7, 0.0)))
+    assert not _same_camera(front + [1e-4, 0.0, 0.0], None, front, None)
+    assert not _same_camera(front, Window(2.0), front, None)
+    assert not _same_camera(front, Window(2.0, (0.5, 0.0)), front, Window(2.0, (0.5001, 0.0)))
+
+
 # --------------------------------------------------------------------------- in the browser
 
 
@@ -431,6 +531,8 @@ def test_the_page_shows_the_closed_form_and_follows_the_camera(page, server, vol
     assert mean <= TOLERANCE and p95 <= TOLERANCE_MAX, (mean, p95)
     assert _views_apart(shown, side)                                         # the check tells views apart
     print(f"first frame {first:.1f} s after the command; screenshot vs closed form: mean {mean:.2f}, p95 {p95:.1f}")
+    # a page that opens and rests draws one frame: the browser's echoes of its first camera render nothing
+    assert int(_frame(page, r"az 0\.0° el 0\.0°").group(1)) == 1
 
     page.get_by_role("button", name="azimuth +30").click()
     _frame(page, r"az 30\.0° el 0\.0°")
@@ -656,10 +758,11 @@ def test_zoom_and_pan_buttons_change_the_frame_as_the_renderer_says(browser, bal
 
 
 def test_the_wheel_zooms_and_a_right_drag_pans_the_frame(browser, ball_server, ball_file):
-    """viser's own controls: the wheel dollies the browser's camera (the frame zooms by DISTANCE / d),
+    """viser's own controls: the wheel dollies the browser's camera (the frame zooms by 1 / (d tan(F/2))),
     a right-button drag trucks it (look_at and position together: the frame pans); the frame is
-    the renderer's through the window the page prints, the silhouette scales by its zoom and its
-    centroid moves as its centre says."""
+    the renderer's through the window the page prints, the silhouette scales by its zoom, its
+    centroid moves as its centre says, and on the canvas as far as the mouse did (within
+    :data:`DRAG_TOLERANCE`): the ball stays under the mouse."""
     volume = read_volume_file(ball_file)[0]
     r = 2 * N_BALL
     page = _page(browser, ball_server)
@@ -685,8 +788,9 @@ def test_the_wheel_zooms_and_a_right_drag_pans_the_frame(browser, ball_server, b
 
         page.mouse.move(x, y)
         page.mouse.down(button="right")
+        drag = np.array([4.0, -6.0])                                         # (down, left) canvas pixels a step
         for step in range(1, 11):
-            page.mouse.move(x - 3 * step, y + 2 * step)                      # drag the scene left and down
+            page.mouse.move(x + drag[1] * step, y + drag[0] * step)          # drag the scene left and down
             time.sleep(0.05)
         page.mouse.up(button="right")
         time.sleep(1.0)
@@ -699,6 +803,10 @@ def test_the_wheel_zooms_and_a_right_drag_pans_the_frame(browser, ball_server, b
         expected = np.array([+panned.centre[1], -panned.centre[0]]) * panned.zoom * r / 2
         assert abs(moved - centre - expected).max() < SHIFT_TOLERANCE, (moved - centre, expected, panned)
         assert expected[1] < -1.0 and expected[0] > 1.0, expected             # the ball followed the drag
-        print(f"wheel: {window}, silhouette ×{scale:.3f}; right-drag: {panned}, centroid moved {moved - centre}")
+        on_canvas = (moved - centre) * min(box["width"], box["height"]) / r  # frame pixels → canvas pixels
+        mouse = 10 * drag
+        assert abs(on_canvas - mouse).max() < DRAG_TOLERANCE * abs(mouse).max(), (on_canvas, mouse, panned)
+        print(f"wheel: {window}, silhouette ×{scale:.3f}; right-drag: {panned}, centroid moved {moved - centre} "
+              f"frame pixels, {on_canvas} canvas pixels for the mouse's {mouse}")
     finally:
         page.close()

@@ -4,16 +4,29 @@ Per browser (viser client) a :class:`ClientView` keeps the GUI and a render thre
 message gives the view ω = normalize(position − look_at) (the scene's up is +y, so viser's
 orbit camera has the project's frame: right = (ω_z, 0, −ω_x), up = ω × right) and the window of
 the orthographic camera (:func:`~.scene.camera_window`, every renderer draws it,
-:mod:`mitsuba_platonic.render.window`), with d = |position − look_at|:
+:mod:`mitsuba_platonic.render.window`). viser's camera is a perspective one of vertical field of
+view F (the browser reports it; :data:`FOV` ≈ 28.1° here) on a canvas of width/height a; at the
+distance d = |position − look_at| it shows 2 d tan(F/2) world units over the canvas' height, and
+the window takes that scale:
 
-    zoom m = clamp(DISTANCE / d, ¼, 8)           (half-width h = d / DISTANCE: a closer camera magnifies)
+    half-width h = d tan(F/2) min(1, a), zoom m = 1/h, clamped to ¼ … 8     (a closer camera magnifies)
     centre = (look_at · right, look_at · up)     (look_at's offset from the cube's centre on the camera plane)
 
 so zooming (viser's wheel: the distance) magnifies the frame about its centre, and panning
 (look_at and position moved together, ω kept) moves the window: the volume moves the other way,
-m R/2 pixels per world unit. A frame of resolution R shows a world point at lateral coordinates
-(X, Y) at pixel column (1 + (X − c_x) m) R/2, row (1 − (Y − c_y) m) R/2. At the initial camera
-(d = DISTANCE, look_at 0) the frames are the renderers' whole-cube frames, bit for bit.
+by as many pixels on the canvas as the mouse moved (viser trucks the camera by the mouse's travel
+at the look-at point's scale, the frame's scale). A frame of resolution R shows a world point at
+lateral coordinates (X, Y) at pixel column (1 + (X − c_x) m) R/2, row (1 − (Y − c_y) m) R/2. At
+the initial camera (d = :data:`DISTANCE` = 1/tan(:data:`FOV`/2), look_at 0) on a canvas wider than
+tall the frames are the renderers' whole-cube frames, bit for bit (on a taller one, the cube's
+middle: "reset zoom and pan" moves the camera back to show it whole). The browser's dolly is
+held to the distances of zoom ¼ … 8 for its F and a. A camera message that only echoes the
+camera drawn (float32 noise, :data:`VIEW_SNAP`) renders nothing again.
+
+Frames come from :meth:`ViewerApp.frame_for`, one render at a time (a lock), which hands back the
+last frame rendered where it is asked for again (another page's, the same picture at rest). As
+the server starts, a thread renders the frame a page asks for first (:func:`initial_key`) while
+the browser loads the page.
 
 While the camera keeps moving (a message within :data:`SETTLE_S`), the thread renders a
 low-resolution frame (a quarter of the resolution, at least the volume's; the same resolution
@@ -34,6 +47,7 @@ from __future__ import annotations
 
 import contextlib
 import io
+import math
 import socket
 import threading
 import time
@@ -46,15 +60,25 @@ import viser
 
 from ..errors import UserError
 from ..views import camera_frames, from_angles, to_angles
-from .scene import (BACKGROUND, ZOOM_RANGE, Exports, Frame, Scene, Window, camera_window, formations_for,
-                    render_frame, renderers_for, resolutions_for)
+from .scene import (BACKGROUND, WINDOW_SNAP, ZOOM_RANGE, Exports, Frame, Scene, Window, camera_window,
+                    formations_for, render_frame, renderers_for, resolutions_for, zoom_distance)
 
 __all__ = ["ViewerApp", "check_port", "SETTLE_S"]
 
 #: A camera at rest this long gets its full-resolution frame.
 SETTLE_S = 0.2
-#: Distance of the initial camera from the centre (the cube is [−1, 1]³); the zoom is DISTANCE / d.
+#: Distance of the initial camera from the centre (the cube is [−1, 1]³).
 DISTANCE = 4.0
+#: viser's vertical field of view, 2 atan(1/DISTANCE) ≈ 28.1°: the initial camera shows the cube's
+#: cross-section [−1, 1] over the canvas' height, the frame at zoom 1 (:func:`~.scene.camera_window`).
+FOV = 2.0 * math.atan(1.0 / DISTANCE)
+#: A camera message whose view differs from the drawn one by at most this (each component of ω)
+#: and whose window by at most :data:`~.scene.WINDOW_SNAP` is the browser's float32 echo of the
+#: camera the server set (or of the first camera): nothing moved, nothing to render again.
+VIEW_SNAP = 1e-6
+#: The page's controls as it opens: the renderer and the path tracer's spp (the formation: the
+#: volume's richest, EA or AO; the resolution: the volume's).
+INITIAL_RENDERER, INITIAL_SPP = "closed form", 4
 #: The zoom buttons' factor, and the pan buttons' step as a fraction of the frame's width.
 ZOOM_STEP, PAN_STEP = 2.0, 0.25
 #: Frames are enlarged to at least this many pixels a side before they are padded to the canvas' aspect.
@@ -76,6 +100,25 @@ def check_port(host: str, port: int) -> None:
         except OSError as e:
             raise UserError(f"--port {port}: {host}:{port} cannot be used ({e.strerror or e}); choose another "
                             f"--port (0 picks a free one)") from None
+
+
+def initial_key(scene: Scene, version: int = 0) -> Tuple:
+    """The frame a page asks for first: the front view through the whole window with the page's
+    initial controls, as :meth:`ClientView._request` keys it."""
+    c, n = scene.volume.shape[0], scene.volume.shape[-1]
+    return ((0.0, 0.0, 1.0), INITIAL_RENDERER, formations_for(c)[-1], resolutions_for(n)[0], INITIAL_SPP, version,
+            None)
+
+
+def _same_camera(view_a: np.ndarray, window_a: Optional[Window], view_b: np.ndarray,
+                 window_b: Optional[Window]) -> bool:
+    """Whether two cameras draw the same frame but for float32 noise (:data:`VIEW_SNAP`, :data:`WINDOW_SNAP`)."""
+    if np.abs(np.asarray(view_a) - np.asarray(view_b)).max() > VIEW_SNAP:
+        return False
+    if window_a is None or window_b is None:
+        return window_a is window_b
+    return (abs(window_a.zoom / window_b.zoom - 1.0) <= WINDOW_SNAP
+            and max(abs(a - b) for a, b in zip(window_a.centre, window_b.centre)) <= WINDOW_SNAP)
 
 
 def _pad_to_aspect(image: np.ndarray, aspect: float) -> np.ndarray:
@@ -112,6 +155,7 @@ class ViewerApp:
         self.render_lock = threading.Lock()               # one render at a time (torch's and Dr.Jit's threads)
         self.scene_lock = threading.RLock()
         self.version = 0                                   # bumped when the volume changes
+        self.last: Optional[Tuple[Tuple, Frame]] = None     # the last frame rendered (any page's) and its key
         with contextlib.redirect_stdout(io.StringIO()):      # viser's own banner: the command prints the address
             self.server = viser.ViserServer(host=host, port=port, label="platonic view", verbose=False)
         if port and self.server.get_port() != port:        # taken between the check and the bind
@@ -122,9 +166,12 @@ class ViewerApp:
         self.server.initial_camera.position = (0.0, 0.0, DISTANCE)
         self.server.initial_camera.look_at = (0.0, 0.0, 0.0)
         self.server.initial_camera.up = (0.0, 1.0, 0.0)
+        self.server.initial_camera.fov = FOV
         self.clients = {}
         self.server.on_client_connect(self._connect)
         self.server.on_client_disconnect(self._disconnect)
+        self.warming = threading.Thread(target=self._warm_up, name="warm-up", daemon=True)
+        self.warming.start()
 
     @property
     def url(self) -> str:
@@ -138,6 +185,35 @@ class ViewerApp:
         view = self.clients.pop(client.client_id, None)
         if view is not None:
             view.stop()
+
+    def _warm_up(self) -> None:
+        """Render the first frame a page asks for (:func:`initial_key`) while the browser loads the
+        page, and encode it once as the page does (viser's PNG and JPEG encoders load their
+        libraries on first use): the page's own request then finds the frame done
+        (:meth:`frame_for`), or waits on the render lock for it, instead of paying torch's and the
+        encoder's first calls after the page connects."""
+        try:
+            frame = self.frame_for(initial_key(self.scene))
+            from viser._image_encoding import cv2_imencode_with_fallback   # lazy: viser's own encoder, warmed only
+            image = _pad_to_aspect(frame.image, 16 / 9)
+            for fmt in ("png", "jpeg"):
+                cv2_imencode_with_fallback(fmt, image, jpeg_quality=90, channel_ordering="rgb")
+        except Exception:                                  # the page's own request renders it and shows why
+            pass
+
+    def frame_for(self, key: Tuple) -> Frame:
+        """The frame of ``key`` (view, renderer, formation, resolution, spp, volume version, window):
+        the last frame rendered where it has that key (the warm-up's, another page's, the same
+        picture asked for again at rest), else rendered now; one render at a time."""
+        with self.render_lock:
+            if self.last is not None and self.last[0] == key:
+                return self.last[1]
+            view, renderer, formation, res, spp, _, window = key
+            with self.scene_lock:
+                version = self.version                       # the volume it renders (a newer one where it changed)
+                frame = render_frame(self.scene.volume, view, renderer, formation, res, spp, window)
+            self.last = (key[:5] + (version,) + key[6:], frame)
+            return frame
 
     def volume_changed(self) -> None:
         """The scene's volume changed (another input or latent): every page renders again."""
@@ -162,17 +238,18 @@ class ClientView:
         self.lock = threading.Lock()
         self.wake = threading.Event()
         self.stopped = False
-        self.view = np.array([0.0, 0.0, 1.0])
+        self.view = np.array(initial_key(app.scene)[0])
         self.window: Optional[Window] = None              # the full window: the initial camera
         self.last_move = 0.0
         self.shown: Optional[Tuple] = None
         self.count = 0
         self.frame: Optional[Frame] = None
         self.times = {}                                    # renderer → last full frame's seconds
+        self.limits = (0.01, 1e4)                          # the browser's dolly limits as set (viser's defaults)
         self._gui()
-        # the browser's own dolly stops where the zoom does (ZOOM_RANGE): the wheel never runs past it
-        client.camera.min_orbit_distance = DISTANCE / ZOOM_RANGE[1]
-        client.camera.max_orbit_distance = DISTANCE / ZOOM_RANGE[0]
+        # the camera viser connects a page with is the browser's default, before it takes the initial one
+        # (DISTANCE, FOV): draw the initial camera until the page says where it is
+        self._limit_distance(FOV, 1.0)
         client.camera.on_update(self._camera)
         self.thread = threading.Thread(target=self._loop, name=f"render-{client.client_id}", daemon=True)
         self.thread.start()
@@ -187,13 +264,13 @@ class ClientView:
         self.info = gui.add_markdown("frame: waiting for the first frame")
         self.settings = gui.add_markdown("")
         with gui.add_folder("Renderer"):
-            self.renderer = gui.add_dropdown("renderer", renderers_for(c), initial_value="closed form")
+            self.renderer = gui.add_dropdown("renderer", renderers_for(c), initial_value=INITIAL_RENDERER)
             self.formation = gui.add_dropdown("formation", formations_for(c), initial_value=formations_for(c)[-1],
                                               hint="VH, AO: density only; EA: colour (the lit renderers form EA)")
             choices = [str(r) for r in resolutions_for(n)]
             self.resolution = gui.add_dropdown("resolution", choices, initial_value=choices[0],
                                                hint="image pixels per side")
-            self.spp = gui.add_slider("path tracer spp", min=1, max=64, step=1, initial_value=4)
+            self.spp = gui.add_slider("path tracer spp", min=1, max=64, step=1, initial_value=INITIAL_SPP)
             self.low = gui.add_checkbox("low resolution while moving", initial_value=True,
                                         hint="a quarter of the resolution (at least the volume's) while the camera moves")
             for handle in (self.renderer, self.formation, self.resolution, self.spp, self.low):
@@ -207,7 +284,8 @@ class ClientView:
             gui.add_button("zoom out").on_click(lambda _: self.zoom_by(1.0 / ZOOM_STEP))
             for label, dx, dy in (("pan left", -1, 0), ("pan right", 1, 0), ("pan up", 0, 1), ("pan down", 0, -1)):
                 gui.add_button(label).on_click(self._pan_by(dx * PAN_STEP, dy * PAN_STEP))
-            gui.add_button("reset zoom and pan").on_click(lambda _: self.move_camera(np.zeros(3), DISTANCE))
+            gui.add_button("reset zoom and pan").on_click(
+                lambda _: self.move_camera(np.zeros(3), zoom_distance(1.0, *self._lens())))
         self.source_gui(gui)
         with gui.add_folder("Export"):
             self.name = gui.add_text("name", initial_value="view", hint="a file name inside the output folder")
@@ -263,14 +341,39 @@ class ClientView:
 
     # -- camera -----------------------------------------------------------------------------------
 
+    def _lens(self) -> Tuple[float, float]:
+        """This browser's vertical field of view (radians) and canvas width/height, as it last said
+        (:data:`FOV` and 1 before it has)."""
+        cam = self.client.camera
+        fov, height = float(cam.fov), cam.image_height
+        if not (0.0 < fov < math.pi and height > 0 and cam.image_width > 0):
+            return FOV, 1.0
+        return fov, cam.image_width / height
+
+    def _limit_distance(self, fov: float, aspect: float) -> None:
+        """The browser's own dolly stops where the zoom does (:data:`ZOOM_RANGE`): the wheel never runs past it."""
+        near, far = zoom_distance(ZOOM_RANGE[1], fov, aspect), zoom_distance(ZOOM_RANGE[0], fov, aspect)
+        if np.allclose((near, far), self.limits):
+            return
+        cam = self.client.camera
+        if near > self.limits[1]:                          # each setter refuses a minimum above the maximum
+            cam.max_orbit_distance, cam.min_orbit_distance = far, near
+        else:
+            cam.min_orbit_distance, cam.max_orbit_distance = near, far
+        self.limits = (near, far)
+
     def _camera(self, camera) -> None:
         position, look = np.asarray(camera.position, float), np.asarray(camera.look_at, float)
         w = position - look
         norm = float(np.linalg.norm(w))
         if norm < 1e-9 or not np.isfinite(w).all():
             return
-        window = camera_window(position, look, DISTANCE)
+        fov, aspect = self._lens()
+        window = camera_window(position, look, fov, aspect)
+        self._limit_distance(fov, aspect)
         with self.lock:
+            if _same_camera(w / norm, window, self.view, self.window):
+                return                                     # an echo: the frame drawn is this camera's
             self.view = w / norm
             self.window = window
             self.last_move = time.monotonic()
@@ -292,7 +395,7 @@ class ClientView:
             cam.up_direction = (0.0, 1.0, 0.0)
             cam.position = tuple(position)                  # viser moves look_at along with the position:
             cam.look_at = tuple(look)                         # set it back, to orbit about it
-        window = camera_window(position, look, DISTANCE)
+        window = camera_window(position, look, *self._lens())
         with self.lock:                                    # render it even before the browser echoes it
             self.view, self.window = w, window
             self.last_move = 0.0
@@ -301,7 +404,8 @@ class ClientView:
     def zoom_by(self, factor: float) -> None:
         """Zoom ``factor`` times about the look-at point (the distance ÷ ``factor``, within :data:`ZOOM_RANGE`)."""
         look, d = self._place()
-        d = min(max(d / factor, DISTANCE / ZOOM_RANGE[1]), DISTANCE / ZOOM_RANGE[0])
+        lens = self._lens()
+        d = min(max(d / factor, zoom_distance(ZOOM_RANGE[1], *lens)), zoom_distance(ZOOM_RANGE[0], *lens))
         self.move_camera(look, d)
 
     def _pan_by(self, dx: float, dy: float) -> Callable:
@@ -337,8 +441,8 @@ class ClientView:
         n = self.app.scene.volume.shape[-1]
         low = max(n, full // 4) if self.low.value else full
         res, quality = (low, "moving") if moving else (full, "full")
-        return (view, self.renderer.value, self.formation.value, res, int(self.spp.value), self.app.version,
-                self.client.camera.aspect, quality, window)
+        key = (view, self.renderer.value, self.formation.value, res, int(self.spp.value), self.app.version, window)
+        return key, self._lens()[1], quality
 
     def _loop(self) -> None:
         while not self.stopped:
@@ -362,10 +466,9 @@ class ClientView:
                 self.shown = request
 
     def _render(self, request: Tuple) -> None:
-        view, renderer, formation, res, spp, version, aspect, quality, window = request
-        with self.app.render_lock, self.app.scene_lock:
-            volume = self.app.scene.volume
-            frame = render_frame(volume, view, renderer, formation, res, spp, window)
+        key, aspect, quality = request
+        view, renderer, _, res, _, _, window = key
+        frame = self.app.frame_for(key)
         if self.stopped:
             return
         # full frames lossless (PNG, what the tests compare), moving ones as JPEG (a tenth of the encoding time)

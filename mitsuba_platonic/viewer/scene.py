@@ -10,7 +10,9 @@
   An image resolution R = kN above the volume's N: the marcher keeps its k² sub-pixel rays apart;
   the other renderers render the volume resampled trilinearly to R³ (cached). A
   :class:`~mitsuba_platonic.render.window.Window` zooms and pans the orthographic camera, in every
-  renderer; :func:`camera_window` makes it from the browser's camera (its distance, its look-at point).
+  renderer; :func:`camera_window` makes it from the browser's perspective camera (its distance from
+  its look-at point and its field of view give the scale, the look-at point the centre), so that
+  the frame moves and scales under the mouse as viser's own camera does.
 - :class:`Exports`: the PNG of a frame and the volume (``.npz`` + ``.vol``, a ``.ply`` mesh) written
   into one output folder, under names cleaned of path characters and never over an earlier file:
   nothing the page sends can name a file outside that folder.
@@ -41,7 +43,7 @@ from ..volume import CHANNELS
 
 __all__ = ["RENDERERS", "FORMATIONS", "BACKGROUND", "Frame", "Scene", "Exports", "open_source", "render_frame",
            "formations_for", "renderers_for", "resolutions_for", "to_display", "clean_name", "camera_window",
-           "ZOOM_RANGE", "Window"]
+           "zoom_distance", "ZOOM_RANGE", "Window"]
 
 #: The renderers the page offers: label → backend (mitsuba_platonic.render.BACKENDS).
 RENDERERS: Dict[str, str] = {"closed form": "closed_form", "marcher": "mitsuba",
@@ -130,37 +132,58 @@ def resolutions_for(n: int) -> List[int]:
     return [k * n for k in (1, 2, 4, 8) if k * n <= MAX_RESOLUTION] or [n]
 
 
-def camera_window(position: Sequence[float], look_at: Sequence[float], distance: float) -> Optional[Window]:
-    """The orthographic window of a camera at ``position`` looking at ``look_at`` (world units), or
-    None for the full one (:mod:`mitsuba_platonic.render.window`).
+def _lens_scale(fov: float, aspect: float) -> float:
+    """tan(fov/2)·min(1, aspect): the frame's half-width per unit of distance (:func:`camera_window`);
+    ``fov`` the vertical field of view in radians, ``aspect`` the canvas' width/height."""
+    if isinstance(fov, bool) or not isinstance(fov, (int, float)) or not 0.0 < fov < math.pi:
+        raise UserError(f"fov: expected a vertical field of view in (0, π) radians, got {fov!r}")
+    if isinstance(aspect, bool) or not isinstance(aspect, (int, float)) or not 0.0 < aspect < math.inf:
+        raise UserError(f"aspect: expected a finite width/height > 0, got {aspect!r}")
+    return math.tan(fov / 2.0) * min(1.0, float(aspect))
 
-    With d = |position − look_at|, ω = (position − look_at)/d and (right, up) ω's camera frame:
 
-        zoom m = clamp(distance / d, :data:`ZOOM_RANGE`)        (half-width h = d / distance: closer, larger)
+def camera_window(position: Sequence[float], look_at: Sequence[float], fov: float,
+                  aspect: float = 1.0) -> Optional[Window]:
+    """The orthographic window of the browser's perspective camera at ``position`` looking at
+    ``look_at`` (world units), vertical field of view ``fov`` (radians) on a canvas of width/height
+    ``aspect``, or None for the full one (:mod:`mitsuba_platonic.render.window`).
+
+    The perspective camera shows the plane through its look-at point, at distance d, 2 d tan(fov/2)
+    world units over the canvas' height; the page draws the frame as a square the canvas' shorter
+    side wide (padded to the canvas' aspect). The window gives the frame that scale, so a point of
+    that plane sits where the browser's camera projects it, and stays under the mouse while viser
+    pans (it moves the camera and look_at by the world length the mouse travelled at that scale)
+    or zooms.
+    With ω = (position − look_at)/d and (right, up) ω's camera frame:
+
+        half-width h = d tan(fov/2) min(1, aspect)              (zoom m = 1/h, clamped to :data:`ZOOM_RANGE`)
         centre (c_x, c_y) = (look_at · right, look_at · up)     (look_at's offset on the camera plane)
 
-    so a camera that pans (moves look_at and position together) sees the volume move the other way,
-    and one that orbits about a look-at point keeps that point at the frame's centre. Values within
-    :data:`WINDOW_SNAP` of the initial camera's (m = 1, centre 0) are taken as them. ``distance``:
-    the initial camera's (m = 1). Raises ``ValueError`` for non-finite coordinates, a camera at its
-    look-at point or a ``distance`` that is not a finite number > 0.
+    so a camera that pans sees the volume move the other way, and one that orbits about a look-at
+    point keeps that point at the frame's centre. Values within :data:`WINDOW_SNAP` of the full
+    window's (m = 1, centre 0) are taken as them. Raises ``ValueError`` for non-finite coordinates,
+    a camera at its look-at point, a ``fov`` outside (0, π) or an ``aspect`` that is not finite > 0.
     """
     p, a = np.asarray(position, np.float64).reshape(-1), np.asarray(look_at, np.float64).reshape(-1)
     if p.shape != (3,) or a.shape != (3,) or not (np.isfinite(p).all() and np.isfinite(a).all()):
         raise UserError(f"camera: expected finite 3-vectors, got position {tuple(p)} and look_at {tuple(a)}")
-    if isinstance(distance, bool) or not isinstance(distance, (int, float)) or not math.isfinite(distance) \
-            or not distance > 0:
-        raise UserError(f"distance: expected a finite number > 0, got {distance!r}")
+    scale = _lens_scale(fov, aspect)
     d = float(np.linalg.norm(p - a))
     if not d > 1e-9:
         raise UserError("camera: its position is its look-at point (no view direction)")
     right, up, _ = camera_frames(torch.from_numpy((p - a) / d)[None])
-    zoom = min(max(distance / d, ZOOM_RANGE[0]), ZOOM_RANGE[1])
+    zoom = min(max(1.0 / (d * scale), ZOOM_RANGE[0]), ZOOM_RANGE[1])
     centre = [float(torch.from_numpy(a) @ right[0]), float(torch.from_numpy(a) @ up[0])]
     if abs(zoom - 1.0) <= WINDOW_SNAP:
         zoom = 1.0
     centre = tuple(0.0 if abs(c) <= WINDOW_SNAP else c for c in centre)
     return window_or_none(Window(zoom, centre))
+
+
+def zoom_distance(zoom: float, fov: float, aspect: float = 1.0) -> float:
+    """The distance from the look-at point at which the camera of ``fov`` and ``aspect`` has the
+    zoom ``zoom`` (:func:`camera_window`): d = 1 / (m tan(fov/2) min(1, aspect))."""
+    return 1.0 / (float(zoom) * _lens_scale(fov, aspect))
 
 
 def render_frame(volume: torch.Tensor, view: Tuple[float, float, float], renderer: str = "closed form",
