@@ -504,6 +504,21 @@ def _shown(page, r: int) -> np.ndarray:
     return last
 
 
+def _rest(page, pattern: str, r: int) -> tuple:
+    """(the frame line matching ``pattern``, its R×R frame as drawn) once the camera rests: the
+    line is the same before and after the screenshots agree. viser's orbit controls glide on after
+    the mouse stops (their damping), later on a loaded machine, so a line read first may belong to
+    a frame the canvas has already replaced (at most 20 tries)."""
+    lines = page.get_by_text(re.compile(r"^frame \d+: "))
+    for _ in range(20):
+        _frame(page, pattern)
+        line = lines.inner_text()
+        shot = _shown(page, r)
+        if lines.inner_text() == line and re.search(pattern, line):
+            return line, shot
+    raise AssertionError(f"the camera did not rest on a frame matching {pattern!r}: last {line!r}")
+
+
 def _difference(a: np.ndarray, b: np.ndarray) -> tuple:
     d = np.abs(a.astype(float) - b.astype(float))
     return float(d.mean()), float(np.percentile(d, 95))
@@ -596,11 +611,12 @@ def test_dragging_the_canvas_orbits_with_low_resolution_frames_while_moving(page
         seen.add((m.group(3), int(m.group(4))))
     page.mouse.up()
     assert ("moving", N) in seen, seen
-    m = _frame(page, rf"full, {4 * N}×")
+    line, shown = _rest(page, rf"full, {4 * N}×", 4 * N)
+    m = FRAME.search(line)
     az, el = float(m.group(5)), float(m.group(6))
     assert abs(az) > 5.0, (az, el)                                    # the drag turned the camera
     expected = render_frame(volume, tuple(from_angles(az, el).tolist()), "closed form", "EA", 4 * N).image
-    mean, p95 = _difference(_shown(page, 4 * N), expected)           # the angles printed to 0.1°
+    mean, p95 = _difference(shown, expected)                         # the angles printed to 0.1°
     assert mean <= 2 * TOLERANCE and p95 <= 4 * TOLERANCE_MAX, (mean, p95)
 
 
@@ -660,14 +676,18 @@ def ball_server(ball_file, tmp_path_factory):
 
 def _window_of(page, pattern: str = "full") -> tuple:
     """The latest frame line matching ``pattern``: (its match, the Window it names: None when full)."""
+    m = _frame(page, pattern)
+    return m, _window_in(page.get_by_text(re.compile(r"^frame \d+: .*" + pattern)).inner_text())
+
+
+def _window_in(line: str):
+    """The Window a frame line names: None when full."""
     from mitsuba_platonic.viewer.scene import Window
 
-    m = _frame(page, pattern)
-    line = page.get_by_text(re.compile(r"^frame \d+: .*" + pattern)).inner_text()
     z = WINDOW.search(line)
     assert z, line
     window = Window(float(z.group(1)), (float(z.group(2)), float(z.group(3))))
-    return m, (None if window.full else window)
+    return None if window.full else window
 
 
 def _silhouette(image: np.ndarray) -> tuple:
@@ -777,10 +797,9 @@ def test_the_wheel_zooms_and_a_right_drag_pans_the_frame(browser, ball_server, b
         for _ in range(6):
             page.mouse.wheel(0, -100)                                        # towards the ball
             time.sleep(0.2)
-        time.sleep(1.0)                                                      # the dolly's smoothing settles
-        _, window = _window_of(page, rf"full, {r}×.*zoom (?!1\.000)")
+        line, zoomed = _rest(page, rf"full, {r}×.*zoom (?!1\.000)", r)     # the dolly's smoothing settles
+        window = _window_in(line)
         assert window is not None and 1.1 < window.zoom < 4.0 and window.centre == (0.0, 0.0), window
-        zoomed = _shown(page, r)
         _same(zoomed, _expected(volume, "closed form", r, window), window)
         area, centre = _silhouette(zoomed)
         scale = math.sqrt(area / area0)
@@ -793,11 +812,10 @@ def test_the_wheel_zooms_and_a_right_drag_pans_the_frame(browser, ball_server, b
             page.mouse.move(x + drag[1] * step, y + drag[0] * step)          # drag the scene left and down
             time.sleep(0.05)
         page.mouse.up(button="right")
-        time.sleep(1.0)
-        _, panned = _window_of(page, rf"full, {r}×")
+        line, shot = _rest(page, rf"full, {r}×.*centre \((?!\+0\.000, \+0\.000)", r)
+        panned = _window_in(line)
         assert panned is not None and panned.centre != (0.0, 0.0), panned
         assert abs(panned.zoom - window.zoom) < 1e-2                          # a pan keeps the distance
-        shot = _shown(page, r)
         _same(shot, _expected(volume, "closed form", r, panned), panned)
         _, moved = _silhouette(shot)
         expected = np.array([+panned.centre[1], -panned.centre[0]]) * panned.zoom * r / 2
