@@ -18,6 +18,13 @@ dim 2 front to back): per ray, the weights w_k = T_k a_k of its N samples at dep
 (T exclusive, as the EA layer), and the distortion loss of Barron et al. 2022 (Mip-NeRF 360)
                             L_ds = mean over rays of Σ_{k,l} w_k w_l |s_k − s_l| + (1/3N) Σ_k w_k²
 small where a ray's colour comes from one thin surface, large where it is gathered over a thick haze
+Symmetry (optional prior on G, volumes with the opacity α the last channel, dim 2 the depth along the
+input view ω₀): the object is probably symmetric about the vertical plane through the volume's centre
+that faces the input camera, so α and its mirror front to back, α̃[d] = α[N − 1 − d], agree:
+                            L_sym = Σ |α − α̃| / Σ (α + α̃)
+0 for a front-back symmetric volume, 1 for matter all in one half (a shell behind the photo's surface
+and nothing further back); scale-free, and 0 for an empty volume. The photo cannot tell where along
+its rays the matter is, so the mirrored matter, behind the visible surface, does not contradict it
 WGAN-GP:                    L_D = l_fake − l_real + λ (‖∇_x̂ D(x̂)‖ − 1)²,  x̂ = ε x + (1 − ε) G
                             L_G = −l_fake
 Soft accuracy of D on a batch (the authors' gate: D is updated only while it is ≤ 0.6, so D
@@ -39,7 +46,7 @@ import torch.nn.functional as F
 
 from ..render.closed_form import transmittance_before
 
-__all__ = ["d_loss", "g_loss", "gradient_penalty", "r1_penalty", "colour_tv", "colour_offset", "depth_spread", "mean_colour", "colour_match", "soft_accuracy_counts", "hard_accuracy_counts"]
+__all__ = ["d_loss", "g_loss", "gradient_penalty", "r1_penalty", "colour_tv", "colour_offset", "depth_spread", "symmetry", "mean_colour", "colour_match", "soft_accuracy_counts", "hard_accuracy_counts"]
 
 
 def d_loss(kind: str, real: torch.Tensor, fake: torch.Tensor) -> torch.Tensor:
@@ -135,6 +142,19 @@ def depth_spread(camera_volume: torch.Tensor) -> torch.Tensor:
     S = torch.cumsum(w * s, dim=1) - w * s              # Σ_{l<k} w_l s_l
     pairs = 2.0 * (w * (s * W - S)).sum(dim=1)
     return (pairs + (w * w).sum(dim=1) / (3.0 * n)).mean()
+
+
+def symmetry(volume: torch.Tensor) -> torch.Tensor:
+    """L_sym (module docstring) of volumes ``(B, C, N, H, W)`` whose last channel is the opacity and
+    whose dim 2 is the depth along the input view (the upright object of ``train.pose: elevation``
+    or the input camera's frame of 'input': both have the input camera at +z). Over the whole
+    batch, Σ |α − α̃| / Σ (α + α̃) with α̃ the opacity mirrored along dim 2; in [0, 1], 0 where the
+    volume is empty."""
+    if volume.dim() != 5:
+        raise ValueError(f"symmetry: expected volumes (B, C, N, H, W), got {tuple(volume.shape)}")
+    a = volume[:, -1]
+    mirrored = a.flip(1)                                # α̃[d] = α[N − 1 − d]
+    return (a - mirrored).abs().sum() / (a + mirrored).sum().clamp_min(1e-12)
 
 
 def mean_colour(images: torch.Tensor) -> torch.Tensor:
