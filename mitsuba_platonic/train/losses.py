@@ -25,6 +25,13 @@ that faces the input camera, so α and its mirror front to back, α̃[d] = α[N 
 0 for a front-back symmetric volume, 1 for matter all in one half (a shell behind the photo's surface
 and nothing further back); scale-free, and 0 for an empty volume. The photo cannot tell where along
 its rays the matter is, so the mirrored matter, behind the visible surface, does not contradict it
+Solidity (optional prior on G, volumes in the input camera's frame as for the depth spread): along
+each input ray the object is solid between its first and its last matter. With the hull of a
+ray's opacities, h_k = min(max_{l≤k} α_l, max_{l≥k} α_l) (held constant),
+                            L_solid = Σ relu(h − α) / Σ h
+0 where every ray's opacity rises to one peak and falls (a solid body, a single shell, an empty
+ray), 1 at most; it fills the gap between a front shell and a back one (the symmetry's mirror)
+and never asks for matter beyond a ray's outermost matter
 WGAN-GP:                    L_D = l_fake − l_real + λ (‖∇_x̂ D(x̂)‖ − 1)²,  x̂ = ε x + (1 − ε) G
                             L_G = −l_fake
 Soft accuracy of D on a batch (the authors' gate: D is updated only while it is ≤ 0.6, so D
@@ -46,7 +53,7 @@ import torch.nn.functional as F
 
 from ..render.closed_form import transmittance_before
 
-__all__ = ["d_loss", "g_loss", "gradient_penalty", "r1_penalty", "colour_tv", "colour_offset", "depth_spread", "symmetry", "mean_colour", "colour_match", "soft_accuracy_counts", "hard_accuracy_counts"]
+__all__ = ["d_loss", "g_loss", "gradient_penalty", "r1_penalty", "colour_tv", "colour_offset", "depth_spread", "symmetry", "solidity", "mean_colour", "colour_match", "soft_accuracy_counts", "hard_accuracy_counts"]
 
 
 def d_loss(kind: str, real: torch.Tensor, fake: torch.Tensor) -> torch.Tensor:
@@ -155,6 +162,21 @@ def symmetry(volume: torch.Tensor) -> torch.Tensor:
     a = volume[:, -1]
     mirrored = a.flip(1)                                # α̃[d] = α[N − 1 − d]
     return (a - mirrored).abs().sum() / (a + mirrored).sum().clamp_min(1e-12)
+
+
+def solidity(camera_volume: torch.Tensor) -> torch.Tensor:
+    """L_solid (module docstring) of volumes ``(B, C, N, H, W)`` in a camera's frame (the opacity the
+    last channel, dim 2 the depth from the front): over the whole batch, the opacity missing below
+    each ray's hull, Σ relu(h − α) / Σ h; in [0, 1], 0 for an empty volume. The hull is held
+    constant: the term raises the gaps, never lowers the walls."""
+    if camera_volume.dim() != 5:
+        raise ValueError(f"solidity: expected volumes (B, C, N, H, W), got {tuple(camera_volume.shape)}")
+    a = camera_volume[:, -1]
+    with torch.no_grad():
+        front = torch.cummax(a, dim=1).values                         # max_{l≤k} α_l
+        back = torch.cummax(a.flip(1), dim=1).values.flip(1)          # max_{l≥k} α_l
+        hull = torch.minimum(front, back)
+    return torch.relu(hull - a).sum() / hull.sum().clamp_min(1e-12)
 
 
 def mean_colour(images: torch.Tensor) -> torch.Tensor:
