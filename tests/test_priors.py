@@ -3,13 +3,14 @@ volumes, its gradient (colour only, never density), and the trainer handing it t
 train.colour_match (train/losses.colour_match): the mean colour of the object from every side; and
 train.colour_offset (train/losses.colour_offset): G's colour held to the photo's; and
 train.depth_spread (train/losses.depth_spread): the input view's colour from a thin surface; and
-train.symmetry (train/losses.symmetry): the object probably symmetric front to back."""
+train.symmetry (train/losses.symmetry): the object probably symmetric front to back; and
+train.solidity (train/losses.solidity): no gaps along an input ray between its first and last matter."""
 
 import pytest
 import torch
 
 from mitsuba_platonic.config import ConfigError, load_config
-from mitsuba_platonic.train.losses import colour_match, colour_offset, colour_tv, depth_spread, mean_colour, symmetry
+from mitsuba_platonic.train.losses import colour_match, colour_offset, colour_tv, depth_spread, mean_colour, solidity, symmetry
 
 
 def _volume(n=4, colour=(0.2, 0.5, 0.7), density=1.0):
@@ -401,3 +402,78 @@ def test_the_trainer_hands_g_the_symmetry_of_the_volume_it_made(tmp_path, monkey
             continue
         assert float(terms["symmetry"]) == pytest.approx(2.0 * float(symmetry(seen["v"])), rel=1e-5)
         assert float(terms["symmetry"]) > 0.0
+
+
+def test_solidity_of_rays_worked_by_hand():
+    """Rays along depth (N = 4). Empty, one shell, a solid body, one peak: 0. A front and a back
+    shell with a gap: hull (1, 1, 1, 1), 2 missing of 4, so ½. α = (½, 0, 1, 0): hull
+    min(cummax front (½, ½, 1, 1), cummax back (1, 1, 1, 0)) = (½, ½, 1, 0), ½ missing of 2, so ¼.
+    Pooled over the batch: a full ray beside the gapped one (0 + 2) / (4 + 4) = ¼."""
+    assert float(solidity(_rays([[0, 0, 0, 0]]))) == 0.0
+    assert float(solidity(_rays([[1, 1, 0, 0]]))) == 0.0
+    assert float(solidity(_rays([[0.2, 0.7, 1, 0.4]]))) == 0.0
+    assert float(solidity(_rays([[1, 0, 0, 1]]))) == 0.5
+    assert float(solidity(_rays([[0.5, 0, 1, 0]]))) == pytest.approx(0.25, rel=1e-12)
+    assert float(solidity(_rays([[1, 1, 1, 1], [1, 0, 0, 1]]))) == pytest.approx(0.25, rel=1e-12)
+
+
+def test_solidity_matches_a_per_ray_loop_with_exact_zeros_and_ones_and_fills_only_gaps():
+    """Against each ray's hull written out with Python's max and min, on random volumes holding
+    exact 0s and 1s; the gradient is −1/Σh at a voxel below its hull and 0 elsewhere (the hull
+    held constant: walls are never lowered, nothing beyond the outermost matter is asked for)."""
+    torch.manual_seed(8)
+    v = torch.rand(2, 4, 6, 3, 2, dtype=torch.float64)
+    a = v[:, 3]
+    a[a < 0.3] = 0.0
+    a[a > 0.9] = 1.0
+    n = a.shape[1]
+    missing = total = 0.0
+    below = torch.zeros_like(a, dtype=torch.bool)
+    for b in range(a.shape[0]):
+        for h in range(a.shape[2]):
+            for w in range(a.shape[3]):
+                ray = [float(a[b, d, h, w]) for d in range(n)]
+                for d in range(n):
+                    hull = min(max(ray[:d + 1]), max(ray[d:]))
+                    missing += max(hull - ray[d], 0.0)
+                    total += hull
+                    below[b, d, h, w] = hull > ray[d]
+    v.requires_grad_(True)
+    loss = solidity(v)
+    assert float(loss.detach()) == pytest.approx(missing / total, rel=1e-12)
+    loss.backward()
+    g = v.grad[:, 3]
+    assert torch.allclose(g[below], torch.full_like(g[below], -1.0 / total))
+    assert float(g[~below].abs().max()) == 0.0 and float(v.grad[:, :3].abs().max()) == 0.0
+
+
+def test_the_config_refuses_solidity_without_the_input_cameras_parallel_rays():
+    with pytest.raises(ConfigError, match="train.solidity: .*got 'generation', 'platonic' and 'orthographic'"):
+        load_config(None, ["train.solidity=1", "train.task=generation"])
+    with pytest.raises(ConfigError, match="train.solidity: .*got 'reconstruction', 'platonic' and 'perspective'"):
+        load_config(None, ["train.solidity=1", "render.camera=perspective"])
+    with pytest.raises(ConfigError, match=r"train.solidity: expected a non-negative value, got -1"):
+        load_config(None, ["train.solidity=-1"])
+
+
+@pytest.mark.usefixtures("tiny_class")
+def test_the_trainer_hands_g_the_solidity_of_the_input_view(tmp_path, monkeypatch):
+    """With weight w, G's 'solidity' term is w · L_solid of the volume G made (at the front view the
+    input camera's frame is the volume's own); without it, none."""
+    from mitsuba_platonic.networks import nets
+    original = nets.Generator.forward
+    seen = {}
+
+    def spy(self, *args, **kwargs):
+        out = original(self, *args, **kwargs)
+        seen["v"] = out.detach().clone()
+        return out
+
+    monkeypatch.setattr(nets.Generator, "forward", spy)
+    for weight in (0.0, 2.0):
+        terms = _g_terms(_tiny_trainer(tmp_path, "train.task=reconstruction", f"train.solidity={weight}"))
+        if not weight:
+            assert "solidity" not in terms
+            continue
+        assert float(terms["solidity"]) == pytest.approx(2.0 * float(solidity(seen["v"])), rel=1e-5)
+        assert float(terms["solidity"]) > 0.0                   # G's first volumes have gaps along depth
