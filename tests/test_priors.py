@@ -406,20 +406,40 @@ def test_the_trainer_hands_g_the_symmetry_of_the_volume_it_made(tmp_path, monkey
 
 def test_solidity_of_rays_worked_by_hand():
     """Rays along depth (N = 4). Empty, one shell, a solid body, one peak: 0. A front and a back
-    shell with a gap: hull (1, 1, 1, 1), 2 missing of 4, so ½. α = (½, 0, 1, 0): hull
-    min(cummax front (½, ½, 1, 1), cummax back (1, 1, 1, 0)) = (½, ½, 1, 0), ½ missing of 2, so ¼.
-    Pooled over the batch: a full ray beside the gapped one (0 + 2) / (4 + 4) = ¼."""
+    shell with a gap: hull (1, 1, 1, 1), 2 missing of 4, so ½. α = (½, 0, 1, 0) (½ is a surface):
+    hull min(cummax front (½, ½, 1, 1), cummax back (1, 1, 1, 0)) = (½, ½, 1, 0), ½ missing of 2,
+    so ¼. Pooled over the batch: a full ray beside the gapped one (0 + 2) / (4 + 4) = ¼. A haze
+    below ½ has no surfaces: (0.4, 0, 0, 0.4) is not filled, and (0.4, 0, 1, 0) has the hull
+    (0, 0, 1, 0): 0."""
     assert float(solidity(_rays([[0, 0, 0, 0]]))) == 0.0
     assert float(solidity(_rays([[1, 1, 0, 0]]))) == 0.0
     assert float(solidity(_rays([[0.2, 0.7, 1, 0.4]]))) == 0.0
     assert float(solidity(_rays([[1, 0, 0, 1]]))) == 0.5
     assert float(solidity(_rays([[0.5, 0, 1, 0]]))) == pytest.approx(0.25, rel=1e-12)
     assert float(solidity(_rays([[1, 1, 1, 1], [1, 0, 0, 1]]))) == pytest.approx(0.25, rel=1e-12)
+    assert float(solidity(_rays([[0.4, 0, 0, 0.4]]))) == 0.0
+    assert float(solidity(_rays([[0.4, 0, 1, 0]]))) == 0.0
+
+
+def test_solidity_leaves_a_haze_alone_and_fills_between_surfaces_inside_it():
+    """G's first volumes are a haze: every voxel below ½ with gaps. Filling it would make each ray
+    an opaque block (32 voxels of 0.3: opacity 1 − 0.7³² ≈ 1), so a haze costs nothing; two
+    surfaces of 0.9 in the same haze ask for the gap between them alone."""
+    torch.manual_seed(9)
+    haze = 0.3 * torch.rand(1, 32, dtype=torch.float64)
+    haze[:, ::3] = 0.0
+    assert float(solidity(_rays(haze))) == 0.0
+    walls = haze.clone()
+    walls[0, 5] = walls[0, 20] = 0.9
+    v = _rays(walls).requires_grad_(True)
+    solidity(v).backward()
+    asked = (v.grad[0, 3, :, 0, 0] < 0).nonzero().flatten().tolist()
+    assert asked and min(asked) > 5 and max(asked) < 20, asked
 
 
 def test_solidity_matches_a_per_ray_loop_with_exact_zeros_and_ones_and_fills_only_gaps():
-    """Against each ray's hull written out with Python's max and min, on random volumes holding
-    exact 0s and 1s; the gradient is −1/Σh at a voxel below its hull and 0 elsewhere (the hull
+    """Against each ray's hull of surfaces (α ≥ ½) written out with Python's max and min, on random
+    volumes holding exact 0s and 1s; the gradient is −1/Σh at a voxel below its hull and 0 elsewhere (the hull
     held constant: walls are never lowered, nothing beyond the outermost matter is asked for)."""
     torch.manual_seed(8)
     v = torch.rand(2, 4, 6, 3, 2, dtype=torch.float64)
@@ -433,8 +453,9 @@ def test_solidity_matches_a_per_ray_loop_with_exact_zeros_and_ones_and_fills_onl
         for h in range(a.shape[2]):
             for w in range(a.shape[3]):
                 ray = [float(a[b, d, h, w]) for d in range(n)]
+                surfaces = [x if x >= 0.5 else 0.0 for x in ray]
                 for d in range(n):
-                    hull = min(max(ray[:d + 1]), max(ray[d:]))
+                    hull = min(max(surfaces[:d + 1]), max(surfaces[d:]))
                     missing += max(hull - ray[d], 0.0)
                     total += hull
                     below[b, d, h, w] = hull > ray[d]
@@ -459,13 +480,17 @@ def test_the_config_refuses_solidity_without_the_input_cameras_parallel_rays():
 @pytest.mark.usefixtures("tiny_class")
 def test_the_trainer_hands_g_the_solidity_of_the_input_view(tmp_path, monkeypatch):
     """With weight w, G's 'solidity' term is w · L_solid of the volume G made (at the front view the
-    input camera's frame is the volume's own); without it, none."""
+    input camera's frame is the volume's own); without it, none. G's first volumes are a haze with
+    no surfaces, so G's output gets two walls of 0.9 with a gap between them along depth."""
     from mitsuba_platonic.networks import nets
     original = nets.Generator.forward
     seen = {}
 
     def spy(self, *args, **kwargs):
         out = original(self, *args, **kwargs)
+        walls = torch.zeros_like(out)
+        walls[:, -1, [1, -2]] = 0.9 - out[:, -1, [1, -2]].detach()   # α = 0.9 there, the graph kept
+        out = out + walls
         seen["v"] = out.detach().clone()
         return out
 
@@ -476,4 +501,4 @@ def test_the_trainer_hands_g_the_solidity_of_the_input_view(tmp_path, monkeypatc
             assert "solidity" not in terms
             continue
         assert float(terms["solidity"]) == pytest.approx(2.0 * float(solidity(seen["v"])), rel=1e-5)
-        assert float(terms["solidity"]) > 0.0                   # G's first volumes have gaps along depth
+        assert float(terms["solidity"]) > 0.0                   # the gap between the walls

@@ -26,12 +26,15 @@ that faces the input camera, so α and its mirror front to back, α̃[d] = α[N 
 and nothing further back); scale-free, and 0 for an empty volume. The photo cannot tell where along
 its rays the matter is, so the mirrored matter, behind the visible surface, does not contradict it
 Solidity (optional prior on G, volumes in the input camera's frame as for the depth spread): along
-each input ray the object is solid between its first and its last matter. With the hull of a
-ray's opacities, h_k = min(max_{l≤k} α_l, max_{l≥k} α_l) (held constant),
+each input ray the object is solid between its first and its last surface. With a ray's surfaces
+m_l = α_l where α_l ≥ ½, else 0, and their hull h_k = min(max_{l≤k} m_l, max_{l≥k} m_l) (held
+constant),
                             L_solid = Σ relu(h − α) / Σ h
-0 where every ray's opacity rises to one peak and falls (a solid body, a single shell, an empty
-ray), 1 at most; it fills the gap between a front shell and a back one (the symmetry's mirror)
-and never asks for matter beyond a ray's outermost matter
+0 where every ray's surfaces rise to one peak and fall (a solid body, a single shell, an empty
+ray, a haze below ½), 1 at most; it fills the gap between a front shell and a back one (the
+symmetry's mirror) and never asks for matter beyond a ray's outermost surface. A haze is not a
+surface: filled, a haze of G's first steps would turn every ray into an opaque block, whose
+saturated opacity no longer passes the input view's gradient back (a run that did so collapsed)
 WGAN-GP:                    L_D = l_fake − l_real + λ (‖∇_x̂ D(x̂)‖ − 1)²,  x̂ = ε x + (1 − ε) G
                             L_G = −l_fake
 Soft accuracy of D on a batch (the authors' gate: D is updated only while it is ≤ 0.6, so D
@@ -164,17 +167,23 @@ def symmetry(volume: torch.Tensor) -> torch.Tensor:
     return (a - mirrored).abs().sum() / (a + mirrored).sum().clamp_min(1e-12)
 
 
+#: The opacity from which a voxel counts as a surface for :func:`solidity`.
+SURFACE = 0.5
+
+
 def solidity(camera_volume: torch.Tensor) -> torch.Tensor:
     """L_solid (module docstring) of volumes ``(B, C, N, H, W)`` in a camera's frame (the opacity the
     last channel, dim 2 the depth from the front): over the whole batch, the opacity missing below
-    each ray's hull, Σ relu(h − α) / Σ h; in [0, 1], 0 for an empty volume. The hull is held
-    constant: the term raises the gaps, never lowers the walls."""
+    the hull of each ray's surfaces (α ≥ :data:`SURFACE`), Σ relu(h − α) / Σ h; in [0, 1], 0 for a
+    volume without surfaces. The hull is held constant: the term raises the gaps, never lowers the
+    walls."""
     if camera_volume.dim() != 5:
         raise ValueError(f"solidity: expected volumes (B, C, N, H, W), got {tuple(camera_volume.shape)}")
     a = camera_volume[:, -1]
     with torch.no_grad():
-        front = torch.cummax(a, dim=1).values                         # max_{l≤k} α_l
-        back = torch.cummax(a.flip(1), dim=1).values.flip(1)          # max_{l≥k} α_l
+        m = torch.where(a >= SURFACE, a, torch.zeros_like(a))         # the surfaces: a haze is none
+        front = torch.cummax(m, dim=1).values                         # max_{l≤k} m_l
+        back = torch.cummax(m.flip(1), dim=1).values.flip(1)          # max_{l≥k} m_l
         hull = torch.minimum(front, back)
     return torch.relu(hull - a).sum() / hull.sum().clamp_min(1e-12)
 
