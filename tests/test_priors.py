@@ -2,13 +2,15 @@
 volumes, its gradient (colour only, never density), and the trainer handing it to G; and
 train.colour_match (train/losses.colour_match): the mean colour of the object from every side; and
 train.colour_offset (train/losses.colour_offset): G's colour held to the photo's; and
-train.depth_spread (train/losses.depth_spread): the input view's colour from a thin surface."""
+train.depth_spread (train/losses.depth_spread): the input view's colour from a thin surface; and
+train.symmetry (train/losses.symmetry): the object probably symmetric front to back; and
+train.solidity (train/losses.solidity): no gaps along an input ray between its first and last matter."""
 
 import pytest
 import torch
 
 from mitsuba_platonic.config import ConfigError, load_config
-from mitsuba_platonic.train.losses import colour_match, colour_offset, colour_tv, depth_spread, mean_colour
+from mitsuba_platonic.train.losses import colour_match, colour_offset, colour_tv, depth_spread, mean_colour, solidity, symmetry
 
 
 def _volume(n=4, colour=(0.2, 0.5, 0.7), density=1.0):
@@ -313,3 +315,190 @@ def test_the_trainer_hands_g_the_depth_spread_of_the_input_view(tmp_path, monkey
             continue
         assert float(terms["depth_spread"].detach()) == pytest.approx(3.0 * float(depth_spread(seen["v"])), rel=1e-5)
         assert float(terms["depth_spread"].detach()) > 0.0
+
+
+def test_symmetry_of_rays_worked_by_hand():
+    """Rays along depth (N = 4). Empty: 0. A shell at the front and nothing behind it: 1. The same
+    shell mirrored at the back: 0. α = (1, 0, 0, ½): α̃ = (½, 0, 0, 1), Σ|α − α̃| = 1 and
+    Σ(α + α̃) = 3, so ⅓. The batch is pooled, not averaged per ray: an empty ray beside a lone
+    voxel gives 2/2 = 1; a full ray beside a lone voxel (0 + 2) / (8 + 2) = 1/5, where the mean of
+    the rays' own scores would be ½. Colour does not enter."""
+    assert float(symmetry(_rays([[0, 0, 0, 0]]))) == 0.0
+    assert float(symmetry(_rays([[1, 1, 0, 0]]))) == 1.0
+    assert float(symmetry(_rays([[1, 1, 1, 1]]))) == 0.0
+    assert float(symmetry(_rays([[1, 0, 0, 0.5]]))) == pytest.approx(1 / 3, rel=1e-12)
+    assert float(symmetry(_rays([[0, 0, 0, 0], [0, 0, 1, 0]]))) == 1.0
+    assert float(symmetry(_rays([[1, 1, 1, 1], [0, 0, 1, 0]]))) == pytest.approx(1 / 5, rel=1e-12)
+    v = _rays([[1, 0, 0, 0.5]])
+    v[:, :3] = torch.rand_like(v[:, :3])
+    assert float(symmetry(v)) == pytest.approx(1 / 3, rel=1e-12)
+
+
+def test_symmetry_mirrors_along_depth_alone_and_matches_a_voxel_loop_with_exact_zeros_and_ones():
+    """Against the sum written out voxel by voxel with the mirror index N − 1 − d, on random
+    volumes holding exact 0s and 1s. A volume symmetric front to back scores 0 however lopsided it
+    is left to right or top to bottom; one symmetric left to right alone does not."""
+    torch.manual_seed(6)
+    v = torch.rand(2, 4, 5, 3, 4, dtype=torch.float64)
+    a = v[:, 3]
+    a[a < 0.2] = 0.0
+    a[a > 0.9] = 1.0
+    n = a.shape[1]
+    diff = total = 0.0
+    for b in range(a.shape[0]):
+        for d in range(n):
+            for h in range(a.shape[2]):
+                for w in range(a.shape[3]):
+                    x, y = float(a[b, d, h, w]), float(a[b, n - 1 - d, h, w])
+                    diff += abs(x - y)
+                    total += x + y
+    assert float(symmetry(v)) == pytest.approx(diff / total, rel=1e-12)
+    front_back = v.clone()
+    front_back[:, 3] = a + a.flip(1)                  # symmetric in depth, not in h or w
+    assert float(symmetry(front_back)) == 0.0
+    left_right = v.clone()
+    left_right[:, 3] = a + a.flip(3)                  # symmetric in w alone
+    assert float(symmetry(left_right)) > 0.1
+
+
+def test_the_symmetry_gradient_grows_the_mirror_and_matches_finite_differences():
+    """Where the front holds matter and its mirror at the back does not, the gradient asks for
+    matter at the back (a negative derivative there); away from ties |α − α̃| is smooth and the
+    gradient matches finite differences."""
+    v = _rays([[0.9, 0.3, 0.1, 0.0]]).requires_grad_(True)
+    symmetry(v).backward()
+    assert float(v.grad[0, 3, 3, 0, 0]) < 0.0 and float(v.grad[0, 3, 0, 0, 0]) > 0.0
+    torch.manual_seed(7)
+    v = (0.05 + 0.9 * torch.rand(2, 4, 5, 3, 3, dtype=torch.float64)).requires_grad_(True)
+    assert torch.autograd.gradcheck(symmetry, (v,))
+
+
+def test_the_config_refuses_symmetry_without_a_reconstruction_by_the_platonic_mode():
+    with pytest.raises(ConfigError, match="train.symmetry: .*got task 'generation', mode 'platonic'"):
+        load_config(None, ["train.symmetry=1", "train.task=generation"])
+    with pytest.raises(ConfigError, match="train.symmetry: .*got task 'reconstruction', mode 'prgan'"):
+        load_config(None, ["train.symmetry=1", "train.mode=prgan"])
+    with pytest.raises(ConfigError, match=r"train.symmetry: expected a non-negative value, got -1"):
+        load_config(None, ["train.symmetry=-1"])
+
+
+@pytest.mark.usefixtures("tiny_class")
+def test_the_trainer_hands_g_the_symmetry_of_the_volume_it_made(tmp_path, monkeypatch):
+    """With weight w, G's 'symmetry' term is w · L_sym of the volume G made; without it, none."""
+    from mitsuba_platonic.networks import nets
+    original = nets.Generator.forward
+    seen = {}
+
+    def spy(self, *args, **kwargs):
+        out = original(self, *args, **kwargs)
+        seen["v"] = out.detach().clone()
+        return out
+
+    monkeypatch.setattr(nets.Generator, "forward", spy)
+    for weight in (0.0, 2.0):
+        terms = _g_terms(_tiny_trainer(tmp_path, "train.task=reconstruction", f"train.symmetry={weight}"))
+        if not weight:
+            assert "symmetry" not in terms
+            continue
+        assert float(terms["symmetry"]) == pytest.approx(2.0 * float(symmetry(seen["v"])), rel=1e-5)
+        assert float(terms["symmetry"]) > 0.0
+
+
+def test_solidity_of_rays_worked_by_hand():
+    """Rays along depth (N = 4). Empty, one shell, a solid body, one peak: 0. A front and a back
+    shell with a gap: hull (1, 1, 1, 1), 2 missing of 4, so ½. α = (½, 0, 1, 0) (½ is a surface):
+    hull min(cummax front (½, ½, 1, 1), cummax back (1, 1, 1, 0)) = (½, ½, 1, 0), ½ missing of 2,
+    so ¼. Pooled over the batch: a full ray beside the gapped one (0 + 2) / (4 + 4) = ¼. A haze
+    below ½ has no surfaces: (0.4, 0, 0, 0.4) is not filled, and (0.4, 0, 1, 0) has the hull
+    (0, 0, 1, 0): 0."""
+    assert float(solidity(_rays([[0, 0, 0, 0]]))) == 0.0
+    assert float(solidity(_rays([[1, 1, 0, 0]]))) == 0.0
+    assert float(solidity(_rays([[0.2, 0.7, 1, 0.4]]))) == 0.0
+    assert float(solidity(_rays([[1, 0, 0, 1]]))) == 0.5
+    assert float(solidity(_rays([[0.5, 0, 1, 0]]))) == pytest.approx(0.25, rel=1e-12)
+    assert float(solidity(_rays([[1, 1, 1, 1], [1, 0, 0, 1]]))) == pytest.approx(0.25, rel=1e-12)
+    assert float(solidity(_rays([[0.4, 0, 0, 0.4]]))) == 0.0
+    assert float(solidity(_rays([[0.4, 0, 1, 0]]))) == 0.0
+
+
+def test_solidity_leaves_a_haze_alone_and_fills_between_surfaces_inside_it():
+    """G's first volumes are a haze: every voxel below ½ with gaps. Filling it would make each ray
+    an opaque block (32 voxels of 0.3: opacity 1 − 0.7³² ≈ 1), so a haze costs nothing; two
+    surfaces of 0.9 in the same haze ask for the gap between them alone."""
+    torch.manual_seed(9)
+    haze = 0.3 * torch.rand(1, 32, dtype=torch.float64)
+    haze[:, ::3] = 0.0
+    assert float(solidity(_rays(haze))) == 0.0
+    walls = haze.clone()
+    walls[0, 5] = walls[0, 20] = 0.9
+    v = _rays(walls).requires_grad_(True)
+    solidity(v).backward()
+    asked = (v.grad[0, 3, :, 0, 0] < 0).nonzero().flatten().tolist()
+    assert asked and min(asked) > 5 and max(asked) < 20, asked
+
+
+def test_solidity_matches_a_per_ray_loop_with_exact_zeros_and_ones_and_fills_only_gaps():
+    """Against each ray's hull of surfaces (α ≥ ½) written out with Python's max and min, on random
+    volumes holding exact 0s and 1s; the gradient is −1/Σh at a voxel below its hull and 0 elsewhere (the hull
+    held constant: walls are never lowered, nothing beyond the outermost matter is asked for)."""
+    torch.manual_seed(8)
+    v = torch.rand(2, 4, 6, 3, 2, dtype=torch.float64)
+    a = v[:, 3]
+    a[a < 0.3] = 0.0
+    a[a > 0.9] = 1.0
+    n = a.shape[1]
+    missing = total = 0.0
+    below = torch.zeros_like(a, dtype=torch.bool)
+    for b in range(a.shape[0]):
+        for h in range(a.shape[2]):
+            for w in range(a.shape[3]):
+                ray = [float(a[b, d, h, w]) for d in range(n)]
+                surfaces = [x if x >= 0.5 else 0.0 for x in ray]
+                for d in range(n):
+                    hull = min(max(surfaces[:d + 1]), max(surfaces[d:]))
+                    missing += max(hull - ray[d], 0.0)
+                    total += hull
+                    below[b, d, h, w] = hull > ray[d]
+    v.requires_grad_(True)
+    loss = solidity(v)
+    assert float(loss.detach()) == pytest.approx(missing / total, rel=1e-12)
+    loss.backward()
+    g = v.grad[:, 3]
+    assert torch.allclose(g[below], torch.full_like(g[below], -1.0 / total))
+    assert float(g[~below].abs().max()) == 0.0 and float(v.grad[:, :3].abs().max()) == 0.0
+
+
+def test_the_config_refuses_solidity_without_the_input_cameras_parallel_rays():
+    with pytest.raises(ConfigError, match="train.solidity: .*got 'generation', 'platonic' and 'orthographic'"):
+        load_config(None, ["train.solidity=1", "train.task=generation"])
+    with pytest.raises(ConfigError, match="train.solidity: .*got 'reconstruction', 'platonic' and 'perspective'"):
+        load_config(None, ["train.solidity=1", "render.camera=perspective"])
+    with pytest.raises(ConfigError, match=r"train.solidity: expected a non-negative value, got -1"):
+        load_config(None, ["train.solidity=-1"])
+
+
+@pytest.mark.usefixtures("tiny_class")
+def test_the_trainer_hands_g_the_solidity_of_the_input_view(tmp_path, monkeypatch):
+    """With weight w, G's 'solidity' term is w · L_solid of the volume G made (at the front view the
+    input camera's frame is the volume's own); without it, none. G's first volumes are a haze with
+    no surfaces, so G's output gets two walls of 0.9 with a gap between them along depth."""
+    from mitsuba_platonic.networks import nets
+    original = nets.Generator.forward
+    seen = {}
+
+    def spy(self, *args, **kwargs):
+        out = original(self, *args, **kwargs)
+        walls = torch.zeros_like(out)
+        walls[:, -1, [1, -2]] = 0.9 - out[:, -1, [1, -2]].detach()   # α = 0.9 there, the graph kept
+        out = out + walls
+        seen["v"] = out.detach().clone()
+        return out
+
+    monkeypatch.setattr(nets.Generator, "forward", spy)
+    for weight in (0.0, 2.0):
+        terms = _g_terms(_tiny_trainer(tmp_path, "train.task=reconstruction", f"train.solidity={weight}"))
+        if not weight:
+            assert "solidity" not in terms
+            continue
+        assert float(terms["solidity"]) == pytest.approx(2.0 * float(solidity(seen["v"])), rel=1e-5)
+        assert float(terms["solidity"]) > 0.0                   # the gap between the walls
