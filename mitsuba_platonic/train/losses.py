@@ -18,23 +18,6 @@ dim 2 front to back): per ray, the weights w_k = T_k a_k of its N samples at dep
 (T exclusive, as the EA layer), and the distortion loss of Barron et al. 2022 (Mip-NeRF 360)
                             L_ds = mean over rays of Σ_{k,l} w_k w_l |s_k − s_l| + (1/3N) Σ_k w_k²
 small where a ray's colour comes from one thin surface, large where it is gathered over a thick haze
-Symmetry (optional prior on G, volumes with the opacity α the last channel, dim 2 the depth along the
-input view ω₀): the object is probably symmetric about the vertical plane through the volume's centre
-that faces the input camera, so α and its mirror front to back, α̃[d] = α[N − 1 − d], agree:
-                            L_sym = Σ |α − α̃| / Σ (α + α̃)
-0 for a front-back symmetric volume, 1 for matter all in one half (a shell behind the photo's surface
-and nothing further back); scale-free, and 0 for an empty volume. The photo cannot tell where along
-its rays the matter is, so the mirrored matter, behind the visible surface, does not contradict it
-Solidity (optional prior on G, volumes in the input camera's frame as for the depth spread): along
-each input ray the object is solid between its first and its last surface. With a ray's surfaces
-m_l = α_l where α_l ≥ ½, else 0, and their hull h_k = min(max_{l≤k} m_l, max_{l≥k} m_l) (held
-constant),
-                            L_solid = Σ relu(h − α) / Σ h
-0 where every ray's surfaces rise to one peak and fall (a solid body, a single shell, an empty
-ray, a haze below ½), 1 at most; it fills the gap between a front shell and a back one (the
-symmetry's mirror) and never asks for matter beyond a ray's outermost surface. A haze is not a
-surface: filled, a haze of G's first steps would turn every ray into an opaque block, whose
-saturated opacity no longer passes the input view's gradient back (a run that did so collapsed)
 WGAN-GP:                    L_D = l_fake − l_real + λ (‖∇_x̂ D(x̂)‖ − 1)²,  x̂ = ε x + (1 − ε) G
                             L_G = −l_fake
 Soft accuracy of D on a batch (the authors' gate: D is updated only while it is ≤ 0.6, so D
@@ -56,7 +39,7 @@ import torch.nn.functional as F
 
 from ..render.closed_form import transmittance_before
 
-__all__ = ["d_loss", "g_loss", "gradient_penalty", "r1_penalty", "colour_tv", "colour_offset", "depth_spread", "symmetry", "solidity", "mean_colour", "colour_match", "soft_accuracy_counts", "hard_accuracy_counts"]
+__all__ = ["d_loss", "g_loss", "gradient_penalty", "r1_penalty", "colour_tv", "colour_offset", "depth_spread", "mean_colour", "colour_match", "soft_accuracy_counts", "hard_accuracy_counts"]
 
 
 def d_loss(kind: str, real: torch.Tensor, fake: torch.Tensor) -> torch.Tensor:
@@ -152,40 +135,6 @@ def depth_spread(camera_volume: torch.Tensor) -> torch.Tensor:
     S = torch.cumsum(w * s, dim=1) - w * s              # Σ_{l<k} w_l s_l
     pairs = 2.0 * (w * (s * W - S)).sum(dim=1)
     return (pairs + (w * w).sum(dim=1) / (3.0 * n)).mean()
-
-
-def symmetry(volume: torch.Tensor) -> torch.Tensor:
-    """L_sym (module docstring) of volumes ``(B, C, N, H, W)`` whose last channel is the opacity and
-    whose dim 2 is the depth along the input view (the upright object of ``train.pose: elevation``
-    or the input camera's frame of 'input': both have the input camera at +z). Over the whole
-    batch, Σ |α − α̃| / Σ (α + α̃) with α̃ the opacity mirrored along dim 2; in [0, 1], 0 where the
-    volume is empty."""
-    if volume.dim() != 5:
-        raise ValueError(f"symmetry: expected volumes (B, C, N, H, W), got {tuple(volume.shape)}")
-    a = volume[:, -1]
-    mirrored = a.flip(1)                                # α̃[d] = α[N − 1 − d]
-    return (a - mirrored).abs().sum() / (a + mirrored).sum().clamp_min(1e-12)
-
-
-#: The opacity from which a voxel counts as a surface for :func:`solidity`.
-SURFACE = 0.5
-
-
-def solidity(camera_volume: torch.Tensor) -> torch.Tensor:
-    """L_solid (module docstring) of volumes ``(B, C, N, H, W)`` in a camera's frame (the opacity the
-    last channel, dim 2 the depth from the front): over the whole batch, the opacity missing below
-    the hull of each ray's surfaces (α ≥ :data:`SURFACE`), Σ relu(h − α) / Σ h; in [0, 1], 0 for a
-    volume without surfaces. The hull is held constant: the term raises the gaps, never lowers the
-    walls."""
-    if camera_volume.dim() != 5:
-        raise ValueError(f"solidity: expected volumes (B, C, N, H, W), got {tuple(camera_volume.shape)}")
-    a = camera_volume[:, -1]
-    with torch.no_grad():
-        m = torch.where(a >= SURFACE, a, torch.zeros_like(a))         # the surfaces: a haze is none
-        front = torch.cummax(m, dim=1).values                         # max_{l≤k} m_l
-        back = torch.cummax(m.flip(1), dim=1).values.flip(1)          # max_{l≥k} m_l
-        hull = torch.minimum(front, back)
-    return torch.relu(hull - a).sum() / hull.sum().clamp_min(1e-12)
 
 
 def mean_colour(images: torch.Tensor) -> torch.Tensor:
