@@ -308,6 +308,74 @@ def test_a_busy_port_names_the_flag(volume_file):
     assert f"--port {port}" in one_line(err, "view", "error") and "choose another --port" in err
 
 
+#: ``platonic view`` with stdout probed: as the address line is written, whether torch has loaded.
+_PROBE = """
+import sys
+from mitsuba_platonic.console import main
+
+class Probe:
+    def __init__(self, stream):
+        self.stream = stream
+    def write(self, text):
+        if " at http://" in text:
+            self.stream.write(f"torch loaded: {'torch' in sys.modules}\\n")
+        return self.stream.write(text)
+    def __getattr__(self, name):
+        return getattr(self.stream, name)
+
+sys.stdout = Probe(sys.stdout)
+main(sys.argv[1:])
+"""
+
+
+def test_a_volume_files_address_comes_before_torch_and_ctrl_c_then_is_one_line(volume_file, tmp_path):
+    """For a volume file the address is printed before torch is imported (the browser loads the page
+    while torch and the scene load: the command line parses ``view`` alone, SOURCE is read with
+    numpy); a Ctrl-C right after it, while the scene loads, ends the process by SIGINT with one line."""
+    proc = subprocess.Popen([sys.executable, "-c", _PROBE, "view", str(volume_file), "--port", "0"], cwd=tmp_path,
+                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+                            env={**os.environ, "PYTHONUNBUFFERED": "1"})
+    try:
+        probe, address = proc.stdout.readline(), proc.stdout.readline()
+    finally:
+        proc.send_signal(signal.SIGINT)
+        try:
+            _, err = proc.communicate(timeout=60)
+        except subprocess.TimeoutExpired:
+            proc.kill()
+            _, err = proc.communicate()
+    assert probe == "torch loaded: False\n" and "at http://127.0.0.1:" in address, (probe, address, err)
+    assert proc.returncode == -signal.SIGINT, err
+    assert one_line(err, "view", "interrupted") and "Traceback" not in err, err
+
+
+def test_a_page_connected_before_the_scene_gets_its_first_frame(volume_file, tmp_path, monkeypatch):
+    """The server starts before the scene is made (start_server); a page connected to it then is
+    given its GUI and first frame once ViewerApp takes the server: viser calls the connect handler
+    for the pages connected already (here one stands in viser's table of connected pages), and
+    the warm-up renders the first frame as the app starts."""
+    from mitsuba_platonic.viewer import app as A
+    from mitsuba_platonic.viewer.start import start_server, stop_server
+
+    connected = []
+    monkeypatch.setattr(A.ViewerApp, "_connect", lambda self, client: connected.append(client))
+    server = start_server(port=0)
+    early = object()                                       # a page that connected while the scene loaded
+    server._connected_clients[-1] = early
+    app = None
+    try:
+        app = A.ViewerApp(open_source(volume_file), tmp_path / "exports", port=0, server=server)
+        deadline = time.monotonic() + 30
+        while not connected and time.monotonic() < deadline:
+            time.sleep(0.02)
+        assert connected == [early]
+        app.warming.join(timeout=300)
+        assert app.last is not None and app.last[0] == A.initial_key(app.scene)
+    finally:
+        server._connected_clients.pop(-1, None)
+        app.stop() if app is not None else stop_server(server)
+
+
 @pytest.fixture(scope="module")
 def runs(tmp_path_factory, tiny_class):
     """A reconstruction run and a generation run of one training step each, 16³."""

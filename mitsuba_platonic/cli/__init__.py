@@ -20,7 +20,10 @@ Shared: :mod:`.args` (``CLIError``, the argparse number types, ``--models``), :m
 Every module here imports only argparse and the package's light modules at the top, so importing
 the package loads no numpy or torch; building the parser loads torch (the choice lists it offers
 live beside the torch code that owns them) but never Mitsuba or Dr.Jit: each handler imports
-what it runs when it runs, so ``--help`` and a wrong flag answer without starting LLVM.
+what it runs when it runs, so ``--help`` and a wrong flag answer without starting LLVM. A command
+line that starts with ``view`` is parsed by the parser of that command alone (:data:`ALONE`:
+``build_parser("view")``, the same usage, help and errors), which loads no torch: ``platonic view``
+prints its page's address while torch loads (:mod:`.viewer`).
 
 Exit codes: 0 on success; 2 on a user error (usage errors, unreadable or invalid files, invalid
 options: :class:`~mitsuba_platonic.errors.UserError`, which ``ConfigError``, ``RunError`` and
@@ -48,21 +51,25 @@ from .renderers import add_bench, add_compare
 from .training import add_evaluate, add_quickstart, add_train
 from .viewer import add_view
 
-__all__ = ["main", "build_parser", "parse_models", "CLIError", "SUBCOMMANDS"]
+__all__ = ["main", "build_parser", "parse_models", "CLIError", "SUBCOMMANDS", "ALONE"]
 
 #: Subcommand registrars, in help order. Add ``add_<command>`` functions here.
 SUBCOMMANDS: Sequence[Callable[["argparse._SubParsersAction"], None]] = (
     add_quickstart, add_train, add_reconstruct, add_generate, add_evaluate, add_make_dataset, add_compare,
     add_bench, add_convert_checkpoint, add_view)
+#: Commands whose subparser loads nothing heavy: a command line starting with one of them is parsed
+#: by a parser of it alone (its subparser the same, and the top level's usage: ``COMMAND``).
+ALONE = {"view": add_view}
 
 
-def build_parser() -> argparse.ArgumentParser:
-    """The ``platonic`` parser with one subparser per subcommand."""
+def build_parser(alone: Optional[str] = None) -> argparse.ArgumentParser:
+    """The ``platonic`` parser with one subparser per subcommand (``alone``: a command of
+    :data:`ALONE`, the only subparser)."""
     parser = argparse.ArgumentParser(
         prog=PROG, description="PlatonicGAN with closed-form and Mitsuba 3 rendering layers.")
     parser.add_argument("--version", action="version", version=f"{PROG} {__version__}")
     sub = parser.add_subparsers(dest="command", metavar="COMMAND", required=True)
-    for add in SUBCOMMANDS:
+    for add in (ALONE[alone],) if alone else SUBCOMMANDS:
         add(sub)
     return parser
 
@@ -86,7 +93,8 @@ def main(argv: Optional[Sequence[str]] = None) -> int:
 def _run(argv: Optional[Sequence[str]]) -> int:
     args: Optional[argparse.Namespace] = None
     try:
-        parser = build_parser()
+        words = sys.argv[1:] if argv is None else list(argv)
+        parser = build_parser(words[0]) if words and words[0] in ALONE else build_parser()
         try:
             args = parser.parse_args(argv)
         except SystemExit as e:  # argparse has printed usage / help already

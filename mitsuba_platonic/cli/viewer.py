@@ -4,6 +4,16 @@ Opens SOURCE (a volume file or a run folder; ``--photo`` for a reconstruction ru
 page on ``--host``:``--port`` (127.0.0.1 by default: only this machine), prints its address and
 serves until Ctrl-C (exit 130, as every command's Ctrl-C). The web library (viser, the ``viewer``
 extra) is imported here, in the handler, and nowhere else outside :mod:`mitsuba_platonic.viewer`.
+
+The start-up order, so that the browser loads the page while torch loads (about 2 s on 2 cores):
+``--port``'s range, ``--out``, viser installed, the port free and SOURCE (missing, of the wrong
+kind, a damaged volume file: a volume file is read and checked with numpy) are checked first, each
+a one-line error with exit 2; then, for a volume file, the server starts and the address is
+printed before torch is imported (:mod:`mitsuba_platonic.viewer.start`; the command line parses
+``view`` without the other commands' modules, :func:`mitsuba_platonic.cli.build_parser`), and
+the scene is made; a page that connects meanwhile waits for it and then gets its GUI and the first
+frame (:class:`~mitsuba_platonic.viewer.app.ViewerApp`, which renders that frame at once). A run
+folder is opened (torch, its checkpoint) before the address, whose line names the run's step.
 """
 
 from __future__ import annotations
@@ -28,25 +38,43 @@ def _cmd_view(args: argparse.Namespace) -> int:
     except ImportError:
         raise CLIError("the viewer needs the 'viewer' extra: pip install 'mitsuba-platonic[viewer]' "
                        "(or pip install -e '.[viewer]' in a checkout)") from None
+    from ..viewer.start import address, check_port, check_source, start_server, stop_server, volume_title
+
+    check_port(args.host, args.port)                       # before loading anything: a busy port says so at once
+    array = check_source(args.source, args.photo)          # a volume file's array (numpy), None for a run folder
+    scene = None if array is not None else _open(args, None)
+    server = start_server(args.host, args.port)
+    app = None
+    try:
+        title = volume_title(args.source, array.shape) if scene is None else scene.title
+        url = address(args.host, server.get_port())
+        print(f"platonic view: {title} at {url} (Ctrl-C stops it; exports go to {out})", flush=True)
+        if args.host not in ("127.0.0.1", "localhost", "::1"):
+            print(f"platonic view: --host {args.host}: reachable from other machines on that network",
+                  file=sys.stderr, flush=True)
+        if scene is None:
+            scene = _open(args, array)                     # torch loads while the browser loads the page
+        from ..viewer.app import ViewerApp
+
+        app = ViewerApp(scene, out, host=args.host, port=args.port, server=server)
+        while True:
+            time.sleep(3600)
+    finally:
+        if app is not None:
+            app.stop()
+        else:
+            stop_server(server)
+
+
+def _open(args: argparse.Namespace, array):
+    """SOURCE as the viewer's scene (torch loads here); ``array``: a volume file's, checked already."""
     import torch
 
-    from ..viewer.app import ViewerApp, check_port
     from ..viewer.scene import open_source
 
     if args.threads:
         torch.set_num_threads(args.threads)
-    check_port(args.host, args.port)                       # before loading anything: a busy port says so at once
-    scene = open_source(args.source, args.photo)
-    app = ViewerApp(scene, out, host=args.host, port=args.port)
-    try:
-        print(f"platonic view: {scene.title} at {app.url} (Ctrl-C stops it; exports go to {out})", flush=True)
-        if args.host not in ("127.0.0.1", "localhost", "::1"):
-            print(f"platonic view: --host {args.host}: reachable from other machines on that network",
-                  file=sys.stderr, flush=True)
-        while True:
-            time.sleep(3600)
-    finally:
-        app.stop()
+    return open_source(args.source, args.photo, array)
 
 
 def add_view(sub: "argparse._SubParsersAction") -> None:

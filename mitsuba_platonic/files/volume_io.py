@@ -12,21 +12,27 @@ The one place that knows the two file formats (docs/conventions.md, "Volumes"):
 
 :func:`save_volume` writes both beside each other, each whole or not at all; :func:`load_volume`
 reads a volume the command line names (``builtin:<kind>`` or a ``.npz`` file).
+
+Importing it loads numpy, not torch: :func:`read_volume_array` reads and checks a file with numpy
+alone (``platonic view`` checks its SOURCE before torch has loaded); the functions that return
+tensors import torch when they run.
 """
 
 from __future__ import annotations
 
 from pathlib import Path
-from typing import List, Optional, Union
+from typing import TYPE_CHECKING, List, Optional, Union
 
 import numpy as np
-import torch
 
 from ..errors import UserError
-from ..volume import TEST_VOLUMES, test_volume
 from .fileio import atomic_write, make_folder
 
+if TYPE_CHECKING:
+    import torch
+
 __all__ = ["BUILTIN_PREFIX", "VolumeFileError", "to_mitsuba_grid", "read_npz", "read_vol", "read_volume_file",
+           "read_volume_array",
            "load_volume", "write_npz", "write_vol", "save_volume"]
 
 PathLike = Union[str, Path]
@@ -62,11 +68,23 @@ def _existing_file(path: Path) -> "tuple[Path, str]":
     return path, name
 
 
+def _tensor(v: np.ndarray) -> "torch.Tensor":
+    """A checked ``(C, N, N, N)`` array → the ``(1, C, N, N, N)`` tensor on its memory."""
+    import torch  # lazy: reading a file into numpy (read_volume_array) needs no torch
+
+    return torch.from_numpy(v)[None]
+
+
 def read_npz(path: Path) -> torch.Tensor:
     """Read and validate the array ``volume`` of a ``.npz`` file → ``(1, C, N, N, N)`` float32.
 
     Raises :class:`VolumeFileError` naming the file and what is wrong (missing, not an archive, no
     array ``volume``, a wrong shape, values outside [0, 1], …)."""
+    return _tensor(_npz_array(path))
+
+
+def _npz_array(path: Path) -> np.ndarray:
+    """:func:`read_npz`'s checked ``(C, N, N, N)`` array, read with numpy alone."""
     path, name = _existing_file(path)
     try:
         archive = np.load(path, allow_pickle=False)
@@ -87,7 +105,7 @@ def read_npz(path: Path) -> torch.Tensor:
             v = archive["volume"]
         except Exception as e:
             raise VolumeFileError(f"could not read array 'volume' from {name!r}: {e}") from None
-    return torch.from_numpy(_checked(v, name))[None]
+    return _checked(v, name)
 
 
 def read_vol(path: Path) -> torch.Tensor:
@@ -96,6 +114,11 @@ def read_vol(path: Path) -> torch.Tensor:
 
     Raises :class:`VolumeFileError` naming the file and what is wrong (missing, not a ``.vol``, an
     encoding other than float32, a size that does not match its header, …)."""
+    return _tensor(_vol_array(path))
+
+
+def _vol_array(path: Path) -> np.ndarray:
+    """:func:`read_vol`'s checked ``(C, N, N, N)`` array, read with numpy alone."""
     path, name = _existing_file(path)
     data = path.read_bytes()
     header = len(_VOL_MAGIC) + 4 * 4 + 6 * 4
@@ -107,18 +130,24 @@ def read_vol(path: Path) -> torch.Tensor:
     if min(x, y, z, c) < 1 or len(data) - header != 4 * x * y * z * c:
         raise VolumeFileError(f"{name!r}: its header says {x}×{y}×{z}×{c} values, its body holds "
                               f"{(len(data) - header) // 4} (a truncated or damaged file)")
-    grid = torch.from_numpy(np.frombuffer(data, "<f4", x * y * z * c, header).reshape(z, y, x, c).copy())
-    v = grid.flip(0, 1).permute(3, 0, 1, 2).numpy()          # [Z, Y, X, C] → (C, D, H, W): to_mitsuba_grid's inverse
-    return torch.from_numpy(_checked(v, name))[None]
+    grid = np.frombuffer(data, "<f4", x * y * z * c, header).reshape(z, y, x, c)
+    v = grid[::-1, ::-1].transpose(3, 0, 1, 2)          # [Z, Y, X, C] → (C, D, H, W): to_mitsuba_grid's inverse
+    return _checked(v, name)
 
 
 def read_volume_file(path: PathLike) -> torch.Tensor:
     """A ``.npz`` (:func:`read_npz`) or ``.vol`` (:func:`read_vol`) file → ``(1, C, N, N, N)``."""
+    return _tensor(read_volume_array(path))
+
+
+def read_volume_array(path: PathLike) -> np.ndarray:
+    """A ``.npz`` or ``.vol`` file → its checked ``(C, N, N, N)`` float32 array (what
+    :func:`read_volume_file` returns, as numpy, read and checked without torch); the same errors."""
     path = Path(path)
     if path.suffix.lower() == ".npz":
-        return read_npz(path)
+        return _npz_array(path)
     if path.suffix.lower() == ".vol":
-        return read_vol(path)
+        return _vol_array(path)
     raise VolumeFileError(f"{str(path)!r}: expected a volume file ending in .npz or .vol")
 
 
@@ -160,6 +189,8 @@ def load_volume(spec: str, resolution: Optional[int] = None) -> torch.Tensor:
     For a file, ``resolution`` (if given) must match the file's N. The messages name the command
     line's ``--volume`` and ``--resolution``, which pass ``spec`` and ``resolution`` through.
     """
+    from ..volume import TEST_VOLUMES, test_volume  # lazy: torch, which reading a file into numpy does without
+
     if spec.startswith(BUILTIN_PREFIX):
         kind = spec[len(BUILTIN_PREFIX):]
         if kind not in TEST_VOLUMES:

@@ -1,5 +1,8 @@
 """``platonic view``: an interactive web viewer on the project's own renderers (the ``viewer`` extra).
 
+- :mod:`.start`: what the command does before torch loads: the port's and SOURCE's checks (a
+  volume file read with numpy) and the server started with the initial camera, so that the
+  address is printed while torch and the scene load. Imports numpy, and viser only to start it.
 - :mod:`.scene`: what is shown, without the web library: the SOURCE (a volume file, a run
   folder, a photo run with a photo) opened as volumes, a frame of the current volume rendered by
   one of the project's renderers at a camera direction, and the exports a page may ask for,

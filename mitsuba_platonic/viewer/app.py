@@ -24,9 +24,12 @@ held to the distances of zoom ¼ … 8 for its F and a. A camera message that on
 camera drawn (float32 noise, :data:`VIEW_SNAP`) renders nothing again.
 
 Frames come from :meth:`ViewerApp.frame_for`, one render at a time (a lock), which hands back the
-last frame rendered where it is asked for again (another page's, the same picture at rest). As
-the server starts, a thread renders the frame a page asks for first (:func:`initial_key`) while
-the browser loads the page.
+last frame rendered where it is asked for again (another page's, the same picture at rest). The
+server may start before the scene is made (:func:`~.start.start_server`: ``platonic view`` prints
+the address, then imports torch and opens SOURCE); a page that connects meanwhile waits, and is
+served when :class:`ViewerApp` takes the server (viser calls its connect handler for the pages
+connected already). As the app starts, a thread renders the frame a page asks for first
+(:func:`initial_key`) while the browser loads the page.
 
 While the camera keeps moving (a message within :data:`SETTLE_S`), the thread renders a
 low-resolution frame (a quarter of the resolution, at least the volume's; the same resolution
@@ -45,10 +48,7 @@ generation run: seed, new latent, a walk to a second seed), and exports into the
 
 from __future__ import annotations
 
-import contextlib
-import io
 import math
-import socket
 import threading
 import time
 from pathlib import Path
@@ -62,16 +62,12 @@ from ..errors import UserError
 from ..views import camera_frames, from_angles, to_angles
 from .scene import (BACKGROUND, WINDOW_SNAP, ZOOM_RANGE, Exports, Frame, Scene, Window, camera_window,
                     formations_for, render_frame, renderers_for, resolutions_for, zoom_distance)
+from .start import DISTANCE, FOV, address, check_port, start_server, stop_server
 
 __all__ = ["ViewerApp", "check_port", "SETTLE_S"]
 
 #: A camera at rest this long gets its full-resolution frame.
 SETTLE_S = 0.2
-#: Distance of the initial camera from the centre (the cube is [−1, 1]³).
-DISTANCE = 4.0
-#: viser's vertical field of view, 2 atan(1/DISTANCE) ≈ 28.1°: the initial camera shows the cube's
-#: cross-section [−1, 1] over the canvas' height, the frame at zoom 1 (:func:`~.scene.camera_window`).
-FOV = 2.0 * math.atan(1.0 / DISTANCE)
 #: A camera message whose view differs from the drawn one by at most this (each component of ω)
 #: and whose window by at most :data:`~.scene.WINDOW_SNAP` is the browser's float32 echo of the
 #: camera the server set (or of the first camera): nothing moved, nothing to render again.
@@ -85,21 +81,6 @@ ZOOM_STEP, PAN_STEP = 2.0, 0.25
 MIN_SHOWN = 256
 #: The background grey as an 8-bit sRGB value (what :func:`~.scene.to_display` composites over).
 _BG8 = int(round(255 * (1.055 * BACKGROUND ** (1 / 2.4) - 0.055)))
-
-
-def check_port(host: str, port: int) -> None:
-    """Raise :class:`UserError` naming ``--port`` unless ``host:port`` can be bound now (viser itself
-    would quietly move to the next free port)."""
-    if port == 0:
-        return
-    family = socket.AF_INET6 if ":" in host else socket.AF_INET
-    with socket.socket(family, socket.SOCK_STREAM) as s:
-        s.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)
-        try:
-            s.bind((host, port))
-        except OSError as e:
-            raise UserError(f"--port {port}: {host}:{port} cannot be used ({e.strerror or e}); choose another "
-                            f"--port (0 picks a free one)") from None
 
 
 def initial_key(scene: Scene, version: int = 0) -> Tuple:
@@ -147,36 +128,32 @@ def _pad_to_aspect(image: np.ndarray, aspect: float) -> np.ndarray:
 
 
 class ViewerApp:
-    """The viser server for one :class:`~.scene.Scene`, its exports into ``out``."""
+    """The page for one :class:`~.scene.Scene`, its exports into ``out``: on ``server`` (started by
+    :func:`~.start.start_server` on ``host:port``, whose address may already have been given out:
+    the pages connected to it are served from here on), else on a server started here."""
 
-    def __init__(self, scene: Scene, out: Path, host: str = "127.0.0.1", port: int = 8080):
-        check_port(host, port)
+    def __init__(self, scene: Scene, out: Path, host: str = "127.0.0.1", port: int = 8080,
+                 server: Optional["viser.ViserServer"] = None):
+        if server is None:
+            server = start_server(host, port)
         self.scene, self.exports = scene, Exports(out)
         self.render_lock = threading.Lock()               # one render at a time (torch's and Dr.Jit's threads)
         self.scene_lock = threading.RLock()
         self.version = 0                                   # bumped when the volume changes
         self.last: Optional[Tuple[Tuple, Frame]] = None     # the last frame rendered (any page's) and its key
-        with contextlib.redirect_stdout(io.StringIO()):      # viser's own banner: the command prints the address
-            self.server = viser.ViserServer(host=host, port=port, label="platonic view", verbose=False)
-        if port and self.server.get_port() != port:        # taken between the check and the bind
-            self.server.stop()
-            raise UserError(f"--port {port}: {host}:{port} is in use; choose another --port (0 picks a free one)")
+        self.server = server
         self.host, self.port = host, self.server.get_port()
-        self.server.scene.set_up_direction("+y")
-        self.server.initial_camera.position = (0.0, 0.0, DISTANCE)
-        self.server.initial_camera.look_at = (0.0, 0.0, 0.0)
-        self.server.initial_camera.up = (0.0, 1.0, 0.0)
-        self.server.initial_camera.fov = FOV
         self.clients = {}
-        self.server.on_client_connect(self._connect)
-        self.server.on_client_disconnect(self._disconnect)
         self.warming = threading.Thread(target=self._warm_up, name="warm-up", daemon=True)
         self.warming.start()
+        # viser calls the connect handler for the pages connected already too (those that opened the
+        # address while the scene loaded); they get their GUI and first frame now
+        self.server.on_client_disconnect(self._disconnect)
+        self.server.on_client_connect(self._connect)
 
     @property
     def url(self) -> str:
-        host = f"[{self.host}]" if ":" in self.host else self.host
-        return f"http://{host}:{self.port}"
+        return address(self.host, self.port)
 
     def _connect(self, client: "viser.ClientHandle") -> None:
         self.clients[client.client_id] = ClientView(self, client)
@@ -226,8 +203,7 @@ class ViewerApp:
     def stop(self) -> None:
         for view in list(self.clients.values()):
             view.stop()
-        with contextlib.redirect_stdout(io.StringIO()):
-            self.server.stop()
+        stop_server(self.server)
 
 
 class ClientView:

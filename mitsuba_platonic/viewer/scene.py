@@ -35,11 +35,12 @@ from PIL import Image
 from ..errors import UserError
 from ..export import extract_mesh, save_ply
 from ..files.fileio import atomic_write
-from ..files.volume_io import read_volume_file, save_volume
+from ..files.volume_io import save_volume
 from ..render import RenderSettings, render_with
 from ..render.window import Window, window_or_none
 from ..views import camera_frames
 from ..volume import CHANNELS
+from .start import check_source, volume_title
 
 __all__ = ["RENDERERS", "FORMATIONS", "BACKGROUND", "Frame", "Scene", "Exports", "open_source", "render_frame",
            "formations_for", "renderers_for", "resolutions_for", "to_display", "clean_name", "camera_window",
@@ -343,19 +344,17 @@ def _held_out(cfg) -> Tuple[Optional[torch.Tensor], List[str], Optional[str]]:
     return data.held_out, names, None
 
 
-def open_source(source: PathLike, photo: Optional[PathLike] = None) -> Scene:
-    """SOURCE → :class:`Scene` (module docstring); :class:`UserError` naming what is wrong."""
+def open_source(source: PathLike, photo: Optional[PathLike] = None, array: Optional[np.ndarray] = None) -> Scene:
+    """SOURCE → :class:`Scene` (module docstring); :class:`UserError` naming what is wrong.
+
+    ``array``: what :func:`~.start.check_source` returned for this SOURCE, a volume file's checked
+    array (not read again); None: SOURCE is checked and read here."""
     path = Path(source)
-    if not path.exists():
-        raise UserError(f"SOURCE {str(path)!r} does not exist; expected a volume file (.npz, .vol) or a run folder")
-    if path.is_file():
-        if photo is not None:
-            raise UserError(f"--photo needs a reconstruction run folder as SOURCE, got the file {str(path)!r}")
-        volume = read_volume_file(path)[0]
-        return Scene(volume=volume, kind="volume", title=f"{path.name} ({volume.shape[0]} channel(s), "
-                                                         f"{volume.shape[-1]}³)")
-    if not path.is_dir():
-        raise UserError(f"SOURCE {str(path)!r} is neither a file nor a folder")
+    if array is None:
+        array = check_source(path, photo)
+    if array is not None:
+        volume = torch.from_numpy(array)
+        return Scene(volume=volume, kind="volume", title=volume_title(path, volume.shape))
     # lazy, the three: checkpoints, configs and networks are for run folders only (a volume file's
     # first frame waits for none of them)
     from ..files.checkpoint import read_checkpoint                  # lazy: runs only
