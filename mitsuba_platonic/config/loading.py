@@ -37,8 +37,9 @@ RETIRED = {
     ("train", "light_fade"): (0, "3afe14f"),
     ("train", "r1_every"): (1, "3afe14f"),
     ("train", "silhouette_weight"): (0.0, "60a45a0"),      # issue 43: docs/experiments/photo-sides.md
-    ("train", "symmetry"): (0.0, "3bef62f"),               # issue 43: screened, pending pt-tree and the trees
+    ("train", "symmetry"): (0.0, "3bef62f"),               # issue 43: docs/experiments/photo-sides.md
     ("train", "solidity"): (0.0, "3bef62f"),
+    ("train", "turn"): (0.0, "dbbc002"),                   # issue 43: the quarter turn at e173879
 }
 
 
