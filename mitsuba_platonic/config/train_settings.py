@@ -45,7 +45,7 @@ POSES = ("input", "elevation")
 LIGHTS = ("prior", "head")
 #: The weights of the loss terms: each ≥ 0 (0: the term is off), checked by name.
 LOSS_WEIGHTS = ("gp_weight", "rec_weight", "weight_3d", "pose_weight", "r1_weight", "colour_tv",
-                "colour_match", "colour_offset", "depth_spread", "symmetry", "solidity")
+                "colour_match", "colour_offset", "depth_spread", "symmetry", "turn", "solidity")
 #: How messages name ``train.mode: prgan``.
 PRGAN = "the PrGAN-style baseline ('prgan')"
 #: The GAN losses of :func:`~mitsuba_platonic.train.losses.d_loss` / ``g_loss`` (anything but the first is WGAN-GP).
@@ -113,7 +113,9 @@ class TrainConfig:
     (:func:`mitsuba_platonic.train.losses.depth_spread`, docs/training.md); symmetry: weight of the
     prior that the object is probably symmetric front to back, its opacity mirrored along the input
     view's depth (reconstruction; 0: none) (:func:`mitsuba_platonic.train.losses.symmetry`,
-    docs/training.md); solidity: weight of the prior that along each input ray the object is solid
+    docs/training.md); turn: weight of the prior that the object is probably round about its vertical
+    axis, its upright opacity turned a quarter (reconstruction, train.pose 'elevation'; 0: none)
+    (:func:`mitsuba_platonic.train.losses.turn`); solidity: weight of the prior that along each input ray the object is solid
     between its first and its last matter (reconstruction, image targets; 0: none)
     (:func:`mitsuba_platonic.train.losses.solidity`); ema: null, or the decay β
     of an exponential moving average of E's and G's weights, which samples, checkpoints' inference
@@ -155,6 +157,7 @@ class TrainConfig:
     colour_offset: float = 0.0
     depth_spread: float = 0.0
     symmetry: float = 0.0
+    turn: float = 0.0
     solidity: float = 0.0
     ema: Optional[float] = None
     d_augment: List[str] = field(default_factory=list)
@@ -201,6 +204,9 @@ class TrainConfig:
             raise ConfigError("train.symmetry: the prior mirrors G's volume front to back along the input view, so it "
                               f"needs train.task 'reconstruction' and train.mode 'platonic', got task {self.task!r}, "
                               f"mode {self.mode!r}")
+        if self.turn > 0 and self.pose != "elevation":
+            raise ConfigError("train.turn: the prior turns G's volume a quarter about the object's vertical, which only "
+                              f"an upright volume has, so it needs train.pose 'elevation', got {self.pose!r}")
         for key in ("lr_g", "lr_e", "lr_d"):
             if not getattr(self, key) > 0:
                 raise ConfigError(f"train.{key}: expected a positive learning rate, got {getattr(self, key)!r}")

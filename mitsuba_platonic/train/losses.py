@@ -25,6 +25,12 @@ that faces the input camera, so α and its mirror front to back, α̃[d] = α[N 
 0 for a front-back symmetric volume, 1 for matter all in one half (a shell behind the photo's surface
 and nothing further back); scale-free, and 0 for an empty volume. The photo cannot tell where along
 its rays the matter is, so the mirrored matter, behind the visible surface, does not contradict it
+Turn (optional prior on G, upright volumes as for the symmetry, dim 3 the vertical): the object is
+probably round about its vertical axis, so α and α turned a quarter about the vertical through the
+volume's centre, α̂ = T α (depth becomes width), agree:
+                            L_turn = Σ |α − T α| / Σ (α + T α)
+0 for a volume that a quarter turn leaves alone (a ball, a cylinder, a cone), 1 at most; it asks
+the object to be as deep as it is wide, where the front-back mirror only doubles the photo's front
 Solidity (optional prior on G, volumes in the input camera's frame as for the depth spread): along
 each input ray the object is solid between its first and its last surface. With a ray's surfaces
 m_l = α_l where α_l ≥ ½, else 0, and their hull h_k = min(max_{l≤k} m_l, max_{l≥k} m_l) (held
@@ -56,7 +62,7 @@ import torch.nn.functional as F
 
 from ..render.closed_form import transmittance_before
 
-__all__ = ["d_loss", "g_loss", "gradient_penalty", "r1_penalty", "colour_tv", "colour_offset", "depth_spread", "symmetry", "solidity", "mean_colour", "colour_match", "soft_accuracy_counts", "hard_accuracy_counts"]
+__all__ = ["d_loss", "g_loss", "gradient_penalty", "r1_penalty", "colour_tv", "colour_offset", "depth_spread", "symmetry", "turn", "solidity", "mean_colour", "colour_match", "soft_accuracy_counts", "hard_accuracy_counts"]
 
 
 def d_loss(kind: str, real: torch.Tensor, fake: torch.Tensor) -> torch.Tensor:
@@ -165,6 +171,18 @@ def symmetry(volume: torch.Tensor) -> torch.Tensor:
     a = volume[:, -1]
     mirrored = a.flip(1)                                # α̃[d] = α[N − 1 − d]
     return (a - mirrored).abs().sum() / (a + mirrored).sum().clamp_min(1e-12)
+
+
+def turn(volume: torch.Tensor) -> torch.Tensor:
+    """L_turn (module docstring) of upright volumes ``(B, C, N, N, N)`` (the opacity the last channel,
+    dims 2, 3, 4 depth, height, width): over the whole batch, Σ |α − T α| / Σ (α + T α) with T the
+    quarter turn about the vertical through the volume's centre (depth ↔ width); in [0, 1], 0 where
+    the volume is empty."""
+    if volume.dim() != 5 or volume.shape[2] != volume.shape[4]:
+        raise ValueError(f"turn: expected upright volumes (B, C, N, H, N), got {tuple(volume.shape)}")
+    a = volume[:, -1]
+    turned = torch.rot90(a, 1, dims=(1, 3))             # (d, w) → (w, N − 1 − d): a quarter about the vertical
+    return (a - turned).abs().sum() / (a + turned).sum().clamp_min(1e-12)
 
 
 #: The opacity from which a voxel counts as a surface for :func:`solidity`.

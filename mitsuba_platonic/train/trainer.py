@@ -113,7 +113,7 @@ from ..views import DEFAULT_ELEVATION, from_angles, front_view, sample_views, to
 from .augment import augment, augment_photos
 from .data import TrainingData
 from .losses import (colour_match, colour_offset, colour_tv, d_loss, depth_spread, g_loss, gradient_penalty,
-                     hard_accuracy_counts, r1_penalty, soft_accuracy_counts, solidity, symmetry)
+                     hard_accuracy_counts, r1_penalty, soft_accuracy_counts, solidity, symmetry, turn)
 from .renderer import in_camera, make_lit_renderer, make_renderer
 from .roll import input_frame_roll, roll
 
@@ -357,6 +357,8 @@ class Trainer:
             terms["depth_spread"] = t.depth_spread * depth_spread(v_input)
         if t.symmetry > 0:                                   # matter behind the photo's surface, mirrored
             terms["symmetry"] = t.symmetry * symmetry(v)
+        if t.turn > 0:                                       # as deep as wide: round about the vertical
+            terms["turn"] = t.turn * turn(v)
         if t.solidity > 0:                                   # no gaps along the photo's rays
             terms["solidity"] = t.solidity * solidity(v_input)
         if t.colour_match > 0:                               # the photo's mean colour from every side
@@ -380,7 +382,7 @@ class Trainer:
         """G's (and E's) loss: the sum of its weighted terms, named 'adv2d' (D on rendered views),
         'adv3d' (D3 on volumes), 'rec' (the input view), 'rec3d'
         (the input image's ground-truth volume), 'pose' (the elevations of G's renders), 'colour_tv',
-        'colour_match', 'colour_offset', 'depth_spread', 'symmetry' and 'solidity' (priors, when their weights are set), 'light' (the lights of
+        'colour_match', 'colour_offset', 'depth_spread', 'symmetry', 'turn' and 'solidity' (priors, when their weights are set), 'light' (the lights of
         G's renders). One place that sees
         every term, so the tests can check which of them reach G."""
         return sum(terms.values())
