@@ -464,6 +464,29 @@ def test_the_config_refuses_turn_without_an_upright_volume():
     load_config(None, ["train.turn=1", "train.task=reconstruction", "train.pose=elevation", "train.pose_weight=1"])
 
 
+@pytest.mark.usefixtures("tiny_class")
+def test_the_trainer_hands_g_the_turn_of_the_upright_volume_it_made(tmp_path, monkeypatch):
+    """With weight w, G's 'turn' term is w · L_turn of the upright volume G made; without it, none."""
+    from mitsuba_platonic.networks import nets
+    original = nets.Generator.forward
+    seen = {}
+
+    def spy(self, *args, **kwargs):
+        out = original(self, *args, **kwargs)
+        seen["v"] = out.detach().clone()
+        return out
+
+    monkeypatch.setattr(nets.Generator, "forward", spy)
+    for weight in (0.0, 2.0):
+        terms = _g_terms(_tiny_trainer(tmp_path, "train.task=reconstruction", "train.pose=elevation",
+                                       "train.pose_weight=1", f"train.turn={weight}"))
+        if not weight:
+            assert "turn" not in terms
+            continue
+        assert float(terms["turn"]) == pytest.approx(2.0 * float(turn(seen["v"])), rel=1e-5)
+        assert float(terms["turn"]) > 0.0
+
+
 def test_solidity_of_rays_worked_by_hand():
     """Rays along depth (N = 4). Empty, one shell, a solid body, one peak: 0. A front and a back
     shell with a gap: hull (1, 1, 1, 1), 2 missing of 4, so ½. α = (½, 0, 1, 0) (½ is a surface):
