@@ -6,11 +6,13 @@ train.depth_spread (train/losses.depth_spread): the input view's colour from a t
 train.symmetry (train/losses.symmetry): the object probably symmetric front to back; and
 train.solidity (train/losses.solidity): no gaps along an input ray between its first and last matter."""
 
+import math
+
 import pytest
 import torch
 
 from mitsuba_platonic.config import ConfigError, load_config
-from mitsuba_platonic.train.losses import colour_match, colour_offset, colour_tv, depth_spread, mean_colour, solidity, symmetry, turn
+from mitsuba_platonic.train.losses import colour_match, colour_offset, colour_tv, depth_spread, mean_colour, solidity, symmetry, turn, turned
 
 
 def _volume(n=4, colour=(0.2, 0.5, 0.7), density=1.0):
@@ -404,11 +406,12 @@ def test_the_trainer_hands_g_the_symmetry_of_the_volume_it_made(tmp_path, monkey
         assert float(terms["symmetry"]) > 0.0
 
 
-def test_turn_matches_a_voxel_loop_with_exact_zeros_and_ones_and_spares_a_vertical_cylinder():
-    """Against the sum written out voxel by voxel with the quarter turn about the vertical (h) axis,
-    (d, h, w) → (w, h, N − 1 − d), on random volumes holding exact 0s and 1s. A vertical cylinder
-    about the volume's centre, however its radius changes with height, scores 0; a slab as wide as
-    the volume and one voxel deep does not; neither does a cylinder lying along depth."""
+def test_a_quarter_turn_matches_a_voxel_loop_with_exact_zeros_and_ones_and_spares_a_vertical_cone():
+    """φ = 90° against the sum written out voxel by voxel with the quarter turn about the vertical (h)
+    axis, (d, h, w) → (w, h, N − 1 − d), on random volumes holding exact 0s and 1s (voxel centres
+    land on voxel centres: no resampling). A vertical cone about the volume's centre scores 0 at
+    that turn; a slab as wide as the volume and one voxel deep does not; neither does the cone
+    lying along depth."""
     torch.manual_seed(16)
     v = torch.rand(2, 4, 5, 3, 5, dtype=torch.float64)
     a = v[:, 3]
@@ -423,37 +426,72 @@ def test_turn_matches_a_voxel_loop_with_exact_zeros_and_ones_and_spares_a_vertic
                     x, y = float(a[b, d, h, w]), float(a[b, w, h, n - 1 - d])
                     diff += abs(x - y)
                     total += x + y
-    assert float(turn(v)) == pytest.approx(diff / total, rel=1e-12)
-    n = 8
-    c = torch.arange(n, dtype=torch.float64) - (n - 1) / 2
-    r2 = c[:, None] ** 2 + c[None, :] ** 2                       # (d, w) distance² from the vertical axis
-    radius = torch.linspace(1.0, 3.5, n, dtype=torch.float64)    # a cone: wider towards the bottom
-    cylinder = torch.zeros(1, 1, n, n, n, dtype=torch.float64)
-    cylinder[0, 0] = (r2[:, None, :] <= radius[None, :, None] ** 2).double()
-    assert float(turn(cylinder)) == 0.0
-    slab = torch.zeros(1, 1, n, n, n, dtype=torch.float64)
-    slab[0, 0, n // 2] = 1.0                                     # wide, one voxel deep
-    assert float(turn(slab)) > 0.8
-    lying = cylinder.permute(0, 1, 3, 2, 4)                      # the same cone, its axis along depth
-    assert float(turn(lying)) > 0.1
+    quarter = torch.full((2,), math.pi / 2, dtype=torch.float64)
+    assert float(turn(v, quarter)) == pytest.approx(diff / total, rel=1e-9)
+    assert float(turn(v, -quarter)) == pytest.approx(diff / total, rel=1e-9)
+    cone, slab = _cone(8), torch.zeros(1, 1, 8, 8, 8, dtype=torch.float64)
+    slab[0, 0, 4] = 1.0                                          # wide, one voxel deep
+    assert float(turn(cone, quarter[:1])) == pytest.approx(0.0, abs=1e-12)
+    assert float(turn(slab, quarter[:1])) > 0.8
+    assert float(turn(cone.permute(0, 1, 3, 2, 4), quarter[:1])) > 0.1
     with pytest.raises(ValueError, match=r"turn: expected upright volumes \(B, C, N, H, N\), got \(1, 1, 8, 8, 4\)"):
-        turn(slab[..., :4])
+        turn(slab[..., :4], quarter[:1])
+    with pytest.raises(ValueError, match=r"turn: expected one angle per volume, shape \(1,\), got \(2,\)"):
+        turn(slab, quarter)
+
+
+def _cone(n: int, points: int = 0) -> torch.Tensor:
+    """A vertical cone about the centre of an n³ volume (wider towards the bottom), ``(1, 1, n, n, n)``;
+    with ``points`` > 0, a star of that many points instead (its radius swings by half with the angle)."""
+    c = torch.arange(n, dtype=torch.float64) - (n - 1) / 2
+    r = torch.sqrt(c[:, None] ** 2 + c[None, :] ** 2)            # (d, w) distance from the vertical axis
+    θ = torch.atan2(c[:, None], c[None, :])
+    radius = torch.linspace(0.3, 0.45, n, dtype=torch.float64)[None, :, None] * n
+    if points:
+        radius = radius * (0.75 + 0.25 * torch.cos(points * θ))[:, None, :]
+    return (r[:, None, :] <= radius).double()[None, None]
+
+
+def test_a_random_turn_tells_a_round_body_from_a_four_pointed_star():
+    """At a quarter turn a four-pointed star scores 0 as a cone does; at an eighth of a turn the star
+    scores far more than the cone, whose loss is only the resampling's blur."""
+    quarter, eighth = torch.tensor([math.pi / 2], dtype=torch.float64), torch.tensor([math.pi / 4], dtype=torch.float64)
+    cone, star = _cone(32), _cone(32, points=4)
+    assert float(turn(star, quarter)) == pytest.approx(0.0, abs=1e-12)
+    assert float(turn(star, eighth)) > 3.0 * float(turn(cone, eighth))
+    assert float(turn(cone, eighth)) < 0.05
+
+
+def test_turned_goes_the_way_its_docstring_says():
+    """A positive quarter turn takes the front's centre line (d = 0, nearest the camera) to the left
+    (w = 0), the left to the back, at its height; a negative one to the right."""
+    n = 5
+    v = torch.zeros(1, 1, n, n, n, dtype=torch.float64)
+    v[0, 0, 0, 1, 2] = 1.0
+    quarter = torch.tensor([math.pi / 2], dtype=torch.float64)
+    def where(x: torch.Tensor) -> list:
+        assert float(x.sum()) == pytest.approx(1.0, abs=1e-12)   # all of it moved, up to cos(π/2)'s round-off
+        return (x[0, 0] > 0.5).nonzero().tolist()
+
+    assert where(turned(v, quarter)) == [[2, 1, 0]]
+    assert where(turned(turned(v, quarter), quarter)) == [[4, 1, 2]]
+    assert where(turned(v, -quarter)) == [[2, 1, 4]]
 
 
 def test_the_turn_gradient_grows_a_shallow_slab_in_depth_and_matches_finite_differences():
-    """A slab one voxel deep and as wide as the volume: the gradient asks for matter in front of and
-    behind it on the centre line (negative derivatives there), and less of the slab's far ends;
-    away from ties it matches finite differences."""
+    """A slab one voxel deep and as wide as the volume: at a quarter turn the gradient asks for matter
+    in front of and behind it on the centre line (negative derivatives there), and less of the slab's
+    far ends; at a random angle it matches finite differences."""
     n = 6
     slab = torch.zeros(1, 1, n, n, n, dtype=torch.float64)
     slab[0, 0, n // 2] = 1.0
     slab.requires_grad_(True)
-    turn(slab).backward()
+    turn(slab, torch.tensor([math.pi / 2], dtype=torch.float64)).backward()
     assert float(slab.grad[0, 0, 0, 2, n // 2]) < 0.0 and float(slab.grad[0, 0, n - 1, 2, n // 2]) < 0.0
     assert float(slab.grad[0, 0, n // 2, 2, 0]) > 0.0
     torch.manual_seed(17)
     v = (0.05 + 0.9 * torch.rand(2, 4, 4, 3, 4, dtype=torch.float64)).requires_grad_(True)
-    assert torch.autograd.gradcheck(turn, (v,))
+    assert torch.autograd.gradcheck(lambda x: turn(x, torch.tensor([0.3, 2.1], dtype=torch.float64)), (v,))
 
 
 def test_the_config_refuses_turn_without_an_upright_volume():
@@ -466,9 +504,11 @@ def test_the_config_refuses_turn_without_an_upright_volume():
 
 @pytest.mark.usefixtures("tiny_class")
 def test_the_trainer_hands_g_the_turn_of_the_upright_volume_it_made(tmp_path, monkeypatch):
-    """With weight w, G's 'turn' term is w · L_turn of the upright volume G made; without it, none."""
+    """With weight w, G's 'turn' term is w · L_turn of the upright volume G made, at one angle per
+    volume in [0, 2π) drawn anew each step; without it, none."""
     from mitsuba_platonic.networks import nets
-    original = nets.Generator.forward
+    from mitsuba_platonic.train import trainer as T
+    original, original_turn = nets.Generator.forward, T.turn
     seen = {}
 
     def spy(self, *args, **kwargs):
@@ -476,14 +516,21 @@ def test_the_trainer_hands_g_the_turn_of_the_upright_volume_it_made(tmp_path, mo
         seen["v"] = out.detach().clone()
         return out
 
+    def turn_spy(volume, φ):
+        seen["φ"] = φ.detach().clone()
+        return original_turn(volume, φ)
+
     monkeypatch.setattr(nets.Generator, "forward", spy)
+    monkeypatch.setattr(T, "turn", turn_spy)
     for weight in (0.0, 2.0):
         terms = _g_terms(_tiny_trainer(tmp_path, "train.task=reconstruction", "train.pose=elevation",
                                        "train.pose_weight=1", f"train.turn={weight}"))
         if not weight:
             assert "turn" not in terms
             continue
-        assert float(terms["turn"]) == pytest.approx(2.0 * float(turn(seen["v"])), rel=1e-5)
+        φ = seen["φ"]
+        assert φ.shape == (2,) and bool(((φ >= 0) & (φ < 2 * math.pi)).all()) and float(φ[0]) != float(φ[1])
+        assert float(terms["turn"]) == pytest.approx(2.0 * float(turn(seen["v"], φ.to(seen["v"]))), rel=1e-5)
         assert float(terms["turn"]) > 0.0
 
 

@@ -26,11 +26,13 @@ that faces the input camera, so α and its mirror front to back, α̃[d] = α[N 
 and nothing further back); scale-free, and 0 for an empty volume. The photo cannot tell where along
 its rays the matter is, so the mirrored matter, behind the visible surface, does not contradict it
 Turn (optional prior on G, upright volumes as for the symmetry, dim 3 the vertical): the object is
-probably round about its vertical axis, so α and α turned a quarter about the vertical through the
-volume's centre, α̂ = T α (depth becomes width), agree:
-                            L_turn = Σ |α − T α| / Σ (α + T α)
-0 for a volume that a quarter turn leaves alone (a ball, a cylinder, a cone), 1 at most; it asks
-the object to be as deep as it is wide, where the front-back mirror only doubles the photo's front
+probably round about its vertical axis, so α and α turned by a random angle φ about the vertical
+through the volume's centre, T_φ α (resampled trilinearly; φ uniform in [0, 2π), one per volume and
+step), agree:
+                            L_turn = Σ |α − T_φ α| / Σ (α + T_φ α)
+0 for a volume that every turn leaves alone (a ball, a cylinder, a cone; up to the resampling's blur),
+1 at most; it asks the object to be as deep as it is wide, where the front-back mirror only doubles
+the photo's front. A quarter turn alone is satisfied by a four-pointed star as well as by a disc
 Solidity (optional prior on G, volumes in the input camera's frame as for the depth spread): along
 each input ray the object is solid between its first and its last surface. With a ray's surfaces
 m_l = α_l where α_l ≥ ½, else 0, and their hull h_k = min(max_{l≤k} m_l, max_{l≥k} m_l) (held
@@ -62,7 +64,7 @@ import torch.nn.functional as F
 
 from ..render.closed_form import transmittance_before
 
-__all__ = ["d_loss", "g_loss", "gradient_penalty", "r1_penalty", "colour_tv", "colour_offset", "depth_spread", "symmetry", "turn", "solidity", "mean_colour", "colour_match", "soft_accuracy_counts", "hard_accuracy_counts"]
+__all__ = ["d_loss", "g_loss", "gradient_penalty", "r1_penalty", "colour_tv", "colour_offset", "depth_spread", "symmetry", "turned", "turn", "solidity", "mean_colour", "colour_match", "soft_accuracy_counts", "hard_accuracy_counts"]
 
 
 def d_loss(kind: str, real: torch.Tensor, fake: torch.Tensor) -> torch.Tensor:
@@ -173,16 +175,39 @@ def symmetry(volume: torch.Tensor) -> torch.Tensor:
     return (a - mirrored).abs().sum() / (a + mirrored).sum().clamp_min(1e-12)
 
 
-def turn(volume: torch.Tensor) -> torch.Tensor:
+def turned(volume: torch.Tensor, φ: torch.Tensor) -> torch.Tensor:
+    """``volume`` ``(B, C, N, H, N)`` turned by φ ``(B,)`` radians about the vertical through its
+    centre, resampled trilinearly (nothing from beyond the cube): the value at p is the volume's at
+    p' in grid coordinates (x, y, z) ↔ (w, h, d), each in [−1, 1]:
+
+        x' = cos φ x − sin φ z,   z' = sin φ x + cos φ z,   y' = y
+
+    so a positive quarter turn takes the front (d = 0, nearest the camera) to the left (w = 0).
+
+    A quarter turn maps voxel centres onto voxel centres: exact, as :func:`torch.rot90`."""
+    b = volume.shape[0]
+    c, s = torch.cos(φ).to(volume), torch.sin(φ).to(volume)
+    zero, one = torch.zeros_like(c), torch.ones_like(c)
+    # grid_sample's coordinates are (x, y, z) ↔ (w, h, d); the affine grid maps output to input
+    rows = torch.stack([torch.stack([c, zero, -s, zero], -1),
+                        torch.stack([zero, one, zero, zero], -1),
+                        torch.stack([s, zero, c, zero], -1)], 1)          # (B, 3, 4)
+    grid = F.affine_grid(rows, list(volume.shape), align_corners=False)
+    return F.grid_sample(volume, grid, mode="bilinear", padding_mode="zeros", align_corners=False)
+
+
+def turn(volume: torch.Tensor, φ: torch.Tensor) -> torch.Tensor:
     """L_turn (module docstring) of upright volumes ``(B, C, N, N, N)`` (the opacity the last channel,
-    dims 2, 3, 4 depth, height, width): over the whole batch, Σ |α − T α| / Σ (α + T α) with T the
-    quarter turn about the vertical through the volume's centre (depth ↔ width); in [0, 1], 0 where
-    the volume is empty."""
+    dims 2, 3, 4 depth, height, width) turned by φ ``(B,)`` radians about the vertical through the
+    volume's centre (:func:`turned`): over the whole batch, Σ |α − T_φ α| / Σ (α + T_φ α); in [0, 1],
+    0 where the volume is empty."""
     if volume.dim() != 5 or volume.shape[2] != volume.shape[4]:
         raise ValueError(f"turn: expected upright volumes (B, C, N, H, N), got {tuple(volume.shape)}")
-    a = volume[:, -1]
-    turned = torch.rot90(a, 1, dims=(1, 3))             # (d, w) → (w, N − 1 − d): a quarter about the vertical
-    return (a - turned).abs().sum() / (a + turned).sum().clamp_min(1e-12)
+    if φ.shape != (volume.shape[0],):
+        raise ValueError(f"turn: expected one angle per volume, shape ({volume.shape[0]},), got {tuple(φ.shape)}")
+    a = volume[:, -1:]
+    t = turned(a, φ)
+    return (a - t).abs().sum() / (a + t).sum().clamp_min(1e-12)
 
 
 #: The opacity from which a voxel counts as a surface for :func:`solidity`.
