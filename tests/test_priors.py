@@ -406,24 +406,30 @@ def test_the_trainer_hands_g_the_symmetry_of_the_volume_it_made(tmp_path, monkey
 
 def test_turn_matches_a_voxel_loop_with_exact_zeros_and_ones_and_spares_a_vertical_cylinder():
     """Against the sum written out voxel by voxel with the quarter turn about the vertical (h) axis,
-    (d, h, w) → (w, h, N − 1 − d), on random volumes holding exact 0s and 1s. A vertical cylinder
-    about the volume's centre, however its radius changes with height, scores 0; a slab as wide as
+    (d, h, w) → (w, h, N − 1 − d), of the colour weighted by the opacity and of the opacity, on
+    random volumes holding exact 0s and 1s (a uniform colour: the opacity's term alone). A vertical
+    cylinder about the volume's centre, however its radius and colour change with height, scores 0,
+    not so with the colour of the front's columns carried along depth; a slab as wide as
     the volume and one voxel deep does not; neither does a cylinder lying along depth."""
     torch.manual_seed(16)
     v = torch.rand(2, 4, 5, 3, 5, dtype=torch.float64)
-    a = v[:, 3]
-    a[a < 0.2] = 0.0
-    a[a > 0.9] = 1.0
-    n = a.shape[1]
+    v[v < 0.2] = 0.0
+    v[v > 0.9] = 1.0
+    n = v.shape[2]
     diff = total = 0.0
-    for b in range(a.shape[0]):
-        for d in range(n):
-            for h in range(a.shape[2]):
-                for w in range(n):
-                    x, y = float(a[b, d, h, w]), float(a[b, w, h, n - 1 - d])
-                    diff += abs(x - y)
-                    total += x + y
+    for b in range(v.shape[0]):
+        for c in range(4):
+            for d in range(n):
+                for h in range(v.shape[3]):
+                    for w in range(n):
+                        x = float(v[b, c, d, h, w] * (v[b, 3, d, h, w] if c < 3 else 1.0))
+                        y = float(v[b, c, w, h, n - 1 - d] * (v[b, 3, w, h, n - 1 - d] if c < 3 else 1.0))
+                        diff += abs(x - y)
+                        total += x + y
     assert float(turn(v)) == pytest.approx(diff / total, rel=1e-12)
+    uniform = v.clone()
+    uniform[:, :3] = 0.4                                         # one colour: the opacity's term alone
+    assert float(turn(uniform)) == pytest.approx(float(turn(v[:, 3:])), rel=1e-12)
     n = 8
     c = torch.arange(n, dtype=torch.float64) - (n - 1) / 2
     r2 = c[:, None] ** 2 + c[None, :] ** 2                       # (d, w) distance² from the vertical axis
@@ -431,6 +437,12 @@ def test_turn_matches_a_voxel_loop_with_exact_zeros_and_ones_and_spares_a_vertic
     cylinder = torch.zeros(1, 1, n, n, n, dtype=torch.float64)
     cylinder[0, 0] = (r2[:, None, :] <= radius[None, :, None] ** 2).double()
     assert float(turn(cylinder)) == 0.0
+    layered = torch.cat([torch.linspace(0.0, 1.0, n, dtype=torch.float64)[None, None, None, :, None]
+                         .expand(1, 3, n, n, n), cylinder], dim=1)  # colours that change with height alone
+    assert float(turn(layered)) == pytest.approx(0.0, abs=1e-15)
+    streaked = layered.clone()
+    streaked[:, :3] = torch.linspace(0.0, 1.0, n, dtype=torch.float64)[None, None, None, None, :]
+    assert float(turn(streaked)) > 0.05                          # the front's columns carried along depth
     slab = torch.zeros(1, 1, n, n, n, dtype=torch.float64)
     slab[0, 0, n // 2] = 1.0                                     # wide, one voxel deep
     assert float(turn(slab)) > 0.8

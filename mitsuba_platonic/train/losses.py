@@ -26,11 +26,15 @@ that faces the input camera, so α and its mirror front to back, α̃[d] = α[N 
 and nothing further back); scale-free, and 0 for an empty volume. The photo cannot tell where along
 its rays the matter is, so the mirrored matter, behind the visible surface, does not contradict it
 Turn (optional prior on G, upright volumes as for the symmetry, dim 3 the vertical): the object is
-probably round about its vertical axis, so α and α turned a quarter about the vertical through the
-volume's centre, α̂ = T α (depth becomes width), agree:
-                            L_turn = Σ |α − T α| / Σ (α + T α)
-0 for a volume that a quarter turn leaves alone (a ball, a cylinder, a cone), 1 at most; it asks
-the object to be as deep as it is wide, where the front-back mirror only doubles the photo's front
+probably round about its vertical axis and looks from the side as it does from the front, so its
+matter X = (α c, α) (the colour c weighted by the opacity; X = α without colour) and X turned a
+quarter about the vertical through the volume's centre, T X (depth becomes width), agree:
+                            L_turn = Σ |X − T X| / Σ (X + T X)
+0 for a volume that a quarter turn leaves alone (a ball, a cylinder, a cone, of colours that
+change with height and radius only), 1 at most, the opacity's term alone for a uniform colour. It
+asks the object to be as deep as it is wide, where the front-back mirror only doubles the photo's
+front, and its side to wear the colours of its front rather than the photo's rim carried along
+depth
 Solidity (optional prior on G, volumes in the input camera's frame as for the depth spread): along
 each input ray the object is solid between its first and its last surface. With a ray's surfaces
 m_l = α_l where α_l ≥ ½, else 0, and their hull h_k = min(max_{l≤k} m_l, max_{l≥k} m_l) (held
@@ -175,14 +179,15 @@ def symmetry(volume: torch.Tensor) -> torch.Tensor:
 
 def turn(volume: torch.Tensor) -> torch.Tensor:
     """L_turn (module docstring) of upright volumes ``(B, C, N, N, N)`` (the opacity the last channel,
-    dims 2, 3, 4 depth, height, width): over the whole batch, Σ |α − T α| / Σ (α + T α) with T the
+    dims 2, 3, 4 depth, height, width): over the whole batch, Σ |X − T X| / Σ (X + T X) with T the
     quarter turn about the vertical through the volume's centre (depth ↔ width); in [0, 1], 0 where
     the volume is empty."""
     if volume.dim() != 5 or volume.shape[2] != volume.shape[4]:
         raise ValueError(f"turn: expected upright volumes (B, C, N, H, N), got {tuple(volume.shape)}")
-    a = volume[:, -1]
-    turned = torch.rot90(a, 1, dims=(1, 3))             # (d, w) → (w, N − 1 − d): a quarter about the vertical
-    return (a - turned).abs().sum() / (a + turned).sum().clamp_min(1e-12)
+    a = volume[:, -1:]
+    x = torch.cat([volume[:, :-1] * a, a], dim=1)       # X = (α c, α): the colour where there is matter
+    turned = torch.rot90(x, 1, dims=(2, 4))             # (d, w) → (w, N − 1 − d): a quarter about the vertical
+    return (x - turned).abs().sum() / (x + turned).sum().clamp_min(1e-12)
 
 
 #: The opacity from which a voxel counts as a surface for :func:`solidity`.
