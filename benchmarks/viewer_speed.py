@@ -37,6 +37,7 @@ import tempfile
 import threading
 import time
 from pathlib import Path
+from typing import Tuple
 
 import numpy as np
 import torch
@@ -98,12 +99,25 @@ RAF_COUNTER = """() => { if (window.__drawn === undefined) { window.__drawn = 0;
     const tick = () => { window.__drawn++; requestAnimationFrame(tick); }; requestAnimationFrame(tick); } }"""
 
 
+def frame_line(page):
+    """The page's frame line (``frame N: T ms, full|moving, R×R px, …``) as a :data:`FRAME` match, or None."""
+    return FRAME.search(page.get_by_text(re.compile(r"^frame \d+:")).inner_text())
+
+
 def frame_count(page) -> int:
-    m = FRAME.search(page.get_by_text(re.compile(r"^frame \d+:")).inner_text())
+    m = frame_line(page)
     return int(m.group(1)) if m else 0
 
 
-def in_browser(source: Path, pixels: int, seconds: float, window: tuple = (1280, 720)) -> None:
+def window_size(text: str) -> Tuple[int, int]:
+    """``--window``: WxH, two positive whole numbers of pixels."""
+    m = re.fullmatch(r"(\d+)x(\d+)", text)
+    if not m or int(m.group(1)) < 1 or int(m.group(2)) < 1:
+        raise argparse.ArgumentTypeError(f"expected WxH in pixels, e.g. 1280x720, got {text!r}")
+    return int(m.group(1)), int(m.group(2))
+
+
+def in_browser(source: Path, pixels: int, seconds: float, window: Tuple[int, int] = (1280, 720)) -> None:
     from playwright.sync_api import sync_playwright
 
     exe = shutil.which("chromium") or shutil.which("chromium-browser")
@@ -147,7 +161,7 @@ def in_browser(source: Path, pixels: int, seconds: float, window: tuple = (1280,
                     page.mouse.move(x + 4 * (steps % 100), y + (steps % 20), steps=1)
                     if time.monotonic() - read > 0.25:       # the frame line now and then: reading it costs the page
                         read = time.monotonic()
-                        m = FRAME.search(page.get_by_text(re.compile(r"^frame \d+:")).inner_text())
+                        m = frame_line(page)
                         if m:
                             seen[m.group(1)] = (m.group(3), m.group(4), float(m.group(2)))
                     time.sleep(max(0.0, t0 + steps / 60 - time.monotonic()))
@@ -176,7 +190,8 @@ def main() -> None:
     parser.add_argument("--pixels", type=int, default=256, help="image pixels per side (a multiple of N)")
     parser.add_argument("--seconds", type=float, default=5.0, help="length of each drag in the browser")
     parser.add_argument("--source", default=None, help="a volume file or run folder instead of the test volume")
-    parser.add_argument("--window", default="1280x720", help="the browser's window, WxH (default: 1280x720)")
+    parser.add_argument("--window", type=window_size, default=(1280, 720),
+                        help="the browser's window, WxH (default: 1280x720)")
     parser.add_argument("--no-browser", action="store_true")
     args = parser.parse_args()
     torch.set_num_threads(min(2, os.cpu_count() or 1))
@@ -188,7 +203,7 @@ def main() -> None:
         if not args.source:
             np.savez(source, volume=volume.numpy())
         if not args.no_browser:
-            in_browser(source, args.pixels, args.seconds, tuple(int(x) for x in args.window.split("x")))
+            in_browser(source, args.pixels, args.seconds, args.window)
         server_side(volume, args.pixels)
 
 
