@@ -40,6 +40,7 @@ RETIRED = {
     ("train", "symmetry"): (0.0, "3bef62f"),               # issue 43: docs/experiments/photo-sides.md
     ("train", "solidity"): (0.0, "3bef62f"),
     ("train", "turn"): (0.0, "dbbc002"),                   # issue 43: the quarter turn at e173879
+    ("model", "texture_turns"): (1, "89ff8ad"),            # issue 43: with the turn, screened on the tree photos
 }
 
 
