@@ -22,7 +22,7 @@ __all__ = ["ModelConfig", "NET_KEYS"]
 
 #: The model keys that :class:`~mitsuba_platonic.networks.nets.NetConfig` takes as they are.
 NET_KEYS = ("resolution", "latent", "width", "norm", "encoder_hidden", "upsample", "precision", "photo_colour",
-            "photo_texture", "texture_conv")
+            "photo_texture", "texture_conv", "texture_turns")
 
 
 @dataclass
@@ -46,6 +46,9 @@ class ModelConfig:
     texture_conv: with photo_texture, G's last logits corrected by a 3³ convolution that sees the photo's
     colour, G's own logits and how much of each voxel the input camera sees
     (:func:`~mitsuba_platonic.networks.photo_colours.texture_corrected`; "G's colour seeing the photo").
+    texture_turns: with photo_texture, 1: the photo carried along the input camera's rays; 4: the photo
+    projected from four cameras a quarter turn apart about the vertical, blended by each voxel's azimuth
+    (screen, issue 43).
     """
 
     resolution: int = 32
@@ -61,6 +64,7 @@ class ModelConfig:
     photo_colour: bool = False
     photo_texture: bool = False
     texture_conv: bool = False
+    texture_turns: int = 1
 
     def validate(self) -> "ModelConfig":
         """Check this section's values; raise :class:`~mitsuba_platonic.settings_checks.ConfigError`
@@ -79,6 +83,10 @@ class ModelConfig:
         if self.photo_texture and not self.photo_colour:
             raise ConfigError("model.photo_texture: the offset per voxel is G's photo colour read per pixel, so it "
                               "needs model.photo_colour: true")
+        choice("model.texture_turns", self.texture_turns, (1, 4))
+        if self.texture_turns != 1 and not self.photo_texture:
+            raise ConfigError("model.texture_turns: the turned cameras project the photo's texture, so it needs "
+                              "model.photo_texture: true")
         if self.texture_conv and not self.photo_texture:
             raise ConfigError("model.texture_conv: the convolution reads the photo's texture, so it needs "
                               "model.photo_texture: true")

@@ -1,0 +1,46 @@
+"""model.texture_turns (screen, issue 43): the photo projected from four cameras a quarter turn apart."""
+
+import math
+
+import pytest
+import torch
+
+from mitsuba_platonic.config import load_config
+from mitsuba_platonic.networks.photo_colours import photo_texture
+
+
+@pytest.mark.parametrize("θ", [0.0, 0.3])
+def test_each_quarter_of_the_azimuth_shows_its_turned_cameras_photo(θ):
+    r = 32
+    g = torch.Generator().manual_seed(0)
+    photo = torch.rand(1, 4, r, r, generator=g)
+    photo[:, 3] = 1.0
+    t = photo_texture(photo, r, torch.tensor([θ]), turns=4)
+    c = -1.0 + (torch.arange(r, dtype=torch.float64) + 0.5) * (2.0 / r)
+    x, y, z = c[None, None, :], c.flip(0)[None, :, None], c.flip(0)[:, None, None]   # G's frame: d, h, w
+    x, y, z = torch.broadcast_tensors(x, y, z)
+    φ = torch.atan2(x, z)
+    for k in range(4):
+        φ_k = k * math.pi / 2.0
+        near = torch.remainder(φ - φ_k + math.pi, 2 * math.pi).sub(math.pi).abs() < math.radians(20.0)
+        x_k = x * math.cos(φ_k) - z * math.sin(φ_k)
+        z_k = x * math.sin(φ_k) + z * math.cos(φ_k)
+        Y = y * math.cos(θ) - z_k * math.sin(θ)
+        grid = torch.stack([x_k, -Y], -1).reshape(1, r, r * r, 2).float()
+        seen = torch.nn.functional.grid_sample(photo[:, :3], grid, mode="bilinear", padding_mode="border",
+                                               align_corners=False).reshape(3, r, r, r)
+        assert near.sum() > 1000
+        assert (t[0][:, near] - seen[:, near]).abs().max() < 2e-3     # the others' weight ≤ cos(70°)^8 ≈ 2e-4
+
+
+def test_one_turn_is_the_carried_photo_and_the_key_is_checked(tmp_path):
+    photo = torch.rand(2, 4, 16, 16)
+    photo[:, 3] = 1.0
+    assert torch.equal(photo_texture(photo, 16, None), photo_texture(photo, 16, None, turns=1))
+    with pytest.raises(ValueError, match="turns"):
+        photo_texture(photo, 16, None, turns=3)
+    cfg = load_config("photos", [f"data.path={tmp_path}", "model.texture_turns=4"])
+    assert cfg.model.net_config(4).texture_turns == 4
+    from mitsuba_platonic.settings_checks import ConfigError
+    with pytest.raises(ConfigError, match="model.texture_turns"):
+        load_config("photos", [f"data.path={tmp_path}", "model.texture_turns=2"])
