@@ -19,7 +19,8 @@ The collections:
   as cut-out photo folders (``data.path: COLLECTION/images``), so the same loader, crop and split
   apply. For these the table also has the truth at the views the photo never showed
   (:mod:`mitsuba_platonic.evaluate.photo_truth`): silhouette IoU and MAE of EA renders at ±90°
-  (side) and 180° (back) about the object's true axis, the IoU at the photo's own view (how
+  (side), ±45° (oblique: a four-pointed star passes at ±90° but not here) and 180° (back) about the
+  object's true axis, the IoU at the photo's own view (how
   well the truth was framed as the photo was), the 3D IoU, and the thickness: the matter behind the
   photo's surface along its rays, as a share of the object's (1: as solid as the truth).
 
@@ -65,7 +66,8 @@ COLLECTIONS = ("tree", *PATH_TRACED)
 JUDGE = [("c2st_near", "acc. near", 3), ("c2st_side", "acc. side", 3), ("c2st_back", "acc. back", 3),
          ("roughness_side", "rough. side", 2), ("delta_e_side", "ΔE side", 1), ("delta_e_back", "ΔE back", 1),
          ("input_view_mae", "input MAE", 4), ("not_cards", "not cards", 0)]
-TRUTH = [("truth_front_iou", "IoU 0°", 3), ("truth_side_iou", "IoU ±90°", 3), ("truth_back_iou", "IoU 180°", 3),
+TRUTH = [("truth_front_iou", "IoU 0°", 3), ("truth_oblique_iou", "IoU ±45°", 3), ("truth_side_iou", "IoU ±90°", 3),
+         ("truth_back_iou", "IoU 180°", 3),
          ("truth_side_mae", "MAE ±90°", 4), ("truth_volume_iou", "3D IoU", 3), ("truth_thickness", "thickness", 2)]
 
 

@@ -118,6 +118,15 @@ def test_config_errors_name_the_key(override, match):
         load_config(None, [override])
 
 
+def test_photos64_is_the_photo_recipe_at_64(tmp_path):
+    # one recipe: the 64³ config differs from photos.yaml in its run's name and the resolution only
+    a = load_config("photos", [f"data.path={tmp_path}"]).to_dict()
+    b = load_config("photos64", [f"data.path={tmp_path}"]).to_dict()
+    assert (a["run"].pop("name"), b["run"].pop("name")) == ("photos", "photos64")
+    assert (a["model"].pop("resolution"), b["model"].pop("resolution")) == (32, 64)
+    assert a == b
+
+
 def test_config_files_load(tmp_path):
     from pathlib import Path
     configs = sorted((Path(__file__).resolve().parents[1] / "configs").glob("*.yaml"))

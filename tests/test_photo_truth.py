@@ -14,7 +14,8 @@ from mitsuba_platonic.data.photos import decode_image
 from mitsuba_platonic.data.photos.frame import frame_and_resample, framing
 from mitsuba_platonic.data.photos.prepare import photo_framing
 from mitsuba_platonic.evaluate.metrics import volume_iou
-from mitsuba_platonic.evaluate.photo_truth import framed_truth, score_against_truth, thickness, turntable_in_camera
+from mitsuba_platonic.evaluate.photo_truth import (framed_truth, score_against_truth, thickness, turntable_in_camera,
+                                                  view_scores)
 from mitsuba_platonic.evaluate.photos import photo_splits
 from mitsuba_platonic.evaluate.protocol import billboard
 from mitsuba_platonic.render import render
@@ -172,3 +173,27 @@ def test_thickness_is_one_for_the_truth_and_the_share_of_a_shell_that_fills_the_
     assert math.isnan(thickness(ball, torch.zeros_like(ball)))
     with pytest.raises(ValueError, match="one shape"):
         thickness(ball, ball[:, :16])
+
+
+def test_the_oblique_score_tells_a_four_armed_cross_from_the_cylinder_that_the_side_cannot():
+    # a vertical cylinder of radius r and a cross of two slabs whose arms reach r: the same silhouette at 0°
+    # and at ±90° (a quarter turn leaves the cross unchanged), its arms foreshortened at ±45°
+    n, r, w, h = 32, 0.6, 0.1, 0.7
+    c = voxel_centres(n)
+    x, y, z = c[..., 0].abs(), c[..., 1].abs(), c[..., 2].abs()
+    upright = y <= h
+    cylinder = upright & (c[..., 0] ** 2 + c[..., 2] ** 2 <= r * r)
+    cross = upright & (((x <= r) & (z <= w)) | ((z <= r) & (x <= w)))
+
+    def volume(solid):
+        rgb = torch.tensor([0.3, 0.6, 0.2], dtype=torch.float64)[:, None, None, None].expand(3, n, n, n)
+        return torch.cat([rgb, solid.double()[None]]).float()
+
+    truth, star = volume(cylinder), volume(cross)
+    assert view_scores(truth, truth, 0.0)["oblique_iou"] == pytest.approx(1.0)
+    scores = view_scores(star, truth, 0.0)
+    assert scores["front_iou"] > 0.95 and scores["side_iou"] > 0.95
+    # seen at 45° an arm spans u = (x ∓ z)/√2 up to (r + w)/√2 from the axis, inside the cylinder's r: the
+    # IoU is at most the ratio of the widths (0.825), give or take a voxel's soft edge on each side
+    assert scores["oblique_iou"] <= (r + w) / (math.sqrt(2.0) * r) + 2.0 / n
+    assert scores["oblique_iou"] < scores["side_iou"] - 0.15
