@@ -44,3 +44,21 @@ def test_one_turn_is_the_carried_photo_and_the_key_is_checked(tmp_path):
     from mitsuba_platonic.settings_checks import ConfigError
     with pytest.raises(ConfigError, match="model.texture_turns"):
         load_config("photos", [f"data.path={tmp_path}", "model.texture_turns=2"])
+
+
+def test_the_turned_texture_goes_where_the_input_camera_does_not_see():
+    from torch import nn
+    from mitsuba_platonic.networks.photo_colours import texture_corrected
+
+    r = 8
+    conv = nn.Conv3d(8, 4, 3, padding=1)
+    nn.init.zeros_(conv.weight)
+    nn.init.zeros_(conv.bias)                                     # no correction: colour = σ(ℓ + logit t)
+    carried, behind = torch.full((1, 3, r, r, r), 0.2), torch.full((1, 3, r, r, r), 0.7)
+    volume = torch.zeros(1, 4, r, r, r)
+    volume[:, 3, :2] = 1.0 - 1e-6                                  # an opaque slab at the front (d = 0, 1)
+    colour, _ = texture_corrected(conv, volume, torch.zeros(1, 3, r, r, r), carried, None, behind)
+    assert torch.allclose(colour[:, :3, :1], carried[:, :, :1], atol=1e-5)      # seen: the photo's pixel
+    assert torch.allclose(colour[:, :3, 2:], behind[:, :, 2:], atol=1e-4)       # behind the slab: the turned one
+    plain, _ = texture_corrected(conv, volume, torch.zeros(1, 3, r, r, r), carried, None)
+    assert torch.allclose(plain[:, :3], carried, atol=1e-5)

@@ -162,7 +162,8 @@ def _in_g_frame(weight: torch.Tensor, elevation: Optional[torch.Tensor]) -> torc
 
 
 def texture_corrected(conv: nn.Module, volume: torch.Tensor, offsets: torch.Tensor, texture: torch.Tensor,
-                      elevation: Optional[torch.Tensor] = None) -> Tuple[torch.Tensor, torch.Tensor]:
+                      elevation: Optional[torch.Tensor] = None,
+                      behind: Optional[torch.Tensor] = None) -> Tuple[torch.Tensor, torch.Tensor]:
     """``model.texture_conv``: (volume, ℓ') of the volume G made with offsets ℓ from the photos'
     ``texture`` t (:func:`photo_texture`, ``(B, 3, R, R, R)``), its logits corrected by ``conv``
     (G's :attr:`~mitsuba_platonic.networks.nets.Generator.texture_conv`, a 3³ convolution, 8 channels
@@ -177,9 +178,15 @@ def texture_corrected(conv: nn.Module, volume: torch.Tensor, offsets: torch.Tens
     code, so they cannot tell where the texture carried along the input camera's rays runs
     through the body as streaks seen from the side; the convolution sees the texture, its
     neighbours and how deep behind what the camera sees each voxel lies. ℓ' is the whole offset
-    from the photo's colour (``train.colour_offset`` penalises it)."""
+    from the photo's colour (``train.colour_offset`` penalises it).
+
+    ``behind`` (``model.texture_turns`` 4: the photo from four turned cameras, :func:`photo_texture`):
+    the texture where the input camera does not see, t ← T_front t + (1 − T_front) t_behind, so the
+    surface the photo shows keeps the photo's own pixels."""
     ρ = volume[:, 3:]
     front = _in_g_frame(front_transmittance(ρ, elevation), elevation)
+    if behind is not None:
+        texture = front * texture.to(volume) + (1.0 - front) * behind.to(volume)
     t = torch.logit(texture.to(volume).clamp(COLOUR_MIN, 1.0 - COLOUR_MIN))
     logit_ρ = torch.logit(ρ.clamp(1e-6, 1.0 - 1e-6))            # G's own density logit (ρ is its sigmoid)
     x = torch.cat([offsets, logit_ρ, t, front], dim=1).contiguous(memory_format=torch.channels_last_3d)
@@ -199,9 +206,10 @@ def photo_volume(G: nn.Module, code: torch.Tensor, images: torch.Tensor, recipe:
     recipe of training and of :meth:`~mitsuba_platonic.model.Model.reconstruct`."""
     mean = photo_colour(images)
     r = recipe.resolution
-    t = photo_texture(images, r, elevation, recipe.texture_turns) if recipe.photo_texture else None
+    t = photo_texture(images, r, elevation) if recipe.photo_texture else None
+    behind = photo_texture(images, r, elevation, 4) if recipe.texture_turns == 4 else None
     v, ℓ = G(code, mean if t is None else t, offsets=True)
     if recipe.texture_conv:
         conv = getattr(G, "module", G).texture_conv                # G, or the G inside a data-parallel wrapper
-        v, ℓ = texture_corrected(conv, v, ℓ, t, elevation)
+        v, ℓ = texture_corrected(conv, v, ℓ, t, elevation, behind)
     return v, ℓ

@@ -46,9 +46,9 @@ class ModelConfig:
     texture_conv: with photo_texture, G's last logits corrected by a 3³ convolution that sees the photo's
     colour, G's own logits and how much of each voxel the input camera sees
     (:func:`~mitsuba_platonic.networks.photo_colours.texture_corrected`; "G's colour seeing the photo").
-    texture_turns: with photo_texture, 1: the photo carried along the input camera's rays; 4: the photo
-    projected from four cameras a quarter turn apart about the vertical, blended by each voxel's azimuth
-    (screen, issue 43).
+    texture_turns: with texture_conv, 1: the photo carried along the input camera's rays; 4: behind what the
+    input camera sees, the photo projected from four cameras a quarter turn apart about the vertical,
+    blended by each voxel's azimuth (screen, issue 43).
     """
 
     resolution: int = 32
@@ -84,9 +84,9 @@ class ModelConfig:
             raise ConfigError("model.photo_texture: the offset per voxel is G's photo colour read per pixel, so it "
                               "needs model.photo_colour: true")
         choice("model.texture_turns", self.texture_turns, (1, 4))
-        if self.texture_turns != 1 and not self.photo_texture:
-            raise ConfigError("model.texture_turns: the turned cameras project the photo's texture, so it needs "
-                              "model.photo_texture: true")
+        if self.texture_turns != 1 and not self.texture_conv:
+            raise ConfigError("model.texture_turns: the turned cameras' texture goes where the input camera does not "
+                              "see, which texture_conv weighs, so it needs model.texture_conv: true")
         if self.texture_conv and not self.photo_texture:
             raise ConfigError("model.texture_conv: the convolution reads the photo's texture, so it needs "
                               "model.photo_texture: true")
