@@ -62,9 +62,9 @@ from ..errors import UserError
 from ..views import camera_frames, from_angles, to_angles
 from .scene import (BACKGROUND, WINDOW_SNAP, ZOOM_RANGE, Exports, Frame, Scene, Window, camera_window,
                     formations_for, render_frame, renderers_for, resolutions_for, zoom_distance)
-from .start import DISTANCE, FOV, address, check_port, start_server, stop_server
+from .start import DISTANCE, FOV, address, start_server, stop_server
 
-__all__ = ["ViewerApp", "check_port", "SETTLE_S"]
+__all__ = ["ViewerApp", "SETTLE_S"]
 
 #: A camera at rest this long gets its full-resolution frame.
 SETTLE_S = 0.2

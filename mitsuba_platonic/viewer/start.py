@@ -102,7 +102,6 @@ def stop_server(server) -> None:
         server.stop()
 
 
-
 def address(host: str, port: int) -> str:
     """The page's address: ``http://host:port`` (``[host]`` for an IPv6 one)."""
     return f"http://[{host}]:{port}" if ":" in host else f"http://{host}:{port}"
