@@ -62,3 +62,30 @@ def test_the_turned_texture_goes_where_the_input_camera_does_not_see():
     assert torch.allclose(colour[:, :3, 2:], behind[:, :, 2:], atol=1e-4)       # behind the slab: the turned one
     plain, _ = texture_corrected(conv, volume, torch.zeros(1, 3, r, r, r), carried, None)
     assert torch.allclose(plain[:, :3], carried, atol=1e-5)
+
+
+def test_without_offsets_behind_the_body_keeps_the_turned_texture_and_the_seen_surface_its_offsets(tmp_path):
+    from torch import nn
+    from mitsuba_platonic.networks.photo_colours import texture_corrected
+    from mitsuba_platonic.settings_checks import ConfigError
+
+    r = 8
+    conv = nn.Conv3d(8, 4, 3, padding=1)
+    nn.init.zeros_(conv.weight)
+    nn.init.zeros_(conv.bias)
+    carried, behind = torch.full((1, 3, r, r, r), 0.2), torch.full((1, 3, r, r, r), 0.7)
+    volume = torch.zeros(1, 4, r, r, r)
+    volume[:, 3, :2] = 1.0 - 1e-6                                  # an opaque slab at the front (d = 0, 1)
+    ℓ = torch.full((1, 3, r, r, r), 1.5, requires_grad=True)       # G's offsets, the same everywhere
+    colour, used = texture_corrected(conv, volume, ℓ, carried, None, behind, offsets_behind=False)
+    assert torch.allclose(colour[:, :3, :1], torch.sigmoid(torch.logit(carried[:, :, :1]) + 1.5), atol=1e-5)
+    assert torch.allclose(colour[:, :3, 2:], behind[:, :, 2:], atol=1e-4)       # behind: the texture as read
+    assert used[:, :, 2:].abs().max() < 1e-4 and torch.allclose(used[:, :, :1], ℓ[:, :, :1])
+    colour[:, :3].sum().backward()
+    assert ℓ.grad[:, :, 2:].abs().max() < 1e-4 < ℓ.grad[:, :, :1].abs().min()   # no gradient to the unseen offsets
+    with_offsets, _ = texture_corrected(conv, volume, ℓ.detach(), carried, None, behind)
+    assert torch.allclose(with_offsets[:, :3, 2:], torch.sigmoid(torch.logit(behind[:, :, 2:]) + 1.5), atol=1e-4)
+    cfg = load_config("photos", [f"data.path={tmp_path}", "model.texture_turns=4", "model.offsets_behind=false"])
+    assert cfg.model.net_config(4).offsets_behind is False
+    with pytest.raises(ConfigError, match="model.offsets_behind"):
+        load_config("photos", [f"data.path={tmp_path}", "model.offsets_behind=false"])

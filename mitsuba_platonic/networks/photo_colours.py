@@ -163,7 +163,8 @@ def _in_g_frame(weight: torch.Tensor, elevation: Optional[torch.Tensor]) -> torc
 
 def texture_corrected(conv: nn.Module, volume: torch.Tensor, offsets: torch.Tensor, texture: torch.Tensor,
                       elevation: Optional[torch.Tensor] = None,
-                      behind: Optional[torch.Tensor] = None) -> Tuple[torch.Tensor, torch.Tensor]:
+                      behind: Optional[torch.Tensor] = None,
+                      offsets_behind: bool = True) -> Tuple[torch.Tensor, torch.Tensor]:
     """``model.texture_conv``: (volume, ℓ') of the volume G made with offsets ℓ from the photos'
     ``texture`` t (:func:`photo_texture`, ``(B, 3, R, R, R)``), its logits corrected by ``conv``
     (G's :attr:`~mitsuba_platonic.networks.nets.Generator.texture_conv`, a 3³ convolution, 8 channels
@@ -182,7 +183,9 @@ def texture_corrected(conv: nn.Module, volume: torch.Tensor, offsets: torch.Tens
 
     ``behind`` (``model.texture_turns`` 4: the photo from four turned cameras, :func:`photo_texture`):
     the texture where the input camera does not see, t ← T_front t + (1 − T_front) t_behind, so the
-    surface the photo shows keeps the photo's own pixels."""
+    surface the photo shows keeps the photo's own pixels. ``offsets_behind`` False
+    (``model.offsets_behind``): G's colour offsets act only where the input camera sees,
+    ℓ' ← T_front (ℓ + δ_c), so the body behind that surface keeps the turned cameras' texture as read."""
     ρ = volume[:, 3:]
     front = _in_g_frame(front_transmittance(ρ, elevation), elevation)
     if behind is not None:
@@ -191,8 +194,11 @@ def texture_corrected(conv: nn.Module, volume: torch.Tensor, offsets: torch.Tens
     logit_ρ = torch.logit(ρ.clamp(1e-6, 1.0 - 1e-6))            # G's own density logit (ρ is its sigmoid)
     x = torch.cat([offsets, logit_ρ, t, front], dim=1).contiguous(memory_format=torch.channels_last_3d)
     δ = conv(x).float()
-    logits = torch.cat([offsets + t, logit_ρ], dim=1) + δ
-    return torch.sigmoid(logits).contiguous(), offsets + δ[:, :3]
+    ℓ = offsets + δ[:, :3]
+    if behind is not None and not offsets_behind:
+        ℓ = front * ℓ                                          # T_front held constant: offsets where seen
+    logits = torch.cat([ℓ + t, logit_ρ + δ[:, 3:]], dim=1)
+    return torch.sigmoid(logits).contiguous(), ℓ
 
 
 def photo_volume(G: nn.Module, code: torch.Tensor, images: torch.Tensor, recipe: Any,
@@ -211,5 +217,5 @@ def photo_volume(G: nn.Module, code: torch.Tensor, images: torch.Tensor, recipe:
     v, ℓ = G(code, mean if t is None else t, offsets=True)
     if recipe.texture_conv:
         conv = getattr(G, "module", G).texture_conv                # G, or the G inside a data-parallel wrapper
-        v, ℓ = texture_corrected(conv, v, ℓ, t, elevation, behind)
+        v, ℓ = texture_corrected(conv, v, ℓ, t, elevation, behind, recipe.offsets_behind)
     return v, ℓ
