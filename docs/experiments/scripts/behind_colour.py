@@ -22,20 +22,29 @@ from pathlib import Path
 from typing import Callable, Tuple
 
 import torch
+from torch import nn
 
 from mitsuba_platonic.config import load_config
 from mitsuba_platonic.evaluate.judge import judge
 from mitsuba_platonic.evaluate.photos import photo_splits
 from mitsuba_platonic.model import Model
-from mitsuba_platonic.networks.photo_colours import (COLOUR_MIN, _in_g_frame, front_transmittance, photo_texture,
-                                                     texture_corrected)
+from mitsuba_platonic.networks.photo_colours import photo_texture, texture_corrected
 
 KEYS = [("c2st_near", "acc. near", 3), ("c2st_side", "acc. side", 3), ("c2st_back", "acc. back", 3),
         ("roughness_side", "rough. side", 2), ("delta_e_side", "ΔE side", 1), ("delta_e_back", "ΔE back", 1)]
 
 
 def coloured(model: Model, kind: str) -> Callable[[torch.Tensor], Tuple[torch.Tensor, torch.Tensor]]:
-    """A reconstruct function for the judge: upright volumes of ``model`` coloured by ``kind``, and θ̂ in degrees."""
+    """A reconstruct function for the judge: upright volumes of ``model`` coloured by ``kind``, and θ̂ in
+    degrees. Both kinds go through the recipe's own :func:`texture_corrected`: ``seen offsets`` with
+    ``offsets_behind=False``, ``texture`` with zero offsets and a zero convolution (colour σ(logit t) = t);
+    the density is the model's in every kind."""
+    conv = model.G.texture_conv
+    if kind == "texture":
+        conv = nn.Conv3d(conv.in_channels, conv.out_channels, 3, padding=1)
+        nn.init.zeros_(conv.weight)
+        nn.init.zeros_(conv.bias)
+
     def reconstruct(x: torch.Tensor) -> Tuple[torch.Tensor, torch.Tensor]:
         with torch.no_grad():
             z = model.E(x)
@@ -43,15 +52,12 @@ def coloured(model: Model, kind: str) -> Callable[[torch.Tensor], Tuple[torch.Te
             t = photo_texture(x, model.net.resolution, θ)
             behind = photo_texture(x, model.net.resolution, θ, 4)
             v, ℓ = model.G(model.code(z), t, offsets=True)
-            volume, ℓ_all = texture_corrected(model.G.texture_conv, v, ℓ, t, θ, behind)
-            front = _in_g_frame(front_transmittance(v[:, 3:], θ), θ)            # T_front, as the recipe has it
-            texture = (front * t + (1.0 - front) * behind).to(volume)
+            density = texture_corrected(model.G.texture_conv, v, ℓ, t, θ, behind)[0][:, 3:]
             if kind == "texture":
-                volume = torch.cat([texture, volume[:, 3:]], 1)
-            elif kind == "seen offsets":
-                logit_t = torch.logit(texture.clamp(COLOUR_MIN, 1.0 - COLOUR_MIN))
-                volume = torch.cat([torch.sigmoid(logit_t + front * ℓ_all), volume[:, 3:]], 1)
-        return volume, torch.rad2deg(θ)
+                colour = texture_corrected(conv.to(v), v, torch.zeros_like(ℓ), t, θ, behind)[0][:, :3]
+            else:
+                colour = texture_corrected(conv, v, ℓ, t, θ, behind, offsets_behind=False)[0][:, :3]
+        return torch.cat([colour, density], 1), torch.rad2deg(θ)
     return reconstruct
 
 
