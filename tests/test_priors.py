@@ -2,13 +2,17 @@
 volumes, its gradient (colour only, never density), and the trainer handing it to G; and
 train.colour_match (train/losses.colour_match): the mean colour of the object from every side; and
 train.colour_offset (train/losses.colour_offset): G's colour held to the photo's; and
-train.depth_spread (train/losses.depth_spread): the input view's colour from a thin surface."""
+train.depth_spread (train/losses.depth_spread): the input view's colour from a thin surface; and
+train.turn (train/losses.turn): the object probably round about its vertical; and
+train.solidity (train/losses.solidity): no gaps along an input ray between its first and last matter."""
+
+import math
 
 import pytest
 import torch
 
 from mitsuba_platonic.config import ConfigError, load_config
-from mitsuba_platonic.train.losses import colour_match, colour_offset, colour_tv, depth_spread, mean_colour
+from mitsuba_platonic.train.losses import colour_match, colour_offset, colour_tv, depth_spread, mean_colour, solidity, turn, turned
 
 
 def _volume(n=4, colour=(0.2, 0.5, 0.7), density=1.0):
@@ -313,3 +317,231 @@ def test_the_trainer_hands_g_the_depth_spread_of_the_input_view(tmp_path, monkey
             continue
         assert float(terms["depth_spread"].detach()) == pytest.approx(3.0 * float(depth_spread(seen["v"])), rel=1e-5)
         assert float(terms["depth_spread"].detach()) > 0.0
+
+
+def test_a_quarter_turn_matches_a_voxel_loop_with_exact_zeros_and_ones_and_spares_a_vertical_cone():
+    """φ = 90° against the sum written out voxel by voxel with the quarter turn about the vertical (h)
+    axis, (d, h, w) → (w, h, N − 1 − d), on random volumes holding exact 0s and 1s (voxel centres
+    land on voxel centres: no resampling). A vertical cone about the volume's centre scores 0 at
+    that turn; a slab as wide as the volume and one voxel deep does not; neither does the cone
+    lying along depth."""
+    torch.manual_seed(16)
+    v = torch.rand(2, 4, 5, 3, 5, dtype=torch.float64)
+    a = v[:, 3]
+    a[a < 0.2] = 0.0
+    a[a > 0.9] = 1.0
+    n = a.shape[1]
+    diff = total = 0.0
+    for b in range(a.shape[0]):
+        for d in range(n):
+            for h in range(a.shape[2]):
+                for w in range(n):
+                    x, y = float(a[b, d, h, w]), float(a[b, w, h, n - 1 - d])
+                    diff += abs(x - y)
+                    total += x + y
+    quarter = torch.full((2,), math.pi / 2, dtype=torch.float64)
+    assert float(turn(v, quarter)) == pytest.approx(diff / total, rel=1e-9)
+    assert float(turn(v, -quarter)) == pytest.approx(diff / total, rel=1e-9)
+    cone, slab = _cone(8), torch.zeros(1, 1, 8, 8, 8, dtype=torch.float64)
+    slab[0, 0, 4] = 1.0                                          # wide, one voxel deep
+    assert float(turn(cone, quarter[:1])) == pytest.approx(0.0, abs=1e-12)
+    assert float(turn(slab, quarter[:1])) > 0.8
+    assert float(turn(cone.permute(0, 1, 3, 2, 4), quarter[:1])) > 0.1
+    with pytest.raises(ValueError, match=r"turn: expected upright volumes \(B, C, N, H, N\), got \(1, 1, 8, 8, 4\)"):
+        turn(slab[..., :4], quarter[:1])
+    with pytest.raises(ValueError, match=r"turn: expected one angle per volume, shape \(1,\), got \(2,\)"):
+        turn(slab, quarter)
+
+
+def _cone(n: int, points: int = 0) -> torch.Tensor:
+    """A vertical cone about the centre of an n³ volume (wider towards the bottom), ``(1, 1, n, n, n)``;
+    with ``points`` > 0, a star of that many points instead (its radius swings by half with the angle)."""
+    c = torch.arange(n, dtype=torch.float64) - (n - 1) / 2
+    r = torch.sqrt(c[:, None] ** 2 + c[None, :] ** 2)            # (d, w) distance from the vertical axis
+    θ = torch.atan2(c[:, None], c[None, :])
+    radius = torch.linspace(0.3, 0.45, n, dtype=torch.float64)[None, :, None] * n
+    if points:
+        radius = radius * (0.75 + 0.25 * torch.cos(points * θ))[:, None, :]
+    return (r[:, None, :] <= radius).double()[None, None]
+
+
+def test_a_random_turn_tells_a_round_body_from_a_four_pointed_star():
+    """At a quarter turn a four-pointed star scores 0 as a cone does; at an eighth of a turn the star
+    scores far more than the cone, whose loss is only the resampling's blur."""
+    quarter, eighth = torch.tensor([math.pi / 2], dtype=torch.float64), torch.tensor([math.pi / 4], dtype=torch.float64)
+    cone, star = _cone(32), _cone(32, points=4)
+    assert float(turn(star, quarter)) == pytest.approx(0.0, abs=1e-12)
+    assert float(turn(star, eighth)) > 3.0 * float(turn(cone, eighth))
+    assert float(turn(cone, eighth)) < 0.05
+
+
+def test_turned_goes_the_way_its_docstring_says():
+    """A positive quarter turn takes the front's centre line (d = 0, nearest the camera) to the left
+    (w = 0), the left to the back, at its height; a negative one to the right."""
+    n = 5
+    v = torch.zeros(1, 1, n, n, n, dtype=torch.float64)
+    v[0, 0, 0, 1, 2] = 1.0
+    quarter = torch.tensor([math.pi / 2], dtype=torch.float64)
+    def where(x: torch.Tensor) -> list:
+        assert float(x.sum()) == pytest.approx(1.0, abs=1e-12)   # all of it moved, up to cos(π/2)'s round-off
+        return (x[0, 0] > 0.5).nonzero().tolist()
+
+    assert where(turned(v, quarter)) == [[2, 1, 0]]
+    assert where(turned(turned(v, quarter), quarter)) == [[4, 1, 2]]
+    assert where(turned(v, -quarter)) == [[2, 1, 4]]
+
+
+def test_the_turn_gradient_grows_a_shallow_slab_in_depth_and_matches_finite_differences():
+    """A slab one voxel deep and as wide as the volume: at a quarter turn the gradient asks for matter
+    in front of and behind it on the centre line (negative derivatives there), and less of the slab's
+    far ends; at a random angle it matches finite differences."""
+    n = 6
+    slab = torch.zeros(1, 1, n, n, n, dtype=torch.float64)
+    slab[0, 0, n // 2] = 1.0
+    slab.requires_grad_(True)
+    turn(slab, torch.tensor([math.pi / 2], dtype=torch.float64)).backward()
+    assert float(slab.grad[0, 0, 0, 2, n // 2]) < 0.0 and float(slab.grad[0, 0, n - 1, 2, n // 2]) < 0.0
+    assert float(slab.grad[0, 0, n // 2, 2, 0]) > 0.0
+    torch.manual_seed(17)
+    v = (0.05 + 0.9 * torch.rand(2, 4, 4, 3, 4, dtype=torch.float64)).requires_grad_(True)
+    assert torch.autograd.gradcheck(lambda x: turn(x, torch.tensor([0.3, 2.1], dtype=torch.float64)), (v,))
+
+
+def test_the_config_refuses_turn_without_an_upright_volume():
+    with pytest.raises(ConfigError, match="train.turn: .*needs train.pose 'elevation', got 'input'"):
+        load_config(None, ["train.turn=1", "train.task=reconstruction"])
+    with pytest.raises(ConfigError, match=r"train.turn: expected a non-negative value, got -1"):
+        load_config(None, ["train.turn=-1"])
+    load_config(None, ["train.turn=1", "train.task=reconstruction", "train.pose=elevation", "train.pose_weight=1"])
+
+
+@pytest.mark.usefixtures("tiny_class")
+def test_the_trainer_hands_g_the_turn_of_the_upright_volume_it_made(tmp_path, monkeypatch):
+    """With weight w, G's 'turn' term is w · L_turn of the upright volume G made, at one angle per
+    volume in [0, 2π) drawn anew each step; without it, none."""
+    from mitsuba_platonic.networks import nets
+    from mitsuba_platonic.train import trainer as T
+    original, original_turn = nets.Generator.forward, T.turn
+    seen = {}
+
+    def spy(self, *args, **kwargs):
+        out = original(self, *args, **kwargs)
+        seen["v"] = out.detach().clone()
+        return out
+
+    def turn_spy(volume, φ):
+        seen["φ"] = φ.detach().clone()
+        return original_turn(volume, φ)
+
+    monkeypatch.setattr(nets.Generator, "forward", spy)
+    monkeypatch.setattr(T, "turn", turn_spy)
+    for weight in (0.0, 2.0):
+        terms = _g_terms(_tiny_trainer(tmp_path, "train.task=reconstruction", "train.pose=elevation",
+                                       "train.pose_weight=1", f"train.turn={weight}"))
+        if not weight:
+            assert "turn" not in terms
+            continue
+        φ = seen["φ"]
+        assert φ.shape == (2,) and bool(((φ >= 0) & (φ < 2 * math.pi)).all()) and float(φ[0]) != float(φ[1])
+        assert float(terms["turn"]) == pytest.approx(2.0 * float(turn(seen["v"], φ.to(seen["v"]))), rel=1e-5)
+        assert float(terms["turn"]) > 0.0
+
+
+def test_solidity_of_rays_worked_by_hand():
+    """Rays along depth (N = 4). Empty, one shell, a solid body, one peak: 0. A front and a back
+    shell with a gap: hull (1, 1, 1, 1), 2 missing of 4, so ½. α = (½, 0, 1, 0) (½ is a surface):
+    hull min(cummax front (½, ½, 1, 1), cummax back (1, 1, 1, 0)) = (½, ½, 1, 0), ½ missing of 2,
+    so ¼. Pooled over the batch: a full ray beside the gapped one (0 + 2) / (4 + 4) = ¼. A haze
+    below ½ has no surfaces: (0.4, 0, 0, 0.4) is not filled, and (0.4, 0, 1, 0) has the hull
+    (0, 0, 1, 0): 0."""
+    assert float(solidity(_rays([[0, 0, 0, 0]]))) == 0.0
+    assert float(solidity(_rays([[1, 1, 0, 0]]))) == 0.0
+    assert float(solidity(_rays([[0.2, 0.7, 1, 0.4]]))) == 0.0
+    assert float(solidity(_rays([[1, 0, 0, 1]]))) == 0.5
+    assert float(solidity(_rays([[0.5, 0, 1, 0]]))) == pytest.approx(0.25, rel=1e-12)
+    assert float(solidity(_rays([[1, 1, 1, 1], [1, 0, 0, 1]]))) == pytest.approx(0.25, rel=1e-12)
+    assert float(solidity(_rays([[0.4, 0, 0, 0.4]]))) == 0.0
+    assert float(solidity(_rays([[0.4, 0, 1, 0]]))) == 0.0
+
+
+def test_solidity_leaves_a_haze_alone_and_fills_between_surfaces_inside_it():
+    """G's first volumes are a haze: every voxel below ½ with gaps. Filling it would make each ray
+    an opaque block (32 voxels of 0.3: opacity 1 − 0.7³² ≈ 1), so a haze costs nothing; two
+    surfaces of 0.9 in the same haze ask for the gap between them alone."""
+    torch.manual_seed(9)
+    haze = 0.3 * torch.rand(1, 32, dtype=torch.float64)
+    haze[:, ::3] = 0.0
+    assert float(solidity(_rays(haze))) == 0.0
+    walls = haze.clone()
+    walls[0, 5] = walls[0, 20] = 0.9
+    v = _rays(walls).requires_grad_(True)
+    solidity(v).backward()
+    asked = (v.grad[0, 3, :, 0, 0] < 0).nonzero().flatten().tolist()
+    assert asked and min(asked) > 5 and max(asked) < 20, asked
+
+
+def test_solidity_matches_a_per_ray_loop_with_exact_zeros_and_ones_and_fills_only_gaps():
+    """Against each ray's hull of surfaces (α ≥ ½) written out with Python's max and min, on random
+    volumes holding exact 0s and 1s; the gradient is −1/Σh at a voxel below its hull and 0 elsewhere (the hull
+    held constant: walls are never lowered, nothing beyond the outermost matter is asked for)."""
+    torch.manual_seed(8)
+    v = torch.rand(2, 4, 6, 3, 2, dtype=torch.float64)
+    a = v[:, 3]
+    a[a < 0.3] = 0.0
+    a[a > 0.9] = 1.0
+    n = a.shape[1]
+    missing = total = 0.0
+    below = torch.zeros_like(a, dtype=torch.bool)
+    for b in range(a.shape[0]):
+        for h in range(a.shape[2]):
+            for w in range(a.shape[3]):
+                ray = [float(a[b, d, h, w]) for d in range(n)]
+                surfaces = [x if x >= 0.5 else 0.0 for x in ray]
+                for d in range(n):
+                    hull = min(max(surfaces[:d + 1]), max(surfaces[d:]))
+                    missing += max(hull - ray[d], 0.0)
+                    total += hull
+                    below[b, d, h, w] = hull > ray[d]
+    v.requires_grad_(True)
+    loss = solidity(v)
+    assert float(loss.detach()) == pytest.approx(missing / total, rel=1e-12)
+    loss.backward()
+    g = v.grad[:, 3]
+    assert torch.allclose(g[below], torch.full_like(g[below], -1.0 / total))
+    assert float(g[~below].abs().max()) == 0.0 and float(v.grad[:, :3].abs().max()) == 0.0
+
+
+def test_the_config_refuses_solidity_without_the_input_cameras_parallel_rays():
+    with pytest.raises(ConfigError, match="train.solidity: .*got 'generation', 'platonic' and 'orthographic'"):
+        load_config(None, ["train.solidity=1", "train.task=generation"])
+    with pytest.raises(ConfigError, match="train.solidity: .*got 'reconstruction', 'platonic' and 'perspective'"):
+        load_config(None, ["train.solidity=1", "render.camera=perspective"])
+    with pytest.raises(ConfigError, match=r"train.solidity: expected a non-negative value, got -1"):
+        load_config(None, ["train.solidity=-1"])
+
+
+@pytest.mark.usefixtures("tiny_class")
+def test_the_trainer_hands_g_the_solidity_of_the_input_view(tmp_path, monkeypatch):
+    """With weight w, G's 'solidity' term is w · L_solid of the volume G made (at the front view the
+    input camera's frame is the volume's own); without it, none. G's first volumes are a haze with
+    no surfaces, so G's output gets two walls of 0.9 with a gap between them along depth."""
+    from mitsuba_platonic.networks import nets
+    original = nets.Generator.forward
+    seen = {}
+
+    def spy(self, *args, **kwargs):
+        out = original(self, *args, **kwargs)
+        walls = torch.zeros_like(out)
+        walls[:, -1, [1, -2]] = 0.9 - out[:, -1, [1, -2]].detach()   # α = 0.9 there, the graph kept
+        out = out + walls
+        seen["v"] = out.detach().clone()
+        return out
+
+    monkeypatch.setattr(nets.Generator, "forward", spy)
+    for weight in (0.0, 2.0):
+        terms = _g_terms(_tiny_trainer(tmp_path, "train.task=reconstruction", f"train.solidity={weight}"))
+        if not weight:
+            assert "solidity" not in terms
+            continue
+        assert float(terms["solidity"]) == pytest.approx(2.0 * float(solidity(seen["v"])), rel=1e-5)
+        assert float(terms["solidity"]) > 0.0                   # the gap between the walls

@@ -93,6 +93,12 @@ class Config:
         if self.train.colour_offset > 0 and not self.model.photo_colour:
             raise ConfigError("train.colour_offset: it penalises G's colour offsets from the photo's colour, so it "
                               "needs model.photo_colour: true")
+        if self.train.solidity > 0 and (self.train.task != "reconstruction" or self.train.mode != "platonic"
+                                        or self.render.camera != "orthographic"):
+            raise ConfigError("train.solidity: it fills each input ray between its first and its last matter, rays "
+                              "parallel to depth in the input camera's frame, so it needs train.task 'reconstruction', "
+                              "train.mode 'platonic' and render.camera 'orthographic'; got "
+                              f"{self.train.task!r}, {self.train.mode!r} and {self.render.camera!r}")
         if self.train.depth_spread > 0 and (self.train.task != "reconstruction" or self.train.rec_target != "image"
                                             or self.render.model != "ea" or self.render.camera != "orthographic"):
             raise ConfigError("train.depth_spread: it weighs the input view's EA rays, parallel to depth in the input "

@@ -38,10 +38,6 @@ RETIRED = {
     ("train", "r1_every"): (1, "3afe14f"),
     ("train", "silhouette_weight"): (0.0, "60a45a0"),      # issue 43: docs/experiments/photo-sides.md
     ("train", "symmetry"): (0.0, "3bef62f"),               # issue 43: docs/experiments/photo-sides.md
-    ("train", "solidity"): (0.0, "3bef62f"),
-    ("train", "turn"): (0.0, "dbbc002"),                   # issue 43: the quarter turn at e173879
-    ("model", "texture_turns"): (1, "89ff8ad"),            # issue 43: with the turn, screened on the tree photos
-    ("model", "offsets_behind"): (True, "d7fd7c6"),        # issue 43: with the turn and texture_turns 4, on the suite
 }
 
 

@@ -45,7 +45,7 @@ POSES = ("input", "elevation")
 LIGHTS = ("prior", "head")
 #: The weights of the loss terms: each ≥ 0 (0: the term is off), checked by name.
 LOSS_WEIGHTS = ("gp_weight", "rec_weight", "weight_3d", "pose_weight", "r1_weight", "colour_tv",
-                "colour_match", "colour_offset", "depth_spread")
+                "colour_match", "colour_offset", "depth_spread", "turn", "solidity")
 #: How messages name ``train.mode: prgan``.
 PRGAN = "the PrGAN-style baseline ('prgan')"
 #: The GAN losses of :func:`~mitsuba_platonic.train.losses.d_loss` / ``g_loss`` (anything but the first is WGAN-GP).
@@ -110,7 +110,13 @@ class TrainConfig:
     colour (``model.photo_colour``; 0: none) (:func:`mitsuba_platonic.train.losses.colour_offset`);
     depth_spread: weight of the distortion of the input view's EA weights along its rays, a prior
     that each ray's colour come from a thin surface (reconstruction, image targets; 0: none)
-    (:func:`mitsuba_platonic.train.losses.depth_spread`, docs/training.md); ema: null, or the decay β
+    (:func:`mitsuba_platonic.train.losses.depth_spread`, docs/training.md); turn: weight of the
+    prior that the object is probably round about its vertical axis, its upright opacity against
+    itself turned by a random angle (train.pose 'elevation'; 0: none)
+    (:func:`mitsuba_platonic.train.losses.turn`, docs/training.md); solidity: weight of the prior
+    that along each input ray the object is solid between its first and its last surface
+    (reconstruction, platonic mode, orthographic camera; 0: none)
+    (:func:`mitsuba_platonic.train.losses.solidity`); ema: null, or the decay β
     of an exponential moving average of E's and G's weights, which samples, checkpoints' inference
     weights and evaluation then use (:meth:`mitsuba_platonic.train.trainer.Trainer.inference_model`,
     docs/training.md); d_augment: the differentiable augmentations of every image D sees, real or
@@ -149,6 +155,8 @@ class TrainConfig:
     colour_match: float = 0.0
     colour_offset: float = 0.0
     depth_spread: float = 0.0
+    turn: float = 0.0
+    solidity: float = 0.0
     ema: Optional[float] = None
     d_augment: List[str] = field(default_factory=list)
     photo_augment: List[str] = field(default_factory=list)
@@ -190,6 +198,9 @@ class TrainConfig:
         elif self.pose_weight > 0:
             raise ConfigError("train.pose_weight: the pose term trains the elevation head of train.pose "
                               f"'elevation'; with pose {self.pose!r} expected 0, got {self.pose_weight!r}")
+        if self.turn > 0 and self.pose != "elevation":
+            raise ConfigError("train.turn: the prior turns G's volume by a random angle about the object's vertical, which "
+                              f"only an upright volume has, so it needs train.pose 'elevation', got {self.pose!r}")
         for key in ("lr_g", "lr_e", "lr_d"):
             if not getattr(self, key) > 0:
                 raise ConfigError(f"train.{key}: expected a positive learning rate, got {getattr(self, key)!r}")

@@ -97,6 +97,8 @@ class NetConfig:
     photo_colour: bool = False
     photo_texture: bool = False
     texture_conv: bool = False
+    texture_turns: int = 1
+    offsets_behind: bool = True
 
     def validate(self) -> "NetConfig":
         if self.resolution not in RESOLUTIONS:
@@ -132,6 +134,11 @@ class NetConfig:
         if not isinstance(self.texture_conv, bool) or (self.texture_conv and not self.photo_texture):
             raise ValueError(f"texture_conv must be True or False, and True only with photo_texture; got "
                              f"{self.texture_conv!r} (photo_texture {self.photo_texture!r})")
+        if self.texture_turns not in (1, 4):
+            raise ValueError(f"texture_turns must be 1 or 4, got {self.texture_turns!r}")
+        if not isinstance(self.offsets_behind, bool) or (not self.offsets_behind and self.texture_turns != 4):
+            raise ValueError(f"offsets_behind must be True or False, and False only with texture_turns 4; got "
+                             f"{self.offsets_behind!r} (texture_turns {self.texture_turns!r})")
         return self
 
     @property

@@ -18,6 +18,7 @@ measurements behind each.
 
 from __future__ import annotations
 
+import math
 from typing import Any, Optional, Tuple
 
 import torch
@@ -86,7 +87,12 @@ def _elevations(elevation: Optional[torch.Tensor], b: int, what: str) -> torch.T
     return θ
 
 
-def photo_texture(images: torch.Tensor, resolution: int, elevation: Optional[torch.Tensor] = None) -> torch.Tensor:
+#: The power p of the four turned cameras' blend weights, w_k ∝ max(0, cos(φ − φ_k))^p.
+TURN_BLEND = 8
+
+
+def photo_texture(images: torch.Tensor, resolution: int, elevation: Optional[torch.Tensor] = None,
+                  turns: int = 1) -> torch.Tensor:
     """The photo's colour carried along the input camera's rays: ``(B, 3, R, R, R)``, a colour per
     voxel of G's frame for premultiplied RGBA photos ``(B, 4, H, W)``.
 
@@ -100,10 +106,36 @@ def photo_texture(images: torch.Tensor, resolution: int, elevation: Optional[tor
 
     and takes the colour there, read bilinearly (column X, row −Y; beyond the photo, its edge).
     Every voxel along a ray gets that ray's pixel: the front of the object starts with the photo's
-    detail, the back with its mirror image, and G's offsets change what the views disagree with."""
+    detail, the back with its mirror image, and G's offsets change what the views disagree with.
+
+    ``turns`` 4: the photo as seen by four cameras at the input's elevation, turned by φ_k = k·90°
+    about the vertical. Camera k sees p at X_k = x cos φ_k − z sin φ_k, Y_k = y cos θ − z_k sin θ
+    with z_k = x sin φ_k + z cos φ_k, and the voxel at azimuth φ = atan2(x, z) about the vertical
+    takes Σ_k w_k c(X_k, Y_k), w_k ∝ max(0, cos(φ − φ_k))^p (p = :data:`TURN_BLEND`): each side of
+    a body round about its vertical shows a photo's worth of texture, where the carried photo shows
+    its rim's columns stretched across the side."""
     c = _over_mean(images, "photo_texture")
-    X, Y, _ = _camera_coordinates(resolution, _elevations(elevation, images.shape[0], "photo_texture"))
-    return _read(c, X, Y, resolution)
+    θ = _elevations(elevation, images.shape[0], "photo_texture")
+    X, Y, _ = _camera_coordinates(resolution, θ)
+    if turns == 1:
+        return _read(c, X, Y, resolution)
+    if turns != 4:
+        raise ValueError(f"photo_texture: turns must be 1 or 4, got {turns!r}")
+    centres = -1.0 + (torch.arange(resolution, dtype=torch.float64) + 0.5) * (2.0 / resolution)
+    x = centres[None, None, None, :]                                                   # G's frame, as above
+    y = centres.flip(0)[None, None, :, None]
+    z = centres.flip(0)[None, :, None, None]
+    φ = torch.atan2(x, z)                                                               # azimuth about the vertical
+    s, co = torch.sin(θ)[:, None, None, None], torch.cos(θ)[:, None, None, None]
+    out, total = 0.0, 0.0
+    for k in range(4):
+        φ_k = k * math.pi / 2.0
+        x_k = x * math.cos(φ_k) - z * math.sin(φ_k)                                     # camera k's right
+        z_k = x * math.sin(φ_k) + z * math.cos(φ_k)                                     # towards camera k
+        w = torch.cos(φ - φ_k).clamp_min(0.0) ** TURN_BLEND
+        out = out + w.to(c) * _read(c, x_k, y * co - z_k * s, resolution)
+        total = total + w
+    return out / total.to(c).clamp_min(1e-12)
 
 
 def front_transmittance(density: torch.Tensor, elevation: Optional[torch.Tensor] = None) -> torch.Tensor:
@@ -130,7 +162,9 @@ def _in_g_frame(weight: torch.Tensor, elevation: Optional[torch.Tensor]) -> torc
 
 
 def texture_corrected(conv: nn.Module, volume: torch.Tensor, offsets: torch.Tensor, texture: torch.Tensor,
-                      elevation: Optional[torch.Tensor] = None) -> Tuple[torch.Tensor, torch.Tensor]:
+                      elevation: Optional[torch.Tensor] = None,
+                      behind: Optional[torch.Tensor] = None,
+                      offsets_behind: bool = True) -> Tuple[torch.Tensor, torch.Tensor]:
     """``model.texture_conv``: (volume, ℓ') of the volume G made with offsets ℓ from the photos'
     ``texture`` t (:func:`photo_texture`, ``(B, 3, R, R, R)``), its logits corrected by ``conv``
     (G's :attr:`~mitsuba_platonic.networks.nets.Generator.texture_conv`, a 3³ convolution, 8 channels
@@ -145,15 +179,26 @@ def texture_corrected(conv: nn.Module, volume: torch.Tensor, offsets: torch.Tens
     code, so they cannot tell where the texture carried along the input camera's rays runs
     through the body as streaks seen from the side; the convolution sees the texture, its
     neighbours and how deep behind what the camera sees each voxel lies. ℓ' is the whole offset
-    from the photo's colour (``train.colour_offset`` penalises it)."""
+    from the photo's colour (``train.colour_offset`` penalises it).
+
+    ``behind`` (``model.texture_turns`` 4: the photo from four turned cameras, :func:`photo_texture`):
+    the texture where the input camera does not see, t ← T_front t + (1 − T_front) t_behind, so the
+    surface the photo shows keeps the photo's own pixels. ``offsets_behind`` False
+    (``model.offsets_behind``): G's colour offsets act only where the input camera sees,
+    ℓ' ← T_front (ℓ + δ_c), so the body behind that surface keeps the turned cameras' texture as read."""
     ρ = volume[:, 3:]
     front = _in_g_frame(front_transmittance(ρ, elevation), elevation)
+    if behind is not None:
+        texture = front * texture.to(volume) + (1.0 - front) * behind.to(volume)
     t = torch.logit(texture.to(volume).clamp(COLOUR_MIN, 1.0 - COLOUR_MIN))
     logit_ρ = torch.logit(ρ.clamp(1e-6, 1.0 - 1e-6))            # G's own density logit (ρ is its sigmoid)
     x = torch.cat([offsets, logit_ρ, t, front], dim=1).contiguous(memory_format=torch.channels_last_3d)
     δ = conv(x).float()
-    logits = torch.cat([offsets + t, logit_ρ], dim=1) + δ
-    return torch.sigmoid(logits).contiguous(), offsets + δ[:, :3]
+    ℓ = offsets + δ[:, :3]
+    if behind is not None and not offsets_behind:
+        ℓ = front * ℓ                                          # T_front held constant: offsets where seen
+    logits = torch.cat([ℓ + t, logit_ρ + δ[:, 3:]], dim=1)
+    return torch.sigmoid(logits).contiguous(), ℓ
 
 
 def photo_volume(G: nn.Module, code: torch.Tensor, images: torch.Tensor, recipe: Any,
@@ -168,8 +213,9 @@ def photo_volume(G: nn.Module, code: torch.Tensor, images: torch.Tensor, recipe:
     mean = photo_colour(images)
     r = recipe.resolution
     t = photo_texture(images, r, elevation) if recipe.photo_texture else None
+    behind = photo_texture(images, r, elevation, 4) if recipe.texture_turns == 4 else None
     v, ℓ = G(code, mean if t is None else t, offsets=True)
     if recipe.texture_conv:
         conv = getattr(G, "module", G).texture_conv                # G, or the G inside a data-parallel wrapper
-        v, ℓ = texture_corrected(conv, v, ℓ, t, elevation)
+        v, ℓ = texture_corrected(conv, v, ℓ, t, elevation, behind, recipe.offsets_behind)
     return v, ℓ

@@ -22,7 +22,7 @@ __all__ = ["ModelConfig", "NET_KEYS"]
 
 #: The model keys that :class:`~mitsuba_platonic.networks.nets.NetConfig` takes as they are.
 NET_KEYS = ("resolution", "latent", "width", "norm", "encoder_hidden", "upsample", "precision", "photo_colour",
-            "photo_texture", "texture_conv")
+            "photo_texture", "texture_conv", "texture_turns", "offsets_behind")
 
 
 @dataclass
@@ -46,6 +46,11 @@ class ModelConfig:
     texture_conv: with photo_texture, G's last logits corrected by a 3³ convolution that sees the photo's
     colour, G's own logits and how much of each voxel the input camera sees
     (:func:`~mitsuba_platonic.networks.photo_colours.texture_corrected`; "G's colour seeing the photo").
+    texture_turns: with texture_conv, 1: the photo carried along the input camera's rays; 4: behind what the
+    input camera sees, the photo projected from four cameras a quarter turn apart about the vertical,
+    blended by each voxel's azimuth (docs/training.md, "The photo config's choices").
+    offsets_behind: with texture_turns 4, whether G's colour offsets apply behind what the input camera sees
+    (false: the colour there is the turned cameras' texture as read; docs/training.md).
     """
 
     resolution: int = 32
@@ -61,6 +66,8 @@ class ModelConfig:
     photo_colour: bool = False
     photo_texture: bool = False
     texture_conv: bool = False
+    texture_turns: int = 1
+    offsets_behind: bool = True
 
     def validate(self) -> "ModelConfig":
         """Check this section's values; raise :class:`~mitsuba_platonic.settings_checks.ConfigError`
@@ -79,6 +86,15 @@ class ModelConfig:
         if self.photo_texture and not self.photo_colour:
             raise ConfigError("model.photo_texture: the offset per voxel is G's photo colour read per pixel, so it "
                               "needs model.photo_colour: true")
+        choice("model.texture_turns", self.texture_turns, (1, 4))
+        if self.texture_turns != 1 and not self.texture_conv:
+            raise ConfigError("model.texture_turns: the turned cameras' texture goes where the input camera does not "
+                              "see, which texture_conv weighs, so it needs model.texture_conv: true")
+        if not isinstance(self.offsets_behind, bool):
+            raise ConfigError(f"model.offsets_behind must be true or false, got {self.offsets_behind!r}")
+        if not self.offsets_behind and self.texture_turns != 4:
+            raise ConfigError("model.offsets_behind: false keeps the turned cameras' texture behind the seen surface, "
+                              "so it needs model.texture_turns: 4")
         if self.texture_conv and not self.photo_texture:
             raise ConfigError("model.texture_conv: the convolution reads the photo's texture, so it needs "
                               "model.photo_texture: true")

@@ -18,6 +18,23 @@ dim 2 front to back): per ray, the weights w_k = T_k a_k of its N samples at dep
 (T exclusive, as the EA layer), and the distortion loss of Barron et al. 2022 (Mip-NeRF 360)
                             L_ds = mean over rays of Σ_{k,l} w_k w_l |s_k − s_l| + (1/3N) Σ_k w_k²
 small where a ray's colour comes from one thin surface, large where it is gathered over a thick haze
+Turn (optional prior on G, upright volumes of ``train.pose: elevation``, dim 2 the depth along the input
+view, dim 3 the vertical): the object is probably round about its vertical axis, so α and α turned by a random angle φ about the vertical
+through the volume's centre, T_φ α (resampled trilinearly; φ uniform in [0, 2π), one per volume and
+step), agree:
+                            L_turn = Σ |α − T_φ α| / Σ (α + T_φ α)
+0 for a volume that every turn leaves alone (a ball, a cylinder, a cone; up to the resampling's blur),
+1 at most; it asks the object to be as deep as it is wide, where the photo alone leaves any depth
+behind its surface free. A quarter turn alone is satisfied by a four-pointed star as well as by a disc
+Solidity (optional prior on G, volumes in the input camera's frame as for the depth spread): along
+each input ray the object is solid between its first and its last surface. With a ray's surfaces
+m_l = α_l where α_l ≥ ½, else 0, and their hull h_k = min(max_{l≤k} m_l, max_{l≥k} m_l) (held
+constant),
+                            L_solid = Σ relu(h − α) / Σ h
+0 where every ray's surfaces rise to one peak and fall (a solid body, a single shell, an empty
+ray, a haze below ½), 1 at most; it fills the gap between a front shell and a back one and never
+asks for matter beyond a ray's outermost surface. A haze is not a surface: filled, a haze of G's first steps would turn every ray into an opaque block, whose
+saturated opacity no longer passes the input view's gradient back (a run that did so collapsed)
 WGAN-GP:                    L_D = l_fake − l_real + λ (‖∇_x̂ D(x̂)‖ − 1)²,  x̂ = ε x + (1 − ε) G
                             L_G = −l_fake
 Soft accuracy of D on a batch (the authors' gate: D is updated only while it is ≤ 0.6, so D
@@ -39,7 +56,7 @@ import torch.nn.functional as F
 
 from ..render.closed_form import transmittance_before
 
-__all__ = ["d_loss", "g_loss", "gradient_penalty", "r1_penalty", "colour_tv", "colour_offset", "depth_spread", "mean_colour", "colour_match", "soft_accuracy_counts", "hard_accuracy_counts"]
+__all__ = ["d_loss", "g_loss", "gradient_penalty", "r1_penalty", "colour_tv", "colour_offset", "depth_spread", "turned", "turn", "solidity", "mean_colour", "colour_match", "soft_accuracy_counts", "hard_accuracy_counts"]
 
 
 def d_loss(kind: str, real: torch.Tensor, fake: torch.Tensor) -> torch.Tensor:
@@ -135,6 +152,62 @@ def depth_spread(camera_volume: torch.Tensor) -> torch.Tensor:
     S = torch.cumsum(w * s, dim=1) - w * s              # Σ_{l<k} w_l s_l
     pairs = 2.0 * (w * (s * W - S)).sum(dim=1)
     return (pairs + (w * w).sum(dim=1) / (3.0 * n)).mean()
+
+
+def turned(volume: torch.Tensor, φ: torch.Tensor) -> torch.Tensor:
+    """``volume`` ``(B, C, N, H, N)`` turned by φ ``(B,)`` radians about the vertical through its
+    centre, resampled trilinearly (nothing from beyond the cube): the value at p is the volume's at
+    p' in grid coordinates (x, y, z) ↔ (w, h, d), each in [−1, 1]:
+
+        x' = cos φ x − sin φ z,   z' = sin φ x + cos φ z,   y' = y
+
+    so a positive quarter turn takes the front (d = 0, nearest the camera) to the left (w = 0).
+
+    A quarter turn maps voxel centres onto voxel centres: exact, as :func:`torch.rot90`."""
+    b = volume.shape[0]
+    c, s = torch.cos(φ).to(volume), torch.sin(φ).to(volume)
+    zero, one = torch.zeros_like(c), torch.ones_like(c)
+    # grid_sample's coordinates are (x, y, z) ↔ (w, h, d); the affine grid maps output to input
+    rows = torch.stack([torch.stack([c, zero, -s, zero], -1),
+                        torch.stack([zero, one, zero, zero], -1),
+                        torch.stack([s, zero, c, zero], -1)], 1)          # (B, 3, 4)
+    grid = F.affine_grid(rows, list(volume.shape), align_corners=False)
+    return F.grid_sample(volume, grid, mode="bilinear", padding_mode="zeros", align_corners=False)
+
+
+def turn(volume: torch.Tensor, φ: torch.Tensor) -> torch.Tensor:
+    """L_turn (module docstring) of upright volumes ``(B, C, N, N, N)`` (the opacity the last channel,
+    dims 2, 3, 4 depth, height, width) turned by φ ``(B,)`` radians about the vertical through the
+    volume's centre (:func:`turned`): over the whole batch, Σ |α − T_φ α| / Σ (α + T_φ α); in [0, 1],
+    0 where the volume is empty."""
+    if volume.dim() != 5 or volume.shape[2] != volume.shape[4]:
+        raise ValueError(f"turn: expected upright volumes (B, C, N, H, N), got {tuple(volume.shape)}")
+    if φ.shape != (volume.shape[0],):
+        raise ValueError(f"turn: expected one angle per volume, shape ({volume.shape[0]},), got {tuple(φ.shape)}")
+    a = volume[:, -1:]
+    t = turned(a, φ)
+    return (a - t).abs().sum() / (a + t).sum().clamp_min(1e-12)
+
+
+#: The opacity from which a voxel counts as a surface for :func:`solidity`.
+SURFACE = 0.5
+
+
+def solidity(camera_volume: torch.Tensor) -> torch.Tensor:
+    """L_solid (module docstring) of volumes ``(B, C, N, H, W)`` in a camera's frame (the opacity the
+    last channel, dim 2 the depth from the front): over the whole batch, the opacity missing below
+    the hull of each ray's surfaces (α ≥ :data:`SURFACE`), Σ relu(h − α) / Σ h; in [0, 1], 0 for a
+    volume without surfaces. The hull is held constant: the term raises the gaps, never lowers the
+    walls."""
+    if camera_volume.dim() != 5:
+        raise ValueError(f"solidity: expected volumes (B, C, N, H, W), got {tuple(camera_volume.shape)}")
+    a = camera_volume[:, -1]
+    with torch.no_grad():
+        m = torch.where(a >= SURFACE, a, torch.zeros_like(a))         # the surfaces: a haze is none
+        front = torch.cummax(m, dim=1).values                         # max_{l≤k} m_l
+        back = torch.cummax(m.flip(1), dim=1).values.flip(1)          # max_{l≥k} m_l
+        hull = torch.minimum(front, back)
+    return torch.relu(hull - a).sum() / hull.sum().clamp_min(1e-12)
 
 
 def mean_colour(images: torch.Tensor) -> torch.Tensor:

@@ -113,7 +113,7 @@ from ..views import DEFAULT_ELEVATION, from_angles, front_view, sample_views, to
 from .augment import augment, augment_photos
 from .data import TrainingData
 from .losses import (colour_match, colour_offset, colour_tv, d_loss, depth_spread, g_loss, gradient_penalty,
-                     hard_accuracy_counts, r1_penalty, soft_accuracy_counts)
+                     hard_accuracy_counts, r1_penalty, soft_accuracy_counts, solidity, turn)
 from .renderer import in_camera, make_lit_renderer, make_renderer
 from .roll import input_frame_roll, roll
 
@@ -355,6 +355,13 @@ class Trainer:
             terms["colour_offset"] = t.colour_offset * colour_offset(v, ℓ)
         if t.depth_spread > 0:                               # the input view's colour from a thin surface
             terms["depth_spread"] = t.depth_spread * depth_spread(v_input)
+        if t.turn > 0:                                       # as deep as wide: round about the vertical
+            g_turn = torch.Generator()                       # one angle per volume, drawn from the run's seed and step
+            g_turn.manual_seed(int(np.random.SeedSequence([cfg.run.seed, step, 17, self.rank]).generate_state(1)[0]))
+            φ = 2.0 * math.pi * torch.rand(v.shape[0], generator=g_turn, dtype=torch.float64)
+            terms["turn"] = t.turn * turn(v, φ.to(v.device))
+        if t.solidity > 0:                                   # no gaps along the photo's rays
+            terms["solidity"] = t.solidity * solidity(v_input)
         if t.colour_match > 0:                               # the photo's mean colour from every side
             terms["colour_match"] = t.colour_match * colour_match(i_view, x)
         if rec and t.rec_target == "volume":
@@ -376,8 +383,8 @@ class Trainer:
         """G's (and E's) loss: the sum of its weighted terms, named 'adv2d' (D on rendered views),
         'adv3d' (D3 on volumes), 'rec' (the input view), 'rec3d'
         (the input image's ground-truth volume), 'pose' (the elevations of G's renders), 'colour_tv',
-        'colour_match', 'colour_offset' and 'depth_spread' (priors, when their weights are set), 'light' (the lights of
-        G's renders). One place that sees
+        'colour_match', 'colour_offset', 'depth_spread', 'turn' and 'solidity' (priors, when their weights are set),
+        'light' (the lights of G's renders). One place that sees
         every term, so the tests can check which of them reach G."""
         return sum(terms.values())
 
