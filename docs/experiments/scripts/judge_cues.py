@@ -29,10 +29,10 @@ from typing import Dict
 import numpy as np
 import torch
 
-from mitsuba_platonic.checkpoint import read_checkpoint
+from mitsuba_platonic.files.checkpoint import read_checkpoint
 from mitsuba_platonic.evaluate import judge as J
 from mitsuba_platonic.evaluate.photos import photo_splits
-from mitsuba_platonic.loading import checkpoint_config, model_from_checkpoint
+from mitsuba_platonic.config.loading import checkpoint_config, model_from_checkpoint
 from mitsuba_platonic.model import Model
 
 
