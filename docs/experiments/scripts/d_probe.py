@@ -29,7 +29,7 @@ import torch
 
 from mitsuba_platonic.config import load_config
 from mitsuba_platonic.model import critic_config
-from mitsuba_platonic.models import Discriminator, init_critic_he, init_weights
+from mitsuba_platonic.networks.nets import Discriminator, init_critic_he, init_weights
 from mitsuba_platonic.train.data import load_training_data
 from mitsuba_platonic.train.losses import d_loss
 from mitsuba_platonic.train.trainer import Trainer

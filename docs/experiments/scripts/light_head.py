@@ -22,8 +22,8 @@ from pathlib import Path
 import numpy as np
 import torch
 
-from mitsuba_platonic.checkpoint import read_checkpoint
-from mitsuba_platonic.loading import checkpoint_config, model_from_checkpoint
+from mitsuba_platonic.files.checkpoint import read_checkpoint
+from mitsuba_platonic.config.loading import checkpoint_config, model_from_checkpoint
 from mitsuba_platonic.model import Model
 from mitsuba_platonic.train.data import load_training_data
 from mitsuba_platonic.train.renderer import in_camera

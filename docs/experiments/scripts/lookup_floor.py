@@ -23,7 +23,7 @@ from typing import Any
 import torch
 
 from mitsuba_platonic import views as V
-from mitsuba_platonic.compare import best_kernel_ms
+from mitsuba_platonic.render.compare import best_kernel_ms
 from mitsuba_platonic.render.settings import RenderSettings
 from mitsuba_platonic.volume import test_volume
 

@@ -19,10 +19,10 @@ from pathlib import Path
 import numpy as np
 import torch
 
-from mitsuba_platonic.checkpoint import read_checkpoint
+from mitsuba_platonic.files.checkpoint import read_checkpoint
 from mitsuba_platonic.evaluate import image_stats as S
 from mitsuba_platonic.evaluate.photos import photo_splits
-from mitsuba_platonic.loading import checkpoint_config, model_from_checkpoint
+from mitsuba_platonic.config.loading import checkpoint_config, model_from_checkpoint
 from mitsuba_platonic.model import Model
 from mitsuba_platonic.render import render_with
 from mitsuba_platonic.views import front_view

@@ -20,12 +20,12 @@ from pathlib import Path
 import numpy as np
 import torch
 
-from mitsuba_platonic.checkpoint import read_checkpoint
+from mitsuba_platonic.files.checkpoint import read_checkpoint
 from mitsuba_platonic.evaluate.judge import _random_renders
 from mitsuba_platonic.evaluate.photos import photo_splits
-from mitsuba_platonic.loading import checkpoint_config, model_from_checkpoint
+from mitsuba_platonic.config.loading import checkpoint_config, model_from_checkpoint
 from mitsuba_platonic.model import Model, critic_config
-from mitsuba_platonic.models import Discriminator
+from mitsuba_platonic.networks.nets import Discriminator
 
 
 def critic_of(ckpt, cfg) -> Discriminator:

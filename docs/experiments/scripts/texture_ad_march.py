@@ -32,7 +32,7 @@ from typing import Any, Callable, Tuple
 import torch
 
 from mitsuba_platonic import views as V
-from mitsuba_platonic.compare import best_kernel_ms, best_of
+from mitsuba_platonic.render.compare import best_kernel_ms, best_of
 from mitsuba_platonic.render.settings import RenderSettings
 from mitsuba_platonic.volume import test_volume
 

@@ -25,14 +25,14 @@ import numpy as np
 import torch
 
 from mitsuba_platonic.config import load_config
-from mitsuba_platonic.evaluate import held_out_scores, held_out_truths
+from mitsuba_platonic.evaluate.protocol import held_out_scores, held_out_truths
 from mitsuba_platonic.evaluate import metrics as M
 from mitsuba_platonic.data.collection import load_manifest
 from mitsuba_platonic.evaluate.protocol import NOVEL_VIEWS
-from mitsuba_platonic.models import Discriminator, init_weights
+from mitsuba_platonic.networks.nets import Discriminator, init_weights
 from mitsuba_platonic.render import render
 from mitsuba_platonic.views import to_angles
-from mitsuba_platonic.quickstart import CONFIG
+from mitsuba_platonic.quickstart.procedural import CONFIG
 from mitsuba_platonic.train.data import collection_folder, load_training_data
 from mitsuba_platonic.train.losses import colour_tv
 from mitsuba_platonic.train.trainer import Trainer
