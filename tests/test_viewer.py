@@ -896,3 +896,40 @@ def test_the_wheel_zooms_and_a_right_drag_pans_the_frame(browser, ball_server, b
               f"frame pixels, {on_canvas} canvas pixels for the mouse's {mouse}")
     finally:
         page.close()
+
+
+def _camera_view(placed: bool, since_connect: float):
+    """A ClientView's camera state alone (no browser, no GUI): the initial camera drawn, a canvas 7:3."""
+    import threading
+    from types import SimpleNamespace
+
+    from mitsuba_platonic.viewer import app as A
+    cam = SimpleNamespace(fov=A.FOV, image_height=300, image_width=700, position=(0.0, 0.0, A.DISTANCE),
+                          look_at=(0.0, 0.0, 0.0), min_orbit_distance=0.01, max_orbit_distance=1e4)
+    v = object.__new__(A.ClientView)
+    v.client, v.lock, v.wake = SimpleNamespace(camera=cam), threading.Lock(), threading.Event()
+    v.view, v.window, v.last_move, v.limits = np.array([0.0, 0.0, 1.0]), None, 0.0, (0.01, 1e4)
+    v.connected, v.placed = time.monotonic() - since_connect, placed
+    return v
+
+
+def test_the_browsers_default_camera_before_the_initial_one_is_not_drawn():
+    """A page may report the browser's default camera (the back, zoom 0.8) before the initial one: it
+    is not drawn; once the page has echoed the initial camera, or CONNECT_S after the connection,
+    every report is the user's."""
+    from types import SimpleNamespace
+
+    from mitsuba_platonic.viewer.app import CONNECT_S
+    from mitsuba_platonic.viewer.start import DISTANCE
+    default = SimpleNamespace(position=(0.0, 0.0, -DISTANCE / 0.8), look_at=(0.0, 0.0, 0.0))
+    initial = SimpleNamespace(position=(0.0, 0.0, DISTANCE), look_at=(0.0, 0.0, 0.0))
+    v = _camera_view(placed=False, since_connect=0.0)
+    v._camera(default)
+    assert not v.wake.is_set() and tuple(v.view) == (0.0, 0.0, 1.0) and not v.placed
+    v._camera(initial)                                     # the initial camera's echo: placed, nothing to draw
+    assert v.placed and not v.wake.is_set() and v.window is None
+    v._camera(default)                                     # from now on the user's camera
+    assert v.wake.is_set() and v.view[2] < -0.99
+    late = _camera_view(placed=False, since_connect=CONNECT_S + 0.5)
+    late._camera(default)                                  # no echo came in time: the report counts
+    assert late.placed and late.wake.is_set() and late.view[2] < -0.99

@@ -72,6 +72,11 @@ SETTLE_S = 0.2
 #: and whose window by at most :data:`~.scene.WINDOW_SNAP` is the browser's float32 echo of the
 #: camera the server set (or of the first camera): nothing moved, nothing to render again.
 VIEW_SNAP = 1e-6
+#: Before a page first reports the initial camera it may report the browser's own default camera
+#: (seen: the back view at zoom 0.8, a quarter of a second before the initial one); such reports are
+#: not the user's and are not drawn. After this many seconds from the connection every report counts,
+#: echoed or not.
+CONNECT_S = 1.0
 #: The page's controls as it opens: the renderer and the path tracer's spp (the formation: the
 #: volume's richest, EA or AO; the resolution: the volume's).
 INITIAL_RENDERER, INITIAL_SPP = "closed form", 4
@@ -222,6 +227,8 @@ class ClientView:
         self.frame: Optional[Frame] = None
         self.times = {}                                    # renderer → last full frame's seconds
         self.limits = (0.01, 1e4)                          # the browser's dolly limits as set (viser's defaults)
+        self.connected = time.monotonic()
+        self.placed = False                                # has the page reported the initial camera yet?
         self._gui()
         # the camera viser connects a page with is the browser's default, before it takes the initial one
         # (DISTANCE, FOV): draw the initial camera until the page says where it is
@@ -348,7 +355,12 @@ class ClientView:
         window = camera_window(position, look, fov, aspect)
         self._limit_distance(fov, aspect)
         with self.lock:
-            if _same_camera(w / norm, window, self.view, self.window):
+            echo = _same_camera(w / norm, window, self.view, self.window)
+            if not self.placed:                            # the browser's default camera before the initial one
+                self.placed = echo or time.monotonic() - self.connected > CONNECT_S
+                if not self.placed:
+                    return
+            if echo:
                 return                                     # an echo: the frame drawn is this camera's
             self.view = w / norm
             self.window = window
