@@ -26,7 +26,7 @@ from pathlib import Path
 
 import torch
 
-from mitsuba_platonic.config.loading import checkpoint_config
+from mitsuba_platonic.config.loading import checkpoint_config, model_from_checkpoint
 from mitsuba_platonic.evaluate.judge import judge
 from mitsuba_platonic.evaluate.photo_truth import truth_pairs
 from mitsuba_platonic.evaluate.photos import photo_splits
@@ -45,7 +45,7 @@ def main() -> None:
     args = ap.parse_args()
     torch.set_num_threads(1)
     ckpt = read_checkpoint(args.run)
-    model, cfg = Model.from_checkpoint(args.run), checkpoint_config(ckpt)      # the config without retired keys
+    model, cfg = model_from_checkpoint(Model, ckpt), checkpoint_config(ckpt)   # one read; the config without retired keys
     if model.P is None:
         raise SystemExit(f"{args.run}: expected a run with train.pose elevation (the judge turns about the vertical)")
     train, held, files = photo_splits(cfg)
