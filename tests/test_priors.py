@@ -12,7 +12,7 @@ import pytest
 import torch
 
 from mitsuba_platonic.config import ConfigError, load_config
-from mitsuba_platonic.train.losses import colour_match, colour_offset, colour_tv, depth_spread, mean_colour, slice_centres, solidity, turn, turned
+from mitsuba_platonic.train.losses import colour_match, colour_offset, colour_tv, depth_spread, mean_colour, solidity, turn, turned
 
 
 def _volume(n=4, colour=(0.2, 0.5, 0.7), density=1.0):
@@ -407,51 +407,6 @@ def test_the_turn_gradient_grows_a_shallow_slab_in_depth_and_matches_finite_diff
     assert torch.autograd.gradcheck(lambda x: turn(x, torch.tensor([0.3, 2.1], dtype=torch.float64)), (v,))
 
 
-def test_turned_slice_by_slice_spares_a_leaning_cone_beside_the_axis_and_still_grows_a_slab():
-    """A cone moved off the volume's axis, each slice further along (a lean), scores exactly 0 at a
-    quarter turn about each slice's centroid (integer shifts: voxel centres land on voxel centres)
-    and only the resampling's blur at an eighth, where about the volume's axis it scores far more; a
-    slab one voxel deep still scores near 1. The centroids are the slices' opacity-weighted means in
-    grid coordinates, (0, 0) where a slice is empty."""
-    n, m = 32, 20
-    cone, small = _cone(n), _cone(m)
-    lean = torch.zeros_like(cone)
-    for h in range(m):                                           # at depth 9–28; slice h from width 2 + h // 4
-        lean[0, 0, 9:9 + m, 6 + h, 2 + h // 4:2 + h // 4 + m] = small[0, 0, :, h]
-    quarter, eighth = torch.tensor([math.pi / 2], dtype=torch.float64), torch.tensor([math.pi / 4], dtype=torch.float64)
-    assert float(turn(lean, quarter, "slice")) == pytest.approx(0.0, abs=1e-12)
-    assert float(turn(lean, eighth, "slice")) == pytest.approx(float(turn(small, eighth)), rel=0.05)
-    assert float(turn(lean, eighth)) > 5.0 * float(turn(lean, eighth, "slice"))
-    slab = torch.zeros(1, 1, 8, 8, 8, dtype=torch.float64)
-    slab[0, 0, 2, 3:] = 1.0                                      # wide, one voxel deep, off the axis, slices 0–2 empty
-    assert float(turn(slab, quarter[:1], "slice")) > 0.8
-    c = slice_centres(slab)
-    assert c[0, :3].abs().max() == 0.0
-    assert c[0, 3:, 0].tolist() == pytest.approx([0.0] * 5, abs=1e-12)          # x: the slab's middle
-    assert c[0, 3:, 1].tolist() == pytest.approx([(2 * 2 + 1) / 8 - 1] * 5)     # z: its depth, voxel 2
-    with pytest.raises(ValueError, match="turn: expected about 'volume' or 'slice', got 'axis'"):
-        turn(slab, quarter, "axis")
-
-
-def test_the_turn_about_each_slice_matches_finite_differences():
-    """The centroids are held constant, so the gradient is the resampled difference's, at random angles."""
-    torch.manual_seed(18)
-    v = (0.05 + 0.9 * torch.rand(2, 4, 4, 3, 4, dtype=torch.float64)).requires_grad_(True)
-    def loss(x):
-        return turn(x, torch.tensor([0.3, 2.1], dtype=torch.float64), "slice")
-    # centroids held constant: compare with the loss at the centroids of the point itself
-    c = slice_centres(v[:, -1:])
-    def fixed(x):
-        a = x[:, -1:]
-        t = turned(a, torch.tensor([0.3, 2.1], dtype=torch.float64), c)
-        return (a - t).abs().sum() / (a + t).sum()
-    assert float(loss(v).detach()) == pytest.approx(float(fixed(v).detach()), rel=1e-12)
-    assert torch.autograd.gradcheck(fixed, (v,))
-    g1, = torch.autograd.grad(loss(v), v)
-    g2, = torch.autograd.grad(fixed(v), v)
-    assert torch.allclose(g1, g2, rtol=1e-12, atol=1e-15)
-
-
 def test_the_config_refuses_turn_without_an_upright_volume():
     with pytest.raises(ConfigError, match="train.turn: .*needs train.pose 'elevation', got 'input'"):
         load_config(None, ["train.turn=1", "train.task=reconstruction"])
@@ -474,22 +429,21 @@ def test_the_trainer_hands_g_the_turn_of_the_upright_volume_it_made(tmp_path, mo
         seen["v"] = out.detach().clone()
         return out
 
-    def turn_spy(volume, φ, about):
-        seen["φ"], seen["about"] = φ.detach().clone(), about
-        return original_turn(volume, φ, about)
+    def turn_spy(volume, φ):
+        seen["φ"] = φ.detach().clone()
+        return original_turn(volume, φ)
 
     monkeypatch.setattr(nets.Generator, "forward", spy)
     monkeypatch.setattr(T, "turn", turn_spy)
-    for weight, about in ((0.0, "volume"), (2.0, "volume"), (2.0, "slice")):
+    for weight in (0.0, 2.0):
         terms = _g_terms(_tiny_trainer(tmp_path, "train.task=reconstruction", "train.pose=elevation",
-                                       "train.pose_weight=1", f"train.turn={weight}", f"train.turn_about={about}"))
+                                       "train.pose_weight=1", f"train.turn={weight}"))
         if not weight:
             assert "turn" not in terms
             continue
         φ = seen["φ"]
         assert φ.shape == (2,) and bool(((φ >= 0) & (φ < 2 * math.pi)).all()) and float(φ[0]) != float(φ[1])
-        assert seen["about"] == about
-        assert float(terms["turn"]) == pytest.approx(2.0 * float(turn(seen["v"], φ.to(seen["v"]), about)), rel=1e-5)
+        assert float(terms["turn"]) == pytest.approx(2.0 * float(turn(seen["v"], φ.to(seen["v"]))), rel=1e-5)
         assert float(terms["turn"]) > 0.0
 
 

@@ -38,6 +38,7 @@ RETIRED = {
     ("train", "r1_every"): (1, "3afe14f"),
     ("train", "silhouette_weight"): (0.0, "60a45a0"),      # issue 43: docs/experiments/photo-sides.md
     ("train", "symmetry"): (0.0, "3bef62f"),               # issue 43: docs/experiments/photo-sides.md
+    ("train", "turn_about"): ("volume", "55e7013"),        # issue 43: docs/experiments/photo-sides.md
 }
 
 

@@ -21,7 +21,7 @@ from ..settings_checks import ConfigError, check_elevation, choice, non_negative
 from ..views import DISTRIBUTIONS
 
 __all__ = ["TrainConfig", "TASKS", "MODES", "MODES_3D", "REC_TARGETS", "REC_LOSSES", "REC_CHANNELS", "POSES", "LIGHTS", "PRGAN",
-           "LOSS_WEIGHTS", "LOSSES", "ROLLS", "TURN_AXES", "AUGMENTS", "PHOTO_AUGMENTS"]
+           "LOSS_WEIGHTS", "LOSSES", "ROLLS", "AUGMENTS", "PHOTO_AUGMENTS"]
 
 #: What E/G learn: reconstruct the input image, or generate from z ~ N(0, I).
 TASKS = ("reconstruction", "generation")
@@ -52,8 +52,6 @@ PRGAN = "the PrGAN-style baseline ('prgan')"
 LOSSES = ("nonsaturating", "wgan-gp")
 #: train.d_roll: 'none' (D sees the images as rendered) | 'uniform' | 'matched' (:mod:`mitsuba_platonic.train.roll`).
 ROLLS = ("none", "uniform", "matched")
-#: train.turn_about: the vertical axis each horizontal slice of the volume is turned about
-TURN_AXES = ("volume", "slice")
 #: The transforms ``train.d_augment`` may list, applied in this order (:mod:`mitsuba_platonic.train.augment`).
 AUGMENTS = ("flip", "translation", "cutout")
 #: The transforms ``train.photo_augment`` may list, applied in this order.
@@ -115,10 +113,7 @@ class TrainConfig:
     (:func:`mitsuba_platonic.train.losses.depth_spread`, docs/training.md); turn: weight of the
     prior that the object is probably round about its vertical axis, its upright opacity against
     itself turned by a random angle (train.pose 'elevation'; 0: none)
-    (:func:`mitsuba_platonic.train.losses.turn`, docs/training.md); turn_about: the vertical it turns
-    about, 'volume' (through the volume's centre) or 'slice' (each horizontal slice about its own
-    opacity's centroid, so that a lean or an offset stays free; screened in
-    docs/experiments/photo-sides.md); solidity: weight of the prior
+    (:func:`mitsuba_platonic.train.losses.turn`, docs/training.md); solidity: weight of the prior
     that along each input ray the object is solid between its first and its last surface
     (reconstruction, platonic mode, orthographic camera; 0: none)
     (:func:`mitsuba_platonic.train.losses.solidity`); ema: null, or the decay β
@@ -161,7 +156,6 @@ class TrainConfig:
     colour_offset: float = 0.0
     depth_spread: float = 0.0
     turn: float = 0.0
-    turn_about: str = "volume"
     solidity: float = 0.0
     ema: Optional[float] = None
     d_augment: List[str] = field(default_factory=list)
@@ -190,7 +184,6 @@ class TrainConfig:
                               "camera's frame, so it needs train.task 'reconstruction' and a 2D critic "
                               f"(not mode 'gan3d'), got task {self.task!r}, mode {self.mode!r}")
         choice("train.pose", self.pose, POSES)
-        choice("train.turn_about", self.turn_about, TURN_AXES)
         for key in LOSS_WEIGHTS:                             # a negative weight turns a loss into a reward
             non_negative(f"train.{key}", getattr(self, key))
         if self.pose == "elevation":

@@ -25,10 +25,7 @@ step), agree:
                             L_turn = Σ |α − T_φ α| / Σ (α + T_φ α)
 0 for a volume that every turn leaves alone (a ball, a cylinder, a cone; up to the resampling's blur),
 1 at most; it asks the object to be as deep as it is wide, where the photo alone leaves any depth
-behind its surface free. A quarter turn alone is satisfied by a four-pointed star as well as by a disc.
-Turned slice by slice (``train.turn_about: slice``), each horizontal slice y turns about its own
-opacity's centroid c_y = Σ α p / Σ α (held constant): a leaning cap or a trunk beside the axis is
-round about itself, not pulled onto the volume's axis
+behind its surface free. A quarter turn alone is satisfied by a four-pointed star as well as by a disc
 Solidity (optional prior on G, volumes in the input camera's frame as for the depth spread): along
 each input ray the object is solid between its first and its last surface. With a ray's surfaces
 m_l = α_l where α_l ≥ ½, else 0, and their hull h_k = min(max_{l≤k} m_l, max_{l≥k} m_l) (held
@@ -59,7 +56,7 @@ import torch.nn.functional as F
 
 from ..render.closed_form import transmittance_before
 
-__all__ = ["d_loss", "g_loss", "gradient_penalty", "r1_penalty", "colour_tv", "colour_offset", "depth_spread", "turned", "slice_centres", "turn", "solidity", "mean_colour", "colour_match", "soft_accuracy_counts", "hard_accuracy_counts"]
+__all__ = ["d_loss", "g_loss", "gradient_penalty", "r1_penalty", "colour_tv", "colour_offset", "depth_spread", "turned", "turn", "solidity", "mean_colour", "colour_match", "soft_accuracy_counts", "hard_accuracy_counts"]
 
 
 def d_loss(kind: str, real: torch.Tensor, fake: torch.Tensor) -> torch.Tensor:
@@ -157,7 +154,7 @@ def depth_spread(camera_volume: torch.Tensor) -> torch.Tensor:
     return (pairs + (w * w).sum(dim=1) / (3.0 * n)).mean()
 
 
-def turned(volume: torch.Tensor, φ: torch.Tensor, centres: Optional[torch.Tensor] = None) -> torch.Tensor:
+def turned(volume: torch.Tensor, φ: torch.Tensor) -> torch.Tensor:
     """``volume`` ``(B, C, N, H, N)`` turned by φ ``(B,)`` radians about the vertical through its
     centre, resampled trilinearly (nothing from beyond the cube): the value at p is the volume's at
     p' in grid coordinates (x, y, z) ↔ (w, h, d), each in [−1, 1]:
@@ -166,9 +163,8 @@ def turned(volume: torch.Tensor, φ: torch.Tensor, centres: Optional[torch.Tenso
 
     so a positive quarter turn takes the front (d = 0, nearest the camera) to the left (w = 0).
 
-    A quarter turn maps voxel centres onto voxel centres: exact, as :func:`torch.rot90`. With
-    ``centres`` ``(B, H, 2)`` (:func:`slice_centres`) each slice h turns about the vertical through its
-    own (x, z) instead."""
+    A quarter turn maps voxel centres onto voxel centres: exact, as :func:`torch.rot90`."""
+    b = volume.shape[0]
     c, s = torch.cos(φ).to(volume), torch.sin(φ).to(volume)
     zero, one = torch.zeros_like(c), torch.ones_like(c)
     # grid_sample's coordinates are (x, y, z) ↔ (w, h, d); the affine grid maps output to input
@@ -176,42 +172,20 @@ def turned(volume: torch.Tensor, φ: torch.Tensor, centres: Optional[torch.Tenso
                         torch.stack([zero, one, zero, zero], -1),
                         torch.stack([s, zero, c, zero], -1)], 1)          # (B, 3, 4)
     grid = F.affine_grid(rows, list(volume.shape), align_corners=False)
-    if centres is not None:                                  # about (x_c, z_c) per slice: p' = R p + (c − R c)
-        cx, cz = centres[..., 0].to(volume), centres[..., 1].to(volume)                     # (B, H)
-        c, s = c[:, None], s[:, None]
-        shift = torch.stack([cx - (c * cx - s * cz), torch.zeros_like(cx), cz - (s * cx + c * cz)], -1)
-        grid = grid + shift[:, None, :, None, :]             # (B, 1, H, 1, 3) over depth and width
     return F.grid_sample(volume, grid, mode="bilinear", padding_mode="zeros", align_corners=False)
 
 
-def slice_centres(opacity: torch.Tensor) -> torch.Tensor:
-    """``(B, H, 2)``: the centroid (x, z) of each horizontal slice's opacity of ``opacity``
-    ``(B, 1, N, H, N)`` in :func:`turned`'s grid coordinates (voxel centres at (2i + 1)/N − 1), held
-    constant; (0, 0), the volume's axis, where a slice is empty."""
-    a = opacity.detach()[:, 0]                                                            # (B, D, H, W)
-    n = a.shape[1]
-    p = (2.0 * torch.arange(n, dtype=a.dtype, device=a.device) + 1.0) / n - 1.0
-    mass = a.sum((1, 3))                                                                  # (B, H)
-    x = torch.einsum("bdhw,w->bh", a, p) / mass.clamp_min(1e-6)
-    z = torch.einsum("bdhw,d->bh", a, p) / mass.clamp_min(1e-6)
-    empty = mass < 1e-6
-    return torch.stack([x.masked_fill(empty, 0.0), z.masked_fill(empty, 0.0)], -1)
-
-
-def turn(volume: torch.Tensor, φ: torch.Tensor, about: str = "volume") -> torch.Tensor:
+def turn(volume: torch.Tensor, φ: torch.Tensor) -> torch.Tensor:
     """L_turn (module docstring) of upright volumes ``(B, C, N, N, N)`` (the opacity the last channel,
     dims 2, 3, 4 depth, height, width) turned by φ ``(B,)`` radians about the vertical through the
     volume's centre (:func:`turned`): over the whole batch, Σ |α − T_φ α| / Σ (α + T_φ α); in [0, 1],
-    0 where the volume is empty. ``about``: 'volume' or 'slice', each slice about its own centroid
-    (:func:`slice_centres`)."""
+    0 where the volume is empty."""
     if volume.dim() != 5 or volume.shape[2] != volume.shape[4]:
         raise ValueError(f"turn: expected upright volumes (B, C, N, H, N), got {tuple(volume.shape)}")
     if φ.shape != (volume.shape[0],):
         raise ValueError(f"turn: expected one angle per volume, shape ({volume.shape[0]},), got {tuple(φ.shape)}")
-    if about not in ("volume", "slice"):
-        raise ValueError(f"turn: expected about 'volume' or 'slice', got {about!r}")
     a = volume[:, -1:]
-    t = turned(a, φ, slice_centres(a) if about == "slice" else None)
+    t = turned(a, φ)
     return (a - t).abs().sum() / (a + t).sum().clamp_min(1e-12)
 
 

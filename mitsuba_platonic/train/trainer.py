@@ -359,7 +359,7 @@ class Trainer:
             g_turn = torch.Generator()                       # one angle per volume, drawn from the run's seed and step
             g_turn.manual_seed(int(np.random.SeedSequence([cfg.run.seed, step, 17, self.rank]).generate_state(1)[0]))
             φ = 2.0 * math.pi * torch.rand(v.shape[0], generator=g_turn, dtype=torch.float64)
-            terms["turn"] = t.turn * turn(v, φ.to(v.device), t.turn_about)
+            terms["turn"] = t.turn * turn(v, φ.to(v.device))
         if t.solidity > 0:                                   # no gaps along the photo's rays
             terms["solidity"] = t.solidity * solidity(v_input)
         if t.colour_match > 0:                               # the photo's mean colour from every side
