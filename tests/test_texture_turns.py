@@ -100,3 +100,58 @@ def test_the_photo_config_with_its_roundness_off_loads_as_documented(tmp_path):
                                  "model.offsets_behind=true"])
     assert (cfg.train.turn, cfg.model.texture_turns, cfg.model.offsets_behind) == (0.0, 1, True)
     assert cfg.train.solidity == 1.0                                  # solidity does not assume a round class
+
+
+def test_the_rim_weight_ramps_in_cos_phi_from_the_rim_azimuth_to_ninety_degrees():
+    """s = clamp(cos φ / cos φ_r, 0, 1) at voxel centres, against each voxel's azimuth written out; 1 on the
+    near side within φ_r, 0 from 90° on; φ_r 90 is 1 everywhere; a bad azimuth is an error."""
+    from mitsuba_platonic.networks.photo_colours import rim_weight
+    r = 16
+    s = rim_weight(r, 60.0)[0, 0]
+    c = -1.0 + (torch.arange(r, dtype=torch.float64) + 0.5) * (2.0 / r)
+    for d in range(r):
+        for w in range(r):
+            φ = math.degrees(math.atan2(c[w], c[r - 1 - d]))           # x along w, z along −d
+            want = min(1.0, max(0.0, math.cos(math.radians(φ)) / 0.5))
+            assert float(s[d, 0, w]) == pytest.approx(want, abs=1e-12)
+            assert torch.equal(s[d, :, w], s[d, :1, w].expand(r))       # the same at every height
+    assert float(s.max()) == 1.0 and float(s.min()) == 0.0
+    assert float(s[0, 0, r // 2]) == 1.0 and float(s[r - 1, 0, r // 2]) == 0.0   # facing the camera (d = 0), behind
+    assert torch.equal(rim_weight(r, 90.0), torch.ones(1, 1, r, r, r, dtype=torch.float64))
+    with pytest.raises(ValueError, match=r"rim_weight: expected an azimuth in degrees in \[0, 90\], got 95"):
+        rim_weight(r, 95)
+
+
+def test_the_rim_of_the_seen_surface_takes_the_turned_texture_and_keeps_its_offsets(tmp_path):
+    """A front slab, opaque, seen by the input camera: with a rim azimuth, its voxels take
+    T_front s t + (1 − T_front s) t_behind (s the rim weight); the offsets still act there. The config
+    key needs the four cameras and an azimuth in [0, 90]."""
+    from torch import nn
+    from mitsuba_platonic.networks.photo_colours import rim_weight, texture_corrected
+    from mitsuba_platonic.settings_checks import ConfigError
+
+    r = 8
+    conv = nn.Conv3d(8, 4, 3, padding=1)
+    nn.init.zeros_(conv.weight)
+    nn.init.zeros_(conv.bias)
+    carried, behind = torch.full((1, 3, r, r, r), 0.2), torch.full((1, 3, r, r, r), 0.7)
+    volume = torch.zeros(1, 4, r, r, r)
+    volume[:, 3, r // 2 - 1] = 1.0 - 1e-6                          # an opaque slab just in front of the axis, nothing before it
+    ℓ = torch.full((1, 3, r, r, r), 0.5)
+    colour, used = texture_corrected(conv, volume, ℓ, carried, None, behind, offsets_behind=False, rim=45.0)
+    k = slice(r // 2 - 1, r // 2)
+    s = rim_weight(r, 45.0).float()[:, :, k]                       # the slab's voxels: T_front = 1
+    t = s * 0.2 + (1.0 - s) * 0.7
+    assert torch.allclose(colour[:, :3, k], torch.sigmoid(torch.logit(t) + 0.5), atol=1e-5)
+    assert float(s.min()) < 0.25 and float(s.max()) == 1.0          # the slab's ends are near the rim
+    assert torch.allclose(used[:, :, k], ℓ[:, :, k])                # the offsets where seen, rim or not
+    same, _ = texture_corrected(conv, volume, ℓ, carried, None, behind, offsets_behind=False, rim=90.0)
+    before, _ = texture_corrected(conv, volume, ℓ, carried, None, behind, offsets_behind=False)
+    assert torch.equal(same, before)
+    cfg = load_config("photos", [f"data.path={tmp_path}", "model.texture_rim=60"])
+    assert cfg.model.net_config(4).texture_rim == 60.0
+    with pytest.raises(ConfigError, match=r"model.texture_rim: expected an azimuth in degrees in \[0, 90\], got 120"):
+        load_config("photos", [f"data.path={tmp_path}", "model.texture_rim=120"])
+    with pytest.raises(ConfigError, match="model.texture_rim: .*needs model.texture_turns: 4"):
+        load_config("photos", [f"data.path={tmp_path}", "model.texture_rim=60", "model.texture_turns=1",
+                               "model.offsets_behind=true"])
