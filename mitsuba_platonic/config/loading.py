@@ -39,6 +39,7 @@ RETIRED = {
     ("train", "silhouette_weight"): (0.0, "60a45a0"),      # issue 43: docs/experiments/photo-sides.md
     ("train", "symmetry"): (0.0, "3bef62f"),               # issue 43: docs/experiments/photo-sides.md
     ("train", "turn_about"): ("volume", "55e7013"),        # issue 43: docs/experiments/photo-sides.md
+    ("model", "texture_rim"): (90.0, "f98b5e7"),           # issue 43: docs/experiments/photo-sides.md
 }
 
 

@@ -99,7 +99,6 @@ class NetConfig:
     texture_conv: bool = False
     texture_turns: int = 1
     offsets_behind: bool = True
-    texture_rim: float = 90.0
 
     def validate(self) -> "NetConfig":
         if self.resolution not in RESOLUTIONS:
@@ -140,9 +139,6 @@ class NetConfig:
         if not isinstance(self.offsets_behind, bool) or (not self.offsets_behind and self.texture_turns != 4):
             raise ValueError(f"offsets_behind must be True or False, and False only with texture_turns 4; got "
                              f"{self.offsets_behind!r} (texture_turns {self.texture_turns!r})")
-        if not 0.0 <= self.texture_rim <= 90.0 or (self.texture_rim < 90.0 and self.texture_turns != 4):
-            raise ValueError(f"texture_rim must be in [0, 90], and below 90 only with texture_turns 4; got "
-                             f"{self.texture_rim!r} (texture_turns {self.texture_turns!r})")
         return self
 
     @property

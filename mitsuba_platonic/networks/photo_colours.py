@@ -27,8 +27,7 @@ from torch import nn
 
 from ..render.closed_form import tilt, transmittance_before
 
-__all__ = ["COLOUR_MIN", "photo_colour", "photo_texture", "rim_weight", "front_transmittance", "texture_corrected",
-           "photo_volume"]
+__all__ = ["COLOUR_MIN", "photo_colour", "photo_texture", "front_transmittance", "texture_corrected", "photo_volume"]
 
 
 #: Where :func:`photo_colour` clamps a mean colour, so that its logit stays finite (≈ ±5.5).
@@ -139,26 +138,6 @@ def photo_texture(images: torch.Tensor, resolution: int, elevation: Optional[tor
     return out / total.to(c).clamp_min(1e-12)
 
 
-def rim_weight(resolution: int, rim: float) -> torch.Tensor:
-    """``(1, 1, R, R, R)`` in [0, 1], G's frame: how much of the carried photo a voxel the input camera
-    sees keeps (``model.texture_rim``). With φ = atan2(x, z) the voxel's azimuth about the vertical
-    (0 facing the input camera, as in :func:`photo_texture`) and φ_r = ``rim`` degrees,
-
-        s = clamp(cos φ / cos φ_r, 0, 1)
-
-    1 within φ_r of the camera and on the axis, falling linearly in cos φ to 0 at 90° (the rim the
-    photo shows edge-on, its columns stretched across a side view), 0 behind. ``rim`` 90: 1 everywhere."""
-    if not 0.0 <= rim <= 90.0:
-        raise ValueError(f"rim_weight: expected an azimuth in degrees in [0, 90], got {rim!r}")
-    if rim >= 90.0:
-        return torch.ones(1, 1, resolution, resolution, resolution, dtype=torch.float64)
-    centres = -1.0 + (torch.arange(resolution, dtype=torch.float64) + 0.5) * (2.0 / resolution)
-    x = centres[None, None, None, :]                                                   # G's frame, as photo_texture
-    z = centres.flip(0)[None, :, None, None]
-    cos_φ = z / torch.sqrt(x * x + z * z).clamp_min(1e-12)
-    return (cos_φ / math.cos(math.radians(rim))).clamp(0.0, 1.0).expand(1, 1, resolution, resolution, resolution)
-
-
 def front_transmittance(density: torch.Tensor, elevation: Optional[torch.Tensor] = None) -> torch.Tensor:
     """T_front ``(B, 1, R, R, R)`` in [0, 1] and in the input camera's frame: the transmittance from
     each voxel out of the volume towards the input camera, for a density ``(B, 1, R, R, R)`` in G's
@@ -185,7 +164,7 @@ def _in_g_frame(weight: torch.Tensor, elevation: Optional[torch.Tensor]) -> torc
 def texture_corrected(conv: nn.Module, volume: torch.Tensor, offsets: torch.Tensor, texture: torch.Tensor,
                       elevation: Optional[torch.Tensor] = None,
                       behind: Optional[torch.Tensor] = None,
-                      offsets_behind: bool = True, rim: float = 90.0) -> Tuple[torch.Tensor, torch.Tensor]:
+                      offsets_behind: bool = True) -> Tuple[torch.Tensor, torch.Tensor]:
     """``model.texture_conv``: (volume, ℓ') of the volume G made with offsets ℓ from the photos'
     ``texture`` t (:func:`photo_texture`, ``(B, 3, R, R, R)``), its logits corrected by ``conv``
     (G's :attr:`~mitsuba_platonic.networks.nets.Generator.texture_conv`, a 3³ convolution, 8 channels
@@ -206,15 +185,11 @@ def texture_corrected(conv: nn.Module, volume: torch.Tensor, offsets: torch.Tens
     the texture where the input camera does not see, t ← T_front t + (1 − T_front) t_behind, so the
     surface the photo shows keeps the photo's own pixels. ``offsets_behind`` False
     (``model.offsets_behind``): G's colour offsets act only where the input camera sees,
-    ℓ' ← T_front (ℓ + δ_c), so the body behind that surface keeps the turned cameras' texture as read.
-    ``rim`` (``model.texture_rim``): the seen surface's rim takes the turned cameras' texture too,
-    t ← T_front s t + (1 − T_front s) t_behind with s = :func:`rim_weight`; the offsets still act
-    wherever the input camera sees."""
+    ℓ' ← T_front (ℓ + δ_c), so the body behind that surface keeps the turned cameras' texture as read."""
     ρ = volume[:, 3:]
     front = _in_g_frame(front_transmittance(ρ, elevation), elevation)
     if behind is not None:
-        seen = front * rim_weight(front.shape[-1], rim).to(front) if rim < 90.0 else front
-        texture = seen * texture.to(volume) + (1.0 - seen) * behind.to(volume)
+        texture = front * texture.to(volume) + (1.0 - front) * behind.to(volume)
     t = torch.logit(texture.to(volume).clamp(COLOUR_MIN, 1.0 - COLOUR_MIN))
     logit_ρ = torch.logit(ρ.clamp(1e-6, 1.0 - 1e-6))            # G's own density logit (ρ is its sigmoid)
     x = torch.cat([offsets, logit_ρ, t, front], dim=1).contiguous(memory_format=torch.channels_last_3d)
@@ -242,5 +217,5 @@ def photo_volume(G: nn.Module, code: torch.Tensor, images: torch.Tensor, recipe:
     v, ℓ = G(code, mean if t is None else t, offsets=True)
     if recipe.texture_conv:
         conv = getattr(G, "module", G).texture_conv                # G, or the G inside a data-parallel wrapper
-        v, ℓ = texture_corrected(conv, v, ℓ, t, elevation, behind, recipe.offsets_behind, recipe.texture_rim)
+        v, ℓ = texture_corrected(conv, v, ℓ, t, elevation, behind, recipe.offsets_behind)
     return v, ℓ

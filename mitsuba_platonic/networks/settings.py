@@ -22,7 +22,7 @@ __all__ = ["ModelConfig", "NET_KEYS"]
 
 #: The model keys that :class:`~mitsuba_platonic.networks.nets.NetConfig` takes as they are.
 NET_KEYS = ("resolution", "latent", "width", "norm", "encoder_hidden", "upsample", "precision", "photo_colour",
-            "photo_texture", "texture_conv", "texture_turns", "offsets_behind", "texture_rim")
+            "photo_texture", "texture_conv", "texture_turns", "offsets_behind")
 
 
 @dataclass
@@ -51,9 +51,6 @@ class ModelConfig:
     blended by each voxel's azimuth (docs/training.md, "The photo config's choices").
     offsets_behind: with texture_turns 4, whether G's colour offsets apply behind what the input camera sees
     (false: the colour there is the turned cameras' texture as read; docs/training.md).
-    texture_rim: with texture_turns 4, the azimuth φ_r in degrees from the input camera beyond which the
-    surface the input camera sees takes the turned cameras' texture too, in a ramp of cos φ that reaches
-    them at 90° (90: none; :func:`~mitsuba_platonic.networks.photo_colours.rim_weight`).
     """
 
     resolution: int = 32
@@ -71,7 +68,6 @@ class ModelConfig:
     texture_conv: bool = False
     texture_turns: int = 1
     offsets_behind: bool = True
-    texture_rim: float = 90.0
 
     def validate(self) -> "ModelConfig":
         """Check this section's values; raise :class:`~mitsuba_platonic.settings_checks.ConfigError`
@@ -99,11 +95,6 @@ class ModelConfig:
         if not self.offsets_behind and self.texture_turns != 4:
             raise ConfigError("model.offsets_behind: false keeps the turned cameras' texture behind the seen surface, "
                               "so it needs model.texture_turns: 4")
-        if not 0.0 <= self.texture_rim <= 90.0:
-            raise ConfigError(f"model.texture_rim: expected an azimuth in degrees in [0, 90], got {self.texture_rim!r}")
-        if self.texture_rim < 90.0 and self.texture_turns != 4:
-            raise ConfigError("model.texture_rim: the rim takes the turned cameras' texture, so it needs "
-                              "model.texture_turns: 4")
         if self.texture_conv and not self.photo_texture:
             raise ConfigError("model.texture_conv: the convolution reads the photo's texture, so it needs "
                               "model.photo_texture: true")

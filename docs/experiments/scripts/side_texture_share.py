@@ -7,11 +7,10 @@ carried along the input camera's rays where that camera sees it and the four tur
 behind, blended by T_front, the transmittance towards the input camera
 (``networks/photo_colours.texture_corrected``). This script renders the held-out photos'
 reconstructions on the judge's turntable about the object's vertical (``evaluate/judge.py``) with
-every voxel's colour replaced by the carried photo's weight in its texture, T_front (times the rim
-weight s of ``model.texture_rim`` where it is below 90°), its density kept, so that each pixel's colour
-is the EA-weighted share of its colour that is the carried photo:
+every voxel's colour replaced by the carried photo's weight in its texture, T_front, its density kept,
+so that each pixel's colour is the EA-weighted share of its colour that is the carried photo:
 
-    share = Σ_pixels Σ_k T_k a_k T_front,k s_k / Σ_pixels α
+    share = Σ_pixels Σ_k T_k a_k T_front,k / Σ_pixels α
 
 and prints it per azimuth, over the whole silhouette and over the image's middle third of columns.
 At 0° it is below 1 by the soft surfaces' depth; at 180° near 0. Figures only;
@@ -30,7 +29,7 @@ from mitsuba_platonic.evaluate import judge as J
 from mitsuba_platonic.evaluate.photos import photo_splits
 from mitsuba_platonic.files.checkpoint import read_checkpoint
 from mitsuba_platonic.model import Model
-from mitsuba_platonic.networks.photo_colours import _in_g_frame, front_transmittance, rim_weight
+from mitsuba_platonic.networks.photo_colours import _in_g_frame, front_transmittance
 
 AZIMUTHS = (0.0, 45.0, 90.0, -90.0, 180.0)
 
@@ -52,7 +51,6 @@ def main() -> None:
         density = volumes[:, 3:].detach().float().cpu()
         θ = torch.deg2rad(elevations.detach().float().cpu())
         seen = _in_g_frame(front_transmittance(density, θ), θ)
-        seen = seen * rim_weight(density.shape[-1], cfg.model.texture_rim).to(seen)   # × s with model.texture_rim
         probe = torch.cat([seen.expand(-1, 3, -1, -1, -1), density], 1)        # colour = the carried share
         turntable = J._turntable(probe, elevations.double().cpu(), AZIMUTHS, cfg.render, 0)
         r = turntable.shape[-1]
