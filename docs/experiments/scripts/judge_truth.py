@@ -21,18 +21,13 @@ not the shape. Figures only; docs/experiments/photo-sides.md reads them.
 from __future__ import annotations
 
 import argparse
-import math
 from pathlib import Path
 
 import torch
 
-from mitsuba_platonic.config.loading import checkpoint_config, model_from_checkpoint
 from mitsuba_platonic.evaluate.judge import judge
-from mitsuba_platonic.evaluate.photo_truth import truth_pairs
 from mitsuba_platonic.evaluate.photos import photo_splits
-from mitsuba_platonic.files.checkpoint import read_checkpoint
-from mitsuba_platonic.model import Model
-from mitsuba_platonic.render.closed_form import tilt
+from photo_runs import upright_run, upright_truth
 
 KEYS = [("c2st_input", "acc. input", 3), ("c2st_near", "acc. near", 3), ("c2st_side", "acc. side", 3),
         ("c2st_back", "acc. back", 3), ("roughness_side", "rough. side", 2), ("delta_e_side", "ΔE side", 1),
@@ -44,18 +39,13 @@ def main() -> None:
     ap.add_argument("run", type=Path)
     args = ap.parse_args()
     torch.set_num_threads(1)
-    ckpt = read_checkpoint(args.run)
-    model, cfg = model_from_checkpoint(Model, ckpt), checkpoint_config(ckpt)   # one read; the config without retired keys
-    if model.P is None:
-        raise SystemExit(f"{args.run}: expected a run with train.pose elevation (the judge turns about the vertical)")
+    model, cfg = upright_run(args.run)
     train, held, files = photo_splits(cfg)
-    pairs = list(truth_pairs(model, cfg))
+    pairs, upright, elevations = upright_truth(model, cfg)
     if [p.file for p in pairs] != [str(f) for f in files]:
         raise SystemExit("the truth's photos are not the held-out photos in their order")
-    θ = torch.tensor([math.radians(p.elevation) for p in pairs], dtype=torch.float64)
-    upright = tilt(torch.stack([p.truth for p in pairs]), -θ).clamp(0.0, 1.0)       # the input frame, turned back
     answers = {"model": model.reconstruct_upright(held),
-               "truth": (upright, torch.rad2deg(θ))}
+               "truth": (upright, elevations)}
     print("| renders of | " + " | ".join(h for _, h, _ in KEYS) + " |")
     print("|---" * (len(KEYS) + 1) + "|")
     for name, volumes in answers.items():

@@ -24,12 +24,10 @@ from pathlib import Path
 
 import torch
 
-from mitsuba_platonic.config.loading import checkpoint_config, model_from_checkpoint
 from mitsuba_platonic.evaluate import judge as J
 from mitsuba_platonic.evaluate.photos import photo_splits
-from mitsuba_platonic.files.checkpoint import read_checkpoint
-from mitsuba_platonic.model import Model
 from mitsuba_platonic.networks.photo_colours import _in_g_frame, front_transmittance
+from photo_runs import upright_run
 
 AZIMUTHS = (0.0, 45.0, 90.0, -90.0, 180.0)
 
@@ -42,10 +40,7 @@ def main() -> None:
     print("| run | " + " | ".join(f"{φ:+.0f}° (middle)" for φ in AZIMUTHS) + " |")
     print("|---" * (len(AZIMUTHS) + 1) + "|")
     for run in args.runs:
-        ckpt = read_checkpoint(run)
-        model, cfg = model_from_checkpoint(Model, ckpt), checkpoint_config(ckpt)
-        if model.P is None:
-            raise SystemExit(f"{run}: expected a run with train.pose elevation (the turntable turns about the vertical)")
+        model, cfg = upright_run(run)
         _, held, _ = photo_splits(cfg)
         volumes, elevations = model.reconstruct_upright(held)
         density = volumes[:, 3:].detach().float().cpu()

@@ -20,20 +20,15 @@ of roundness shows here first. Figures only; docs/experiments/photo-sides.md rea
 from __future__ import annotations
 
 import argparse
-import math
 from pathlib import Path
 from typing import Dict
 
 import torch
 
 from mitsuba_platonic.errors import UserError
-from mitsuba_platonic.config.loading import checkpoint_config, model_from_checkpoint
 from mitsuba_platonic.evaluate import judge as J
-from mitsuba_platonic.evaluate.photo_truth import truth_pairs
 from mitsuba_platonic.evaluate.photos import photo_splits
-from mitsuba_platonic.files.checkpoint import read_checkpoint
-from mitsuba_platonic.model import Model
-from mitsuba_platonic.render.closed_form import tilt
+from photo_runs import upright_run, upright_truth
 
 AZIMUTHS = (0.0, 45.0, 90.0, -90.0, 180.0)
 
@@ -57,24 +52,16 @@ def main() -> None:
     args = ap.parse_args()
     torch.set_num_threads(1)
     for run in args.runs:
-        ckpt = read_checkpoint(run)
-        model, cfg = model_from_checkpoint(Model, ckpt), checkpoint_config(ckpt)
-        if model.P is None:
-            raise SystemExit(f"{run}: expected a run with train.pose elevation (the turntable turns about the vertical)")
+        model, cfg = upright_run(run)
         _, held, _ = photo_splits(cfg)
         print(f"\n{run}\n\n| silhouettes of | asymmetry | width | coverage |\n|---|---|---|---|")
         print(row("held-out photos", silhouette_figures(held[:, -1])))
-        volumes, elevations = model.reconstruct_upright(held)
-        answers = {"model": (volumes, elevations)}
+        answers = {"model": model.reconstruct_upright(held)}
         try:
-            pairs = list(truth_pairs(model, cfg))
+            _, upright, elevations = upright_truth(model, cfg)
+            answers["truth"] = (upright.float(), elevations)
         except UserError as e:                               # the tree photos and other real folders: no truth
             print(f"(no truth: {e})")
-            pairs = []
-        if pairs:
-            θ = torch.tensor([math.radians(p.elevation) for p in pairs], dtype=torch.float64)
-            answers["truth"] = (tilt(torch.stack([p.truth for p in pairs]), -θ).clamp(0.0, 1.0).float(),
-                                torch.rad2deg(θ))
         for name, (v, el) in answers.items():
             turntable = J._turntable(v.detach().float().cpu().clamp(0.0, 1.0), el.double(), AZIMUTHS, cfg.render, 0)
             for i, φ in enumerate(AZIMUTHS):
