@@ -41,7 +41,7 @@ def test_shapes_and_gradient_flow(resolution, channels, norm):
 
 
 def test_paper_generator_widths_at_64():
-    g = build_networks(NetConfig(resolution=64, width=64, latent=200))["G"]
+    g = build_networks(NetConfig(resolution=64, width=64, latent=200, norm="batch"))["G"]
     convs = [m for m in g.modules() if isinstance(m, torch.nn.ConvTranspose3d)]
     assert [c.out_channels for c in convs] == [512, 256, 128, 64, 4]
 
@@ -55,7 +55,7 @@ def test_generator_output_shape_range_and_dependence_on_z(resolution, channels):
     scaled up the output saturates at both ends of (0, 1) without leaving it (a sigmoid, not an
     unbounded or one-sided output)."""
     g = build_networks(NetConfig(resolution=resolution, volume_channels=channels, image_channels=channels,
-                                 latent=8, width=2))["G"].train()
+                                 latent=8, width=2, norm="batch"))["G"].train()
     z = torch.randn(4, 8)
     with torch.no_grad():
         v = g(z)
@@ -77,7 +77,7 @@ def test_encoder_maps_images_to_codes(resolution, channels, encoder_hidden):
     """E (plain Linear head or the authors' hidden layer): (B, C, R, R) → (B, latent); each code
     depends on its own image only (eval mode) and differs between images."""
     e = build_networks(NetConfig(resolution=resolution, volume_channels=channels, image_channels=channels,
-                                 latent=8, width=2, encoder_hidden=encoder_hidden))["E"].eval()
+                                 latent=8, width=2, encoder_hidden=encoder_hidden, norm="batch"))["E"].eval()
     x = torch.rand(3, channels, resolution, resolution)
     with torch.no_grad():
         codes = e(x)
@@ -90,7 +90,7 @@ def test_encoder_maps_images_to_codes(resolution, channels, encoder_hidden):
 
 
 def test_bad_inputs():
-    nets = build_networks(NetConfig(resolution=16, latent=8, width=4))
+    nets = build_networks(NetConfig(resolution=16, latent=8, width=4, norm="batch"))
     with pytest.raises(ValueError, match="expects images"):
         nets["D"](torch.rand(2, 4, 32, 32))
     with pytest.raises(ValueError, match="expects z"):
@@ -250,8 +250,8 @@ def test_generators_start_half_transparent_and_learn_a_silhouette(resolution):
     from mitsuba_platonic import views as V
 
     torch.manual_seed(0)
-    nets = build_networks(NetConfig(resolution=resolution, volume_channels=1, image_channels=1, latent=8, width=8))
-    ea = build_networks(NetConfig(resolution=resolution, volume_channels=4, image_channels=4, latent=8, width=8))
+    nets = build_networks(NetConfig(resolution=resolution, volume_channels=1, image_channels=1, latent=8, width=8, norm="batch"))
+    ea = build_networks(NetConfig(resolution=resolution, volume_channels=4, image_channels=4, latent=8, width=8, norm="batch"))
     z = torch.randn(2, 8)
     with torch.no_grad():
         v = nets["G"](z)
@@ -281,7 +281,7 @@ def test_generators_start_half_transparent_and_learn_a_silhouette(resolution):
         return                                            # the fit: at 16³ only (time)
     assert fit(nets["G"]) < 0.1                           # close to the disc
     torch.manual_seed(0)
-    zero = build_networks(NetConfig(resolution=resolution, volume_channels=1, image_channels=1, latent=8, width=8))
+    zero = build_networks(NetConfig(resolution=resolution, volume_channels=1, image_channels=1, latent=8, width=8, norm="batch"))
     with torch.no_grad():
         [m for m in zero["G"].modules() if isinstance(m, torch.nn.ConvTranspose3d)][-1].bias.zero_()
     assert fit(zero["G"]) > 0.3                           # still mostly opaque
@@ -517,7 +517,7 @@ def test_a_photo_colour_generator_offsets_its_colour_logits_from_the_photos():
     with pytest.raises(ValueError, match=r"\(3, 3\)"):
         G(z, m[:, :2])
     with pytest.raises(ValueError, match="takes no colour"):
-        Generator(NetConfig(resolution=16, width=8, latent=16))(z, m)
+        Generator(NetConfig(resolution=16, width=8, latent=16, norm="batch"))(z, m)
     with pytest.raises(ValueError, match="volume_channels 4"):
         NetConfig(volume_channels=1, image_channels=1, photo_colour=True).validate()
 

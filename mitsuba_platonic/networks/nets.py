@@ -32,6 +32,7 @@ import torch.nn.functional as F
 from torch import nn
 
 from ..render.single_scatter import SKY_SHARE
+from .net_settings import NetSettings
 from .photo_colours import COLOUR_MIN
 
 __all__ = ["NORMS", "UPSAMPLES", "INITS", "PRECISIONS", "NetConfig", "Encoder", "Generator", "Discriminator",
@@ -65,40 +66,26 @@ def arithmetic(precision: str, x: torch.Tensor) -> ContextManager:
     return contextlib.nullcontext()
 
 
-@dataclass(frozen=True)
-class NetConfig:
-    """resolution R (16, 32, 64, 128), volume channels (1 or 4), image channels (1 or 4),
-    latent size, base width (channels of the widest-resolution layer), normalisation,
-    encoder_hidden: width of E's last layer before the Linear to z (0: none, E's trunk feeds
-    the Linear directly); view_codes: length of a view code appended to z as G's input (the
-    PrGAN-style baseline, ``train.mode: prgan``: a one-hot of one of 8 ring views; 0: none, G
-    sees z only); upsample: how G's stages double the resolution (:data:`UPSAMPLES`); pose:
-    whether a :class:`PoseHead` reads the input camera's elevation from z (``train.pose:
-    elevation``); light: whether a :class:`LightHead` reads the photo's light from z (``train.light:
-    head``); precision: the networks' arithmetic (:data:`PRECISIONS`); photo_colour: G's colour is an
-    offset from the input photo's mean colour (:meth:`Generator.forward`); photo_texture: from the
-    photo's colour at each voxel's pixel instead (:func:`~mitsuba_platonic.networks.photo_colours.photo_texture`);
-    texture_conv: G's logits
-    corrected by a convolution that sees it (:mod:`~mitsuba_platonic.networks.photo_colours`). A config's model section
-    builds it (:meth:`~mitsuba_platonic.networks.settings.ModelConfig.net_config`, its keys of the same names)."""
+@dataclass
+class NetConfig(NetSettings):
+    """E's, G's and the critics' configuration: the shapes and arithmetic of :class:`~.net_settings.NetSettings`
+    (its fields, defaults and their documentation, which the config's model section shares), and what
+    the config's other sections decide, one line per key:
 
-    resolution: int = 32
+    volume_channels: the channels of G's volumes, 1 (density) or 4 (colour and density).
+    image_channels: the channels of the images E and D read, 1 or 4.
+    view_codes: the length of a view code appended to z as G's input (the PrGAN-style baseline,
+    ``train.mode: prgan``: a one-hot of one of 8 ring views); 0: none, G sees z only.
+    pose: whether a :class:`PoseHead` reads the input camera's elevation from z (``train.pose: elevation``).
+    light: whether a :class:`LightHead` reads the photo's light from z (``train.light: head``).
+
+    A config's model section builds it (:meth:`~mitsuba_platonic.networks.settings.ModelConfig.net_config`)."""
+
     volume_channels: int = 4
     image_channels: int = 4
-    latent: int = 64
-    width: int = 32
-    norm: str = "batch"
-    encoder_hidden: int = 0
-    upsample: str = "transposed"
     view_codes: int = 0
     pose: bool = False
     light: bool = False
-    precision: str = "fp32"
-    photo_colour: bool = False
-    photo_texture: bool = False
-    texture_conv: bool = False
-    texture_turns: int = 1
-    offsets_behind: bool = True
 
     def validate(self) -> "NetConfig":
         if self.resolution not in RESOLUTIONS:

@@ -1,9 +1,10 @@
 """The model section of a config (``model:``): the networks' sizes, arithmetic and how they start.
 
 :class:`ModelConfig` is the section's dataclass, beside the networks it configures
-(:mod:`mitsuba_platonic.networks.nets`). Ten of its keys (:data:`NET_KEYS`) are the networks' own settings
-(their shapes and arithmetic), :class:`~mitsuba_platonic.networks.nets.NetConfig`'s fields of the same names;
-:meth:`ModelConfig.net_config` hands them over, with what the other sections decide (the
+(:mod:`mitsuba_platonic.networks.nets`). Twelve of its keys (:data:`NET_KEYS`) are the networks' own settings
+(their shapes and arithmetic): both it and :class:`~mitsuba_platonic.networks.nets.NetConfig` inherit them
+from :class:`~mitsuba_platonic.networks.net_settings.NetSettings`, where each is declared and documented
+once; :meth:`ModelConfig.net_config` hands them over, with what the other sections decide (the
 image formation's channels, the PrGAN view code, the pose head), so the two never disagree.
 The other three (``init``, ``critic_init``, ``critic_width``) are training's: how the networks
 start, and the critics' width. Imports no config: the config composes it.
@@ -16,58 +17,31 @@ from dataclasses import dataclass
 from typing import Optional
 
 from ..settings_checks import ConfigError, choice, non_negative, positive
+from .net_settings import NetSettings, net_keys
 from .nets import INITS, NORMS, PRECISIONS, RESOLUTIONS, UPSAMPLES, NetConfig
 
 __all__ = ["ModelConfig", "NET_KEYS"]
 
-#: The model keys that :class:`~mitsuba_platonic.networks.nets.NetConfig` takes as they are.
-NET_KEYS = ("resolution", "latent", "width", "norm", "encoder_hidden", "upsample", "precision", "photo_colour",
-            "photo_texture", "texture_conv", "texture_turns", "offsets_behind")
+#: The model keys that :class:`~mitsuba_platonic.networks.nets.NetConfig` takes as they are: the
+#: fields of :class:`~mitsuba_platonic.networks.net_settings.NetSettings`, which both inherit.
+NET_KEYS = net_keys()
 
 
 @dataclass
-class ModelConfig:
-    """The model section, one line per key (why each default: docs/training.md, as named).
+class ModelConfig(NetSettings):
+    """The model section: the networks' shapes and arithmetic (:class:`~mitsuba_platonic.networks.net_settings.NetSettings`,
+    whose fields it inherits), and how training starts them, one line per key (why each default:
+    docs/training.md, as named).
 
-    resolution: volume and image size R (16 | 32 | 64 | 128).
-    latent: the size of z.
-    width: channels at the highest resolution (the paper: 64).
-    norm: 'batch' (the paper's) | 'instance' | 'none' (the default: "What the numbers say").
-    encoder_hidden: width of E's last layer before its Linear to z; 0: none (the authors': 1024, docs/paper.md).
-    upsample: how G doubles its resolution, 'transposed' (the paper's k4 s2) | 'resize' (nearest ×2, k3).
-    critic_init: how D and D3 start, 'dcgan' (N(0, 0.02)) | 'he' ("A discriminator that never learns").
+    critic_init: how D and D3 start, 'dcgan' (N(0, 0.02)) | 'he' (for networks without normalisation:
+    "A discriminator that never learns").
     init: how E and G start, 'dcgan' (the paper's) | 'he' (scaled by fan-in: "E and G that start blind").
     critic_width: channels of D's and D3's first layer, doubling per stage; null: ``width`` (same section).
-    precision: the networks' arithmetic, 'fp32' | 'bf16' (convolutions in bfloat16: "Where a step's time goes").
-    photo_colour: G's colour as an offset from the input photo's mean colour (reconstruction, EA:
-    "A colour read from the photo").
-    photo_texture: with photo_colour, the offset is from the photo's own colour at each voxel's pixel,
-    carried along the input camera's rays, not from its mean (:func:`~mitsuba_platonic.networks.photo_colours.photo_texture`).
-    texture_conv: with photo_texture, G's last logits corrected by a 3³ convolution that sees the photo's
-    colour, G's own logits and how much of each voxel the input camera sees
-    (:func:`~mitsuba_platonic.networks.photo_colours.texture_corrected`; "G's colour seeing the photo").
-    texture_turns: with texture_conv, 1: the photo carried along the input camera's rays; 4: behind what the
-    input camera sees, the photo projected from four cameras a quarter turn apart about the vertical,
-    blended by each voxel's azimuth (docs/training.md, "The photo config's choices").
-    offsets_behind: with texture_turns 4, whether G's colour offsets apply behind what the input camera sees
-    (false: the colour there is the turned cameras' texture as read; docs/training.md).
     """
 
-    resolution: int = 32
-    latent: int = 64
-    width: int = 16
-    norm: str = "none"
-    encoder_hidden: int = 0
-    upsample: str = "transposed"
     critic_init: str = "dcgan"
     init: str = "dcgan"
     critic_width: Optional[int] = None
-    precision: str = "fp32"
-    photo_colour: bool = False
-    photo_texture: bool = False
-    texture_conv: bool = False
-    texture_turns: int = 1
-    offsets_behind: bool = True
 
     def validate(self) -> "ModelConfig":
         """Check this section's values; raise :class:`~mitsuba_platonic.settings_checks.ConfigError`
