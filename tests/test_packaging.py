@@ -8,6 +8,7 @@ image and ``compare`` from another folder.
 
 from __future__ import annotations
 
+import json
 import os
 import re
 import shutil
@@ -152,6 +153,12 @@ def test_wheel_installs_and_runs_from_another_folder(tmp_path):
     where = _run([env / "bin" / "python", "-c", "import mitsuba_platonic; print(mitsuba_platonic.__file__)"],
                  cwd=work, env=environ)
     assert Path(where.strip()).is_relative_to(env) and not Path(where.strip()).is_relative_to(ROOT), where
+
+    # every packaged config resolves in the wheel as in the checkout: the parents its `extends:` names are there
+    resolve = ("import json; from mitsuba_platonic.config import load_config; from mitsuba_platonic.files.resources "
+               "import config_names; print(json.dumps({n: load_config(n, ['data.path=P']).to_dict() for n in config_names()}))")
+    installed = json.loads(_run([env / "bin" / "python", "-c", resolve], cwd=work, env=environ))
+    assert installed == {n: load_config(n, ["data.path=P"]).to_dict() for n in resources.config_names()}
 
     out = _run([platonic, "quickstart", "--out", "q", "--set", "run.steps=2", "--set", "model.resolution=16",
                 "--set", "data.n_shapes=10", "--set", "data.views_per_shape=1", "--set", "train.batch_size=2"],

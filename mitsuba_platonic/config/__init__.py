@@ -19,7 +19,8 @@ expected int, got 'eight'``); numbers must be finite (no ``.inf``, ``.nan``). py
 and types (on the plain dataclasses: other modules construct them directly); the sections'
 ``validate()`` and :meth:`Config.validate` check ranges, choices and combinations. Command-line
 overrides use dotted keys, ``--set run.steps=500``; values are parsed as YAML scalars (``true``,
-``1e-4``, ``[0.5, 0.9]``, ``null``). Every section and :class:`ConfigError` stay importable from here;
+``1e-4``, ``[0.5, 0.9]``, ``null``). A config file may extend another (``extends: photos``) and set only
+what differs (:mod:`.files`: how files are found, read and merged). Every section and :class:`ConfigError` stay importable from here;
 :mod:`.loading` reads what runs saved back into a config.
 """
 
@@ -38,11 +39,11 @@ import yaml
 from pydantic_core import SchemaValidator, core_schema
 
 from ..data.settings import DataConfig
-from ..files.resources import config_names, config_path
 from ..networks.settings import ModelConfig
 from ..render.settings import LIT, SINGLE_SCATTERING, RenderSettings as RenderConfig
 from ..settings_checks import ConfigError, quoted
 from ..views import DEFAULT_ELEVATION
+from .files import config_file, read_config_file, yaml_problem
 from .run_settings import RunConfig
 from .train_settings import MODES_3D, PRGAN, TrainConfig
 
@@ -237,51 +238,10 @@ def apply_overrides(data: Dict[str, Any], overrides: Sequence[str]) -> Dict[str,
 
 
 def load_config(path: Optional[Union[str, Path]] = None, overrides: Sequence[str] = ()) -> Config:
-    """Load a YAML config (or the defaults when ``path`` is None), apply overrides, validate."""
-    data: Dict[str, Any] = {}
-    if path is not None:
-        path = config_file(path)
-        try:
-            data = yaml.safe_load(path.read_text())
-        except UnicodeDecodeError:
-            raise ConfigError(f"{path}: not a YAML text file (not UTF-8 text)") from None
-        except yaml.YAMLError as e:
-            raise ConfigError(f"{path}: not valid YAML ({yaml_problem(e)})") from None
-        if data is None:                                    # empty or comments only: not silently "all defaults"
-            raise ConfigError(f"{path}: the config file is empty; expected a mapping of sections (run, data, "
-                              f"model, render, train); for the defaults leave --config out, or start from a "
-                              f"packaged config (--config quickstart)")
-        if not isinstance(data, dict):
-            raise ConfigError(f"{path}: expected a mapping of sections (run, data, model, render, train), "
-                              f"got a {type(data).__name__}")
+    """Load a YAML config (or the defaults when ``path`` is None), its ``extends:`` chain merged in
+    (:mod:`.files`), apply overrides, validate."""
+    data: Dict[str, Any] = {} if path is None else read_config_file(path)
     return config_from_dict(apply_overrides(data, overrides))
-
-
-def config_file(path: Union[str, Path]) -> Path:
-    """The config file ``path`` names: the file itself where it exists, else the packaged config
-    of that name (``paper``, ``paper.yaml`` or ``configs/paper.yaml``: the repository's configs
-    travel inside the package, so they are found from any folder, also one that holds a folder of
-    the same name, such as a run folder ``paper/``). ConfigError otherwise."""
-
-    p = Path(path)
-    if p.is_file():
-        return p
-    if p.parent in (Path("."), Path("configs")) and p.suffix in ("", ".yaml"):
-        try:
-            return config_path(p.name)
-        except FileNotFoundError:
-            pass
-    if p.exists():
-        raise ConfigError(f"config file {str(path)!r} is not a file")
-    raise ConfigError(f"config file {str(path)!r} does not exist (packaged configs, found by name from any "
-                      f"folder: {', '.join(config_names())})")
-
-
-def yaml_problem(e: yaml.YAMLError) -> str:
-    """A YAML error on one line: its problem and where (PyYAML's own message spans lines)."""
-    mark = getattr(e, "problem_mark", None)
-    where = f" at line {mark.line + 1}, column {mark.column + 1}" if mark is not None else ""
-    return f"{getattr(e, 'problem', None) or type(e).__name__}{where}"
 
 
 def config_from_dict(data: Dict[str, Any]) -> Config:
