@@ -13,7 +13,8 @@ import pytest
 
 from mitsuba_platonic.files.checkpoint import CHECKPOINT_VERSION, RunError, read_checkpoint
 from mitsuba_platonic.config import Config, ModelConfig, TrainConfig
-from mitsuba_platonic.config.loading import RETIRED, checkpoint_config
+from mitsuba_platonic.config.loading import checkpoint_config
+from mitsuba_platonic.config.retired import RETIRED
 from mitsuba_platonic.model import Model
 from mitsuba_platonic.train import run as R
 

@@ -4,8 +4,8 @@ The checkpoint file format (:mod:`mitsuba_platonic.files.checkpoint`) stores and
 config as the mapping ``Config.to_dict()`` wrote; this module, in the config's package, builds the
 config and the model from it. Old run folders load as they did: a saved config that lacks keys
 added since gets their defaults, as a YAML file would, and one that holds a retired option at the
-value that left it off (:data:`RETIRED`) loads without it; one that had it on names the commit that
-still has its code.
+value that left it off loads without it; one that had it on names the commit that still has its
+code (:mod:`.retired`, the list of retired options).
 
 :meth:`Model.from_checkpoint <mitsuba_platonic.model.Model.from_checkpoint>` is the public entry
 point, one layer up; it hands its class to :func:`load_model`, so this module never imports the model's.
@@ -20,41 +20,12 @@ import torch
 
 from ..files.checkpoint import Checkpoint, RunError, load_weights, read_checkpoint, saved_config_dict
 from . import Config, ConfigError, config_from_dict
+from .retired import without_retired
 
 __all__ = ["saved_config", "checkpoint_config", "config_difference", "RESUME_SECTIONS", "model_from_checkpoint",
-           "load_model", "RETIRED", "without_retired"]
+           "load_model"]
 
 M = TypeVar("M")
-
-#: Options tried, measured and not adopted, then removed from the config (issues 43, 44): their value
-#: when off, and the last commit with their code (the experiment log, docs/experiments/, has each).
-RETIRED = {
-    ("model", "texture_surface"): (False, "3afe14f"),
-    ("model", "texture_sides"): (False, "3afe14f"),
-    ("model", "texture_blur"): (0.0, "3afe14f"),
-    ("train", "adv_input"): (0.0, "3afe14f"),
-    ("train", "light_warmup"): (0, "3afe14f"),
-    ("train", "light_fade"): (0, "3afe14f"),
-    ("train", "r1_every"): (1, "3afe14f"),
-    ("train", "silhouette_weight"): (0.0, "60a45a0"),      # issue 43: docs/experiments/photo-sides.md
-    ("train", "symmetry"): (0.0, "3bef62f"),               # issue 43: docs/experiments/photo-sides.md
-    ("train", "turn_about"): ("volume", "55e7013"),        # issue 43: docs/experiments/photo-sides.md
-    ("model", "texture_rim"): (90.0, "f98b5e7"),           # issue 43: docs/experiments/photo-sides.md
-}
-
-
-def without_retired(saved: Dict[str, Any]) -> Dict[str, Any]:
-    """A saved config (the mapping a run wrote) without the :data:`RETIRED` keys it holds at their off
-    value; :class:`ConfigError` naming the key and the commit to check out if one was on."""
-    out = {name: dict(section) if isinstance(section, dict) else section for name, section in saved.items()}
-    for (section, key), (off, commit) in RETIRED.items():
-        values = out.get(section)
-        if isinstance(values, dict) and key in values:
-            value = values.pop(key)
-            if value != off:
-                raise ConfigError(f"{section}.{key}: {value!r} was tried and retired (docs/experiments/); "
-                                  f"this run needs the code of commit {commit}")
-    return out
 
 
 def saved_config(state: Dict[str, Any], path: Path, run_name: Optional[str] = None) -> Config:

@@ -26,7 +26,8 @@ import yaml
 
 from .. import __version__
 from ..config import Config, ConfigError, config_from_dict, yaml_problem
-from ..config.loading import config_difference, without_retired
+from ..config.loading import config_difference
+from ..config.retired import without_retired
 from ..files.checkpoint import RunError, checkpoint_files
 from ..files.fileio import atomic_write, make_folder, open_file, remove_temporaries
 

@@ -23,7 +23,7 @@ import yaml
 from PIL import Image
 
 from mitsuba_platonic.config import config_from_dict
-from mitsuba_platonic.config.loading import without_retired
+from mitsuba_platonic.config.retired import without_retired
 from mitsuba_platonic.evaluate.photo_truth import thickness, truth_pairs, turntable_in_camera
 from mitsuba_platonic.model import Model
 from mitsuba_platonic.render import render
