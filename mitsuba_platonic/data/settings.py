@@ -23,13 +23,22 @@ SOURCES = ("procedural", "folder")
 
 @dataclass
 class DataConfig(PhotoOptions):
-    """source: 'procedural' (render a built-in class with make-dataset, cached under ``cache``)
-    or 'folder' (an unstructured photo collection at ``path``).
-    Procedural: shape_class, n_shapes, views_per_shape, formation ('vh'|'ao'|'ea'|'physical'),
-    view_distribution ('sphere'|'band'|'ring'), elevation, seed.
-    Folder: the photo options background, threshold, crop, margin, clean, fill_holes and erode,
-    inherited from (and explained by) :class:`mitsuba_platonic.data.photos.PhotoOptions`.
-    split: the train split's share; the rest is held out (val/test) for evaluation."""
+    """The data section, one line per key (its table in docs/training.md is made from these lines); the
+    photo options (background, threshold, crop, margin, clean, fill_holes, erode) are inherited from,
+    and explained by, :class:`~mitsuba_platonic.data.photos.PhotoOptions`.
+
+    source: 'procedural' (a collection rendered from procedural shapes by ``platonic make-dataset``, with
+    ground-truth volumes, cached under ``cache``) or 'folder' (your photos, at ``path``).
+    path: a folder of RGBA cut-outs (source 'folder').
+    cache: where rendered collections are kept and reused.
+    shape_class, n_shapes, views_per_shape: the procedural collection: its class, shapes and views per shape.
+    formation: how the collection's images are formed, 'ea' | 'ao' | 'vh' | 'physical' (path traced); the
+    renderer must match it, except a lit one.
+    view_distribution, elevation: where the collection's cameras are, 'sphere' | 'band' (between two
+    elevations) | 'ring' (docs/conventions.md).
+    split, seed: the train split's share (the rest is held out, halved into val and test, for evaluation)
+    and the seed of the split (and of a procedural collection's shapes and views).
+    """
 
     source: str = "procedural"
     path: Optional[str] = None

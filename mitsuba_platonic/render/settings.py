@@ -47,7 +47,8 @@ OPTIONS_OF: Dict[str, tuple] = {
 class RenderSettings:
     """How volumes become images.
 
-    backend: 'closed_form' | 'mitsuba' (ray marcher) | 'physical' (path tracer under natural light) |
+    backend: 'closed_form' (the paper's reference) | 'mitsuba' (the batched ray marcher: the shipped configs',
+        the same images to float precision, faster) | 'physical' (path tracer under natural light; a GPU run) |
         'single_scatter' (single scattering of a random sun and sky per image; EA-style RGBA) |
         'scatter_march' (the same light in one Dr.Jit launch per pass; docs/rendering.md).
     model: image formation, 'vh' | 'ao' | 'ea' (the physical backend renders EA-style RGBA).

@@ -27,14 +27,20 @@ class PhotoOptions:
     """How a collection turns each photo into a training image; the one owner of these settings:
     the data config's section (``mitsuba_platonic.data.settings.DataConfig``) inherits them.
 
-    background: null | 'white' (RGB photos on white are masked by their near-white pixels);
-    threshold: how near to white, in [0, 1); crop: 'image' | 'bbox'; margin: a transparent border,
-    a share of R per side in [0, 0.5) (with crop 'bbox' the object otherwise touches the image
-    edge, where rendered views seldom put it); clean: remove frame lines and specks from masks
-    (false for exact masks, e.g. rendered cut-outs, whose thin parts are real); fill_holes: keep
-    white areas enclosed by an object on white opaque (a white label on a mug); erode: shrink
-    masks by this many source pixels (cut-outs that carry a light fringe of their old
-    background). :class:`~mitsuba_platonic.data.photos.PhotoCollection` says more.
+    One line per key (the data section's table in docs/training.md is made from these lines):
+
+    background: null | 'white' (RGB photos on white are masked by their near-white pixels).
+    threshold: how near to white, in [0, 1).
+    crop: how a photo is framed, 'image' (the whole image) | 'bbox' (the object's bounding box, as the photo
+    configs do).
+    margin: a transparent border, a share of R per side in [0, 0.5) (with crop 'bbox' the object otherwise
+    touches the image edge, where rendered views seldom put it).
+    clean: remove frame lines and specks from masks (false for exact masks, e.g. rendered cut-outs, whose
+    thin parts are real).
+    fill_holes: keep white areas enclosed by an object on white opaque (a white label on a mug).
+    erode: shrink masks by this many source pixels (cut-outs that carry a light fringe of their old background).
+
+    :class:`~mitsuba_platonic.data.photos.PhotoCollection` says more.
     """
 
     background: Optional[str] = None
