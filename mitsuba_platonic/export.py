@@ -270,19 +270,20 @@ def export_samples(model: "Model", n: int, out: PathLike, seed: int = 0, overwri
         remove(p)
     written = [] if written is None else written
     bar = progress_bar(n, unit="sample", desc="generate", disable=not progress, first_line=True, seconds=30.0)
-    z = model.latents(n, seed)
-    volumes = model.decode(z.to(model.device)).cpu()
+    volumes = model.generate(n, seed).cpu()
     for i, vol in enumerate(volumes):
         export_volume(vol, out / f"sample_{i:03d}", model.formation, level=None, frames=24, written=written)
         bar.update(1)
     bar.close()
-    head = f"step {model.step}, seed {seed}"
+    step = getattr(model, "step", None)                     # a fresh model has none
+    head = (f"step {step}, " if step is not None else "") + f"seed {seed}"
     written.append(save_sample_grid(volumes, model.formation, out / "samples.png", cell=cell,
                                     title=f"{n} samples ({head})"))
     if turntables:
         written.append(save_turntables(volumes, model.formation, out / "turntables.png", azimuths=turntables,
                                        cell=cell))
     if interpolation and n >= 2:
+        z = model.latents(2, seed)                           # generate(n, seed)'s first two latents, whatever n
         written.append(save_interpolation(model, z[0], z[1], out / "interpolation.png", interpolation, cell,
                                           title=f"sample_000 to sample_001 ({head}): G(slerp(z0, z1; t))")[0])
     return written

@@ -194,6 +194,9 @@ def test_interpolation_ends_are_g_of_the_two_latents(tmp_path):
     samples = model.generate(2, seed=5)
     assert torch.equal(volumes[0], samples[0].clamp(0, 1)) and torch.equal(volumes[-1], samples[1].clamp(0, 1))
     assert not torch.equal(volumes[1], volumes[0])
+    # generate's walk takes latents(2, seed): the first two of any generate(n, seed), n ≥ 2
+    assert torch.equal(model.latents(5, seed=5)[:2], z)
+    assert torch.equal(model.generate(5, seed=5)[:2], samples)
     with Image.open(path) as im:
         assert im.width >= 4 * 128 and im.height >= 128
 

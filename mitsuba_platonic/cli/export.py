@@ -95,7 +95,7 @@ def _cmd_generate(args: argparse.Namespace) -> int:
     except KeyboardInterrupt:
         samples = len({p.stem for p in written if p.name.startswith("sample_")})
         raise _interrupted_export("generate", written, out, f"{samples} of {args.n} sample(s) begun, "
-                                                              f"samples.png not written") from None
+                                                              f"the sheets (samples.png …) not written") from None
     sheets = ["samples.png (the grid)"] + (["turntables.png"] if args.turntable else []) + \
         (["interpolation.png (sample_000 to sample_001)"] if args.interpolate and args.n >= 2 else [])
     print(f"{args.n} volumes (step {model.step}) → {out}; " + ", ".join(sheets))
