@@ -27,11 +27,11 @@ import torch.nn.functional as F
 from .errors import UserError
 from .files.fileio import atomic_write, make_folder, remove
 from .files.volume_io import save_volume
-from .images import composite, linear_to_srgb, save_grid, save_png, to_hwc
+from .images import composite, linear_to_srgb, save_png, to_hwc
 from .render.frames import display_frames, save_gif, turntable_frames
+from .sheets import CELL, save_interpolation, save_sample_grid, save_turntables
 from .runtime import budget
 from .runtime.progress import progress_bar
-from .views import turntable
 from .volume import voxel_size, world_to_grid
 
 if TYPE_CHECKING:
@@ -39,7 +39,7 @@ if TYPE_CHECKING:
 
 #: save_volume is volume_io's, named here too for the callers that import it from export (notebooks).
 __all__ = ["save_volume", "display_frames", "turntable_frames", "save_gif", "extract_mesh",
-           "save_ply", "Mesh", "Exported", "export_volume", "export_reconstructions", "export_samples", "check_samples_fit", "output_names",
+           "save_ply", "Mesh", "Exported", "export_volume", "export_reconstructions", "export_samples", "check_samples_fit", "output_names", "TURNTABLE_AZIMUTHS", "INTERPOLATION_STEPS",
            "EXPORT_EXTENSIONS"]
 
 PathLike = Union[str, Path]
@@ -217,7 +217,7 @@ def export_reconstructions(model: "Model", images: Sequence[PathLike], out: Path
         yield path, export_volume(vol, out / name, model.formation, level=level, written=written)
 
 
-_SAMPLE = re.compile(r"sample_\d{3,}\.(npz|vol|gif|ply)|samples\.png")
+_SAMPLE = re.compile(r"sample_\d{3,}\.(npz|vol|gif|ply)|samples\.png|turntables\.png|interpolation\.png")
 
 
 def check_samples_fit(model: "Model", n: int, out: PathLike) -> None:
@@ -237,16 +237,30 @@ def check_samples_fit(model: "Model", n: int, out: PathLike) -> None:
                           f"lower -n (at most about {most} fit), or choose another --out", resource="disk space")
 
 
+#: ``platonic generate``'s sheets (:mod:`mitsuba_platonic.sheets`): azimuths per turntable, steps of the walk.
+TURNTABLE_AZIMUTHS = 8
+INTERPOLATION_STEPS = 8
+
+
 def export_samples(model: "Model", n: int, out: PathLike, seed: int = 0, overwrite: bool = False,
-                   written: Optional[List[Path]] = None, progress: bool = False) -> List[Path]:
+                   written: Optional[List[Path]] = None, progress: bool = False, cell: int = CELL,
+                   turntables: int = TURNTABLE_AZIMUTHS, interpolation: int = INTERPOLATION_STEPS) -> List[Path]:
     """``platonic generate``: ``n`` volumes of ``model.generate(n, seed)`` → ``out/sample_NNN``
-    .npz/.vol/.gif (24-frame turntables) and ``out/samples.png`` (one row per sample, 4 views
-    90° apart); returns every path written, the overview last.
+    .npz/.vol/.gif (24-frame turntables) and the sheets of :mod:`mitsuba_platonic.sheets`, every tile
+    at least ``cell`` pixels: ``out/samples.png`` (the labelled grid), ``out/turntables.png`` (a line of
+    ``turntables`` azimuths per sample; 0: none) and ``out/interpolation.png`` (``interpolation`` steps
+    of the spherical walk from sample 0's latent to sample 1's, :func:`~mitsuba_platonic.sheets.slerp`;
+    0 or n < 2: none); returns every path written, the sheets last.
 
     A folder holding an earlier call's samples is refused (:class:`UserError`, before any work),
     so that no old ``sample_NNN`` is left beside new ones; ``overwrite`` deletes them first. With
     ``progress``, a line on stderr at once (how many) and as the samples are written
     (:func:`~mitsuba_platonic.runtime.progress.progress_bar`)."""
+    for name, value, least in (("turntables", turntables, 0), ("interpolation", interpolation, 0)):
+        if isinstance(value, bool) or not isinstance(value, int) or value < least:
+            raise UserError(f"{name} must be a non-negative int, got {value!r}")
+    if interpolation == 1:
+        raise UserError("an interpolation needs at least 2 steps (its two ends), or 0 for none")
     out = Path(out)
     check_samples_fit(model, n, out)
     earlier = sorted(p for p in out.iterdir() if _SAMPLE.fullmatch(p.name)) if out.is_dir() else []
@@ -255,12 +269,21 @@ def export_samples(model: "Model", n: int, out: PathLike, seed: int = 0, overwri
     for p in earlier:
         remove(p)
     written = [] if written is None else written
-    rows = []
     bar = progress_bar(n, unit="sample", desc="generate", disable=not progress, first_line=True, seconds=30.0)
-    for i, vol in enumerate(model.generate(n, seed).cpu()):
+    volumes = model.generate(n, seed).cpu()
+    for i, vol in enumerate(volumes):
         export_volume(vol, out / f"sample_{i:03d}", model.formation, level=None, frames=24, written=written)
-        rows.append(display_frames(vol, model.formation, turntable(4, elevation=20.0)))
         bar.update(1)
     bar.close()
-    written.append(save_grid(out / "samples.png", rows))
+    step = getattr(model, "step", None)                     # a fresh model has none
+    head = (f"step {step}, " if step is not None else "") + f"seed {seed}"
+    written.append(save_sample_grid(volumes, model.formation, out / "samples.png", cell=cell,
+                                    title=f"{n} samples ({head})"))
+    if turntables:
+        written.append(save_turntables(volumes, model.formation, out / "turntables.png", azimuths=turntables,
+                                       cell=cell))
+    if interpolation and n >= 2:
+        z = model.latents(2, seed)                           # generate(n, seed)'s first two latents, whatever n
+        written.append(save_interpolation(model, z[0], z[1], out / "interpolation.png", interpolation, cell,
+                                          title=f"sample_000 to sample_001 ({head}): G(slerp(z0, z1; t))")[0])
     return written

@@ -247,8 +247,12 @@ class Model(nn.Module):
         PrGAN-style model's G gets the code of ring view 0; a model with a pose head gives its
         upright volumes, in their own frame: no input view to tilt them into; a model with
         ``photo_colour`` has no photo to read a colour from and offsets from grey)."""
-        z = torch.randn(n, self.latent, generator=torch.Generator().manual_seed(seed)).to(self.device)
-        return self.decode(z)
+        return self.decode(self.latents(n, seed).to(self.device))
+
+    def latents(self, n: int, seed: int = 0) -> torch.Tensor:
+        """The latents :meth:`generate` decodes: z ~ N(0, I) ``(n, latent)`` on the CPU, drawn by a
+        generator seeded with ``seed`` (z[i] is the latent of sample i of ``generate(n, seed)``)."""
+        return torch.randn(n, self.latent, generator=torch.Generator().manual_seed(seed))
 
     @torch.no_grad()
     def decode(self, z: torch.Tensor) -> torch.Tensor:

@@ -141,7 +141,7 @@ LAYERS = [
     ("the config: every section composed, training's own (train, run), what runs saved read back", ["config"]),
     ("the model: E and G for inference", ["model"]),
     ("training: data, trainer, runs", ["train"]),
-    ("evaluation and export", ["evaluate", "export", "bench", "viewer"]),
+    ("evaluation and export", ["evaluate", "export", "sheets", "bench", "viewer"]),
     ("the quickstart pipelines", ["quickstart"]),
     ("command line", ["cli", "console"]),
 ]

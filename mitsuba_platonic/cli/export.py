@@ -15,7 +15,7 @@ from typing import List
 
 from ..errors import Interrupted
 from ..files.fileio import confined
-from .args import CLIError, positive_int, seed
+from .args import CLIError, non_negative_int, positive_int, seed
 
 __all__ = ["add_reconstruct", "add_generate"]
 
@@ -79,31 +79,49 @@ def _cmd_generate(args: argparse.Namespace) -> int:
     from ..export import export_samples
     from ..model import Model
 
+    if args.cell < 8:                                          # before the model is read
+        raise CLIError(f"--cell: expected at least 8 pixels per tile, got {args.cell}")
+    if args.interpolate == 1:
+        raise CLIError("--interpolate: a walk needs at least 2 steps (its two ends), or 0 for none")
+
     model = Model.from_checkpoint(args.run)
     out = Path(args.out) if args.out else Path(args.run) / "generated"
     written: List[Path] = []
     try:
         with confined(out):                                  # nothing written or deleted through a link --out holds
             export_samples(model, args.n, out, seed=args.seed, overwrite=args.overwrite, written=written,
-                           progress=not args.quiet)
+                           progress=not args.quiet, cell=args.cell, turntables=args.turntable,
+                           interpolation=args.interpolate)
     except KeyboardInterrupt:
         samples = len({p.stem for p in written if p.name.startswith("sample_")})
         raise _interrupted_export("generate", written, out, f"{samples} of {args.n} sample(s) begun, "
-                                                              f"samples.png not written") from None
-    print(f"{args.n} volumes (step {model.step}) → {out} (samples.png: one row per sample, 4 views)")
+                                                              f"the sheets (samples.png …) not written") from None
+    sheets = ["samples.png (the grid)"] + (["turntables.png"] if args.turntable else []) + \
+        (["interpolation.png (sample_000 to sample_001)"] if args.interpolate and args.n >= 2 else [])
+    print(f"{args.n} volumes (step {model.step}) → {out}; " + ", ".join(sheets))
     return 0
 
 
 def add_generate(sub: "argparse._SubParsersAction") -> None:
     p = sub.add_parser("generate", help="sample volumes from a trained generator",
-                       description="Draw z ~ N(0, I), generate volumes, write sample_000.npz/.vol/.gif, … and a "
-                                   "samples.png overview into --out. A folder holding an earlier call's samples "
-                                   "is refused unless --overwrite, which deletes them first.")
+                       description="Draw z ~ N(0, I), generate volumes, write sample_000.npz/.vol/.gif, … into "
+                                   "--out with three sheets: samples.png (a labelled grid, one tile per sample), "
+                                   "turntables.png (a line of azimuths per sample) and interpolation.png (G along "
+                                   "the spherical interpolation from sample_000's latent to sample_001's). A folder "
+                                   "holding an earlier call's samples is refused unless --overwrite, which deletes "
+                                   "them first.")
     p.add_argument("--run", required=True, help="a run folder")
     p.add_argument("-n", type=positive_int, default=16, help="number of samples (default: %(default)s)")
     p.add_argument("--seed", type=seed, default=0)
     p.add_argument("--out", default=None, help="output folder (default: RUN/generated)")
+    p.add_argument("--cell", type=positive_int, default=128, metavar="PX",
+                   help="pixels per tile of the sheets, at least (nearest upscaling; default: %(default)s)")
+    p.add_argument("--turntable", type=non_negative_int, default=8, metavar="N",
+                   help="azimuths per sample in turntables.png (0: no turntables; default: %(default)s)")
+    p.add_argument("--interpolate", type=non_negative_int, default=8, metavar="K",
+                   help="steps of the walk from sample_000 to sample_001 in interpolation.png, ends included "
+                        "(0: none; needs -n 2 or more; default: %(default)s)")
     p.add_argument("--overwrite", action="store_true",
-                   help="delete an earlier call's sample_* files and samples.png in --out first")
+                   help="delete an earlier call's sample_* files and sheets in --out first")
     p.add_argument("--quiet", action="store_true", help="no progress lines")
     p.set_defaults(handler=_cmd_generate, interrupted="nothing was written; run the same command again")

@@ -8,6 +8,9 @@
   table and figures (``platonic evaluate``).
 - :mod:`.photos`: runs trained on a photo folder (no ground truth): held-out photos scored at the
   input view, the reconstruction described at views 10–30° above and beside it, the front-card check.
+- :mod:`.generation`: generation runs (no input image): the two-sample critic on random samples,
+  nearest-truth IoU and coverage where truth exists, diversity (a collapsed model named), roughness;
+  :mod:`.generation_report` writes their section of the report.
 
 docs/evaluation.md describes each metric and method.
 """

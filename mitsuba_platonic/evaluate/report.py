@@ -49,6 +49,7 @@ from ..train.data import collection_folder, load_training_data
 from ..views import turntable
 from . import metrics as M
 from .figures import save_image_grid
+from .generation_report import GenerationSection, evaluate_generation_run, section_lines, section_results as generation_results
 from .judge import CRITIC_STEPS
 from .photos import (PhotoSection, evaluate_photo_run, section_markdown, section_results, write_judge_figure,
                      write_photo_figure)
@@ -207,10 +208,11 @@ def write_figure(row: Row, path: PathLike, views: torch.Tensor = FIGURE_VIEWS) -
 
 
 def write_report(rows: Sequence[Row], out_dir: PathLike, notes: Sequence[str] = (),
-                 methods: Sequence[str] = METHODS, photo_sections: Sequence[PhotoSection] = ()) -> Path:
+                 methods: Sequence[str] = METHODS, photo_sections: Sequence[PhotoSection] = (),
+                 generation_sections: Sequence[GenerationSection] = ()) -> Path:
     """Write ``report.md``, ``figures/*.png`` and ``results.json`` for ``rows`` (runs with ground
     truth, the Table 2 layout) and ``photo_sections`` (folder runs, :mod:`.photos`) into ``out_dir``."""
-    if not rows and not photo_sections:
+    if not rows and not photo_sections and not generation_sections:
         raise UserError("nothing to report: expected at least one scored row or photo section")
     out = Path(out_dir)
     if out.exists() and not out.is_dir():
@@ -244,6 +246,8 @@ def write_report(rows: Sequence[Row], out_dir: PathLike, notes: Sequence[str] = 
             link = f"figures/{section.figure.name}"
         write_judge_figure(section, out / "figures" / f"{_slug(section.run)}_turntable.png")
         lines += section_markdown(section, link)
+    for generation in generation_sections:                       # generation runs (.generation_report)
+        lines += section_lines(generation, out)
     lines += [f"- {n}" for n in notes]
     if figures:
         lines += ["", "## Figures", "", "Input | reconstruction from 3 novel views | ground truth from the same views.", ""]
@@ -253,6 +257,7 @@ def write_report(rows: Sequence[Row], out_dir: PathLike, notes: Sequence[str] = 
     results = [{"method": r.method, "formation": r.formation, "shape_class": r.shape_class, "mode": r.mode,
                 "means": r.means(), "pairs": r.pairs} for r in rows]
     results += [entry for section in photo_sections for entry in section_results(section)]
+    results += [generation_results(generation) for generation in generation_sections]
     write_text(out / "results.json", json.dumps(results, indent=1))
     return report
 
@@ -318,10 +323,11 @@ def evaluate_runs(run_dirs: Sequence[PathLike], out_dir: PathLike, n_views: int 
         raise UserError(f"limit must be a positive int, got {limit!r}")
     with confined(out_dir, REPORT_PARTS):
         check_output_folder(out_dir, "evaluate", overwrite, earlier=_earlier_evaluation)   # before any work
-        rows, notes, sections = _evaluate_runs(run_dirs, n_views, limit, spp, max_depth, seed, baselines, vgg_weights,
-                                               fid_weights, data_cache, progress, data_path, judge_steps)
+        rows, notes, sections, generations = _evaluate_runs(run_dirs, n_views, limit, spp, max_depth, seed, baselines,
+                                                            vgg_weights, fid_weights, data_cache, progress, data_path,
+                                                            judge_steps)
         claim_output_folder(out_dir, "evaluate", overwrite, earlier=_earlier_evaluation)
-        return write_report(rows, out_dir, notes, photo_sections=sections)
+        return write_report(rows, out_dir, notes, photo_sections=sections, generation_sections=generations)
 
 
 def _earlier_evaluation(out: Path) -> bool:
@@ -336,18 +342,23 @@ def _earlier_evaluation(out: Path) -> bool:
 def _evaluate_runs(run_dirs: Sequence[PathLike], n_views: int, limit: Optional[int], spp: int, max_depth: int,
                    seed: int, baselines: bool, vgg_weights: Optional[PathLike], fid_weights: Optional[PathLike],
                    data_cache: Optional[PathLike], progress: bool, data_path: Optional[PathLike],
-                   judge_steps: int) -> Tuple[List[Row], List[str], List[PhotoSection]]:
-    """The scoring of :func:`evaluate_runs`: its rows, notes and photo sections."""
+                   judge_steps: int) -> Tuple[List[Row], List[str], List[PhotoSection], List[GenerationSection]]:
+    """The scoring of :func:`evaluate_runs`: its rows, notes, photo sections and generation sections."""
     vgg = M.load_feature_network(vgg_weights, "VGG16") if vgg_weights is not None else None
     fidnet = M.load_feature_network(fid_weights, "Inception-v3") if fid_weights is not None else None
     rows: List[Row] = []
     sections: List[PhotoSection] = []
+    generations: List[GenerationSection] = []
     notes: List[str] = []
     t0 = time.perf_counter()
     kw = dict(n_views=n_views, seed=seed, spp=spp, max_depth=max_depth, vgg_network=vgg, fid_network=fidnet,
               progress=progress)
     for run_dir in map(Path, run_dirs):
         cfg, trained, untrained, step, label = _load(run_dir)
+        if cfg.train.task == "generation":                       # samples judged (.generation_report)
+            generations.append(evaluate_generation_run(f"{label} (generation, step {step})", cfg, trained, limit, seed,
+                                                       data_path, data_cache, progress, judge_steps))
+            continue
         if cfg.train.task != "reconstruction":
             raise UserError(f"{run_dir} was trained for {cfg.train.task!r}; evaluation reconstructs held-out "
                             f"images and needs an encoder (train.task: reconstruction)")
@@ -384,7 +395,7 @@ def _evaluate_runs(run_dirs: Sequence[PathLike], n_views: int, limit: Optional[i
                                         **kw_run))
     notes.append(f"evaluated in {time.perf_counter() - t0:.0f} s" + (
         f"; held-out pair k of every row is re-rendered with views and skies of seed {seed} + k" if rows else ""))
-    return rows, notes, sections
+    return rows, notes, sections, generations
 
 
 # -- the command -----------------------------------------------------------------------------
