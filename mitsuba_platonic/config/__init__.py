@@ -43,12 +43,13 @@ from ..networks.settings import ModelConfig
 from ..render.settings import LIT, SINGLE_SCATTERING, RenderSettings as RenderConfig
 from ..settings_checks import ConfigError, quoted
 from ..views import DEFAULT_ELEVATION
-from .files import config_file, read_config_file, yaml_problem
+from .files import config_file, load_yaml, read_config_file, yaml_problem
 from .run_settings import RunConfig
 from .train_settings import MODES_3D, PRGAN, TrainConfig
 
 __all__ = ["Config", "RunConfig", "DataConfig", "ModelConfig", "RenderConfig", "TrainConfig",
-           "load_config", "config_file", "config_from_dict", "apply_overrides", "ConfigError"]
+           "load_config", "config_file", "config_from_dict", "apply_overrides", "load_yaml", "yaml_problem",
+           "ConfigError"]
 
 
 #: The override the ``--set`` errors show as an example (a test checks that it is accepted).
@@ -221,15 +222,15 @@ def apply_overrides(data: Dict[str, Any], overrides: Sequence[str]) -> Dict[str,
     """Apply ``key.sub=value`` strings (values parsed as YAML scalars) to a nested dict."""
     for item in overrides:
         if "=" not in item:
-            raise ConfigError(f"override {item!r}: expected key=value, e.g. {OVERRIDE_EXAMPLE}")
+            raise ConfigError(f"override {quoted(item)}: expected key=value, e.g. {OVERRIDE_EXAMPLE}")
         key, text = item.split("=", 1)
         parts = key.strip().split(".")
         if len(parts) != 2 or not all(parts):
-            raise ConfigError(f"override {item!r}: expected section.key=value, e.g. {OVERRIDE_EXAMPLE}")
+            raise ConfigError(f"override {quoted(item)}: expected section.key=value, e.g. {OVERRIDE_EXAMPLE}")
         try:
-            value = yaml.safe_load(text)
+            value = load_yaml(text)
         except yaml.YAMLError as e:
-            raise ConfigError(f"{key}: could not parse {text!r}: {yaml_problem(e)}") from None
+            raise ConfigError(f"{quoted(key)}: could not parse {quoted(text)}: {yaml_problem(e)}") from None
         data.setdefault(parts[0], {})
         if not isinstance(data[parts[0]], dict):
             raise ConfigError(f"{parts[0]}: expected a mapping")

@@ -16,6 +16,14 @@ A chain that comes back to a file (a cycle), a parent that does not exist, and a
 mapping of sections are :class:`ConfigError`\\ s naming the files. Command-line overrides apply after
 the whole chain is merged. A run folder's ``config.yaml`` holds the resolved config, every key, so a
 run never depends on the files its config extended.
+
+**Reading YAML** (:func:`load_yaml`, used for config files, ``--set`` values and a run folder's
+``config.yaml``). PyYAML on its own takes a key written twice and keeps the last value, silently, and
+recurses once per level of nesting, so a value nested a few thousand deep ends in ``RecursionError``.
+Here a mapping that holds a key twice (a section or a setting) is refused naming the key and its
+line, and so is nesting deeper than :data:`MAX_NESTING` levels, counted on the parser's event
+stream (which does not recurse) before anything is built. Every problem is one line, its quotes cut
+to :data:`~mitsuba_platonic.settings_checks.QUOTE_LIMIT` characters.
 """
 
 from __future__ import annotations
@@ -26,14 +34,17 @@ from typing import Any, Dict, List, Union
 import yaml
 
 from ..files.resources import config_names, config_path
-from ..settings_checks import ConfigError
+from ..settings_checks import QUOTE_LIMIT, ConfigError, quoted
 
-__all__ = ["config_file", "read_config_file", "merge_sections", "yaml_problem", "EXTENDS", "MAX_DEPTH"]
+__all__ = ["config_file", "read_config_file", "merge_sections", "load_yaml", "yaml_problem", "EXTENDS",
+           "MAX_DEPTH", "MAX_NESTING"]
 
 #: The top-level key that names a config's parent.
 EXTENDS = "extends"
 #: How many files one chain of ``extends:`` may hold, the config itself included.
 MAX_DEPTH = 8
+#: How deep mappings and lists may nest in one YAML text (a config needs 3: section, key, list).
+MAX_NESTING = 16
 
 _SECTIONS = "a mapping of sections (run, data, model, render, train)"
 
@@ -58,11 +69,55 @@ def config_file(path: Union[str, Path]) -> Path:
                       f"folder: {', '.join(config_names())})")
 
 
+class _StrictLoader(yaml.SafeLoader):
+    """PyYAML's safe loader, refusing a mapping that holds the same key twice."""
+
+    def construct_mapping(self, node: yaml.Node, deep: bool = False) -> Dict[Any, Any]:
+        if isinstance(node, yaml.MappingNode):
+            seen = set()
+            for key_node, _ in node.value:
+                if key_node.tag == "tag:yaml.org,2002:merge":    # '<<: *base' merges, and may be overridden
+                    continue
+                key = self.construct_object(key_node, deep=True)
+                try:
+                    duplicate = key in seen
+                except TypeError:                              # an unhashable key: the base class names it
+                    break
+                if duplicate:
+                    raise yaml.MarkedYAMLError(problem=f"the key {quoted(key)} is given twice in one mapping "
+                                                       f"(PyYAML would keep the last silently)",
+                                               problem_mark=key_node.start_mark)
+                seen.add(key)
+        return super().construct_mapping(node, deep=deep)
+
+
+def load_yaml(text: str) -> Any:
+    """``text`` parsed as YAML (the safe subset), refusing a key given twice in one mapping and nesting
+    deeper than :data:`MAX_NESTING`; a problem is a :class:`yaml.YAMLError` (:func:`yaml_problem`
+    puts it on one line)."""
+    depth = 0
+    for event in yaml.parse(text, Loader=yaml.SafeLoader):   # an event stream: no recursion per level
+        if isinstance(event, (yaml.MappingStartEvent, yaml.SequenceStartEvent)):
+            depth += 1
+            if depth > MAX_NESTING:
+                raise yaml.MarkedYAMLError(problem=f"nested more than {MAX_NESTING} levels deep (a config needs 3)",
+                                           problem_mark=event.start_mark)
+        elif isinstance(event, (yaml.MappingEndEvent, yaml.SequenceEndEvent)):
+            depth -= 1
+    try:
+        return yaml.load(text, Loader=_StrictLoader)
+    except RecursionError:                                     # aliases that nest each other
+        raise yaml.YAMLError(f"nested too deeply through aliases (more than {MAX_NESTING} levels are refused)") \
+            from None
+
+
 def yaml_problem(e: yaml.YAMLError) -> str:
-    """A YAML error on one line: its problem and where (PyYAML's own message spans lines)."""
+    """A YAML error on one line: its problem and where (PyYAML's own message spans lines), at most a
+    few hundred characters."""
     mark = getattr(e, "problem_mark", None)
     where = f" at line {mark.line + 1}, column {mark.column + 1}" if mark is not None else ""
-    return f"{getattr(e, 'problem', None) or type(e).__name__}{where}"
+    problem = getattr(e, "problem", None) or str(e) or type(e).__name__
+    return " ".join(f"{problem}{where}".split())[:QUOTE_LIMIT * 2]
 
 
 def read_config_file(path: Union[str, Path]) -> Dict[str, Any]:
@@ -90,7 +145,7 @@ def merge_sections(parent: Dict[str, Any], child: Dict[str, Any]) -> Dict[str, A
 def _read(path: Path) -> Dict[str, Any]:
     """One file's mapping, as written (``extends:`` included)."""
     try:
-        data = yaml.safe_load(path.read_text())
+        data = load_yaml(path.read_text())
     except UnicodeDecodeError:
         raise ConfigError(f"{path}: not a YAML text file (not UTF-8 text)") from None
     except yaml.YAMLError as e:
@@ -125,7 +180,7 @@ def _parent(path: Path, name: Any) -> Path:
     else a packaged config of that name."""
     if not isinstance(name, str) or not name.strip():
         raise ConfigError(f"{path}: {EXTENDS}: expected the name of a packaged config or a path relative to "
-                          f"this file, got {name!r}")
+                          f"this file, got {quoted(name)}")
     relative = path.parent / name
     if relative.is_file():
         return relative
@@ -133,5 +188,5 @@ def _parent(path: Path, name: Any) -> Path:
         return config_path(name)
     except FileNotFoundError:
         pass
-    raise ConfigError(f"{path}: {EXTENDS}: {name!r} is neither a file in {path.parent} nor a packaged config "
+    raise ConfigError(f"{path}: {EXTENDS}: {quoted(name)} is neither a file in {path.parent} nor a packaged config "
                       f"(packaged: {', '.join(config_names())})")

@@ -11,7 +11,7 @@ import os
 from dataclasses import dataclass
 from typing import Literal, Union
 
-from ..settings_checks import ConfigError, choice, non_negative, positive
+from ..settings_checks import ConfigError, choice, non_negative, positive, quoted
 
 __all__ = ["RunConfig", "DEVICES"]
 
@@ -67,4 +67,4 @@ def _folder_name(key: str, value: str) -> None:
     """One path component: no separator, not '.' or '..', not empty (so the run stays in out_dir)."""
     seps = {"/", "\\"} | ({os.sep, os.altsep} - {None})
     if not value or value in (".", "..") or any(sep in value for sep in seps) or "\0" in value:
-        raise ConfigError(f"{key}: expected a single folder name (no '/', '..' or absolute path), got {value!r}")
+        raise ConfigError(f"{key}: expected a single folder name (no '/', '..' or absolute path), got {quoted(value)}")

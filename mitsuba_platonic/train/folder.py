@@ -25,7 +25,7 @@ from typing import Iterator, Optional
 import yaml
 
 from .. import __version__
-from ..config import Config, ConfigError, config_from_dict, yaml_problem
+from ..config import Config, ConfigError, config_from_dict, load_yaml, yaml_problem
 from ..config.loading import config_difference
 from ..config.retired import without_retired
 from ..files.checkpoint import RunError, checkpoint_files
@@ -178,7 +178,7 @@ def read_run_config(path: Path) -> Config:
     except UnicodeDecodeError:
         raise RunError(f"{path} is not a text file (not UTF-8); {expected}") from None
     try:
-        data = yaml.safe_load(text)
+        data = load_yaml(text)
     except yaml.YAMLError as e:
         raise RunError(f"{path} is not valid YAML ({yaml_problem(e)}); {expected}") from None
     if not isinstance(data, dict):
