@@ -104,7 +104,7 @@ def main() -> None:
               + f" | {mean:.3f} | {spread:.3f} | {verdict(mean)} |", flush=True)
     if args.tree.is_dir():
         f = evidence(args.tree, options)
-        print(f"| tree photos ({f.photos}) | yes | {f.asymmetry:.3f}" + " | —" * (len(args.seeds) - 1)
+        print(f"| tree photos ({f.photos} photos) | yes | {f.asymmetry:.3f}" + " | —" * (len(args.seeds) - 1)
               + f" | {f.asymmetry:.3f} | {f.aspect_spread:.3f} | {verdict(f.asymmetry)} |")
     else:
         print(f"(the tree photos are not at {args.tree}: left out)")
