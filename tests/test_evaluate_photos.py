@@ -205,6 +205,11 @@ def test_platonic_evaluate_on_a_folder_run_writes_the_photo_section(folder_run, 
         rel = Path(p["file"]).relative_to(photos).as_posix()
         assert f"| {rel} | {p['input_view_mae']:.4f} |" in text
     assert results[2]["card_check"]["cards"] == 4                            # the billboard is a card
+    # the shape priors: the default config has no round prior, so no warning; the evidence reads all 8 photos
+    assert "### Shape priors this run used" in text and "**Warning:" not in text
+    priors = trained["shape_priors"]
+    assert [p["key"] for p in priors["priors"]] == ["train.view_distribution"] and priors["warnings"] == []
+    assert priors["round_evidence"]["photos"] == 8 and "shape_priors" not in results[1]
     figure = out / "figures" / "shapes_platonic_step_2_photos.png"
     assert f"![shapes (platonic, step 2): photo | input view | novel views](figures/{figure.name})" in text
     with Image.open(figure) as im:

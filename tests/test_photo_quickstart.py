@@ -22,6 +22,10 @@ def test_quickstart_on_a_photo_folder_trains_judges_and_exports(tmp_path):
     assert report in stdout and f"report: {out / 'report.md'}" in stdout
     assert "6 for training, 4 held out" in report and "2 steps at 16³" in report
     assert "| run (platonic, step 2) |" in report and "| run: billboard |" in report     # the judge's table
+    # the shape priors of photos.yaml, and no warning: ellipses are their own mirror images
+    assert "## Shape priors this run used" in report and "| `train.turn` | 1 |" in report
+    assert "consistent with a round class" in report and "**Warning:" not in report
+    assert stdout.rstrip().splitlines()[-1] == f"report: {out / 'report.md'}"
     results = json.loads((out / "evaluation" / "results.json").read_text())
     assert results[0]["judge"]["c2st"]["photos"] == 4
     assert (out / "evaluation" / "report.md").is_file()

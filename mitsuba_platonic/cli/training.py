@@ -28,8 +28,14 @@ def _cmd_quickstart(args: argparse.Namespace) -> int:
 
         report = quickstart(Path(args.out or "quickstart"), steps=args.steps, progress=not args.quiet,
                             overrides=args.set or (), overwrite=args.overwrite)
-    print(report.read_text())
+    text = report.read_text()
+    print(text)
     print(f"report: {report}")
+    if args.photos is not None:
+        from ..evaluate.priors import warning_lines
+
+        for line in warning_lines(text):                 # last, where it is seen: a round prior the photos contradict
+            print(f"platonic quickstart: {line}")
     return 0
 
 

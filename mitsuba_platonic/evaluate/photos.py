@@ -81,6 +81,7 @@ from ..volume import CHANNELS
 from . import metrics as M
 from .figures import save_image_grid
 from .judge import CRITIC_REPEATS, CRITIC_STEPS, FIGURE_AZIMUTHS, Judgement, judge, judge_table, stats_table
+from .priors import Prior, RoundEvidence, priors_markdown, priors_results, priors_used, round_evidence
 from .protocol import billboard
 
 __all__ = ["ABOVE", "BESIDE", "CARD_FRACTION", "TARGET_SHARE", "novel_views", "held_out_photos", "card_check",
@@ -351,6 +352,9 @@ class PhotoSection:
     #: (method, :class:`~.judge.Judgement`) per row, when the run's training photos were there to judge with
     judgements: List[Tuple[str, Judgement]] = field(default_factory=list)
     judge_figure: Optional[Path] = None
+    #: the shape priors the run used, and what all its photos' silhouettes say about roundness (:mod:`.priors`)
+    priors: List[Prior] = field(default_factory=list)
+    evidence: Optional[RoundEvidence] = None
 
 
 def evaluate_photo_run(name: str, base: str, cfg: Any, model: Model, untrained: Optional[Callable[[], Model]] = None,
@@ -364,8 +368,10 @@ def evaluate_photo_run(name: str, base: str, cfg: Any, model: Model, untrained: 
     also the rows ``<base>: untrained`` and, for EA, ``<base>: billboard``. Each row is also judged
     away from the input view (:func:`~.judge.judge`, on turntables about the object's vertical axis,
     critics of ``judge_steps`` steps trained on the run's training photos; ``judge_steps=0`` skips
-    the judge)."""
+    the judge). The section also lists the shape priors of ``cfg`` and measures what all the run's
+    photos (training and held out, whatever ``limit``) say about roundness (:mod:`.priors`)."""
     train, photos, files = photo_splits(cfg, data_path)
+    every = photos                                       # the evidence about roundness reads every photo
     if limit is not None:
         photos, files = photos[:limit], files[:limit]
     settings = cfg.render
@@ -388,7 +394,8 @@ def evaluate_photo_run(name: str, base: str, cfg: Any, model: Model, untrained: 
     rows = [score_photos(m, v, photos, files, settings, seed, n_examples if i == 0 else 0)
             for i, ((m, _, _), v) in enumerate(zip(methods, volumes))]
     folder = str(data_path if data_path is not None else cfg.data.path)
-    section = PhotoSection(run=name, folder=folder, settings=settings, rows=rows)
+    section = PhotoSection(run=name, folder=folder, settings=settings, rows=rows, priors=priors_used(cfg),
+                           evidence=round_evidence(torch.cat([train, every])))
     if len(train) and judge_steps:
         for i, (m, _, upright) in enumerate(methods):
             if progress:
@@ -425,6 +432,7 @@ def section_markdown(section: PhotoSection, figure_link: Optional[str] = None) -
              _per_photo_table(trained, section.folder), ""]
     if figure_link:
         lines += [f"![{section.run}: photo | input view | novel views]({figure_link})", ""]
+    lines += priors_markdown(section.priors, section.evidence, heading="###")
     if section.judgements:
         lines += judge_markdown(section)
     return lines
@@ -476,10 +484,13 @@ def write_judge_figure(section: PhotoSection, path: PathLike) -> Optional[Path]:
 
 def section_results(section: PhotoSection) -> List[Dict[str, Any]]:
     """``results.json`` entries of a folder run: one per row, with ``section: "photos"``, the
-    per-photo records under ``pairs`` (as the Table 2 rows), ``means`` and the card check."""
+    per-photo records under ``pairs`` (as the Table 2 rows), ``means`` and the card check; the first
+    (the trained run's) also its ``shape_priors`` (:func:`~.priors.priors_results`)."""
     judged = {m: j for m, j in section.judgements}
+    priors = {"shape_priors": priors_results(section.priors, section.evidence)}
     return [{"method": r.method, "formation": r.formation, "section": "photos", "photo_folder": section.folder,
              "resolution": r.resolution, "means": r.means(), "card_check": r.summary, "pairs": r.photos,
              **({"judge": {**judged[r.method].summary(), "c2st": judged[r.method].c2st,
-                           "photos": judged[r.method].photos}} if r.method in judged else {})}
-            for r in section.rows]
+                           "photos": judged[r.method].photos}} if r.method in judged else {}),
+             **(priors if i == 0 else {})}
+            for i, r in enumerate(section.rows)]

@@ -7,7 +7,9 @@
 3. evaluate the run on the held-out photos (:func:`mitsuba_platonic.evaluate.report.evaluate_runs`):
    input-view scores, the front-card check, and the judge from every side (:mod:`.evaluate.judge`);
 4. export up to four held-out reconstructions (volumes, turntable GIFs, meshes) beside their photos
-   and write ``report.md`` with the judge's verdict.
+   and write ``report.md`` with the judge's verdict, the shape priors the run used and, where its
+   photos' silhouettes contradict a round prior, a warning (:mod:`mitsuba_platonic.evaluate.priors`),
+   which the command also prints last.
 """
 
 from __future__ import annotations
@@ -17,11 +19,14 @@ import time
 from pathlib import Path
 from typing import Any, Dict, List, Optional, Sequence
 
+import torch
+
 from ..config import load_config
 from ..errors import UserError
 from ..evaluate import report as evaluation_report
 from ..evaluate.judge import BANDS
 from ..evaluate.photos import photo_splits
+from ..evaluate.priors import priors_markdown, priors_used, round_evidence
 from ..export import export_held_out
 from ..files.fileio import confined, write_text
 from ..files.resources import config_path
@@ -109,7 +114,8 @@ def _run_photo_quickstart(photos: Path, out: Path, cfg: Any, run_dir: Path, trai
              f"{cfg.render.backend}, {t_train:.0f} s",
              f"- input view (the photo is the truth there): MAE {means['input_view_mae']:.4f}, silhouette IoU "
              f"{means['input_view_iou']:.3f}; {cards['not_cards']} of {cards['n']} reconstructions are not front cards",
-             "", "## Judged from every side", "",
+             "", *priors_markdown(priors_used(cfg), round_evidence(torch.cat([train_photos, held]))),
+             "## Judged from every side", "",
              "Accuracy of a fresh critic telling the held-out photos from renders of their reconstructions, per "
              "band of turntable angle from the input view: 0.5, the renders pass for photos; 1, they never do. "
              "The billboard (the photo extruded through the cube) shows what a reconstruction that learnt only "
