@@ -52,7 +52,7 @@ __all__ = ["generate", "list_classes", "get_class", "register", "unregister", "r
            "sdf", "BUILTIN_CLASSES", "MIN_RESOLUTION", "MAX_RESOLUTION"]
 
 #: Modules of this package that define (and register) the built-in classes.
-BUILTIN_CLASSES = ("airplane", "chair", "lathe", "mushroom", "tree")
+BUILTIN_CLASSES = ("airplane", "animal", "chair", "lathe", "mushroom", "tree")
 
 for _module in BUILTIN_CLASSES:
     importlib.import_module(f"{__name__}.{_module}")
