@@ -58,7 +58,11 @@ __all__ = [
     "camera_frames",
     "validate_views",
     "DISTRIBUTIONS",
+    "COLLECTION_DISTRIBUTIONS",
     "DEFAULT_ELEVATION",
+    "SIDE_AZIMUTHS",
+    "DEFAULT_SIDE_WIDTH",
+    "check_side_width",
     "CAMERAS",
     "lens",
 ]
@@ -68,8 +72,20 @@ Seed = Union[int, torch.Generator, None]
 #: The view distributions p_view of :func:`sample_views`.
 DISTRIBUTIONS = ("sphere", "band", "ring")
 
-#: The elevation (degrees) a 'band' or 'ring' distribution uses when a dataset or run names none.
-DEFAULT_ELEVATION = {"band": (0.0, 60.0), "ring": 20.0}
+#: The view distributions a rendered collection may use: those of training, and 'sides' (photographed
+#: mostly from the sides, as people photograph animals and vehicles; :func:`sample_views`).
+COLLECTION_DISTRIBUTIONS = DISTRIBUTIONS + ("sides",)
+
+#: The elevation (degrees) a 'band', 'ring' or 'sides' distribution uses when a dataset or run names none.
+DEFAULT_ELEVATION = {"band": (0.0, 60.0), "ring": 20.0, "sides": (0.0, 60.0)}
+
+#: The azimuths (degrees) of the *side views*: ω = ±x, which see broadside an object whose length lies
+#: along z (the convention of :mod:`mitsuba_platonic.data.shapes`: the object faces +z, the front
+#: camera at azimuth 0°, and a class with a length lays it along z).
+SIDE_AZIMUTHS = (90.0, -90.0)
+
+#: The half-width W (degrees) of the azimuth windows about :data:`SIDE_AZIMUTHS` of 'sides'.
+DEFAULT_SIDE_WIDTH = 30.0
 
 #: Cameras (module docstring, "Projection").
 CAMERAS = ("orthographic", "perspective")
@@ -121,8 +137,28 @@ def _generator(seed: Seed) -> torch.Generator:
     return g
 
 
+def _side_azimuths(u: torch.Tensor, width: float) -> torch.Tensor:
+    """Azimuths (radians) uniform on [90° − W, 90° + W] ∪ [−90° − W, −90° + W] from uniforms ``u`` in
+    [0, 1): u < ½ → 90° + (4u − 1) W, else −90° + (4u − 3) W (each window half the mass)."""
+    first = u < 0.5
+    offset = torch.where(first, 4.0 * u - 1.0, 4.0 * u - 3.0) * width
+    side = torch.where(first, torch.full_like(u, SIDE_AZIMUTHS[0]), torch.full_like(u, SIDE_AZIMUTHS[1]))
+    return torch.deg2rad(side + offset)
+
+
+def check_side_width(width: object) -> float:
+    """``width`` as a float if it is a number of degrees in (0, 90] (the half-width W of 'sides'),
+    else ``ValueError`` (a :class:`~mitsuba_platonic.errors.UserError`) saying what was expected."""
+    if isinstance(width, bool) or not isinstance(width, (int, float)) or not math.isfinite(width) \
+            or not 0.0 < float(width) <= 90.0:
+        raise UserError(f"'sides' needs side_width, the half-width W of the azimuth windows about the side "
+                        f"views ±90°, in degrees with 0 < W <= 90 (90: every azimuth), got {width!r}")
+    return float(width)
+
+
 def sample_views(n: int, distribution: str = "sphere", seed: Seed = 0,
-                 elevation: Tuple[float, float] | float = (-90.0, 90.0)) -> torch.Tensor:
+                 elevation: Tuple[float, float] | float = (-90.0, 90.0),
+                 side_width: Optional[float] = None) -> torch.Tensor:
     """Draw ``n`` random views, deterministic under ``seed`` (an int or a ``torch.Generator``).
 
     ``distribution``:
@@ -131,22 +167,34 @@ def sample_views(n: int, distribution: str = "sphere", seed: Seed = 0,
         degrees, i.e. y = sin θ uniform in [sin θ_lo, sin θ_hi].
       - ``"ring"``: fixed elevation ``elevation = θ`` (degrees, a single number), φ uniform:
         an azimuth-only ring (turntable-like training).
+      - ``"sides"`` (collections only, :data:`COLLECTION_DISTRIBUTIONS`): photographed mostly from
+        the sides: φ uniform within ±W of the side views :data:`SIDE_AZIMUTHS` (±90°), half the
+        views in each window, W = ``side_width`` degrees (default :data:`DEFAULT_SIDE_WIDTH`,
+        0 < W ≤ 90); y as the band's, ``elevation = (θ_lo, θ_hi)``.
 
-    Returns ``(n, 3)`` float32 unit vectors.
+    ``side_width`` is read by ``"sides"`` only (``ValueError`` for the others). Returns ``(n, 3)``
+    float32 unit vectors.
     """
     if not isinstance(n, int) or n < 0:
         raise UserError(f"n must be a non-negative int, got {n!r}")
+    if side_width is not None and distribution != "sides":
+        raise UserError(f"side_width is read by the 'sides' distribution only; {distribution!r} would ignore it")
     g = _generator(seed)
-    phi = torch.rand(n, generator=g, dtype=torch.float64) * (2.0 * math.pi)
+    u = torch.rand(n, generator=g, dtype=torch.float64)
+    phi = u * (2.0 * math.pi)
     if distribution == "sphere":
         lo, hi = -1.0, 1.0
-    elif distribution == "band":
+    elif distribution in ("band", "sides"):
         if isinstance(elevation, (int, float)) or len(elevation) != 2:
-            raise UserError(f"'band' needs elevation=(low, high) in degrees, got {elevation!r}")
+            raise UserError(f"{distribution!r} needs elevation=(low, high) in degrees, got {elevation!r}")
         e0, e1 = float(elevation[0]), float(elevation[1])
         if not -90.0 <= e0 <= e1 <= 90.0:
-            raise UserError(f"'band' needs elevation=(low, high) with -90 <= low <= high <= 90 degrees, got {elevation!r}")
+            raise UserError(f"{distribution!r} needs elevation=(low, high) with -90 <= low <= high <= 90 degrees, "
+                            f"got {elevation!r}")
         lo, hi = math.sin(math.radians(e0)), math.sin(math.radians(e1))
+        if distribution == "sides":
+            width = DEFAULT_SIDE_WIDTH if side_width is None else check_side_width(side_width)
+            phi = _side_azimuths(u, width)
     elif distribution == "ring":
         if not isinstance(elevation, (int, float)):
             raise UserError(f"'ring' needs a single elevation in degrees, got {elevation!r}")
@@ -154,7 +202,7 @@ def sample_views(n: int, distribution: str = "sphere", seed: Seed = 0,
             raise UserError(f"'ring' needs an elevation in [-90, 90] degrees, got {elevation!r}")
         lo = hi = math.sin(math.radians(float(elevation)))
     else:
-        raise UserError(f"distribution must be one of {DISTRIBUTIONS}, got {distribution!r}")
+        raise UserError(f"distribution must be one of {COLLECTION_DISTRIBUTIONS}, got {distribution!r}")
     y = lo + (hi - lo) * torch.rand(n, generator=g, dtype=torch.float64)
     r = torch.sqrt((1.0 - y * y).clamp_min(0.0))
     w = torch.stack([r * torch.sin(phi), y, r * torch.cos(phi)], dim=-1)

@@ -115,6 +115,7 @@ def test_settings_the_run_ignores_are_warned_about(tmp_path, tiny_class):
     (["--lighting", "envmap", "--spp", "7"], "--lighting, --spp"),
     (["--max-depth", "3"], "--max-depth"),
     (["--elevation", "10"], "--elevation"),
+    (["--side-width", "20"], "--side-width"),
 ])
 def test_make_dataset_refuses_flags_it_would_ignore(tmp_path, flags, named):
     out = tmp_path / "d"

@@ -14,8 +14,8 @@ from mitsuba_platonic.data.photos import decode_image
 from mitsuba_platonic.data.photos.frame import frame_and_resample, framing
 from mitsuba_platonic.data.photos.prepare import photo_framing
 from mitsuba_platonic.evaluate.metrics import volume_iou
-from mitsuba_platonic.evaluate.photo_truth import (framed_truth, score_against_truth, thickness, turntable_in_camera,
-                                                  view_scores)
+from mitsuba_platonic.evaluate.photo_truth import (framed_truth, score_against_truth, silhouette_widths, thickness,
+                                                  turntable_in_camera, view_scores, width_ratio)
 from mitsuba_platonic.evaluate.photos import photo_splits
 from mitsuba_platonic.evaluate.protocol import billboard
 from mitsuba_platonic.render import render
@@ -131,11 +131,19 @@ def test_scores_end_to_end_the_truth_scores_one_and_a_billboard_only_from_the_fr
     # volume up to the resampling of that small shift (a file paired with another's truth scores far lower)
     assert min(means["truth_front_iou"], means["truth_side_iou"], means["truth_back_iou"]) > 0.95
     assert means["truth_volume_iou"] > 0.9 and means["truth_side_mae"] < 0.01
+    # the width ratio at ±90°: the truth's own, the reconstruction's (the truth once more) within a pixel's
+    # rounding of it; each photo's error is the size of the two's difference
+    assert exact.width_ratio_error == pytest.approx([abs(a - b) for a, b in zip(exact.width_ratio,
+                                                                                exact.width_ratio_truth)])
+    assert means["truth_width_ratio_error"] < 0.1
     # the billboard (the photo drawn through the cube's depth) is the truth from the photo's own view, which
     # holds only where the truth was framed as the loader framed the photo; from the side it is a prism
     billboards = score_against_truth(_Fixed([billboard(p) for p in photos]), cfg).means()
     assert billboards["truth_front_iou"] > 0.9
     assert billboards["truth_side_iou"] < 0.6 and billboards["truth_volume_iou"] < 0.5
+    # the billboard reaches through the cube's whole depth: wide from the side whatever the mushroom's ratio
+    assert billboards["truth_width_ratio"] > means["truth_width_ratio"] + 0.3
+    assert billboards["truth_width_ratio_truth"] == pytest.approx(exact.means()["truth_width_ratio_truth"])
 
 
 def test_score_against_truth_needs_a_rendered_collection(tmp_path):
@@ -197,3 +205,55 @@ def test_the_oblique_score_tells_a_four_armed_cross_from_the_cylinder_that_the_s
     # IoU is at most the ratio of the widths (0.825), give or take a voxel's soft edge on each side
     assert scores["oblique_iou"] <= (r + w) / (math.sqrt(2.0) * r) + 2.0 / n
     assert scores["oblique_iou"] < scores["side_iou"] - 0.15
+
+
+def _solid(mask, colour=(0.7, 0.5, 0.3)):
+    n = mask.shape[-1]
+    rgb = torch.tensor(colour, dtype=torch.float64)[:, None, None, None].expand(3, n, n, n)
+    return torch.cat([rgb, mask.double()[None]]).float()
+
+
+def test_width_ratio_of_a_box_is_its_depth_over_its_width_exactly_and_of_a_cylinder_one():
+    n = 32
+    c = voxel_centres(n)
+    x, y, z = c[..., 0].abs(), c[..., 1].abs(), c[..., 2].abs()
+    # a box on whole voxels: 20 voxels across (x, the photo's width), 8 deep (z, along the photo's rays)
+    box = _solid((x < 20 / n) & (y < 12 / n) & (z < 8 / n))
+    front, side, other = silhouette_widths(box, turntable_in_camera(0.0, [0.0, 90.0, -90.0]), (0.0, 1.0, 0.0))
+    assert (front, side, other) == (pytest.approx(40 / n), pytest.approx(16 / n), pytest.approx(16 / n))
+    assert width_ratio(box, 0.0) == 8 / 20
+    cylinder = _solid((c[..., 0] ** 2 + c[..., 2] ** 2 <= 0.5 ** 2) & (y < 0.6))
+    assert width_ratio(cylinder, 0.0) == pytest.approx(1.0)
+    assert math.isnan(width_ratio(torch.zeros(4, n, n, n), 0.0))
+
+
+def test_width_ratio_follows_the_objects_axis_at_an_elevation():
+    """Seen from θ = 30°, the turntable's images at ±90° are rolled about ω; the width across the object's
+    own vertical still gives a tilted cylinder 1 and a tilted box its depth over its width, to 2.5 pixels
+    (measured: 2 wider at ±90°, the tilted voxels' staircase and the bins' offset; exact at 0°)."""
+    n, θ = 48, 30.0
+    s, co = math.sin(math.radians(θ)), math.cos(math.radians(θ))
+    c = voxel_centres(n).to(torch.float64)
+    # the object's axes in the input camera's frame: across x, vertical u, depth d (module docstring)
+    u, d = torch.tensor([0.0, co, s], dtype=torch.float64), torch.tensor([0.0, -s, co], dtype=torch.float64)
+    a, h, w = c[..., 0], c @ u, c @ d
+    cylinder = _solid((a ** 2 + w ** 2 <= 0.45 ** 2) & (h.abs() <= 0.4))
+    pixel = 2.0 / n
+    assert width_ratio(cylinder, θ) == pytest.approx(1.0, abs=2.5 * pixel / 0.9)          # 0.9 across
+    box = _solid((a.abs() <= 0.6) & (h.abs() <= 0.3) & (w.abs() <= 0.25))
+    assert width_ratio(box, θ) == pytest.approx(0.25 / 0.6, abs=2.5 * pixel / 1.2)         # 1.2 across
+    # the column count alone, which the roll mixes with the height, does not
+    alpha = render(box[None].expand(3, -1, -1, -1, -1).contiguous(), turntable_in_camera(θ, [0.0, 90.0, -90.0]),
+                   "ea")[:, 3]
+    columns = (alpha >= 0.5).any(dim=1).sum(dim=1).double()
+    assert float(columns[1:].mean() / columns[0]) > 0.25 / 0.6 + 0.1
+
+
+def test_silhouette_widths_refuses_a_view_along_the_axis_and_bad_inputs():
+    box = _solid(voxel_centres(16)[..., 0].abs() < 0.5)
+    with pytest.raises(ValueError, match="along the axis"):
+        silhouette_widths(box, from_angles(0.0, 90.0)[None], (0.0, 1.0, 0.0))
+    with pytest.raises(ValueError, match=r"\(4, R, R, R\)"):
+        silhouette_widths(box[3], front_view(1), (0.0, 1.0, 0.0))
+    with pytest.raises(ValueError, match="non-zero 3-vector"):
+        silhouette_widths(box, front_view(1), (0.0, 0.0, 0.0))

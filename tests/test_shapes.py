@@ -10,7 +10,7 @@ from mitsuba_platonic.data import shapes
 from mitsuba_platonic.data.shapes import sdf as S
 from mitsuba_platonic.volume import validate_volume, voxel_centres, voxel_size
 
-BUILTIN = ["airplane", "chair", "lathe", "mushroom", "tree"]
+BUILTIN = ["airplane", "animal", "chair", "lathe", "mushroom", "tree"]
 SEEDS = (0, 1, 2)
 
 
@@ -77,7 +77,7 @@ def test_deterministic_and_seeds_differ(volumes, name):
     assert float((a[:3] - b[:3]).abs().max()) > 0.1  # colours vary too
 
 
-@pytest.mark.parametrize("name", ["chair", "tree"])
+@pytest.mark.parametrize("name", ["chair", "tree", "animal"])
 def test_a_seed_is_the_same_object_at_every_resolution(volumes, name):
     c32 = _centroid(volumes(name, 0, 32)[3], 32)
     c64 = _centroid(volumes(name, 0, 64)[3], 64)
@@ -122,6 +122,56 @@ def test_chair_faces_the_front_camera(volumes):
         top = d[:, first:first + 8]  # the highest occupied rows (h grows downwards): the back rest
         c = (top.sum(dim=(1, 2)) * voxel_centres(64)[:, 0, 0, 2]).sum() / top.sum()
         assert float(c) < -0.1
+
+
+def _silhouette_columns(volume, azimuth):
+    """How many image columns the closed-form EA silhouette (α ≥ ½) covers, seen level from ``azimuth``."""
+    from mitsuba_platonic.render import render
+    from mitsuba_platonic.views import from_angles
+
+    alpha = render(volume[None], from_angles(float(azimuth), 0.0)[None], "ea")[0, 3]
+    return int((alpha >= 0.5).any(dim=0).sum())
+
+
+def test_animal_is_narrow_end_on_and_long_from_the_side(volumes):
+    """Length along z (the head at +z): seen end-on (azimuth 0°) the silhouette is a third to a half as
+    wide as from the side views (±90°), where the length shows broadside; the drawn ratio is in
+    [0.34, 0.48] (animal.WIDTH_RATIO), give or take a voxel's rounding on each of the widths."""
+    from mitsuba_platonic.data.shapes.animal import WIDTH_RATIO
+
+    ratios = []
+    for seed in range(6):
+        v = volumes("animal", seed, 64)
+        end_on = _silhouette_columns(v, 0.0)
+        side = _silhouette_columns(v, 90.0)
+        assert side == _silhouette_columns(v, -90.0)               # mirror symmetric about x = 0
+        ratios.append(end_on / side)
+    assert min(ratios) >= WIDTH_RATIO[0] - 0.03 and max(ratios) <= WIDTH_RATIO[1] + 0.03, ratios
+    assert max(ratios) - min(ratios) > 0.05                          # and it varies with the seed
+
+
+def test_animal_stands_on_four_legs_with_its_head_forward_and_its_tail_behind(volumes):
+    for seed in SEEDS:
+        v = volumes("animal", seed, 64)
+        assert torch.allclose(v[3], v[3].flip(2), atol=1e-4)          # the shape is mirror symmetric in x
+        d = v[3] > 0.5
+        rows = d.any(dim=(0, 2)).nonzero().flatten()
+        bottom, top = int(rows.max()), int(rows.min())                 # h grows downwards
+        # the feet: the lowest layer is four separate blobs, in the four quadrants of (x, z)
+        foot = d[:, bottom - 1]                                        # (z, x), one layer above the soles
+        c = voxel_centres(64)[:, bottom - 1]
+        zs, xs = c[..., 2][foot], c[..., 0][foot]
+        quadrants = {(bool(z > 0), bool(x > 0)) for z, x in zip(zs.tolist(), xs.tolist())}
+        assert quadrants == {(False, False), (False, True), (True, False), (True, True)}
+        assert not foot[:, 31:33].any() and not foot[31:33].any()     # nothing under the middle
+        # the head and neck rise ahead (+z): the front half reaches at least as high as the back half
+        p = voxel_centres(64)
+        z, y = p[..., 2], p[..., 1]
+        assert float(y[d & (z > 0)].max()) >= float(y[d & (z < 0)].max())
+        # the body is long: its upper half (above the legs) reaches far both ways along z, not along x
+        upper = d & (y > float(y[d].min() + y[d].max()) / 2)
+        assert float(z[upper].min()) < -0.5 and float(z[upper].max()) > 0.5
+        assert float(p[..., 0][upper].abs().max()) < 0.5 * float(z[upper].max() - z[upper].min())
 
 
 # ------------------------------------------------------------------ errors and registration

@@ -89,3 +89,59 @@ def test_bad_input():
         V.validate_views(torch.zeros(3))
     with pytest.raises(ValueError, match="NaN"):
         V.validate_views(torch.tensor([[float("nan"), 0.0, 1.0]]))
+
+
+@pytest.mark.parametrize("width", [30.0, 10.0, 90.0])
+def test_sides_draws_azimuths_uniformly_within_w_of_the_two_side_views(width):
+    n = 20000
+    v = V.sample_views(n, "sides", seed=3, elevation=(-10.0, 40.0), side_width=width)
+    assert torch.allclose(v.norm(dim=1), torch.ones(n), atol=1e-6)
+    az, el = V.to_angles(v)
+    assert el.min() >= -10.0 - 1e-3 and el.max() <= 40.0 + 1e-3
+    y = v[:, 1].double()                              # as the band's: y uniform on [sin θ_lo, sin θ_hi]
+    lo, hi = math.sin(math.radians(-10.0)), math.sin(math.radians(40.0))
+    assert abs(float(y.mean()) - (lo + hi) / 2) < 0.01
+    # the distance from the nearer side view, and which side: every azimuth within W, half on each side
+    off_plus, off_minus = (torch.remainder(az - s + 180.0, 360.0) - 180.0 for s in V.SIDE_AZIMUTHS)
+    near = torch.minimum(off_plus.abs(), off_minus.abs())
+    assert float(near.max()) <= width + 1e-3
+    plus = off_plus.abs() <= off_minus.abs()
+    assert abs(float(plus.float().mean()) - 0.5) < 4 * math.sqrt(0.25 / n)
+    # uniform within each window: the offsets' histogram in 10 bins, each count within 5 σ of n / 20
+    for offsets in (off_plus[plus], off_minus[~plus]):
+        counts = torch.histc(offsets, bins=10, min=-width, max=width)
+        expected = len(offsets) / 10
+        assert float((counts - expected).abs().max()) < 5 * math.sqrt(expected)
+    if width == 90.0:                                 # the two windows cover the circle: uniform
+        assert az.min() < -179.0 and az.max() > 179.0 and float(az.abs().min()) < 0.1
+
+
+def test_sides_is_deterministic_its_default_width_is_30_and_other_distributions_keep_their_draws():
+    a = V.sample_views(500, "sides", seed=7, elevation=(0.0, 20.0))
+    assert torch.equal(a, V.sample_views(500, "sides", seed=7, elevation=(0.0, 20.0), side_width=30.0))
+    assert not torch.equal(a, V.sample_views(500, "sides", seed=8, elevation=(0.0, 20.0)))
+    assert V.DEFAULT_SIDE_WIDTH == 30.0 and V.DEFAULT_ELEVATION["sides"] == V.DEFAULT_ELEVATION["band"]
+    # 'band' draws φ = 2π u, y from the next uniforms, as before 'sides' existed
+    g = torch.Generator().manual_seed(7)
+    u = torch.rand(500, generator=g, dtype=torch.float64)
+    y = math.sin(0.0) + (math.sin(math.radians(20.0)) - math.sin(0.0)) * torch.rand(500, generator=g, dtype=torch.float64)
+    r = torch.sqrt(1.0 - y * y)
+    expected = torch.stack([r * torch.sin(2 * math.pi * u), y, r * torch.cos(2 * math.pi * u)], dim=-1).float()
+    assert torch.equal(V.sample_views(500, "band", seed=7, elevation=(0.0, 20.0)), expected)
+    assert "sides" in V.COLLECTION_DISTRIBUTIONS and "sides" not in V.DISTRIBUTIONS   # collections only
+
+
+@pytest.mark.parametrize("width", [0.0, -5.0, 90.5, float("nan"), float("inf"), True, "30"])
+def test_sides_refuses_a_bad_width(width):
+    with pytest.raises(ValueError, match=r"side_width.*0 < W <= 90"):
+        V.sample_views(3, "sides", elevation=(0.0, 30.0), side_width=width)
+
+
+def test_sides_needs_a_band_and_only_sides_reads_a_width():
+    with pytest.raises(ValueError, match=r"'sides' needs elevation=\(low, high\)"):
+        V.sample_views(3, "sides", elevation=20.0)
+    with pytest.raises(ValueError, match="'sides' needs elevation"):
+        V.sample_views(3, "sides", elevation=(40.0, 10.0))
+    for other in ("sphere", "band", "ring"):
+        with pytest.raises(ValueError, match="side_width is read by the 'sides' distribution only"):
+            V.sample_views(3, other, elevation=20.0 if other == "ring" else (0.0, 30.0), side_width=30.0)

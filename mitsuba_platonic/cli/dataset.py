@@ -42,7 +42,10 @@ def _check_dataset_flags(args: argparse.Namespace) -> None:
             setattr(args, key, default)
     if args.elevation is not None and args.view_dist == "sphere":
         raise CLIError("--elevation: --view-dist sphere covers every elevation and would ignore it; drop it, or "
-                       "use --view-dist band (low,high) or ring (one number)")
+                       "use --view-dist band or sides (low,high) or ring (one number)")
+    if args.side_width is not None and args.view_dist != "sides":
+        raise CLIError(f"--side-width: only --view-dist sides reads it, and --view-dist {args.view_dist} would "
+                       f"ignore it; drop it or use --view-dist sides")
 
 
 def _cmd_make_dataset(args: argparse.Namespace) -> int:
@@ -73,7 +76,7 @@ def _cmd_make_dataset(args: argparse.Namespace) -> int:
         specs.append(CollectionSpec(
             shape_class=c, n_shapes=args.shapes, views_per_shape=args.views, resolution=args.resolution,
             formation=args.formation, renderer=args.renderer, filter=args.filter, views=args.view_dist,
-            elevation=args.elevation, lighting=args.lighting,
+            elevation=args.elevation, side_width=args.side_width, lighting=args.lighting,
             envmaps=envmaps if (args.formation == "physical" and args.lighting != "sunsky") else (),
             spp=args.spp, max_depth=args.max_depth, camera=args.camera, fov=args.fov,
             distance=args.distance, seed=args.seed))
@@ -90,7 +93,7 @@ def _cmd_make_dataset(args: argparse.Namespace) -> int:
 def add_make_dataset(sub: "argparse._SubParsersAction") -> None:
     from ..data.collection_spec import RENDERERS
     from ..render.settings import CAMERAS, FILTERS, FORMATIONS, LIGHTINGS, RenderSettings
-    from ..views import DEFAULT_ELEVATION, DISTRIBUTIONS
+    from ..views import COLLECTION_DISTRIBUTIONS, DEFAULT_ELEVATION, DEFAULT_SIDE_WIDTH
 
     p = sub.add_parser(
         "make-dataset", help="render a procedural shape class to an image collection",
@@ -109,11 +112,16 @@ def add_make_dataset(sub: "argparse._SubParsersAction") -> None:
     p.add_argument("--renderer", choices=RENDERERS, default="closed_form",
                    help="renderer for vh/ao/ea (default: %(default)s)")
     p.add_argument("--filter", choices=FILTERS, default="trilinear")
-    p.add_argument("--view-dist", choices=DISTRIBUTIONS, default="sphere",
-                   help="view distribution (default: %(default)s)")
+    p.add_argument("--view-dist", choices=COLLECTION_DISTRIBUTIONS, default="sphere",
+                   help="view distribution: sides = azimuths within ±SIDE_WIDTH of the side views ±90° "
+                        "(which see an animal's or a vehicle's length broadside), elevations as band's "
+                        "(default: %(default)s)")
     p.add_argument("--elevation", type=_elevation, default=None,
-                   help="'low,high' degrees for band (default {:g},{:g}); one number for ring (default {:g})"
-                   .format(*DEFAULT_ELEVATION["band"], DEFAULT_ELEVATION["ring"]))
+                   help="'low,high' degrees for band and sides (default {:g},{:g}); one number for ring "
+                        "(default {:g})".format(*DEFAULT_ELEVATION["band"], DEFAULT_ELEVATION["ring"]))
+    p.add_argument("--side-width", type=positive_float, default=None,
+                   help="sides only: W, the half-width of the azimuth windows in degrees, 0 < W <= 90 "
+                        "(default: {:g})".format(DEFAULT_SIDE_WIDTH))
     p.add_argument("--lighting", choices=LIGHTINGS, default=None,
                    help="physical formation only: random sky, environment map, or either (default: sunsky)")
     p.add_argument("--envmap", action="append", default=None,

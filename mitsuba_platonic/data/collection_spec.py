@@ -40,8 +40,12 @@ class CollectionSpec:
     formation: 'vh' | 'ao' | 'ea' | 'physical'.
     renderer: 'closed_form' | 'mitsuba' (vh/ao/ea; physical always path-traces with Mitsuba).
     filter: 'trilinear' | 'nearest' lookups.
-    views: 'sphere' (uniform), 'band' (elevation range, degrees) or 'ring' (one elevation).
-    elevation: (low, high) for 'band', a number for 'ring', ignored for 'sphere'.
+    views: 'sphere' (uniform), 'band' (elevation range, degrees), 'ring' (one elevation) or 'sides'
+        (photographed mostly from the sides: azimuths within ±side_width of the side views ±90°, which
+        see broadside an object whose length lies along z; elevations as the band's;
+        :func:`mitsuba_platonic.views.sample_views`).
+    elevation: (low, high) for 'band' and 'sides', a number for 'ring', ignored for 'sphere'.
+    side_width: W in degrees, 0 < W <= 90, for 'sides' (None: 30); refused for the others.
     lighting: 'sunsky' | 'envmap' | 'mixed' (physical only); envmaps: EXR paths for 'envmap'.
     spp, max_depth: path tracer samples per pixel and path length (physical only).
     camera, fov, distance: the camera of the vh/ao/ea images, as the renderers take it
@@ -62,6 +66,7 @@ class CollectionSpec:
     filter: str = "trilinear"
     views: str = "sphere"
     elevation: Union[float, Tuple[float, float], None] = None
+    side_width: Optional[float] = None
     lighting: str = "sunsky"
     envmaps: Tuple[str, ...] = ()
     spp: int = 32
@@ -90,8 +95,13 @@ class CollectionSpec:
             raise UserError(f"renderer must be one of {RENDERERS}, got {self.renderer!r}")
         if self.filter not in FILTERS:
             raise UserError(f"filter must be 'trilinear' or 'nearest', got {self.filter!r}")
-        if self.views not in V.DISTRIBUTIONS:
-            raise UserError(f"views must be one of {V.DISTRIBUTIONS}, got {self.views!r}")
+        if self.views not in V.COLLECTION_DISTRIBUTIONS:
+            raise UserError(f"views must be one of {V.COLLECTION_DISTRIBUTIONS}, got {self.views!r}")
+        if self.side_width is not None:
+            if self.views != "sides":
+                raise UserError(f"side_width: only views 'sides' reads it, and views {self.views!r} would "
+                                f"ignore it; drop it or use views 'sides'")
+            V.check_side_width(self.side_width)
         if self.lighting not in LIGHTINGS:
             raise UserError(f"lighting must be one of {LIGHTINGS}, got {self.lighting!r}")
         if self.exposure not in ("metered", "auto"):
@@ -109,11 +119,12 @@ class CollectionSpec:
         return self
 
     def _view_kwargs(self) -> Dict[str, Any]:
+        out: Dict[str, Any] = {} if self.side_width is None else {"side_width": self.side_width}
         if self.views == "sphere" or self.elevation is None:
             default = V.DEFAULT_ELEVATION.get(self.views)
-            return {} if default is None else {"elevation": default}
+            return out if default is None else {**out, "elevation": default}
         e = self.elevation
-        return {"elevation": tuple(float(x) for x in e) if isinstance(e, (list, tuple)) else float(e)}
+        return {**out, "elevation": tuple(float(x) for x in e) if isinstance(e, (list, tuple)) else float(e)}
 
     def to_dict(self) -> Dict[str, Any]:
         d = asdict(self)

@@ -5,7 +5,7 @@ Every class generates, from an integer seed, one member of an object class as a 
 :mod:`mitsuba_platonic.volume` (+y up, the object facing +z, the front camera)::
 
     from mitsuba_platonic.data import shapes
-    shapes.list_classes()                       # ['airplane', 'chair', 'lathe', 'mushroom', 'tree']
+    shapes.list_classes()          # ['airplane', 'animal', 'chair', 'lathe', 'mushroom', 'tree']
     vol = shapes.generate("chair", seed=3, n=64)  # (4, 64, 64, 64), deterministic per (name, seed, n)
 
 Shapes are centred (their bounding box at the origin) and scaled to fit the ball of radius
@@ -13,8 +13,14 @@ Shapes are centred (their bounding box at the origin) and scaled to fit the ball
 Δ = 2 / N). Thin parts are kept at least 1.5 voxels thick at every N, so they never vanish
 at N = 16.
 
-Built-in classes (one module each): ``airplane``, ``chair``, ``lathe`` (vases, goblets,
-bottles, barrels), ``mushroom``, ``tree``.
+Built-in classes (one module each): ``airplane``, ``animal`` (four-legged), ``chair``, ``lathe``
+(vases, goblets, bottles, barrels), ``mushroom``, ``tree``.
+
+Orientation: every class faces +z, the front camera at azimuth 0° (:mod:`mitsuba_platonic.views`),
+and a class with a length (the airplane's fuselage, the animal's body) lays it along z. So the *side
+views* at azimuth ±90° (:data:`~mitsuba_platonic.views.SIDE_AZIMUTHS`) see that length broadside for
+every class, and a collection photographed mostly from the sides (``views: sides``) needs no
+per-class axis; a round class (lathe, mushroom, tree) has no preferred one, and the same ±90° apply.
 
 Adding a class
 --------------
@@ -52,7 +58,7 @@ __all__ = ["generate", "list_classes", "get_class", "register", "unregister", "r
            "sdf", "BUILTIN_CLASSES", "MIN_RESOLUTION", "MAX_RESOLUTION"]
 
 #: Modules of this package that define (and register) the built-in classes.
-BUILTIN_CLASSES = ("airplane", "chair", "lathe", "mushroom", "tree")
+BUILTIN_CLASSES = ("airplane", "animal", "chair", "lathe", "mushroom", "tree")
 
 for _module in BUILTIN_CLASSES:
     importlib.import_module(f"{__name__}.{_module}")
