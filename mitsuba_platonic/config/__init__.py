@@ -38,6 +38,7 @@ import yaml
 from pydantic_core import SchemaValidator, core_schema
 
 from ..data.settings import DataConfig
+from ..files.fileio import read_input_text
 from ..files.resources import config_names, config_path
 from ..networks.settings import ModelConfig
 from ..render.settings import LIT, SINGLE_SCATTERING, RenderSettings as RenderConfig
@@ -242,7 +243,7 @@ def load_config(path: Optional[Union[str, Path]] = None, overrides: Sequence[str
     if path is not None:
         path = config_file(path)
         try:
-            data = yaml.safe_load(path.read_text())
+            data = yaml.safe_load(read_input_text(path, "config file"))   # a regular file, at most 16 MiB
         except UnicodeDecodeError:
             raise ConfigError(f"{path}: not a YAML text file (not UTF-8 text)") from None
         except yaml.YAMLError as e:

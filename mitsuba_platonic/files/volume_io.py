@@ -13,6 +13,11 @@ The one place that knows the two file formats (docs/conventions.md, "Volumes"):
 :func:`save_volume` writes both beside each other, each whole or not at all; :func:`load_volume`
 reads a volume the command line names (``builtin:<kind>`` or a ``.npz`` file).
 
+A file is checked before it is read (:func:`~mitsuba_platonic.files.fileio.check_input_file`: a
+regular file, no FIFO or device), and the size it declares (a ``.npz``'s array header, a ``.vol``'s
+length) against the memory free (:func:`~mitsuba_platonic.runtime.budget.check_fits`) before anything
+of that size is allocated: a small compressed file may declare a volume of many gigabytes.
+
 Importing it loads numpy, not torch: :func:`read_volume_array` reads and checks a file with numpy
 alone (``platonic view`` checks its SOURCE before torch has loaded); the functions that return
 tensors import torch when they run.
@@ -26,7 +31,8 @@ from typing import TYPE_CHECKING, List, Optional, Union
 import numpy as np
 
 from ..errors import UserError
-from .fileio import atomic_write, make_folder
+from ..runtime import budget
+from .fileio import InputFileRefused, atomic_write, check_input_file, make_folder, read_input_file
 
 if TYPE_CHECKING:
     import torch
@@ -63,9 +69,45 @@ def _existing_file(path: Path) -> "tuple[Path, str]":
     name = str(path)
     if not path.exists():
         raise VolumeFileError(f"volume file {name!r} does not exist")
-    if not path.is_file():
-        raise VolumeFileError(f"volume file {name!r} is not a file")
+    try:
+        check_input_file(path, "volume file")
+    except InputFileRefused as e:
+        raise VolumeFileError(str(e)) from None
     return path, name
+
+
+#: The bytes reading a volume of ``n`` values of ``itemsize`` bytes takes at least: the array as
+#: stored, and its float32 copy (:func:`_checked`).
+def _reading_bytes(n: int, itemsize: int) -> int:
+    return n * (itemsize + 4)
+
+
+def _check_declared(name: str, shape: "tuple[int, ...]", itemsize: int) -> None:
+    """:class:`VolumeFileError` where reading the array of ``shape`` that file ``name`` declares
+    cannot fit in the memory free (before it is allocated)."""
+    n = int(np.prod(shape, dtype=object)) if shape else 1
+    try:
+        budget.check_fits(_reading_bytes(n, itemsize), budget.available_memory(),
+                          f"{name!r}: its array 'volume' of shape {tuple(shape)}", "use a smaller volume")
+    except UserError as e:
+        raise VolumeFileError(str(e)) from None
+
+
+def _npz_header(archive: "np.lib.npyio.NpzFile", name: str) -> "tuple[tuple[int, ...], np.dtype]":
+    """The shape and dtype the ``volume`` member of ``archive`` declares, read from its ``.npy`` header
+    alone (nothing decompressed beyond it)."""
+    fmt = np.lib.format
+    try:
+        member = "volume.npy" if "volume.npy" in archive.zip.namelist() else "volume"
+        with archive.zip.open(member) as f:
+            version = fmt.read_magic(f)
+            read = {(1, 0): fmt.read_array_header_1_0, (2, 0): fmt.read_array_header_2_0}.get(version)
+            if read is None:
+                raise ValueError(f"format version {version}")
+            shape, _, dtype = read(f)
+    except Exception as e:
+        raise VolumeFileError(f"could not read array 'volume' from {name!r}: {e}") from None
+    return tuple(int(d) for d in shape), dtype
 
 
 def _tensor(v: np.ndarray) -> "torch.Tensor":
@@ -101,6 +143,8 @@ def _npz_array(path: Path) -> np.ndarray:
             found = ", ".join(archive.files) or "no arrays"
             raise VolumeFileError(f"{name!r} has no array named 'volume' (found: {found}); save it with "
                                   f"numpy.savez(path, volume=array)")
+        shape, dtype = _npz_header(archive, name)
+        _check_declared(name, shape, dtype.itemsize)          # before the array is decompressed
         try:
             v = archive["volume"]
         except Exception as e:
@@ -120,7 +164,11 @@ def read_vol(path: Path) -> torch.Tensor:
 def _vol_array(path: Path) -> np.ndarray:
     """:func:`read_vol`'s checked ``(C, N, N, N)`` array, read with numpy alone."""
     path, name = _existing_file(path)
-    data = path.read_bytes()
+    _check_declared(name, (path.stat().st_size // 4,), 4)    # the whole file is read, then copied
+    try:
+        data = read_input_file(path, "volume file", max_bytes=None)
+    except InputFileRefused as e:
+        raise VolumeFileError(str(e)) from None
     header = len(_VOL_MAGIC) + 4 * 4 + 6 * 4
     if len(data) < header or data[:3] != b"VOL":
         raise VolumeFileError(f"{name!r} is not a Mitsuba .vol file (it does not start with 'VOL' and a header)")

@@ -28,7 +28,7 @@ from .. import __version__
 from ..config import Config, ConfigError, config_from_dict, yaml_problem
 from ..config.loading import config_difference, without_retired
 from ..files.checkpoint import RunError, checkpoint_files
-from ..files.fileio import atomic_write, make_folder, open_file, remove_temporaries
+from ..files.fileio import InputFileRefused, atomic_write, make_folder, open_file, read_input_text, remove_temporaries
 from ..files.locks import exclusive_lock
 
 __all__ = ["RUN_MARKER", "RUN_PARTS", "is_run_folder", "claim_run_folder", "run_lock", "prepare_run_folder", "read_run_config"]
@@ -140,7 +140,9 @@ def read_run_config(path: Path) -> Config:
     ``path`` if it is missing, not valid YAML, not a mapping, or has a bad key or value."""
     expected = "expected the run's resolved config as `platonic train` wrote it"
     try:
-        text = path.read_text()
+        text = read_input_text(path)                         # a regular file, at most 16 MiB
+    except InputFileRefused as e:
+        raise RunError(f"{e}; {expected}") from None
     except FileNotFoundError:
         raise RunError(f"{path} is missing; {expected}") from None
     except OSError as e:
