@@ -246,6 +246,7 @@ def test_a_volume_whose_header_declares_more_than_the_memory_is_refused_before_r
 
     from mitsuba_platonic.files import volume_io
     from mitsuba_platonic.runtime import budget
+    from mitsuba_platonic.viewer.start import check_source          # platonic view SOURCE's reader
 
     header = io.BytesIO()
     np.lib.format.write_array_header_1_0(header, {"descr": "<f4", "fortran_order": False, "shape": (4, 256, 256, 256)})
@@ -254,12 +255,12 @@ def test_a_volume_whose_header_declares_more_than_the_memory_is_refused_before_r
         z.writestr("volume.npy", header.getvalue() + bytes(1024))            # magic, header, 1 kB of data
     monkeypatch.setattr(budget, "available_memory", lambda: (64 * 2 ** 20, "this test"))
     with pytest.raises(volume_io.VolumeFileError) as e:
-        volume_io.read_volume_array(path)
+        check_source(path)
     assert str(e.value).startswith(f"'{path}': its array 'volume' of shape (4, 256, 256, 256) needs at least "), e.value
     assert "this test" in str(e.value)
     monkeypatch.undo()                                   # with the memory there is: read, and cut short
     with pytest.raises(volume_io.VolumeFileError, match="could not read array 'volume'"):
-        volume_io.read_volume_array(path)
+        check_source(path)
 
 
 def test_a_run_whose_config_asks_for_networks_that_cannot_fit_is_one_line(tiny_run, tmp_path):

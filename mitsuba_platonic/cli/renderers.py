@@ -104,6 +104,7 @@ def _compare_light_into(args: argparse.Namespace, volume: "torch.Tensor", views:
 def _cmd_compare(args: argparse.Namespace) -> int:
     from ..render.compare import check_memory, comparison_views
     from ..files.volume_io import BUILTIN_PREFIX, load_volume
+    from ..runtime import budget
 
     if not args.light:
         _check_compare_settings(args)
@@ -111,7 +112,7 @@ def _cmd_compare(args: argparse.Namespace) -> int:
         n = 32 if args.resolution is None else args.resolution
         check_memory(n, args.views, builtin=True,
                      what=f"--resolution {n}" if args.resolution is not None else f"--volume {args.volume}")
-    volume = load_volume(args.volume, args.resolution)
+    volume = load_volume(args.volume, args.resolution, fits=budget.memory_check("use a smaller --volume"))
     if not args.volume.startswith(BUILTIN_PREFIX):
         check_memory(volume.shape[-1], args.views, what=f"--volume {args.volume}")
     if args.light:

@@ -15,8 +15,10 @@ reads a volume the command line names (``builtin:<kind>`` or a ``.npz`` file).
 
 A file is checked before it is read (:func:`~mitsuba_platonic.files.fileio.check_input_file`: a
 regular file, no FIFO or device), and the size it declares (a ``.npz``'s array header, a ``.vol``'s
-length) against the memory free (:func:`~mitsuba_platonic.runtime.budget.check_fits`) before anything
-of that size is allocated: a small compressed file may declare a volume of many gigabytes.
+length) is handed to the reader's ``fits`` (the command's memory check,
+:func:`mitsuba_platonic.runtime.budget.memory_check`, which this layer below the machine's does not
+import) before anything of that size is allocated: a small compressed file may declare a volume of
+many gigabytes.
 
 Importing it loads numpy, not torch: :func:`read_volume_array` reads and checks a file with numpy
 alone (``platonic view`` checks its SOURCE before torch has loaded); the functions that return
@@ -26,12 +28,11 @@ tensors import torch when they run.
 from __future__ import annotations
 
 from pathlib import Path
-from typing import TYPE_CHECKING, List, Optional, Union
+from typing import TYPE_CHECKING, Callable, List, Optional, Union
 
 import numpy as np
 
 from ..errors import UserError
-from ..runtime import budget
 from .fileio import InputFileRefused, atomic_write, check_input_file, make_folder, read_input_file
 
 if TYPE_CHECKING:
@@ -42,6 +43,9 @@ __all__ = ["BUILTIN_PREFIX", "VolumeFileError", "to_mitsuba_grid", "read_npz", "
            "load_volume", "write_npz", "write_vol", "save_volume"]
 
 PathLike = Union[str, Path]
+#: A memory check: ``fits(bytes, what)`` raises a :class:`~mitsuba_platonic.errors.UserError` where
+#: ``bytes`` cannot be allocated (:func:`mitsuba_platonic.runtime.budget.memory_check`).
+Fits = Optional[Callable[[int, str], None]]
 
 #: How a built-in test volume is named where a volume file could be: ``builtin:figure``.
 BUILTIN_PREFIX = "builtin:"
@@ -82,13 +86,14 @@ def _reading_bytes(n: int, itemsize: int) -> int:
     return n * (itemsize + 4)
 
 
-def _check_declared(name: str, shape: "tuple[int, ...]", itemsize: int) -> None:
-    """:class:`VolumeFileError` where reading the array of ``shape`` that file ``name`` declares
-    cannot fit in the memory free (before it is allocated)."""
+def _check_declared(name: str, shape: "tuple[int, ...]", itemsize: int, fits: Fits) -> None:
+    """:class:`VolumeFileError` where ``fits`` refuses the bytes reading the array of ``shape`` that
+    file ``name`` declares takes (before it is allocated); nothing is checked without ``fits``."""
+    if fits is None:
+        return
     n = int(np.prod(shape, dtype=object)) if shape else 1
     try:
-        budget.check_fits(_reading_bytes(n, itemsize), budget.available_memory(),
-                          f"{name!r}: its array 'volume' of shape {tuple(shape)}", "use a smaller volume")
+        fits(_reading_bytes(n, itemsize), f"{name!r}: its array 'volume' of shape {tuple(shape)}")
     except UserError as e:
         raise VolumeFileError(str(e)) from None
 
@@ -117,15 +122,15 @@ def _tensor(v: np.ndarray) -> "torch.Tensor":
     return torch.from_numpy(v)[None]
 
 
-def read_npz(path: Path) -> torch.Tensor:
+def read_npz(path: Path, fits: Fits = None) -> torch.Tensor:
     """Read and validate the array ``volume`` of a ``.npz`` file → ``(1, C, N, N, N)`` float32.
 
     Raises :class:`VolumeFileError` naming the file and what is wrong (missing, not an archive, no
-    array ``volume``, a wrong shape, values outside [0, 1], …)."""
-    return _tensor(_npz_array(path))
+    array ``volume``, a wrong shape, values outside [0, 1], a declared size ``fits`` refuses, …)."""
+    return _tensor(_npz_array(path, fits))
 
 
-def _npz_array(path: Path) -> np.ndarray:
+def _npz_array(path: Path, fits: Fits = None) -> np.ndarray:
     """:func:`read_npz`'s checked ``(C, N, N, N)`` array, read with numpy alone."""
     path, name = _existing_file(path)
     try:
@@ -144,7 +149,7 @@ def _npz_array(path: Path) -> np.ndarray:
             raise VolumeFileError(f"{name!r} has no array named 'volume' (found: {found}); save it with "
                                   f"numpy.savez(path, volume=array)")
         shape, dtype = _npz_header(archive, name)
-        _check_declared(name, shape, dtype.itemsize)          # before the array is decompressed
+        _check_declared(name, shape, dtype.itemsize, fits)    # before the array is decompressed
         try:
             v = archive["volume"]
         except Exception as e:
@@ -152,19 +157,19 @@ def _npz_array(path: Path) -> np.ndarray:
     return _checked(v, name)
 
 
-def read_vol(path: Path) -> torch.Tensor:
+def read_vol(path: Path, fits: Fits = None) -> torch.Tensor:
     """Read a Mitsuba ``.vol`` grid (float32, the layout :func:`write_vol` writes) → ``(1, C, N, N, N)``
     float32, checked as :func:`read_npz` checks its array (cubic, C = 1 or 4, values in [0, 1]).
 
     Raises :class:`VolumeFileError` naming the file and what is wrong (missing, not a ``.vol``, an
     encoding other than float32, a size that does not match its header, …)."""
-    return _tensor(_vol_array(path))
+    return _tensor(_vol_array(path, fits))
 
 
-def _vol_array(path: Path) -> np.ndarray:
+def _vol_array(path: Path, fits: Fits = None) -> np.ndarray:
     """:func:`read_vol`'s checked ``(C, N, N, N)`` array, read with numpy alone."""
     path, name = _existing_file(path)
-    _check_declared(name, (path.stat().st_size // 4,), 4)    # the whole file is read, then copied
+    _check_declared(name, (path.stat().st_size // 4,), 4, fits)   # the whole file is read, then copied
     try:
         data = read_input_file(path, "volume file", max_bytes=None)
     except InputFileRefused as e:
@@ -183,19 +188,19 @@ def _vol_array(path: Path) -> np.ndarray:
     return _checked(v, name)
 
 
-def read_volume_file(path: PathLike) -> torch.Tensor:
+def read_volume_file(path: PathLike, fits: Fits = None) -> torch.Tensor:
     """A ``.npz`` (:func:`read_npz`) or ``.vol`` (:func:`read_vol`) file → ``(1, C, N, N, N)``."""
-    return _tensor(read_volume_array(path))
+    return _tensor(read_volume_array(path, fits))
 
 
-def read_volume_array(path: PathLike) -> np.ndarray:
+def read_volume_array(path: PathLike, fits: Fits = None) -> np.ndarray:
     """A ``.npz`` or ``.vol`` file → its checked ``(C, N, N, N)`` float32 array (what
     :func:`read_volume_file` returns, as numpy, read and checked without torch); the same errors."""
     path = Path(path)
     if path.suffix.lower() == ".npz":
-        return _npz_array(path)
+        return _npz_array(path, fits)
     if path.suffix.lower() == ".vol":
-        return _vol_array(path)
+        return _vol_array(path, fits)
     raise VolumeFileError(f"{str(path)!r}: expected a volume file ending in .npz or .vol")
 
 
@@ -230,7 +235,7 @@ def _checked(v: np.ndarray, name: str) -> np.ndarray:
     return np.ascontiguousarray(v)
 
 
-def load_volume(spec: str, resolution: Optional[int] = None) -> torch.Tensor:
+def load_volume(spec: str, resolution: Optional[int] = None, fits: Fits = None) -> torch.Tensor:
     """``builtin:<kind>`` (a :func:`~mitsuba_platonic.volume.test_volume` at ``resolution``, default
     32) or a path to a ``.npz`` file holding ``volume`` → ``(1, C, N, N, N)``, C = 4 or 1.
 
@@ -249,7 +254,7 @@ def load_volume(spec: str, resolution: Optional[int] = None) -> torch.Tensor:
     path = Path(spec)
     if path.suffix.lower() != ".npz":
         raise VolumeFileError(f"--volume must be builtin:figure, builtin:cloud or a .npz file, got {spec!r}")
-    v = read_npz(path)
+    v = read_npz(path, fits)
     if resolution is not None and resolution != v.shape[-1]:
         raise VolumeFileError(f"--resolution {resolution} does not match {spec!r}, whose volume is "
                               f"{v.shape[-1]}³ (leave --resolution out for files)")

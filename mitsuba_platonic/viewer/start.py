@@ -28,6 +28,7 @@ import numpy as np
 
 from ..errors import UserError
 from ..files.volume_io import read_volume_array
+from ..runtime import budget
 
 __all__ = ["DISTANCE", "FOV", "check_port", "check_source", "volume_title", "start_server", "stop_server",
            "address"]
@@ -77,7 +78,7 @@ def check_source(source: PathLike, photo: Optional[PathLike] = None) -> Optional
     if path.is_file():
         if photo is not None:
             raise UserError(f"--photo needs a reconstruction run folder as SOURCE, got the file {str(path)!r}")
-        return read_volume_array(path)
+        return read_volume_array(path, fits=budget.memory_check("use a smaller volume"))   # its declared size
     if not path.is_dir():
         raise UserError(f"SOURCE {str(path)!r} is neither a file nor a folder")
     return None
