@@ -10,16 +10,44 @@ Where Dr.Jit is needed (a Mitsuba render, the first read of ``BACKEND``) its bac
 (:func:`~mitsuba_platonic.runtime.backend.check_backend`), raising
 :class:`~mitsuba_platonic.runtime.backend.BackendError` with install instructions if it has none; the
 closed-form layers, photo loading and ``--help`` work without a usable LLVM.
+
+Where the package is imported by the ``platonic`` command itself (its console script, or ``python -m
+mitsuba_platonic.cli``), a Ctrl-C that comes while it imports, before the command line catches the
+signals (:mod:`mitsuba_platonic.console`), is one line too, ``platonic: interrupted: while starting;
+nothing was written``, not a traceback (:func:`_one_line_interrupt`, Python's hook for an uncaught
+exception; the process still ends by SIGINT: exit status 130 to a shell). Imported by anyone else,
+the package changes nothing of the kind.
 """
 
 from __future__ import annotations
 
-import importlib
 import sys
-import types
-from typing import Any
 
-from .runtime.backend import BackendError, check_backend, preselect_libllvm
+
+def _launched_as_the_command() -> bool:
+    """Whether this process is the ``platonic`` command: its console script, or ``-m mitsuba_platonic.cli``."""
+    script = sys.argv[0].replace("\\", "/").rsplit("/", 1)[-1] if sys.argv else ""
+    line = list(getattr(sys, "orig_argv", ()))
+    module = line[line.index("-m") + 1] if "-m" in line[:-1] else ""
+    return script in ("platonic", "platonic.exe", "platonic-script.py") or module.startswith("mitsuba_platonic.cli")
+
+
+def _one_line_interrupt(kind, value, traceback, _before=sys.excepthook) -> None:
+    """A Ctrl-C before the command line caught it: one line; anything else as Python shows it."""
+    if issubclass(kind, KeyboardInterrupt):
+        print("platonic: interrupted: while starting; nothing was written", file=sys.stderr)
+        return
+    _before(kind, value, traceback)
+
+
+if _launched_as_the_command():  # first, before the imports that take the first ~100 ms (LLVM's search, typing)
+    sys.excepthook = _one_line_interrupt
+
+import importlib  # noqa: E402
+import types  # noqa: E402
+from typing import Any  # noqa: E402
+
+from .runtime.backend import BackendError, check_backend, preselect_libllvm  # noqa: E402
 
 __version__ = "0.1.0"
 __all__ = ["render", "render_with", "RenderSettings", "views", "volume", "BackendError", "BACKEND", "__version__"]

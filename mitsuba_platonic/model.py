@@ -44,13 +44,14 @@ from torch import nn
 from .config.loading import load_model
 from .data.photos import decode_image, prepare_image
 from .errors import UserError
+from .runtime import budget
 from .networks.nets import Encoder, Generator, LightHead, NetConfig, PoseHead, init_weights
 from .networks.photo_colours import photo_volume
 from .render.closed_form import tilt
 from .render.settings import RenderSettings
 from .volume import CHANNELS
 
-__all__ = ["Model", "net_config", "critic_config", "RING_VIEWS", "view_codes"]
+__all__ = ["Model", "net_config", "critic_config", "RING_VIEWS", "view_codes", "check_weights_fit", "BYTES_PER_WEIGHT"]
 
 #: Views of the PrGAN-style baseline: azimuths k · 360°/8 on one elevation ring (Gadelha et al.).
 RING_VIEWS = 8
@@ -72,6 +73,27 @@ def net_config(cfg: Any) -> NetConfig:
 def critic_config(cfg: Any) -> NetConfig:
     """The critics' (D's, D3's) shapes: :func:`net_config` at ``model.critic_width`` when it is set."""
     return cfg.model.critic_config(net_config(cfg))
+
+
+#: Bytes a weight takes at least where a model is only used (float32), not trained.
+BYTES_PER_WEIGHT = 4
+
+
+def check_weights_fit(cls: type, net: NetConfig, cfg: Any) -> None:
+    """:class:`~mitsuba_platonic.errors.UserError` (one line naming the model's size keys) where the
+    weights of ``cls(net, ...)``, counted on PyTorch's meta device (nothing allocated), take more than
+    the memory free at :data:`BYTES_PER_WEIGHT` bytes each (a lower bound: ``generate`` and ``view``
+    of a run whose config says ``model.width: 100000``). Nothing is counted where the default device
+    is the meta device already (the count of :func:`~mitsuba_platonic.train.fits.parameter_count`)."""
+    if torch.empty(0).device.type == "meta":
+        return
+    with torch.device("meta"):
+        count = sum(p.numel() for p in cls(net, cfg.render, cfg.train.task, init=False).parameters())
+    sizes = ", ".join(f"model.{k}: {getattr(cfg.model, k)}" for k in ("resolution", "width", "latent")
+                      if hasattr(cfg.model, k))
+    budget.check_fits(count * BYTES_PER_WEIGHT, budget.available_memory(),
+                      f"the networks of this config ({sizes}; {count:.3g} weights)",
+                      "lower model.width (a run folder whose config asks for this cannot be opened here)")
 
 
 class Model(nn.Module):
@@ -102,8 +124,14 @@ class Model(nn.Module):
 
     @classmethod
     def from_config(cls, cfg: Any, init: bool = True) -> "Model":
-        """A fresh model for ``cfg`` (initialised from torch's global generator unless ``init=False``)."""
-        return cls(net_config(cfg), cfg.render, cfg.train.task, init=init)
+        """A fresh model for ``cfg`` (initialised from torch's global generator unless ``init=False``).
+
+        The sizes come from a config someone may have written by hand (a run folder's): where E's
+        and G's float32 weights cannot fit in the memory free, :class:`~mitsuba_platonic.errors.UserError`
+        before anything is allocated (:func:`check_weights_fit`)."""
+        net = net_config(cfg)
+        check_weights_fit(cls, net, cfg)
+        return cls(net, cfg.render, cfg.train.task, init=init)
 
     @classmethod
     def from_checkpoint(cls, source: Union[str, Path], device: Union[str, torch.device] = "cpu") -> "Model":

@@ -167,3 +167,127 @@ def test_physical_backend_with_envmap_lighting_is_a_config_error(lighting):
     code, _, err = run_cli(["train", "--set", "render.backend=physical", "--set", f"render.lighting={lighting}"])
     assert code == 2
     assert one_line(err, "train", kind="error").startswith("platonic train: error: render.lighting: "), err
+
+
+# --------------------------------------------------------------------------- files that are no regular files, sizes a file declares
+
+
+@pytest.fixture(scope="module")
+def tiny_run(tmp_path_factory, tiny_class):
+    """A finished tiny reconstruction run (two steps at 16³)."""
+    from mitsuba_platonic.train import run as R
+    from tiny_shapes import tiny_run_overrides
+
+    root = tmp_path_factory.mktemp("run")
+    R.train(load_config(None, tiny_run_overrides(root / "runs", root / "data")), progress=False)
+    return root / "runs" / "r"
+
+
+def _fifo(path):
+    """A FIFO at ``path``, and a thread that opens it for writing after a while and closes it (EOF):
+    a reader that waits on it ends instead of hanging the test."""
+    import os
+    import threading
+    import time
+
+    os.mkfifo(path)
+
+    def release():
+        time.sleep(20)
+        try:
+            fd = os.open(path, os.O_WRONLY | os.O_NONBLOCK)
+            os.close(fd)
+        except OSError:                                   # no reader waits: nothing to release
+            pass
+
+    threading.Thread(target=release, daemon=True).start()
+    return path
+
+
+def test_reconstruct_of_a_fifo_is_one_line_and_reads_nothing(tiny_run, tmp_path):
+    fifo = _fifo(tmp_path / "shot.png")
+    code, _, err = run_cli(["reconstruct", "--run", str(tiny_run), str(fifo), "--out", str(tmp_path / "rec")])
+    assert code == 2
+    err = one_line(err, "reconstruct", kind="error")
+    assert f"'{fifo}' is a FIFO (named pipe)" in err and "not a regular file" in err, err
+    assert not (tmp_path / "rec").exists()
+
+
+_READ_ZERO = """
+import resource, sys
+resource.setrlimit(resource.RLIMIT_AS, (2 << 30, 2 << 30))   # a reader without bound fails here, not the machine
+from mitsuba_platonic.data.photos import ImageRejected, decode_image
+try:
+    decode_image(sys.argv[1])
+except ImageRejected as e:
+    print(e.reason, e)
+"""
+
+
+def test_an_image_that_links_to_dev_zero_is_refused_before_it_is_read(tmp_path):
+    """``reconstruct --run R link-to-/dev/zero.png`` (and ``view --photo``) read it whole: all the memory."""
+    link = tmp_path / "zero.png"
+    link.symlink_to("/dev/zero")
+    done = subprocess.run([sys.executable, "-c", _READ_ZERO, str(link)], capture_output=True, text=True,
+                          timeout=120, stdin=subprocess.DEVNULL)
+    assert done.returncode == 0, done.stderr[-2000:]
+    assert done.stdout.startswith(f"unreadable '{link}' is a character device (through a link to '/dev/zero')"), \
+        done.stdout
+
+
+def test_a_volume_whose_header_declares_more_than_the_memory_is_refused_before_reading(tmp_path, monkeypatch):
+    """A small ``.npz`` whose array header declares a large volume (here 4 × 256³ float32, 268 MB, its
+    data cut short): refused by the size it declares against the memory free (64 MB, as this test
+    says), before the data are read."""
+    import io
+    import zipfile
+
+    import numpy as np
+
+    from mitsuba_platonic.files import volume_io
+    from mitsuba_platonic.runtime import budget
+    from mitsuba_platonic.viewer.start import check_source          # platonic view SOURCE's reader
+
+    header = io.BytesIO()
+    np.lib.format.write_array_header_1_0(header, {"descr": "<f4", "fortran_order": False, "shape": (4, 256, 256, 256)})
+    path = tmp_path / "declared.npz"
+    with zipfile.ZipFile(path, "w", zipfile.ZIP_DEFLATED) as z:
+        z.writestr("volume.npy", header.getvalue() + bytes(1024))            # magic, header, 1 kB of data
+    monkeypatch.setattr(budget, "available_memory", lambda: (64 * 2 ** 20, "this test"))
+    with pytest.raises(volume_io.VolumeFileError) as e:
+        check_source(path)
+    assert str(e.value).startswith(f"'{path}': its array 'volume' of shape (4, 256, 256, 256) needs at least "), e.value
+    assert "this test" in str(e.value)
+    monkeypatch.undo()                                   # with the memory there is: read, and cut short
+    with pytest.raises(volume_io.VolumeFileError, match="could not read array 'volume'"):
+        check_source(path)
+
+
+def test_a_run_whose_config_asks_for_networks_that_cannot_fit_is_one_line(tiny_run, tmp_path):
+    """``model.width: 100000`` in a run's checkpoint (its weights of width 4): ``generate`` refused
+    before any network is allocated, naming the width."""
+    import shutil
+
+    import torch
+
+    from mitsuba_platonic.files.checkpoint import save_checkpoint
+
+    run = tmp_path / "r"
+    shutil.copytree(tiny_run, run)
+    for path in (run / "checkpoints").glob("*.pt"):
+        state = torch.load(path, weights_only=True)
+        state["config"]["model"]["width"] = 100000
+        save_checkpoint(path, state)
+    code, _, err = run_cli(["generate", "--run", str(run), "-n", "1", "--out", str(tmp_path / "g")])
+    assert code == 2
+    err = one_line(err, "generate", kind="error")
+    assert "model.width: 100000" in err and "GB of memory" in err, err
+
+
+def test_a_config_file_larger_than_any_config_is_refused_unread(tmp_path):
+    from mitsuba_platonic.files.fileio import MAX_TEXT_BYTES
+
+    big = tmp_path / "big.yaml"
+    big.write_text("run:\n  name: " + "x" * (MAX_TEXT_BYTES + 1) + "\n")
+    with pytest.raises(ValueError, match=rf"config file '{big}' is [0-9,]+ bytes, more than the "):
+        load_config(big)

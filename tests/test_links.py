@@ -196,7 +196,7 @@ def test_make_dataset_resume_refuses_a_linked_image_folder_of_a_half_written_col
 
 
 @pytest.mark.parametrize("part, kind", [("report.md", "file"), ("results.json", "file"), ("figures", "folder"),
-                                        ("platonic.json", "file")])
+                                        ("platonic.json", "file"), ("platonic.lock", "file")])
 def test_evaluate_refuses_an_out_folder_whose_part_is_a_link(tmp_path, part, kind):
     out = tmp_path / "eval"
     out.mkdir()

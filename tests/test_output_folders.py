@@ -1,12 +1,16 @@
-"""An output folder the user made is not overwritten (issue 46): ``evaluate``, ``quickstart`` (and
-``--photos``) and ``compare`` write into a new or empty ``--out``, or one they made before (marked by
+"""An output folder the user made is not overwritten (issues 46, 60): ``evaluate``, ``quickstart`` (and
+``--photos``), ``compare`` and ``bench`` write into a new or empty ``--out``, or one they made before (marked by
 ``platonic.json``; a quickstart continues there); any other folder that holds something is refused
-with one line, nothing in it changed, unless ``--overwrite``. And ``~`` in the config's paths means
-the home folder, never a folder literally named ``~``."""
+with one line, nothing in it changed, unless ``--overwrite``. One command at a time writes into an
+``--out`` (``platonic.lock``): a second is refused with one line naming the first. And ``~`` in the
+config's paths means the home folder, never a folder literally named ``~``."""
 
 from __future__ import annotations
 
 import json
+import os
+import subprocess
+import sys
 from pathlib import Path
 from types import SimpleNamespace
 
@@ -15,7 +19,7 @@ import pytest
 from mitsuba_platonic.config import load_config
 from mitsuba_platonic.errors import Interrupted
 from mitsuba_platonic.evaluate import report as E
-from mitsuba_platonic.files.outputs import MARKER, made_by
+from mitsuba_platonic.files.outputs import LOCK, MARKER, made_by, output_lock
 from cli_runner import one_line, run_cli
 
 
@@ -168,6 +172,110 @@ def test_compare_refuses_a_users_compare_json_and_redoes_its_own(tmp_path):
     assert (out / "notes.txt").read_text() == "keep\n"
     code, _, stderr = _compare(out)                                    # its own: redone in place
     assert code == 0, stderr
+
+
+# --------------------------------------------------------------------------- bench
+
+
+@pytest.fixture
+def benched(monkeypatch):
+    """bench with its measurements replaced by an empty result: what it writes, and where, is real."""
+    import mitsuba_platonic.bench as B
+    from mitsuba_platonic.bench import report
+
+    calls = []
+
+    def run_bench(settings, log=print):
+        calls.append(settings)
+        return {"meta": {"settings": {"batch": 2}}, "views": {}, "rows": [], "train": []}
+
+    monkeypatch.setattr(B, "run_bench", run_bench)
+    monkeypatch.setattr(report, "markdown_tables", lambda result, plot_dir=None: "(tables)")
+    return calls
+
+
+def _bench(out: Path, *extra: str):
+    return run_cli(["bench", "--quick", "--resolutions", "16", "--out", str(out), *extra])
+
+
+def test_bench_refuses_a_users_folder_and_overwrites_only_when_asked(tmp_path, benched):
+    out = tmp_path / "b"
+    _users_folder(out, "bench.md")
+    before = _snapshot(out)
+    code, _, stderr = _bench(out)
+    assert code == 2
+    _refused(stderr, "bench", out)
+    assert _snapshot(out) == before and not benched                  # refused before any measurement
+    code, _, stderr = _bench(out, "--overwrite")
+    assert code == 0, stderr
+    assert (out / "bench.md").read_text().startswith("# platonic bench") and (out / "notes.txt").read_text() == "keep\n"
+    assert made_by(out) == "platonic bench" and not (out / LOCK).exists()
+    code, _, stderr = _bench(out)                                      # its own: redone in place
+    assert code == 0 and len(benched) == 2, stderr
+
+
+@pytest.mark.parametrize("where", ["bench.md", "out"])
+def test_bench_writes_nothing_through_a_link(tmp_path, benched, where):
+    """``--out``'s ``bench.md`` a link to a user's file: refused, naming the link; ``--out`` itself a link
+    to a user's folder: refused as that folder is (it holds their files); the targets as they were."""
+    outside = tmp_path / "outside"
+    _users_folder(outside, "bench.md")
+    before = _snapshot(outside)
+    out = tmp_path / "b"
+    if where == "out":
+        out.symlink_to(outside)
+    else:
+        out.mkdir()
+        (out / "bench.md").symlink_to(outside / "bench.md")
+    code, _, stderr = _bench(out, *(["--overwrite"] if where == "bench.md" else []))
+    assert code == 2 and not benched
+    err = one_line(stderr, "bench", "error")
+    assert (f"{out / 'bench.md'} is a symbolic link" in err) if where == "bench.md" else ("did not write" in err), err
+    assert _snapshot(outside) == before
+
+
+_HOLD = """
+import sys, time
+from mitsuba_platonic.files.outputs import output_lock
+with output_lock(sys.argv[1], sys.argv[2]):
+    print("held", flush=True)
+    time.sleep(600)
+"""
+
+
+def test_a_second_evaluate_into_the_same_out_is_refused_naming_the_first(tmp_path, scored):
+    """Two evaluations into one ``--out`` at once would mix their reports: the second is refused
+    before any scoring, with one line naming the first's pid; once it has ended the folder is free."""
+    out = tmp_path / "eval"
+    holder = subprocess.Popen([sys.executable, "-c", _HOLD, str(out), "evaluate"], stdout=subprocess.PIPE, text=True,
+                              stdin=subprocess.DEVNULL)
+    try:
+        assert holder.stdout.readline().strip() == "held"
+        code, _, stderr = run_cli(["evaluate", "--run", "r", "--out", str(out), "--quiet"])
+        assert code == 2 and not scored, stderr
+        err = one_line(stderr, "evaluate", "error")
+        assert f"--out {out} is in use" in err and f"pid {holder.pid}, platonic evaluate" in err, err
+        assert not (out / "report.md").exists()
+    finally:
+        holder.kill()
+        holder.wait()
+    code, _, stderr = run_cli(["evaluate", "--run", "r", "--out", str(out), "--quiet"])
+    assert code == 0 and len(scored) == 1, stderr
+    assert not (out / LOCK).exists()                                  # released at the end
+
+
+@pytest.mark.parametrize("command", ["bench", "compare", "quickstart"])
+def test_every_output_folder_command_takes_the_lock(tmp_path, benched, stopped_training, command):
+    out = tmp_path / "o"
+    argv = {"bench": ["bench", "--quick", "--resolutions", "16"],
+            "compare": ["compare", "--resolution", "8", "--views", "1", "--repeats", "1", "--models", "vh"],
+            "quickstart": ["quickstart", "--quiet"]}[command]
+    with output_lock(out, "evaluate"):
+        code, _, stderr = run_cli([*argv, "--out", str(out)])
+        assert code == 2, stderr
+        assert f"pid {os.getpid()}, platonic evaluate" in one_line(stderr, command, "error")
+        assert sorted(p.name for p in out.iterdir()) == [LOCK] and not benched and not stopped_training
+    assert not out.exists()                                           # made for the lock alone: removed again
 
 
 # --------------------------------------------------------------------------- ~ in the config

@@ -21,6 +21,7 @@ from mitsuba_platonic.data.photos import (
     split_counts,
     srgb_decoding_table,
 )
+from mitsuba_platonic.data.photos.mask import border_background
 
 TREE = (Path(__file__).resolve().parents[2] / "shared" / "data" / "tree").resolve()  # the loader resolves links
 needs_tree = pytest.mark.skipif(not TREE.is_dir(), reason=f"{TREE} is absent")
@@ -690,3 +691,40 @@ def test_removed_options_are_refused(tmp_path, removed):
     save(blob(0), tmp_path / "x.png")
     with pytest.raises(TypeError):
         PhotoCollection(tmp_path, 8, "all", **removed)
+
+
+def _on(colour, border, name, folder):
+    """A JPEG photo of a ``colour`` box on a ``border``-coloured background."""
+    arr = np.full((48, 64, 3), border, np.uint8)
+    arr[12:36, 16:48] = colour
+    save(Image.fromarray(arr), folder / name, quality=95)
+
+
+def test_photos_without_transparency_are_named_and_a_background_that_is_not_white_is_told(tmp_path):
+    """``data.background: white`` on photos on black (JPEGs, and PNGs whose alpha is opaque everywhere)
+    trained without a word, every mask the whole frame: one warning names the photos without
+    transparency (counts and examples) and those whose border is not white."""
+    for i in range(5):
+        _on((200, 80 + 20 * i, 40), 0, f"black_{i}.jpg", tmp_path)          # distinct: no duplicates
+    _on((30, 60, 150), 255, "white_0.jpg", tmp_path)
+    opaque = np.zeros((48, 64, 4), np.uint8)
+    opaque[..., 3] = 255
+    opaque[12:36, 16:48, :3] = 90
+    save(rgba(opaque), tmp_path / "opaque.png")
+    cut = np.zeros((48, 64, 4), np.uint8)
+    cut[12:36, 16:48] = (90, 90, 90, 255)
+    save(rgba(cut), tmp_path / "cut_out.png")                       # real transparency: not named
+    with pytest.warns(PhotoCollectionWarning) as caught:
+        c = PhotoCollection(tmp_path, 16, "all", background="white")
+    lines = [str(w.message) for w in caught]
+    assert len(lines) == 1, lines
+    line = lines[0]
+    assert line.startswith("7 of 8 usable photo(s) have no transparency and were masked as photos on a white "
+                           "background (data.background: white): black_0.jpg, black_1.jpg, black_2.jpg and 4 more; "
+                           "but 6 of them do not show a white background around the object (6 on black: black_0.jpg, "
+                           "black_1.jpg, black_2.jpg and 3 more)"), line
+    assert "white_0.jpg" not in line.split("; but")[1] and "cut_out.png" not in line
+    assert len(c) == 8
+    assert border_background(np.full((4, 4, 3), 250, np.uint8), 255) == "white"
+    assert border_background(np.full((4, 4, 3), 5, np.uint8), 255) == "black"
+    assert border_background(np.full((4, 4, 3), 128, np.uint8), 255) == "other"

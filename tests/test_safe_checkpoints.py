@@ -190,6 +190,27 @@ def test_a_checkpoint_with_other_objects_is_refused_then_converted_knowingly(run
     assert read_checkpoint(run_dir).step == 4 and read_checkpoint(run_dir).path == last
 
 
+def test_a_plain_pickle_checkpoint_is_converted_as_its_refusal_advises(run_dir, tmp_path):
+    """A ``last.pt`` written by ``pickle.dump`` (not ``torch.save``) holding numpy values: the refusal
+    advises ``platonic convert-checkpoint``, and that (with ``--yes``) converts it (torch.load cannot
+    read a plain pickle: "Invalid magic number" was a traceback)."""
+    import pickle
+
+    last = run_dir / "checkpoints" / "last.pt"
+    state = torch.load(last, weights_only=True)
+    state["step"] = np.int64(state["step"])
+    with open(last, "wb") as f:
+        pickle.dump(state, f)
+    code, _, stderr = run_cli(["generate", "--run", str(run_dir), "-n", "1", "--out", str(tmp_path / "g")])
+    assert code == 2
+    advice = f"platonic convert-checkpoint {last}"
+    assert advice in one_line(stderr, "generate", kind="error"), stderr
+    code, stdout, stderr = run_cli(["convert-checkpoint", "--yes", str(last)])
+    assert code == 0, stderr
+    assert f"{last}: converted (it held numpy" in stdout, stdout
+    assert type(load_checkpoint(last)["step"]) is int and read_checkpoint(run_dir).step == 4
+
+
 @pytest.mark.parametrize("message, refused", [
     ("Weights only load failed...\nUnsupported global: GLOBAL posix.system was not an allowed global", "posix.system"),
     ("Trying to load unsupported GLOBAL subprocess.Popen whose module subprocess is blocked.", "subprocess.Popen"),

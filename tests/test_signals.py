@@ -130,3 +130,43 @@ def test_a_signal_while_the_console_script_loads_is_one_line(tmp_path, sig):
     err = r.stderr.strip()
     what = "terminated (SIGTERM)" if sig == "SIGTERM" else "interrupted"
     assert err == f"platonic: {what}: while starting; nothing was written", err
+
+
+#: The ``platonic`` console script as pip writes it, with a Ctrl-C as ``{module}`` is imported: while
+#: the package itself imports (its LLVM search), before the console script has caught the signals.
+_CONSOLE_SCRIPT = """import os, signal, sys
+class Interrupt:
+    def find_spec(self, name, path=None, target=None):
+        if name == "{module}":
+            os.kill(os.getpid(), signal.SIGINT)
+        return None
+sys.meta_path.insert(0, Interrupt())
+import re
+from mitsuba_platonic.console import main
+if __name__ == '__main__':
+    sys.argv[0] = re.sub(r'(-script\\.pyw|\\.exe)?$', '', sys.argv[0])
+    sys.exit(main())
+"""
+
+
+@pytest.mark.parametrize("module", ["mitsuba_platonic.runtime.backend", "mitsuba_platonic.errors"],
+                         ids=["the package's LLVM search", "the console script's own modules"])
+def test_ctrl_c_while_the_package_imports_is_one_line_and_ends_by_the_signal(tmp_path, module):
+    """The first ~100 ms: a Ctrl-C in the package's ``__init__`` (``preselect_libllvm``) came before the
+    console script caught the signals, a ``KeyboardInterrupt`` traceback."""
+    script = tmp_path / "bin" / "platonic"
+    script.parent.mkdir()
+    script.write_text(_CONSOLE_SCRIPT.format(module=module))
+    env = {**os.environ, "PYTHONPATH": os.pathsep.join([str(Path(__file__).resolve().parents[1]),
+                                                         os.environ.get("PYTHONPATH", "")])}
+    r = subprocess.run([sys.executable, str(script), "--version"], capture_output=True, text=True, timeout=300,
+                       stdin=subprocess.DEVNULL, cwd=tmp_path, env=env)
+    assert r.returncode == -signal.SIGINT, r.stderr
+    assert r.stderr.strip() == "platonic: interrupted: while starting; nothing was written", r.stderr
+
+
+def test_importing_the_package_elsewhere_leaves_pythons_exception_hook_alone():
+    r = subprocess.run([sys.executable, "-c", "import sys; hook = sys.excepthook; import mitsuba_platonic; "
+                                              "print(sys.excepthook is hook)"],
+                       capture_output=True, text=True, timeout=300, stdin=subprocess.DEVNULL)
+    assert r.stdout.strip() == "True", r.stderr

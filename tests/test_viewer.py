@@ -308,6 +308,19 @@ def test_a_busy_port_names_the_flag(volume_file):
     assert f"--port {port}" in one_line(err, "view", "error") and "choose another --port" in err
 
 
+@pytest.mark.parametrize("host, says", [("999.1.1.1", "resolves"), ("no-such-host.invalid", "resolves"),
+                                        ("192.0.2.1", "not an address of this machine")])
+def test_a_host_that_is_not_this_machines_is_one_line_at_once(volume_file, tmp_path, host, says):
+    """``--host`` resolved and bound before anything else, also with ``--port 0``: an address that
+    cannot be resolved, or one of another machine (192.0.2.1: TEST-NET-1), was 90 s of silence."""
+    done = subprocess.run([sys.executable, "-m", "mitsuba_platonic.cli", "view", str(volume_file), "--host", host,
+                           "--port", "0"], capture_output=True, text=True, timeout=120, stdin=subprocess.DEVNULL,
+                          cwd=tmp_path)
+    assert done.returncode == 2, done.stderr
+    err = one_line(done.stderr, "view", "error")
+    assert err.startswith(f"platonic view: error: --host {host}: ") and says in err, err
+
+
 #: ``platonic view`` with stdout probed: as the address line is written, whether torch has loaded.
 _PROBE = """
 import sys
@@ -933,3 +946,64 @@ def test_the_browsers_default_camera_before_the_initial_one_is_not_drawn():
     late = _camera_view(placed=False, since_connect=CONNECT_S + 0.5)
     late._camera(default)                                  # no echo came in time: the report counts
     assert late.placed and late.wake.is_set() and late.view[2] < -0.99
+
+
+def test_a_pages_camera_that_is_not_finite_or_far_off_is_ignored_with_one_line(capsys):
+    """A camera message with NaN, or 1e308 (past any float's square), is one line in the log: the view
+    and the frame stay as they were, nothing is rendered and no traceback reaches viser's log."""
+    from types import SimpleNamespace
+
+    v = _camera_view(placed=True, since_connect=5.0)
+    for position, look_at in (((math.nan, 0.0, 4.0), (0.0, 0.0, 0.0)), ((1e308, 1e308, 1e308), (0.0, 0.0, 0.0)),
+                              ((0.0, 0.0, 4.0), (0.0, -1e308, 0.0))):
+        v._camera(SimpleNamespace(position=position, look_at=look_at))
+        assert not v.wake.is_set() and tuple(v.view) == (0.0, 0.0, 1.0) and v.window is None
+        err = capsys.readouterr().err
+        assert err.startswith("platonic view: ignored a camera from a page: ") and err.count("\n") == 1, err
+    v._camera(SimpleNamespace(position=(4.0, 0.0, 0.0), look_at=(0.0, 0.0, 0.0)))   # a good one still counts
+    assert v.wake.is_set() and v.view[0] > 0.99
+
+
+def test_a_pages_seed_outside_the_generators_range_is_refused_with_one_line(capsys):
+    """A generation run's seed of 2⁶³ (or NaN, or 1e308) is refused as ``generate --seed`` refuses it:
+    one line, no latent drawn; a walk outside [0, 1] likewise; 2⁶³ − 1 is drawn."""
+    import threading
+    from types import SimpleNamespace
+
+    from mitsuba_platonic.viewer import app as A
+
+    drawn = []
+    scene = SimpleNamespace(show_latent=lambda a, b, t: drawn.append((a, b, t)))
+    v = object.__new__(A.ClientView)
+    v.app = SimpleNamespace(scene=scene, scene_lock=threading.RLock(), volume_changed=lambda: None)
+    for seed, walk in ((2 ** 63, 0.0), (math.nan, 0.0), (1e308, 0.0), (-1, 0.0), (1, 2.0), (1, math.nan)):
+        v.seed, v.seed_b, v.walk = (SimpleNamespace(value=seed), SimpleNamespace(value=2),
+                                    SimpleNamespace(value=walk))
+        v._latent()
+        err = capsys.readouterr().err
+        assert err.startswith("platonic view: ignored ") and err.count("\n") == 1 and "Traceback" not in err, err
+    assert drawn == []
+    v.seed, v.walk = SimpleNamespace(value=A.MAX_SEED), SimpleNamespace(value=0.5)
+    v._latent()
+    assert drawn == [(A.MAX_SEED, 2, 0.5)]
+
+
+def test_a_pages_spp_and_resolution_past_the_controls_are_held_to_them(capsys):
+    """spp 1e9 (the slider stops at 64) was a Dr.Jit error: it is held to 64, with one line in the log."""
+    import threading
+    from types import SimpleNamespace
+
+    from mitsuba_platonic.viewer import app as A
+
+    v = _camera_view(placed=True, since_connect=5.0)
+    v.app = SimpleNamespace(scene=SimpleNamespace(volume=torch.zeros(4, N, N, N)), version=0)
+    v.renderer, v.formation, v.low = (SimpleNamespace(value="path tracer"), SimpleNamespace(value="EA"),
+                                      SimpleNamespace(value=False))
+    v.resolution, v.spp = SimpleNamespace(value=str(N)), SimpleNamespace(value=1e9)
+    key, _, _ = v._request()
+    assert key[4] == A.MAX_SPP and key[3] == N
+    assert capsys.readouterr().err == f"platonic view: ignored path tracer spp {1e9!r} from a page: held to 64 (1 … 64)\n"
+    v.resolution, v.spp = SimpleNamespace(value="100000"), SimpleNamespace(value=4)
+    key, _, _ = v._request()
+    assert key[4] == 4 and key[3] == resolutions_for(N)[-1]
+    assert "ignored resolution '100000' from a page: held to" in capsys.readouterr().err

@@ -9,6 +9,8 @@ import shutil
 from pathlib import Path
 from typing import Any, Dict, List, Optional, Sequence, Tuple
 
+from ..files.fileio import atomic_write, write_text
+
 __all__ = ["markdown_tables", "pareto_plot", "write_outputs", "write_doc", "DOC_BEGIN", "DOC_END"]
 
 #: Markers around the generated section of docs/speed_accuracy.md.
@@ -215,17 +217,14 @@ def pareto_plot(rows: List[Dict[str, Any]], path: Path, title: str) -> Path:
         _place_labels(ax2, [(r["fwd_bwd_ms"], max(r["rmse"], floor), r["config"], "dimgrey") for r in others])
     fig.tight_layout()
     _place_labels(ax, labels)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fig.savefig(path)
+    atomic_write(path, lambda tmp: fig.savefig(tmp))       # whole or not at all, never through a link
     return path
 
 
 def write_outputs(result: Dict[str, Any], out: Path) -> Dict[str, Any]:
     """Write ``bench.json``, ``bench.md`` and the Pareto plots into ``out``; return their paths."""
     out = Path(out)
-    out.mkdir(parents=True, exist_ok=True)
-    js = out / "bench.json"
-    js.write_text(json.dumps(result, indent=1, allow_nan=False))
+    js = write_text(out / "bench.json", json.dumps(result, indent=1, allow_nan=False))
     plots = []
     keys = []
     for r in result["rows"]:
@@ -236,8 +235,7 @@ def write_outputs(result: Dict[str, Any], out: Path) -> Dict[str, Any]:
         plots.append(pareto_plot(sel, out / f"pareto_{model}_{n}.png",
                                  f"{model.upper()} at {n}³, batch {result['meta']['settings']['batch']}: "
                                  f"image error vs forward+backward time"))
-    md = out / "bench.md"
-    md.write_text("# platonic bench\n\n" + markdown_tables(result, plot_dir=".") + "\n")
+    md = write_text(out / "bench.md", "# platonic bench\n\n" + markdown_tables(result, plot_dir=".") + "\n")
     return {"json": js, "markdown": md, "plots": plots}
 
 

@@ -15,6 +15,7 @@ from typing import List
 
 from ..errors import Interrupted
 from ..files.fileio import confined
+from ..files.outputs import output_lock
 from .args import CLIError, non_negative_int, positive_int, seed
 
 __all__ = ["add_reconstruct", "add_generate"]
@@ -39,7 +40,7 @@ def _cmd_reconstruct(args: argparse.Namespace) -> int:
     written: List[Path] = []
     done_inputs = 0
     try:
-        with confined(out):                                  # nothing written through a link --out holds
+        with confined(out), output_lock(out, "reconstruct"):   # no write through a link, one command at a time
             for path, done in export_reconstructions(model, args.images, out, background=args.background,
                                                      crop=args.crop, level=args.level, overwrite=args.overwrite,
                                                      written=written):
@@ -88,7 +89,7 @@ def _cmd_generate(args: argparse.Namespace) -> int:
     out = Path(args.out) if args.out else Path(args.run) / "generated"
     written: List[Path] = []
     try:
-        with confined(out):                                  # nothing written or deleted through a link --out holds
+        with confined(out), output_lock(out, "generate"):    # no write or deletion through a link, one at a time
             export_samples(model, args.n, out, seed=args.seed, overwrite=args.overwrite, written=written,
                            progress=not args.quiet, cell=args.cell, turntables=args.turntable,
                            interpolation=args.interpolate)

@@ -14,11 +14,11 @@ import json
 import math
 import sys
 from pathlib import Path
-from typing import TYPE_CHECKING, Any, Dict, List
+from typing import TYPE_CHECKING, Any, Dict, List, Tuple
 
 from ..files.fileio import confined
-from ..files.outputs import MARKER, claim_output_folder
-from .args import CLIError, check_out_folder, parse_models, positive_float, positive_int, resolution, seed
+from ..files.outputs import MARKER, check_output_folder, claim_output_folder, output_lock
+from .args import CLIError, parse_models, positive_float, positive_int, resolution, seed
 
 if TYPE_CHECKING:
     import torch
@@ -75,7 +75,7 @@ def _cmd_compare_light(args: argparse.Namespace, volume, views) -> int:
         raise CLIError(f"--spp: single scattering's rays per pixel: expected a square number (1, 4, 9, …), "
                        f"got {args.spp}")
     out = Path(args.out)
-    with confined(out, COMPARE_PARTS):                      # a link in the folder is refused before any work
+    with confined(out, COMPARE_PARTS), output_lock(out, "compare"):   # no link, one command at a time in --out
         claim_output_folder(out, "compare", args.overwrite, earlier=_earlier_comparison)
         return _compare_light_into(args, volume, views, out)
 
@@ -104,6 +104,7 @@ def _compare_light_into(args: argparse.Namespace, volume: "torch.Tensor", views:
 def _cmd_compare(args: argparse.Namespace) -> int:
     from ..render.compare import check_memory, comparison_views
     from ..files.volume_io import BUILTIN_PREFIX, load_volume
+    from ..runtime import budget
 
     if not args.light:
         _check_compare_settings(args)
@@ -111,7 +112,7 @@ def _cmd_compare(args: argparse.Namespace) -> int:
         n = 32 if args.resolution is None else args.resolution
         check_memory(n, args.views, builtin=True,
                      what=f"--resolution {n}" if args.resolution is not None else f"--volume {args.volume}")
-    volume = load_volume(args.volume, args.resolution)
+    volume = load_volume(args.volume, args.resolution, fits=budget.memory_check("use a smaller --volume"))
     if not args.volume.startswith(BUILTIN_PREFIX):
         check_memory(volume.shape[-1], args.views, what=f"--volume {args.volume}")
     if args.light:
@@ -127,7 +128,7 @@ def _cmd_compare(args: argparse.Namespace) -> int:
     views = comparison_views(args.views, seed=args.seed)
     options = {"step": args.step, "spp": args.spp, "jitter": args.jitter, "seed": args.seed}
     out = Path(args.out)
-    with confined(out, COMPARE_PARTS):                      # a link in the folder is refused before any work
+    with confined(out, COMPARE_PARTS), output_lock(out, "compare"):   # no link, one command at a time in --out
         claim_output_folder(out, "compare", args.overwrite, earlier=_earlier_comparison)
         return _compare_into(args, volume, views, models, options, out)
 
@@ -210,11 +211,37 @@ def add_compare(sub: "argparse._SubParsersAction") -> None:
 # --------------------------------------------------------------------------- bench
 
 
+def bench_parts() -> Tuple[str, ...]:
+    """What bench writes into ``--out`` by fixed names (:func:`~mitsuba_platonic.files.fileio.confined`:
+    none may be a link): the marker, ``bench.json``, ``bench.md`` and every Pareto plot it can draw."""
+    from ..bench import RESOLUTIONS
+    from ..volume import MODELS
+
+    return (MARKER, "bench.json", "bench.md", *(f"pareto_{m}_{n}.png" for m in MODELS for n in RESOLUTIONS))
+
+
+def _earlier_bench(out: Path) -> bool:
+    """Whether ``out`` holds a bench written before :data:`~mitsuba_platonic.files.outputs.MARKER`
+    existed: a ``bench.json`` with the keys bench writes beside a ``bench.md`` that starts as its do."""
+    try:
+        data = json.loads((out / "bench.json").read_text())
+        return (isinstance(data, dict) and set(data) == {"meta", "views", "rows", "train"}
+                and (out / "bench.md").read_text().startswith("# platonic bench\n"))
+    except (OSError, ValueError):
+        return False
+
+
 def _cmd_bench(args: argparse.Namespace) -> int:
+    out = Path(args.out)
+    with confined(out, bench_parts()), output_lock(out, "bench"):   # no link, one command at a time in --out
+        check_output_folder(out, "bench", args.overwrite, earlier=_earlier_bench)   # before the run
+        return _bench_into(args, out)
+
+
+def _bench_into(args: argparse.Namespace, out: Path) -> int:
+    """``bench`` into the confined, locked folder ``out``, checked already; marked before its results are written."""
     from ..bench import DOC_BEGIN, DOC_END, BenchSettings, run_bench, write_doc, write_outputs
 
-    out = Path(args.out)
-    check_out_folder(out)
     if args.doc is not None and not Path(args.doc).is_file():
         raise CLIError(f"--doc {args.doc!r} is not a file")
     if args.doc is not None:                                 # before the run, not after it
@@ -229,6 +256,7 @@ def _cmd_bench(args: argparse.Namespace) -> int:
                              train=not args.no_train,
                              train_steps=args.train_steps)
     result = run_bench(settings, log=lambda line: print(line, flush=True))
+    claim_output_folder(out, "bench", args.overwrite, earlier=_earlier_bench)
     written = write_outputs(result, out)
     print("wrote:")
     for p in [written["json"], written["markdown"], *written["plots"]]:
@@ -276,7 +304,11 @@ def add_bench(sub: "argparse._SubParsersAction") -> None:
     p.add_argument("--quick", action="store_true",
                    help="a reduced set: the smallest resolution, fewer configurations, one timed call, "
                         "path tracer at spp 1 only, one training step (seconds at 16³, batch 2)")
-    p.add_argument("--out", default="bench", help="output folder (default: %(default)s/)")
+    p.add_argument("--out", default="bench", help="output folder: new, empty or an earlier bench's "
+                                                  "(default: %(default)s/)")
+    p.add_argument("--overwrite", action="store_true",
+                   help="write into an --out that holds files bench did not write, replacing those of its names "
+                        "(bench.json, bench.md, pareto_*.png)")
     p.add_argument("--doc", default=None,
                    help="also rewrite the generated section of this Markdown file, e.g. docs/speed_accuracy.md, "
                         "and copy the plots next to it")

@@ -31,6 +31,9 @@ __all__ = ["add_view"]
 def _cmd_view(args: argparse.Namespace) -> int:
     if not 0 <= args.port <= 65535:
         raise CLIError(f"--port: expected 0 … 65535, got {args.port}")
+    from ..viewer.start import address, check_port, check_source, start_server, stop_server, volume_title
+
+    check_port(args.host, args.port)                       # first: --host resolved and bound, a busy port at once
     out = Path(args.out)
     check_out_folder(out)
     try:
@@ -38,9 +41,6 @@ def _cmd_view(args: argparse.Namespace) -> int:
     except ImportError:
         raise CLIError("the viewer needs the 'viewer' extra: pip install 'mitsuba-platonic[viewer]' "
                        "(or pip install -e '.[viewer]' in a checkout)") from None
-    from ..viewer.start import address, check_port, check_source, start_server, stop_server, volume_title
-
-    check_port(args.host, args.port)                       # before loading anything: a busy port says so at once
     array = check_source(args.source, args.photo)          # a volume file's array (numpy), None for a run folder
     scene = None if array is not None else _open(args, None)
     server = start_server(args.host, args.port)

@@ -33,6 +33,7 @@ from typing import Any, Dict, List, Union
 
 import yaml
 
+from ..files.fileio import read_input_text
 from ..files.resources import config_names, config_path
 from ..settings_checks import QUOTE_LIMIT, ConfigError, quoted
 
@@ -145,7 +146,7 @@ def merge_sections(parent: Dict[str, Any], child: Dict[str, Any]) -> Dict[str, A
 def _read(path: Path) -> Dict[str, Any]:
     """One file's mapping, as written (``extends:`` included)."""
     try:
-        data = load_yaml(path.read_text())
+        data = load_yaml(read_input_text(path, "config file"))   # a regular file, at most 16 MiB
     except UnicodeDecodeError:
         raise ConfigError(f"{path}: not a YAML text file (not UTF-8 text)") from None
     except yaml.YAMLError as e:

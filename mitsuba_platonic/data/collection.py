@@ -31,7 +31,7 @@ import numpy as np
 import torch
 
 from ..errors import Interrupted, UserError, raise_if_ctrl_c
-from ..files.fileio import atomic_write, confined, make_folder, open_file, remove
+from ..files.fileio import InputFileRefused, atomic_write, check_input_file, confined, make_folder, open_file, remove
 from ..files.volume_io import write_vol
 from ..images import save_exr, save_png, to_hwc, to_png_rgba
 from ..render import render
@@ -76,10 +76,10 @@ def recorded_images(folder: Union[str, Path]) -> int:
     ``records.jsonl`` (0 where there is none), read in blocks."""
     lines = 0
     try:
-        with open(Path(folder) / "records.jsonl", "rb") as f:
+        with open(check_input_file(Path(folder) / "records.jsonl"), "rb") as f:   # no FIFO: it would block
             for block in iter(lambda: f.read(1 << 20), b""):
                 lines += block.count(b"\n")
-    except OSError:
+    except (OSError, InputFileRefused):                     # none, or no file: the records' reader refuses it
         return 0
     return lines
 

@@ -30,7 +30,7 @@ from pathlib import Path
 from typing import Any, Dict, Iterator, List, Optional, Set, Union
 
 from ..errors import UserError
-from ..files.fileio import atomic_write, open_file, remove
+from ..files.fileio import atomic_write, open_file, read_input_text, remove
 from .collection_spec import CollectionSpec, json_kind
 
 __all__ = ["SUBFOLDERS", "RECORDS", "image_id", "load_manifest", "manifest_problem", "read_spec", "read_records",
@@ -60,7 +60,7 @@ def read_records(path: Path) -> Dict[str, Dict[str, Any]]:
     """``records.jsonl`` as ``{image id: record}``; a torn line (a crash while appending) is skipped."""
     records: Dict[str, Dict[str, Any]] = {}
     if path.exists():
-        for line in path.read_text().splitlines():
+        for line in read_input_text(path, max_bytes=None).splitlines():
             try:
                 r = json.loads(line)
                 records[r["id"]] = r
@@ -73,7 +73,7 @@ def read_spec(spec_file: Path) -> "CollectionSpec":
     """The spec ``collection.json`` records; UserError naming the file if it is damaged (it
     says what the images on disk were made with: nothing can resume or be deleted without it)."""
     try:
-        return CollectionSpec.from_dict(json.loads(spec_file.read_text()))
+        return CollectionSpec.from_dict(json.loads(read_input_text(spec_file, max_bytes=None)))
     except ValueError as e:                                   # not JSON, not UTF-8, not a spec (UserError)
         why = " ".join(str(e).split())
         raise UserError(f"{spec_file} is damaged ({why}); it records the settings the collection in "
@@ -106,7 +106,7 @@ def load_manifest(folder: Union[str, Path]) -> Dict[str, Any]:
         raise FileNotFoundError(f"{folder} has no manifest.json: the collection is unfinished "
                                 f"(re-run make-dataset with the same settings to finish it)")
     try:
-        m = json.loads(path.read_text())
+        m = json.loads(read_input_text(path, max_bytes=None))
         problem = manifest_problem(m)
     except ValueError as e:
         problem = f"not JSON: {' '.join(str(e).split())}"
@@ -131,7 +131,7 @@ def is_finished(manifest_file: Path, spec: CollectionSpec) -> bool:
     A damaged manifest (not JSON, or JSON of another shape) is named in a warning: the
     collection is then finished again, which rebuilds it from ``records.jsonl``."""
     try:
-        m = json.loads(manifest_file.read_text())
+        m = json.loads(read_input_text(manifest_file, max_bytes=None))
         problem = manifest_problem(m)
     except ValueError as e:                                  # not JSON, or not UTF-8
         problem = f"not JSON: {' '.join(str(e).split())}"
@@ -156,7 +156,7 @@ def overwrite_plan(out: Path) -> List[Path]:
         raise UserError(f"overwrite: {out} is not a folder")
     spec: Optional[CollectionSpec] = None
     try:
-        spec = CollectionSpec.from_dict(json.loads((out / "collection.json").read_text()))
+        spec = CollectionSpec.from_dict(json.loads(read_input_text(out / "collection.json", max_bytes=None)))
     except (OSError, ValueError, TypeError, AttributeError):
         pass
     owned = _owned(out, spec) if spec is not None else set()
@@ -203,7 +203,7 @@ def _owned(out: Path, spec: CollectionSpec) -> Set[str]:
             owned |= {f"images/{image_id(i, k)}.png", f"exr/{image_id(i, k)}.exr"}
     named = list(read_records(out / "records.jsonl").values())
     try:
-        named += json.loads((out / "manifest.json").read_text())["images"]
+        named += json.loads(read_input_text(out / "manifest.json", max_bytes=None))["images"]
     except (OSError, ValueError, KeyError, TypeError):
         pass
     for r in named:

@@ -37,6 +37,7 @@ import numpy as np
 import torch
 
 from ..errors import UserError
+from ..files.fileio import check_input_file
 from ..export import extract_mesh
 from ..images import srgb_to_linear
 from ..render import render
@@ -356,7 +357,7 @@ def held_out_truths(records: Sequence[Dict], model: str) -> List[torch.Tensor]:
     for r in records:
         path = Path(r["folder"]) / r["volume"]
         try:
-            vol = torch.from_numpy(np.load(path)["volume"]).float()
+            vol = torch.from_numpy(np.load(check_input_file(path))["volume"]).float()   # no FIFO, no device
         except (OSError, KeyError, ValueError) as e:
             raise UserError(f"cannot read the ground-truth volume {path}: {e}") from None
         out.append(truth_in_input_frame(vol, r["view"], model))

@@ -41,7 +41,7 @@ from ..config.loading import checkpoint_config, model_from_checkpoint
 from ..errors import UserError, raise_if_ctrl_c
 from ..files.checkpoint import read_checkpoint
 from ..files.fileio import confined, make_folder, write_text
-from ..files.outputs import MARKER, check_output_folder, claim_output_folder
+from ..files.outputs import MARKER, check_output_folder, claim_output_folder, output_lock
 from ..model import Model
 from ..render import render
 from ..runtime.progress import progress_bar
@@ -321,7 +321,7 @@ def evaluate_runs(run_dirs: Sequence[PathLike], out_dir: PathLike, n_views: int 
         raise UserError("no run to evaluate: pass at least one --run DIR")
     if limit is not None and (isinstance(limit, bool) or not isinstance(limit, int) or limit < 1):
         raise UserError(f"limit must be a positive int, got {limit!r}")
-    with confined(out_dir, REPORT_PARTS):
+    with confined(out_dir, REPORT_PARTS), output_lock(out_dir, "evaluate"):   # one evaluate at a time in --out
         check_output_folder(out_dir, "evaluate", overwrite, earlier=_earlier_evaluation)   # before any work
         rows, notes, sections, generations = _evaluate_runs(run_dirs, n_views, limit, spp, max_depth, seed, baselines,
                                                             vgg_weights, fid_weights, data_cache, progress, data_path,

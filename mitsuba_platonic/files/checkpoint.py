@@ -247,7 +247,7 @@ def convert_checkpoint(path: Union[str, Path], out: Union[str, Path, None] = Non
         raise
     except Exception as e:                                   # torn or corrupt: nothing to convert
         raise RunError(f"{path} cannot be loaded: {_one_line(e)}") from None
-    state = torch.load(path, map_location="cpu", weights_only=False)     # the user trusts this file
+    state = _unpickle_trusted(path)
     save_checkpoint(target, _to_plain(state, path, "the checkpoint"))
     try:
         _checked(target, torch.device("cpu"))
@@ -255,6 +255,25 @@ def convert_checkpoint(path: Union[str, Path], out: Union[str, Path, None] = Non
         raise RunError(f"{target}: converted to plain data, but it is not a training checkpoint this "
                        f"version reads ({_one_line(e)})") from None
     return refused
+
+
+def _unpickle_trusted(path: Path) -> Any:
+    """The contents of a checkpoint the user trusts, unpickled in full: torch's formats
+    (``torch.save``, its zip or its legacy pickle) by ``torch.load``, a plain ``pickle.dump`` of the
+    state (hand-made tooling; what the safe loader reads as a pickle too) by ``pickle.load``, whose
+    tensors torch's own reducers rebuild. :class:`RunError` naming the file if neither reads it."""
+    with open(path, "rb") as f:
+        zipped = f.read(4).startswith(_ZIP_MAGIC)
+    try:
+        return torch.load(path, map_location="cpu", weights_only=False)     # the user trusts this file
+    except Exception as e:
+        if zipped or "magic number" not in str(e):
+            raise RunError(f"{path} cannot be loaded: {_one_line(e)}") from None
+    try:
+        with open(path, "rb") as f:
+            return pickle.load(f)                                            # the user trusts this file
+    except Exception as e:
+        raise RunError(f"{path} cannot be loaded, neither by torch.load nor as a plain pickle: {_one_line(e)}") from None
 
 
 def _to_plain(value: Any, path: Path, name: str) -> Any:

@@ -16,6 +16,13 @@ written atomically or deleted is replaced or removed itself, never followed (``r
 a link (the user named it); what lies inside may not. ``confined(root, parts)`` checks the
 folder's own layout (``parts``, links as the last part included) on entry, so a command refuses
 before it has done any work, not at its first write.
+
+Reading (:func:`check_input_file`, :func:`read_input_file`, :func:`read_input_text`): every file a
+command reads from a path a user named, or from a folder someone else made (a photo, a volume
+file, a config, a run's records), is checked first: a regular file (not a FIFO, which would block
+the read for ever, nor a device: ``/dev/zero`` reads without end; also through a link), at most a
+size bound, else :class:`InputFileRefused`, one line naming the file. The readers that read whole
+open it without blocking and check what they opened (``fstat``), then read at most the bound.
 """
 
 from __future__ import annotations
@@ -24,6 +31,7 @@ import contextvars
 import errno
 import os
 import re
+import stat
 from contextlib import contextmanager
 from pathlib import Path
 from typing import Any, Callable, Iterable, Iterator, List, Optional, Tuple, Union
@@ -31,7 +39,8 @@ from typing import Any, Callable, Iterable, Iterator, List, Optional, Tuple, Uni
 from ..errors import UserError
 
 __all__ = ["atomic_write", "temporary_name", "remove_temporaries", "interrupt_behind", "LinkRefused", "confined",
-           "check_path", "open_file", "make_folder", "remove", "write_text"]
+           "check_path", "open_file", "make_folder", "remove", "write_text", "InputFileRefused", "check_input_file",
+           "read_input_file", "read_input_text", "MAX_TEXT_BYTES", "MAX_IMAGE_BYTES"]
 
 PathLike = Union[str, Path]
 
@@ -208,3 +217,73 @@ def write_text(path: PathLike, text: str) -> Path:
     path = Path(path)
     atomic_write(path, lambda tmp: tmp.write_text(text))
     return path
+
+
+# --------------------------------------------------------------------------- reading a user's file
+
+#: The largest text file (a config, a run's or a collection's records) a command reads: 16 MiB.
+MAX_TEXT_BYTES = 16 * 2 ** 20
+#: The largest image file a command reads: 1 GiB (Pillow refuses more than 179 megapixels anyway).
+MAX_IMAGE_BYTES = 2 ** 30
+
+
+class InputFileRefused(UserError):
+    """A file to read that is no regular file (``reason`` ``'not_a_file'``) or too large (``'too_large'``)."""
+
+    def __init__(self, message: str, reason: str):
+        super().__init__(message)
+        self.reason = reason
+
+
+def _kind(mode: int) -> str:
+    for test, name in ((stat.S_ISDIR, "a folder"), (stat.S_ISFIFO, "a FIFO (named pipe)"),
+                       (stat.S_ISCHR, "a character device"), (stat.S_ISBLK, "a block device"),
+                       (stat.S_ISSOCK, "a socket")):
+        if test(mode):
+            return name
+    return "not a regular file"
+
+
+def _checked_stat(st: os.stat_result, path: PathLike, what: str, max_bytes: Optional[int]) -> os.stat_result:
+    label = f"{what} {str(path)!r}" if what else repr(str(path))
+    if not stat.S_ISREG(st.st_mode):
+        via = f" (through a link to {os.path.realpath(path)!r})" if os.path.islink(path) else ""
+        raise InputFileRefused(f"{label} is {_kind(st.st_mode)}{via}, not a regular file; nothing was read from "
+                               f"it: name a file", "not_a_file")
+    if max_bytes is not None and st.st_size > max_bytes:
+        raise InputFileRefused(f"{label} is {st.st_size:,} bytes, more than the {max_bytes:,} such a file may be; "
+                               f"nothing was read from it", "too_large")
+    return st
+
+
+def check_input_file(path: PathLike, what: str = "", max_bytes: Optional[int] = None) -> Path:
+    """``path`` after checking that it is (or links to) a regular file of at most ``max_bytes``
+    bytes (None: any size): :class:`InputFileRefused` naming it (``what``: how the command line
+    calls it, ``--photo``) otherwise; ``OSError`` (``FileNotFoundError``) where it cannot be looked at.
+    For readers that take a path (numpy, torch, Pillow); :func:`read_input_file` reads it in one go."""
+    _checked_stat(os.stat(path), path, what, max_bytes)
+    return Path(path)
+
+
+def read_input_file(path: PathLike, what: str = "", max_bytes: Optional[int] = MAX_IMAGE_BYTES) -> bytes:
+    """The bytes of the regular file ``path`` (:func:`check_input_file`'s checks, made on the file
+    opened: a FIFO's open does not block, and what is read is what was checked), at most ``max_bytes``."""
+    fd = os.open(path, os.O_RDONLY | getattr(os, "O_NONBLOCK", 0) | getattr(os, "O_CLOEXEC", 0))
+    try:
+        st = _checked_stat(os.fstat(fd), path, what, max_bytes)
+        if hasattr(os, "set_blocking"):
+            os.set_blocking(fd, True)
+        with os.fdopen(fd, "rb", closefd=False) as f:
+            data = f.read(st.st_size if max_bytes is None else max_bytes + 1)
+    finally:
+        os.close(fd)
+    if max_bytes is not None and len(data) > max_bytes:                # grew since it was looked at
+        _checked_stat(os.stat(path), path, what, max_bytes)
+        raise InputFileRefused(f"{what + ' ' if what else ''}{str(path)!r} is more than the {max_bytes:,} bytes such "
+                               f"a file may be; nothing was read from it", "too_large")
+    return data
+
+
+def read_input_text(path: PathLike, what: str = "", max_bytes: int = MAX_TEXT_BYTES) -> str:
+    """:func:`read_input_file` as UTF-8 text (``UnicodeDecodeError`` where it is not)."""
+    return read_input_file(path, what, max_bytes).decode("utf-8")

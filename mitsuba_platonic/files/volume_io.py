@@ -13,6 +13,13 @@ The one place that knows the two file formats (docs/conventions.md, "Volumes"):
 :func:`save_volume` writes both beside each other, each whole or not at all; :func:`load_volume`
 reads a volume the command line names (``builtin:<kind>`` or a ``.npz`` file).
 
+A file is checked before it is read (:func:`~mitsuba_platonic.files.fileio.check_input_file`: a
+regular file, no FIFO or device), and the size it declares (a ``.npz``'s array header, a ``.vol``'s
+length) is handed to the reader's ``fits`` (the command's memory check,
+:func:`mitsuba_platonic.runtime.budget.memory_check`, which this layer below the machine's does not
+import) before anything of that size is allocated: a small compressed file may declare a volume of
+many gigabytes.
+
 Importing it loads numpy, not torch: :func:`read_volume_array` reads and checks a file with numpy
 alone (``platonic view`` checks its SOURCE before torch has loaded); the functions that return
 tensors import torch when they run.
@@ -21,12 +28,12 @@ tensors import torch when they run.
 from __future__ import annotations
 
 from pathlib import Path
-from typing import TYPE_CHECKING, List, Optional, Union
+from typing import TYPE_CHECKING, Callable, List, Optional, Union
 
 import numpy as np
 
 from ..errors import UserError
-from .fileio import atomic_write, make_folder
+from .fileio import InputFileRefused, atomic_write, check_input_file, make_folder, read_input_file
 
 if TYPE_CHECKING:
     import torch
@@ -36,6 +43,9 @@ __all__ = ["BUILTIN_PREFIX", "VolumeFileError", "to_mitsuba_grid", "read_npz", "
            "load_volume", "write_npz", "write_vol", "save_volume"]
 
 PathLike = Union[str, Path]
+#: A memory check: ``fits(bytes, what)`` raises a :class:`~mitsuba_platonic.errors.UserError` where
+#: ``bytes`` cannot be allocated (:func:`mitsuba_platonic.runtime.budget.memory_check`).
+Fits = Optional[Callable[[int, str], None]]
 
 #: How a built-in test volume is named where a volume file could be: ``builtin:figure``.
 BUILTIN_PREFIX = "builtin:"
@@ -63,9 +73,46 @@ def _existing_file(path: Path) -> "tuple[Path, str]":
     name = str(path)
     if not path.exists():
         raise VolumeFileError(f"volume file {name!r} does not exist")
-    if not path.is_file():
-        raise VolumeFileError(f"volume file {name!r} is not a file")
+    try:
+        check_input_file(path, "volume file")
+    except InputFileRefused as e:
+        raise VolumeFileError(str(e)) from None
     return path, name
+
+
+#: The bytes reading a volume of ``n`` values of ``itemsize`` bytes takes at least: the array as
+#: stored, and its float32 copy (:func:`_checked`).
+def _reading_bytes(n: int, itemsize: int) -> int:
+    return n * (itemsize + 4)
+
+
+def _check_declared(name: str, shape: "tuple[int, ...]", itemsize: int, fits: Fits) -> None:
+    """:class:`VolumeFileError` where ``fits`` refuses the bytes reading the array of ``shape`` that
+    file ``name`` declares takes (before it is allocated); nothing is checked without ``fits``."""
+    if fits is None:
+        return
+    n = int(np.prod(shape, dtype=object)) if shape else 1
+    try:
+        fits(_reading_bytes(n, itemsize), f"{name!r}: its array 'volume' of shape {tuple(shape)}")
+    except UserError as e:
+        raise VolumeFileError(str(e)) from None
+
+
+def _npz_header(archive: "np.lib.npyio.NpzFile", name: str) -> "tuple[tuple[int, ...], np.dtype]":
+    """The shape and dtype the ``volume`` member of ``archive`` declares, read from its ``.npy`` header
+    alone (nothing decompressed beyond it)."""
+    fmt = np.lib.format
+    try:
+        member = "volume.npy" if "volume.npy" in archive.zip.namelist() else "volume"
+        with archive.zip.open(member) as f:
+            version = fmt.read_magic(f)
+            read = {(1, 0): fmt.read_array_header_1_0, (2, 0): fmt.read_array_header_2_0}.get(version)
+            if read is None:
+                raise ValueError(f"format version {version}")
+            shape, _, dtype = read(f)
+    except Exception as e:
+        raise VolumeFileError(f"could not read array 'volume' from {name!r}: {e}") from None
+    return tuple(int(d) for d in shape), dtype
 
 
 def _tensor(v: np.ndarray) -> "torch.Tensor":
@@ -75,15 +122,15 @@ def _tensor(v: np.ndarray) -> "torch.Tensor":
     return torch.from_numpy(v)[None]
 
 
-def read_npz(path: Path) -> torch.Tensor:
+def read_npz(path: Path, fits: Fits = None) -> torch.Tensor:
     """Read and validate the array ``volume`` of a ``.npz`` file → ``(1, C, N, N, N)`` float32.
 
     Raises :class:`VolumeFileError` naming the file and what is wrong (missing, not an archive, no
-    array ``volume``, a wrong shape, values outside [0, 1], …)."""
-    return _tensor(_npz_array(path))
+    array ``volume``, a wrong shape, values outside [0, 1], a declared size ``fits`` refuses, …)."""
+    return _tensor(_npz_array(path, fits))
 
 
-def _npz_array(path: Path) -> np.ndarray:
+def _npz_array(path: Path, fits: Fits = None) -> np.ndarray:
     """:func:`read_npz`'s checked ``(C, N, N, N)`` array, read with numpy alone."""
     path, name = _existing_file(path)
     try:
@@ -101,6 +148,8 @@ def _npz_array(path: Path) -> np.ndarray:
             found = ", ".join(archive.files) or "no arrays"
             raise VolumeFileError(f"{name!r} has no array named 'volume' (found: {found}); save it with "
                                   f"numpy.savez(path, volume=array)")
+        shape, dtype = _npz_header(archive, name)
+        _check_declared(name, shape, dtype.itemsize, fits)    # before the array is decompressed
         try:
             v = archive["volume"]
         except Exception as e:
@@ -108,19 +157,23 @@ def _npz_array(path: Path) -> np.ndarray:
     return _checked(v, name)
 
 
-def read_vol(path: Path) -> torch.Tensor:
+def read_vol(path: Path, fits: Fits = None) -> torch.Tensor:
     """Read a Mitsuba ``.vol`` grid (float32, the layout :func:`write_vol` writes) → ``(1, C, N, N, N)``
     float32, checked as :func:`read_npz` checks its array (cubic, C = 1 or 4, values in [0, 1]).
 
     Raises :class:`VolumeFileError` naming the file and what is wrong (missing, not a ``.vol``, an
     encoding other than float32, a size that does not match its header, …)."""
-    return _tensor(_vol_array(path))
+    return _tensor(_vol_array(path, fits))
 
 
-def _vol_array(path: Path) -> np.ndarray:
+def _vol_array(path: Path, fits: Fits = None) -> np.ndarray:
     """:func:`read_vol`'s checked ``(C, N, N, N)`` array, read with numpy alone."""
     path, name = _existing_file(path)
-    data = path.read_bytes()
+    _check_declared(name, (path.stat().st_size // 4,), 4, fits)   # the whole file is read, then copied
+    try:
+        data = read_input_file(path, "volume file", max_bytes=None)
+    except InputFileRefused as e:
+        raise VolumeFileError(str(e)) from None
     header = len(_VOL_MAGIC) + 4 * 4 + 6 * 4
     if len(data) < header or data[:3] != b"VOL":
         raise VolumeFileError(f"{name!r} is not a Mitsuba .vol file (it does not start with 'VOL' and a header)")
@@ -135,19 +188,19 @@ def _vol_array(path: Path) -> np.ndarray:
     return _checked(v, name)
 
 
-def read_volume_file(path: PathLike) -> torch.Tensor:
+def read_volume_file(path: PathLike, fits: Fits = None) -> torch.Tensor:
     """A ``.npz`` (:func:`read_npz`) or ``.vol`` (:func:`read_vol`) file → ``(1, C, N, N, N)``."""
-    return _tensor(read_volume_array(path))
+    return _tensor(read_volume_array(path, fits))
 
 
-def read_volume_array(path: PathLike) -> np.ndarray:
+def read_volume_array(path: PathLike, fits: Fits = None) -> np.ndarray:
     """A ``.npz`` or ``.vol`` file → its checked ``(C, N, N, N)`` float32 array (what
     :func:`read_volume_file` returns, as numpy, read and checked without torch); the same errors."""
     path = Path(path)
     if path.suffix.lower() == ".npz":
-        return _npz_array(path)
+        return _npz_array(path, fits)
     if path.suffix.lower() == ".vol":
-        return _vol_array(path)
+        return _vol_array(path, fits)
     raise VolumeFileError(f"{str(path)!r}: expected a volume file ending in .npz or .vol")
 
 
@@ -182,7 +235,7 @@ def _checked(v: np.ndarray, name: str) -> np.ndarray:
     return np.ascontiguousarray(v)
 
 
-def load_volume(spec: str, resolution: Optional[int] = None) -> torch.Tensor:
+def load_volume(spec: str, resolution: Optional[int] = None, fits: Fits = None) -> torch.Tensor:
     """``builtin:<kind>`` (a :func:`~mitsuba_platonic.volume.test_volume` at ``resolution``, default
     32) or a path to a ``.npz`` file holding ``volume`` → ``(1, C, N, N, N)``, C = 4 or 1.
 
@@ -201,7 +254,7 @@ def load_volume(spec: str, resolution: Optional[int] = None) -> torch.Tensor:
     path = Path(spec)
     if path.suffix.lower() != ".npz":
         raise VolumeFileError(f"--volume must be builtin:figure, builtin:cloud or a .npz file, got {spec!r}")
-    v = read_npz(path)
+    v = read_npz(path, fits)
     if resolution is not None and resolution != v.shape[-1]:
         raise VolumeFileError(f"--resolution {resolution} does not match {spec!r}, whose volume is "
                               f"{v.shape[-1]}³ (leave --resolution out for files)")

@@ -29,6 +29,7 @@ from ..evaluate.photos import photo_splits
 from ..evaluate.priors import priors_markdown, priors_used, round_evidence
 from ..export import export_held_out
 from ..files.fileio import confined, write_text
+from ..files.outputs import output_lock
 from ..files.resources import config_path
 from ..model import Model
 from ..train import run as training_run
@@ -85,7 +86,7 @@ def _photo_quickstart(photos: Path, out: Path, steps: Optional[int], progress: b
     check_model_fits(cfg)
     train_photos, held, files = photo_splits(cfg)                 # a folder that cannot train fails here
     run_dir = Path(cfg.run.out_dir) / cfg.run.name
-    with confined(out, QUICKSTART_PARTS):               # a link in the folder is refused before any work
+    with confined(out, QUICKSTART_PARTS), output_lock(out, "quickstart"):   # no link, one quickstart at a time
         claim_quickstart_folder(out, run_dir, overwrite)
         return _run_photo_quickstart(photos, out, cfg, run_dir, train_photos, held, progress, stage, t0)
 

@@ -28,7 +28,7 @@ from ..errors import Interrupted
 from ..evaluate.protocol import held_out_scores
 from ..export import export_held_out
 from ..files.fileio import confined, write_text
-from ..files.outputs import MARKER, claim_output_folder
+from ..files.outputs import MARKER, claim_output_folder, output_lock
 from ..files.resources import config_path
 from ..model import Model
 from ..train import data as training_data
@@ -97,7 +97,7 @@ def _quickstart(out: Path, steps: Optional[int], progress: bool, stage: Dict[str
     cfg = load_config(CONFIG, overrides + extra)
     check_model_fits(cfg)                               # before rendering the data
     run_dir = Path(cfg.run.out_dir) / cfg.run.name
-    with confined(out, QUICKSTART_PARTS):               # a link in the folder is refused before any work
+    with confined(out, QUICKSTART_PARTS), output_lock(out, "quickstart"):   # no link, one quickstart at a time
         claim_quickstart_folder(out, run_dir, overwrite)
         return _run_quickstart(out, cfg, run_dir, progress, stage, t0)
 

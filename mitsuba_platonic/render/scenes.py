@@ -29,6 +29,7 @@ import torch
 
 from ..files.resources import scenes_folder
 from ..files.volume_io import read_npz, write_vol
+from ..runtime import budget
 from .grids import extinction
 from .variant import ensure_variant
 
@@ -137,7 +138,7 @@ def main(argv: Optional[Sequence[str]] = None) -> None:
     parser.add_argument("volume", help="an .npz written by platonic generate/reconstruct")
     parser.add_argument("out", help="folder for density.vol, albedo.vol, sigma_t.vol")
     args = parser.parse_args(argv)
-    volume = read_npz(Path(args.volume))[0]
+    volume = read_npz(Path(args.volume), fits=budget.memory_check("use a smaller volume"))[0]
     for key, path in write_scene_grids(volume, args.out).items():
         print(f"{key}={path}")
 

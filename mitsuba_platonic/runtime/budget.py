@@ -14,11 +14,11 @@ from __future__ import annotations
 import os
 import shutil
 from pathlib import Path
-from typing import List, Optional, Tuple, Union
+from typing import Callable, List, Optional, Tuple, Union
 
 from ..errors import UserError
 
-__all__ = ["available_memory", "free_disk", "check_fits", "gigabytes"]
+__all__ = ["available_memory", "free_disk", "check_fits", "gigabytes", "memory_check"]
 
 
 def available_memory() -> Tuple[Optional[int], str]:
@@ -76,3 +76,10 @@ def check_fits(need: int, have: Tuple[Optional[int], str], what: str, fix: str, 
         return
     raise UserError(f"{what} needs at least {gigabytes(need)} of {resource} (an estimate), more than the "
                     f"{max(bytes_, 0) / 1e9:.1f} GB available ({source}); {fix}")
+
+
+def memory_check(fix: str) -> Callable[[int, str], None]:
+    """``fits(need, what)``: :func:`check_fits` of ``need`` bytes against :func:`available_memory`
+    (read at each call), ``fix`` what to change; for readers below this layer that learn a size from
+    a file (a volume's header, :mod:`mitsuba_platonic.files.volume_io`)."""
+    return lambda need, what: check_fits(need, available_memory(), what, fix)

@@ -24,6 +24,7 @@ from ..data.collection import CollectionSpec, load_manifest, make_collection
 from ..data.photos import PhotoCollection, decode_image, prepare_image
 from ..data.settings import SOURCES  # noqa: F401  (the choice list, also named here)
 from ..errors import UserError
+from ..files.fileio import check_input_file
 from ..volume import CHANNELS
 
 __all__ = ["TrainingData", "load_training_data", "collection_folder", "SOURCES"]
@@ -103,7 +104,7 @@ def _procedural(cfg: Config, progress: bool) -> TrainingData:
             held_records.append({**r, "folder": str(folder)})
     volumes = shapes = views = None
     if cfg.train.mode in MODES_3D:                                # the modes trained with 3D ground truth
-        volumes = torch.stack([torch.from_numpy(np.load(folder / "volumes" / f"{i:05d}.npz")["volume"])
+        volumes = torch.stack([torch.from_numpy(np.load(check_input_file(folder / "volumes" / f"{i:05d}.npz"))["volume"])
                                for i in range(n_train)])
         if alpha_only:
             volumes = volumes[:, 3:]

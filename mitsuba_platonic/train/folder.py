@@ -29,7 +29,8 @@ from ..config import Config, ConfigError, config_from_dict, load_yaml, yaml_prob
 from ..config.loading import config_difference
 from ..config.retired import without_retired
 from ..files.checkpoint import RunError, checkpoint_files
-from ..files.fileio import atomic_write, make_folder, open_file, remove_temporaries
+from ..files.fileio import InputFileRefused, atomic_write, make_folder, open_file, read_input_text, remove_temporaries
+from ..files.locks import exclusive_lock
 
 __all__ = ["RUN_MARKER", "RUN_PARTS", "is_run_folder", "claim_run_folder", "run_lock", "prepare_run_folder", "read_run_config"]
 
@@ -80,53 +81,23 @@ def _write_marker(folder: Path) -> None:
         f.write(text + "\n")
 
 
-def _lock_holder(fd: int) -> str:
-    try:
-        text = os.pread(fd, 64, 0).decode(errors="replace").strip()
-    except OSError:
-        return "?"
-    return text if text.isdigit() else "?"
-
-
 @contextmanager
 def run_lock(run_dir: Path) -> Iterator[Path]:
     """Hold ``run_dir/run.lock`` (an exclusive ``flock`` holding this process's pid) while inside.
 
     A lock file whose process is gone is free (the kernel dropped its lock) and is taken over; a
-    live holder makes this raise :class:`RunError`. The file is removed on exit.
+    live holder makes this raise :class:`RunError`. The file is removed on exit
+    (:func:`~mitsuba_platonic.files.locks.exclusive_lock`).
     """
-    import fcntl  # lazy: POSIX only, where a run folder is locked
-
     make_folder(run_dir)
     path = run_dir / "run.lock"
-    while True:
-        fd = open_file(path, os.O_RDWR | os.O_CREAT)
-        try:
-            fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
-        except OSError:
-            holder = _lock_holder(fd)
-            os.close(fd)
-            raise RunError(f"{run_dir} is in use by another training run (pid {holder}, lock {path}); "
-                           f"wait for it to end or choose another run.name") from None
-        try:
-            same = os.path.samestat(os.fstat(fd), os.stat(path))
-        except FileNotFoundError:
-            same = False
-        if same:
-            break
-        os.close(fd)                                 # its holder removed it as we opened it: again
-    try:
-        try:
-            os.ftruncate(fd, 0)
-            os.pwrite(fd, f"{os.getpid()}\n".encode(), 0)
-        except OSError as e:                         # a full disk: say where
-            raise OSError(e.errno, e.strerror, str(path)) from None
+
+    def refused(holder: str) -> RunError:
+        return RunError(f"{run_dir} is in use by another training run (pid {holder if holder.isdigit() else '?'}, "
+                        f"lock {path}); wait for it to end or choose another run.name")
+
+    with exclusive_lock(path, str(os.getpid()), refused):
         yield path
-    finally:
-        try:
-            os.unlink(path)                          # while still holding it: no one can hold a stale copy
-        finally:
-            os.close(fd)
 
 
 def prepare_run_folder(run_dir: Path, cfg: Config, resume: bool, config_file: Optional[Path] = None) -> None:
@@ -170,7 +141,9 @@ def read_run_config(path: Path) -> Config:
     ``path`` if it is missing, not valid YAML, not a mapping, or has a bad key or value."""
     expected = "expected the run's resolved config as `platonic train` wrote it"
     try:
-        text = path.read_text()
+        text = read_input_text(path)                         # a regular file, at most 16 MiB
+    except InputFileRefused as e:
+        raise RunError(f"{e}; {expected}") from None
     except FileNotFoundError:
         raise RunError(f"{path} is missing; {expected}") from None
     except OSError as e:

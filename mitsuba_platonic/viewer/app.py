@@ -44,15 +44,23 @@ the frame (and reset both), the frame time and the renderer's settings (a line o
 read: ``frame N: T ms, full|moving, R×R px, az A° el E°, zoom M×, centre (X, Y)``), the source's
 inputs (a reconstruction run: previous/next held-out input, shown beside the view) or latents (a
 generation run: seed, new latent, a walk to a second seed), and exports into the output folder.
+
+What a page sends is checked at the server's boundary (a page can send any number, past what its
+controls allow): a camera whose position or look-at point is not finite or lies beyond
+:data:`MAX_COORDINATE`, a seed that is not an integer in 0 … :data:`MAX_SEED` (as ``generate
+--seed``), a walk outside [0, 1] are refused, an spp outside the slider's 1 … :data:`MAX_SPP` and
+a resolution not among the choices are clamped to them; each is one line in the server's log
+(stderr, ``platonic view: ignored …``), never a traceback, and the page keeps its last frame.
 """
 
 from __future__ import annotations
 
 import math
+import sys
 import threading
 import time
 from pathlib import Path
-from typing import Callable, Optional, Tuple
+from typing import Callable, Optional, Sequence, Tuple
 
 import numpy as np
 import torch
@@ -64,7 +72,8 @@ from .scene import (BACKGROUND, WINDOW_SNAP, ZOOM_RANGE, Exports, Frame, Scene, 
                     formations_for, render_frame, renderers_for, resolutions_for, zoom_distance)
 from .start import DISTANCE, FOV, address, start_server, stop_server
 
-__all__ = ["ViewerApp", "SETTLE_S"]
+__all__ = ["ViewerApp", "SETTLE_S", "MAX_SPP", "MAX_SEED", "MAX_COORDINATE", "log_ignored", "checked_seed",
+           "checked_camera"]
 
 #: A camera at rest this long gets its full-resolution frame.
 SETTLE_S = 0.2
@@ -84,6 +93,12 @@ INITIAL_RENDERER, INITIAL_SPP = "closed form", 4
 ZOOM_STEP, PAN_STEP = 2.0, 0.25
 #: Frames are enlarged to at least this many pixels a side before they are padded to the canvas' aspect.
 MIN_SHOWN = 256
+#: The path tracer's spp slider's range, which the server holds a page's spp to.
+MAX_SPP = 64
+#: The largest seed a page may ask for: torch's and numpy's generators take a 64-bit signed integer.
+MAX_SEED = 2 ** 63 - 1
+#: The largest camera coordinate (world units; the cube is [−1, 1]³) a page's camera may have.
+MAX_COORDINATE = 1e6
 #: The background grey as an 8-bit sRGB value (what :func:`~.scene.to_display` composites over).
 _BG8 = int(round(255 * (1.055 * BACKGROUND ** (1 / 2.4) - 0.055)))
 
@@ -94,6 +109,46 @@ def initial_key(scene: Scene, version: int = 0) -> Tuple:
     c, n = scene.volume.shape[0], scene.volume.shape[-1]
     return ((0.0, 0.0, 1.0), INITIAL_RENDERER, formations_for(c)[-1], resolutions_for(n)[0], INITIAL_SPP, version,
             None)
+
+
+_last_ignored = {"line": None}
+
+
+def log_ignored(what: str) -> None:
+    """One line in the server's log (stderr) for a value a page sent that was refused or clamped (a
+    line the same as the one before is not repeated: the render thread asks again every 0.1 s)."""
+    line = f"platonic view: ignored {what}"
+    if line != _last_ignored["line"]:
+        _last_ignored["line"] = line
+        print(line, file=sys.stderr, flush=True)
+
+
+def checked_seed(value: object, what: str = "seed") -> Optional[int]:
+    """A page's seed as an int in 0 … :data:`MAX_SEED`, else None (and one line in the log)."""
+    try:
+        number = float(value)
+        seed = int(value) if isinstance(value, int) else int(number) if number.is_integer() else None
+    except (TypeError, ValueError, OverflowError):
+        seed = None
+    if seed is None or not 0 <= seed <= MAX_SEED:
+        log_ignored(f"{what} {value!r} from a page: expected an integer from 0 to 2⁶³ − 1")
+        return None
+    return seed
+
+
+def checked_camera(position: object, look_at: object) -> Optional[Tuple[np.ndarray, np.ndarray]]:
+    """A page's camera (position, look-at point) as float arrays when both are finite 3-vectors within
+    :data:`MAX_COORDINATE` and apart, else None (and one line in the log)."""
+    try:
+        p, a = np.asarray(position, np.float64).reshape(-1), np.asarray(look_at, np.float64).reshape(-1)
+    except (TypeError, ValueError):
+        p = a = np.zeros(0)
+    if (p.shape != (3,) or a.shape != (3,) or not (np.isfinite(p).all() and np.isfinite(a).all())
+            or max(np.abs(p).max(), np.abs(a).max()) > MAX_COORDINATE or not np.linalg.norm(p - a) > 1e-9):
+        log_ignored(f"a camera from a page: position {position!r}, look_at {look_at!r} (expected finite points "
+                    f"within ±{MAX_COORDINATE:g}, apart)")
+        return None
+    return p, a
 
 
 def _same_camera(view_a: np.ndarray, window_a: Optional[Window], view_b: np.ndarray,
@@ -130,6 +185,20 @@ def _pad_to_aspect(image: np.ndarray, aspect: float) -> np.ndarray:
         y0 = (h - r) // 2
         out[y0:y0 + r] = image
     return out
+
+
+def _clamped_choice(value: object, choices: "Sequence[int]", what: str) -> int:
+    """A page's ``value`` held to the nearest of ``choices`` (ascending ints; the first for a value that
+    is no number), with one line in the log where it was not one of them."""
+    try:
+        number = float(value)
+    except (TypeError, ValueError):
+        number = math.nan
+    if not math.isnan(number) and number.is_integer() and int(number) in choices:
+        return int(number)
+    held = choices[0] if math.isnan(number) else min(choices, key=lambda c: abs(c - number))
+    log_ignored(f"{what} {value!r} from a page: held to {held} ({choices[0]} … {choices[-1]})")
+    return held
 
 
 class ViewerApp:
@@ -314,12 +383,24 @@ class ClientView:
         self.app.volume_changed()
 
     def _new_latent(self) -> None:
-        self.seed.value = int(self.seed.value) + 1          # its on_update draws it
+        seed = checked_seed(self.seed.value)
+        if seed is not None:
+            self.seed.value = seed + 1 if seed < MAX_SEED else 0   # its on_update draws it
 
     def _latent(self) -> None:
-        t = float(self.walk.value)
+        seed = checked_seed(self.seed.value)
+        seed_b = checked_seed(self.seed_b.value, "walk-to seed")
+        try:
+            t = float(self.walk.value)
+        except (TypeError, ValueError):
+            t = math.nan
+        if not 0.0 <= t <= 1.0:
+            log_ignored(f"walk {self.walk.value!r} from a page: expected a number from 0 to 1")
+            return
+        if seed is None or (t > 0 and seed_b is None):
+            return
         with self.app.scene_lock:
-            self.app.scene.show_latent(int(self.seed.value), int(self.seed_b.value) if t > 0 else None, t)
+            self.app.scene.show_latent(seed, seed_b if t > 0 else None, t)
         self.app.volume_changed()
 
     # -- camera -----------------------------------------------------------------------------------
@@ -346,13 +427,18 @@ class ClientView:
         self.limits = (near, far)
 
     def _camera(self, camera) -> None:
-        position, look = np.asarray(camera.position, float), np.asarray(camera.look_at, float)
+        checked = checked_camera(camera.position, camera.look_at)    # NaN, 1e308: one line, no traceback
+        if checked is None:
+            return
+        position, look = checked
         w = position - look
         norm = float(np.linalg.norm(w))
-        if norm < 1e-9 or not np.isfinite(w).all():
-            return
         fov, aspect = self._lens()
-        window = camera_window(position, look, fov, aspect)
+        try:
+            window = camera_window(position, look, fov, aspect)
+        except UserError as e:
+            log_ignored(f"a camera from a page: {e}")
+            return
         self._limit_distance(fov, aspect)
         with self.lock:
             echo = _same_camera(w / norm, window, self.view, self.window)
@@ -425,11 +511,13 @@ class ClientView:
         with self.lock:
             view, moving = tuple(float(x) for x in self.view), time.monotonic() - self.last_move < SETTLE_S
             window = self.window
-        full = int(self.resolution.value)
         n = self.app.scene.volume.shape[-1]
+        choices = resolutions_for(n)
+        full = _clamped_choice(self.resolution.value, choices, "resolution")
         low = max(n, full // 4) if self.low.value else full
         res, quality = (low, "moving") if moving else (full, "full")
-        key = (view, self.renderer.value, self.formation.value, res, int(self.spp.value), self.app.version, window)
+        spp = int(_clamped_choice(self.spp.value, range(1, MAX_SPP + 1), "path tracer spp"))
+        key = (view, self.renderer.value, self.formation.value, res, spp, self.app.version, window)
         return key, self._lens()[1], quality
 
     def _loop(self) -> None:

@@ -17,6 +17,7 @@ browser loads the page (:mod:`mitsuba_platonic.cli.viewer`).
 from __future__ import annotations
 
 import contextlib
+import errno
 import io
 import math
 import socket
@@ -27,6 +28,7 @@ import numpy as np
 
 from ..errors import UserError
 from ..files.volume_io import read_volume_array
+from ..runtime import budget
 
 __all__ = ["DISTANCE", "FOV", "check_port", "check_source", "volume_title", "start_server", "stop_server",
            "address"]
@@ -41,16 +43,26 @@ PathLike = Union[str, Path]
 
 
 def check_port(host: str, port: int) -> None:
-    """Raise :class:`UserError` naming ``--port`` unless ``host:port`` can be bound now (viser itself
-    would quietly move to the next free port)."""
-    if port == 0:
-        return
-    family = socket.AF_INET6 if ":" in host else socket.AF_INET
-    with socket.socket(family, socket.SOCK_STREAM) as s:
+    """Raise :class:`UserError` naming ``--host`` or ``--port`` unless ``host`` resolves to an address
+    of this machine and ``host:port`` can be bound now (``port`` 0: any free port of it), before
+    anything else: viser itself would quietly move to the next free port, and with an address that
+    cannot be resolved or is not this machine's it would wait, printing nothing."""
+    try:
+        found = socket.getaddrinfo(host, port, type=socket.SOCK_STREAM, flags=socket.AI_PASSIVE)
+    except (socket.gaierror, UnicodeError, ValueError) as e:
+        raise UserError(f"--host {host}: not an address or a name that resolves here "
+                        f"({getattr(e, 'strerror', None) or e}); pass an address of this machine, e.g. 127.0.0.1 "
+                        f"(this machine only) or 0.0.0.0 (every network it is on)") from None
+    family, kind, proto, _, address = found[0]
+    with socket.socket(family, kind, proto) as s:
         s.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)
         try:
-            s.bind((host, port))
+            s.bind(address)
         except OSError as e:
+            if e.errno == errno.EADDRNOTAVAIL:
+                raise UserError(f"--host {host}: {address[0]} is not an address of this machine ({e.strerror}); "
+                                f"pass one of its addresses, e.g. 127.0.0.1 (this machine only) or 0.0.0.0 (every "
+                                f"network it is on)") from None
             raise UserError(f"--port {port}: {host}:{port} cannot be used ({e.strerror or e}); choose another "
                             f"--port (0 picks a free one)") from None
 
@@ -66,7 +78,7 @@ def check_source(source: PathLike, photo: Optional[PathLike] = None) -> Optional
     if path.is_file():
         if photo is not None:
             raise UserError(f"--photo needs a reconstruction run folder as SOURCE, got the file {str(path)!r}")
-        return read_volume_array(path)
+        return read_volume_array(path, fits=budget.memory_check("use a smaller volume"))   # its declared size
     if not path.is_dir():
         raise UserError(f"SOURCE {str(path)!r} is neither a file nor a folder")
     return None

@@ -27,6 +27,7 @@ import numpy as np
 import png
 from PIL import Image, UnidentifiedImageError
 
+from ...files.fileio import MAX_IMAGE_BYTES, InputFileRefused, read_input_file
 from .rejections import ImageRejected, PathLike
 
 __all__ = ["DecodedImage", "decode_image", "apply_orientation", "SUPPORTED_FORMATS", "IMAGE_SUFFIXES",
@@ -211,15 +212,20 @@ def decode_image(source: Union[PathLike, bytes], name: Optional[str] = None) -> 
 
     Raises:
         ImageRejected: with ``reason`` ``not_an_image``, ``unsupported_format``, ``corrupt``
-            or ``too_large``; the message names the file.
+            or ``too_large`` (also a file over :data:`~mitsuba_platonic.files.fileio.MAX_IMAGE_BYTES`),
+            or ``unreadable`` for a path that is no regular file (a FIFO, a device such as
+            ``/dev/zero``, also through a link: checked before anything is read); the message names the file.
         OSError: if the path cannot be read.
     """
     if isinstance(source, (bytes, bytearray, memoryview)):
         data = bytes(source)
         label = name or "<bytes>"
     else:
-        data = Path(source).read_bytes()
         label = name or str(source)
+        try:                                     # a regular file of a bounded size: no FIFO, no /dev/zero
+            data = read_input_file(source, max_bytes=MAX_IMAGE_BYTES)
+        except InputFileRefused as err:
+            raise ImageRejected("too_large" if err.reason == "too_large" else "unreadable", str(err)) from None
     if not data:
         raise ImageRejected(_suffix_reason(label), f"{label}: the file is empty (0 bytes)")
     try:

@@ -33,6 +33,14 @@ in every format and is only scaled, ``α = a / (2^bits − 1)``.
   and a fully opaque photo would teach the networks a square silhouette.
 - A mask that is empty (alpha 0 everywhere, nothing but white, or nothing left after
   cleaning) is rejected as ``fully_transparent``.
+
+**The background a photo shows** (:func:`border_background`): white masking takes a photo's
+background to be white; one on black (or on a coloured or busy background) keeps the whole frame
+as its mask, silently. Its border (the outermost row or column of pixels on each side) tells: it
+is ``"white"`` where at least :data:`BORDER_SHARE` of its pixels are within ``threshold`` of white
+in every channel (what the masking takes as background), ``"black"`` where that share is within
+``threshold`` of black, else ``"other"``. The photo loader names the photos without transparency,
+and those whose border is not white, in one warning (:mod:`.scan`).
 """
 
 from __future__ import annotations
@@ -49,10 +57,13 @@ from .decode import DecodedImage
 from .rejections import ImageRejected
 
 __all__ = ["srgb_decoding_table", "clean_mask", "white_background_alpha", "premultiplied_linear",
-           "BACKGROUNDS"]
+           "BACKGROUNDS", "border_background", "BORDER_SHARE"]
 
 #: ``background`` choices: ``None`` (files need transparency) or ``"white"``.
 BACKGROUNDS = (None, "white")
+
+#: The share of a photo's border pixels near one colour that makes it the photo's background.
+BORDER_SHARE = 0.5
 
 #: Regions smaller than this fraction of the image are specks (dropped by :func:`clean_mask`).
 MIN_REGION = 5e-4
@@ -116,6 +127,20 @@ def clean_mask(support: np.ndarray, *, min_region: float = MIN_REGION) -> np.nda
     keep = areas >= max(1.0, min_region * mask.size)
     keep[0] = False
     return keep[labels]
+
+
+def border_background(rgb_codes: np.ndarray, max_value: int, threshold: float = 0.05) -> str:
+    """What the border of a photo ``(H, W, 3)`` of sRGB-encoded codes in ``[0, max_value]`` shows:
+    ``"white"`` where at least :data:`BORDER_SHARE` of its border pixels have every channel
+    ≥ ``(1 − threshold)·max_value`` (white masking's background, :func:`white_background_alpha`),
+    ``"black"`` where that share has every channel ≤ ``threshold·max_value``, else ``"other"``."""
+    codes = np.asarray(rgb_codes)
+    border = np.concatenate([codes[0], codes[-1], codes[1:-1, 0], codes[1:-1, -1]]).astype(np.float64)
+    if (border >= (1.0 - threshold) * max_value).all(axis=1).mean() >= BORDER_SHARE:
+        return "white"
+    if (border <= threshold * max_value).all(axis=1).mean() >= BORDER_SHARE:
+        return "black"
+    return "other"
 
 
 def white_background_alpha(rgb_codes: np.ndarray, max_value: int, threshold: float = 0.05, *,

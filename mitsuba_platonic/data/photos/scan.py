@@ -33,12 +33,12 @@ import torch
 
 from ...errors import UserError
 from .decode import decode_image
-from .mask import srgb_decoding_table
+from .mask import border_background, srgb_decoding_table
 from .prepare import ImageOptions, prepare_image
 from .rejections import REASONS, ImageRejected, PathLike, PhotoCollectionWarning
 from .split import assign_splits
 
-__all__ = ["SkippedFile", "PhotoEntry", "CollectionReport", "Scan", "scan"]
+__all__ = ["SkippedFile", "PhotoEntry", "CollectionReport", "Scan", "scan", "opaque_photos_warning"]
 
 logger = logging.getLogger(__name__)
 
@@ -136,6 +136,29 @@ class CollectionReport:
     __str__ = summary
 
 
+def _examples(paths: List[Path], root: Path, shown: int = 3) -> str:
+    names = [p.relative_to(root).as_posix() for p in sorted(paths)]
+    return ", ".join(names[:shown]) + (f" and {len(names) - shown} more" if len(names) > shown else "")
+
+
+def opaque_photos_warning(borders: Dict[Path, str], usable: int, root: Path) -> str:
+    """The one warning line on a collection's photos without transparency (masked as photos on white,
+    ``data.background: white``), ``borders`` what each one's border shows (:func:`~.mask.border_background`):
+    how many there are with a few names, and how many of them and which do not show white around
+    the object, whose mask is then (nearly) the whole frame."""
+    line = (f"{len(borders)} of {usable} usable photo(s) have no transparency and were masked as photos on a "
+            f"white background (data.background: white): {_examples(list(borders), root)}")
+    wrong = {kind: [p for p, b in borders.items() if b == kind] for kind in ("black", "other")}
+    if not any(wrong.values()):
+        return line
+    count = sum(len(v) for v in wrong.values())
+    shown = "; ".join(f"{len(v)} on {'black' if kind == 'black' else 'another colour or a busy background'}: "
+                      f"{_examples(v, root)}" for kind, v in wrong.items() if v)
+    return (f"{line}; but {count} of them do not show a white background around the object ({shown}), so their "
+            f"mask is (nearly) the whole frame: cut them out (PNG with transparency), photograph them on white, or "
+            f"leave them out")
+
+
 def _discover(folder: Path) -> Tuple[List[Path], List[Path], List[Path]]:
     """Files under ``folder``: regular non-hidden files (sorted by relative path), ignored
     hidden paths, and other non-hidden entries that are not regular files (broken links...)."""
@@ -180,8 +203,9 @@ def _load_one(path: Path, options: ImageOptions):
         return SkippedFile(path, "unreadable", f"{path}: cannot read the file "
                                                f"({type(err).__name__}: {err})")
     real_alpha = decoded.has_alpha and bool((decoded.pixels[..., 3] < decoded.max_value).any())
+    border = None if real_alpha else border_background(decoded.pixels[..., :3], decoded.max_value, options.threshold)
     info = (decoded.size, decoded.format, decoded.bit_depth, "alpha" if real_alpha else "white")
-    return info, image
+    return info, image, border
 
 
 @dataclass
@@ -243,18 +267,23 @@ def scan(folder: PathLike, options: ImageOptions, splits: Tuple[float, float, fl
 
     entries: Dict[str, PhotoEntry] = {}
     images: Dict[str, torch.Tensor] = {}
+    borders: Dict[Path, str] = {}                      # photos without transparency → what their border shows
     for key, result in zip(keys, results):
         if isinstance(result, SkippedFile):
             report.skipped.append(result)
             continue
-        (size, fmt, bits, mask), image = result
+        (size, fmt, bits, mask), image, border = result
         entries[key] = PhotoEntry(groups[key][0], key, size, fmt, bits, mask,
                                   tuple(groups[key][1:]))
         images[key] = torch.from_numpy(image)
+        if border is not None:
+            borders[groups[key][0]] = border
     report.skipped.sort(key=lambda s: s.path.relative_to(root).as_posix())
     report.usable = len(entries)
     for s in report.skipped:
         warnings.warn(f"skipped {s.message} [{s.reason}]", PhotoCollectionWarning, stacklevel=3)
+    if borders:
+        warnings.warn(opaque_photos_warning(borders, len(entries), root), PhotoCollectionWarning, stacklevel=3)
 
     if not entries:
         reasons = "; ".join(f"{count} {reason}" for reason, count in
