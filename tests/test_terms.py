@@ -34,7 +34,7 @@ def _names(**kw):
 def _ctx(train, modules=None, seed=5, rank=0, volume_rec=None):
     cfg = SimpleNamespace(train=train, run=SimpleNamespace(seed=seed))
     return SimpleNamespace(cfg=cfg, modules=modules or {}, device=torch.device("cpu"), rank=rank,
-                           global_mean=lambda loss: float(loss), volume_rec=volume_rec)
+                           global_mean=lambda loss: float(loss.detach()), volume_rec=volume_rec)
 
 
 def _value(name, train, s, **ctx):
@@ -142,7 +142,7 @@ def test_adv2d_is_the_generators_loss_on_ds_logits_of_the_views_as_d_sees_them(l
     expected = (sum(-math.log(1 / (1 + math.exp(-li))) for li in l) / 3 if loss == "nonsaturating"
                 else -sum(l) / 3)
     value = _value("adv2d", _train(loss=loss), StepState(0, None, fake_d=fake_d), modules={"D": D})
-    assert float(value) == pytest.approx(expected, rel=1e-12)
+    assert float(value.detach()) == pytest.approx(expected, rel=1e-12)
 
 
 def test_adv3d_is_d3s_verdict_weighted_in_platonic3d_and_unweighted_in_gan3d():
@@ -281,7 +281,7 @@ def test_pose_teaches_the_head_the_elevations_of_gs_renders_and_not_g():
     views = sample_views(3, "band", seed=2, elevation=(-30.0, 60.0))
     i_view = _rand(3, 4, 2, 2, seed=12).requires_grad_(True)
     E, P = _Linear(16, 5, seed=3), _Head(5, 1, seed=4)
-    E_out = [[sum(float(E.weight.detach()[o, j]) * float(i_view[i].flatten()[j]) for j in range(16)) for o in range(5)]
+    E_out = [[sum(float(E.weight.detach()[o, j]) * float(i_view.detach()[i].flatten()[j]) for j in range(16)) for o in range(5)]
              for i in range(3)]
     θ_hat = [sum(float(P.weight.detach()[0, o]) * E_out[i][o] for o in range(5)) for i in range(3)]
     θ = [math.asin(float(views[i, 1])) for i in range(3)]
@@ -289,7 +289,7 @@ def test_pose_teaches_the_head_the_elevations_of_gs_renders_and_not_g():
     value = _value("pose", _train(pose="elevation", pose_weight=2.0), StepState(0, None, i_view=i_view, views=views,
                                                                                    out=out), modules={"E": E, "P": P})
     expected = sum((θ_hat[i] - θ[i]) ** 2 for i in range(3)) / 3
-    assert float(value) == pytest.approx(2.0 * expected, rel=1e-9) and out["loss_pose"] == pytest.approx(expected)
+    assert float(value.detach()) == pytest.approx(2.0 * expected, rel=1e-9) and out["loss_pose"] == pytest.approx(expected)
     value.backward()
     assert i_view.grad is None and E.weight.grad.abs().sum() > 0 and P.weight.grad.abs().sum() > 0
 
@@ -323,7 +323,7 @@ def test_light_teaches_the_head_the_priors_lights_in_each_views_camera_frame():
         share = float(prior.sky[i, 1]) / 0.5                # L_sky = ½ s for a grey daylight of L̄ = ½
         total += (1 - sum(float(d_hat[i, c]) * cam[c] for c in range(3))) / 3 + \
             ((float(s_hat[i]) - share) / (hi - lo)) ** 2 / 3
-    assert float(value) == pytest.approx(total, rel=1e-6) and out["loss_light"] == pytest.approx(total, rel=1e-6)
+    assert float(value.detach()) == pytest.approx(total, rel=1e-6) and out["loss_light"] == pytest.approx(total, rel=1e-6)
     value.backward()
     assert i_view.grad is None and E.weight.grad.abs().sum() > 0
 
