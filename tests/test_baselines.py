@@ -146,14 +146,14 @@ def test_volume_rec_term_compares_v_with_its_images_truth_in_the_input_frame(cac
     train_records = [r for r in load_manifest(folder)["images"] if r["shape"] < len(trainer.volumes)]
     assert len(train_records) == len(trainer.images)
     seen = {}
-    original = trainer._volume_rec
+    original = trainer.volume_rec
 
     def recording(v, idx, out):
         seen["v"], seen["idx"] = v.detach().clone(), idx.clone()
         seen["loss"] = original(v, idx, out)
         return seen["loss"]
 
-    monkeypatch.setattr(trainer, "_volume_rec", recording)
+    monkeypatch.setattr(trainer, "volume_rec", recording)
     norms = _probe_terms(trainer, monkeypatch)
     if mode == "gan3d":
         monkeypatch.setattr(trainer, "render", lambda *a: pytest.fail("gan3d rendered an image"))

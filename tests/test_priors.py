@@ -420,7 +420,7 @@ def test_the_trainer_hands_g_the_turn_of_the_upright_volume_it_made(tmp_path, mo
     """With weight w, G's 'turn' term is w · L_turn of the upright volume G made, at one angle per
     volume in [0, 2π) drawn anew each step; without it, none."""
     from mitsuba_platonic.networks import nets
-    from mitsuba_platonic.train import trainer as T
+    from mitsuba_platonic.train import terms as T      # where the turn term calls L_turn
     original, original_turn = nets.Generator.forward, T.turn
     seen = {}
 

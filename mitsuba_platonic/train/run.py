@@ -51,7 +51,7 @@ from __future__ import annotations
 import time
 import warnings
 from pathlib import Path
-from typing import Optional, Tuple
+from typing import Callable, Dict, Optional, Tuple
 
 import torch
 import torch.distributed as dist
@@ -138,6 +138,9 @@ def _train(cfg: Config, run_dir: Path, resume: bool, progress: bool, stop_at: Op
     sample_inputs = pool[torch.linspace(0, len(pool) - 1, min(4, len(pool))).long()]   # spread: different shapes
     samples_seed = cfg.run.seed + 12345                      # generation runs: the same z at every sample
 
+    def samples(at: int) -> None:
+        write_samples(trainer.inference_model, sample_inputs, run_dir / "samples", at, samples_seed)
+
     stop = StopBetweenSteps()                                # Ctrl-C and SIGTERM: stop after this step, save
     log = ScalarLog(run_dir, start) if rank == 0 else None
     end = cfg.run.steps if stop_at is None else min(stop_at, cfg.run.steps)
@@ -154,20 +157,14 @@ def _train(cfg: Config, run_dir: Path, resume: bool, progress: bool, stop_at: Op
             if rank == 0 and (step % cfg.run.log_every == 0 or step == end):
                 rate = (step - n_last) * images_per_step / max(time.perf_counter() - t_last, 1e-9)
                 t_last, n_last = time.perf_counter(), step
-                log.add(step, {**scalars, "images_per_s": rate})
-                bar.set_postfix({k: f"{v:.3g}" for k, v in scalars.items()
-                                 if not k.endswith(("_updated", "_hard"))}
-                                | {"img/s": f"{rate:.1f}"})
+                _log_step(log, bar, step, scalars, rate)
             bar.update(1)
             if rank == 0 and step % cfg.run.sample_every == 0:
-                write_samples(trainer.inference_model, sample_inputs, run_dir / "samples", step, samples_seed)
+                samples(step)
             if rank == 0 and step % cfg.run.checkpoint_every == 0:
                 log.flush()                                  # first: the rows after a checkpoint are dropped on
                 checkpoints.save(step, trainer.state_dict())  # resume, rows missing before it would stay lost
-            flag = torch.tensor(float(stop.signal is not None))
-            if world > 1:
-                dist.all_reduce(flag)                       # stop together
-            if flag.item() > 0:
+            if _stop_together(stop, world):
                 interrupted = True
                 break
         clean = True
@@ -176,39 +173,63 @@ def _train(cfg: Config, run_dir: Path, resume: bool, progress: bool, stop_at: Op
             _say_what_failed(e, where, trainer, checkpoints)
         raise
     finally:
-        bar.close()
-        if rank == 0:
-            try:
-                if clean:                                    # finished, stop_at or Ctrl-C between steps
-                    log.flush()
-                    checkpoints.save(step, trainer.state_dict())
-                    if step == cfg.run.steps:
-                        write_samples(trainer.inference_model, sample_inputs, run_dir / "samples", step, samples_seed)
-            except OSError as e:                             # the final samples on a full disk
-                clean = False
-                raise RunError(f"after step {step}: {e}; {checkpoints.held()}") from None
-            except BaseException:
-                clean = False
-                raise
-            finally:
-                try:
-                    log.close()
-                except OSError:
-                    if clean:                                # else the error on its way says more
-                        raise
-                stop.restore()
-        else:
-            stop.restore()
-        if world > 1:
-            if clean:
-                dist.barrier()                               # rank 0 has written the last checkpoint
-            dist.destroy_process_group()
+        _close_loop(cfg, clean, step, rank, world, trainer, checkpoints, log, stop, bar, samples)
     if interrupted and step < cfg.run.steps:                 # saved: now say so, and that it did not finish
         held = checkpoints.held() if rank == 0 else "rank 0 saved the checkpoint"
         raise Interrupted(f"after step {step} of {cfg.run.steps}: {held}; continue with the same command and "
                           f"--resume", saved=held)
     return run_dir
 
+
+def _log_step(log: ScalarLog, bar, step: int, scalars: Dict[str, float], rate: float) -> None:
+    """A logged step's row (its scalars and ``images_per_s``) and the progress bar's figures."""
+    log.add(step, {**scalars, "images_per_s": rate})
+    bar.set_postfix({k: f"{v:.3g}" for k, v in scalars.items()
+                     if not k.endswith(("_updated", "_hard"))}
+                    | {"img/s": f"{rate:.1f}"})
+
+
+def _stop_together(stop: StopBetweenSteps, world: int) -> bool:
+    """Whether Ctrl-C or SIGTERM came during this step, on any process (so all stop together)."""
+    flag = torch.tensor(float(stop.signal is not None))
+    if world > 1:
+        dist.all_reduce(flag)                               # stop together
+    return flag.item() > 0
+
+
+def _close_loop(cfg: Config, clean: bool, step: int, rank: int, world: int, trainer: Trainer,
+                checkpoints: Checkpoints, log: Optional[ScalarLog], stop: StopBetweenSteps, bar,
+                samples: Callable[[int], None]) -> None:
+    """The end of the loop, however it ended: after a ``clean`` stop (finished, stop_at or Ctrl-C
+    between steps) rank 0 saves the log, the checkpoint and, at the last step, the samples; the
+    signal handlers are restored and the process group closed."""
+    bar.close()
+    if rank == 0:
+        try:
+            if clean:                                        # finished, stop_at or Ctrl-C between steps
+                log.flush()
+                checkpoints.save(step, trainer.state_dict())
+                if step == cfg.run.steps:
+                    samples(step)
+        except OSError as e:                                 # the final samples on a full disk
+            clean = False
+            raise RunError(f"after step {step}: {e}; {checkpoints.held()}") from None
+        except BaseException:
+            clean = False
+            raise
+        finally:
+            try:
+                log.close()
+            except OSError:
+                if clean:                                    # else the error on its way says more
+                    raise
+            stop.restore()
+    else:
+        stop.restore()
+    if world > 1:
+        if clean:
+            dist.barrier()                                   # rank 0 has written the last checkpoint
+        dist.destroy_process_group()
 
 
 def _training_data(cfg: Config, run_dir: Path, resume: bool, progress: bool, rank: int, world: int) -> TrainingData:
