@@ -79,7 +79,7 @@ from . import image_stats as S
 
 __all__ = ["BANDS", "SCORE_AZIMUTHS", "STAT_VIEWS", "CRITIC_STEPS", "CRITIC_REPEATS", "TRAIN_VIEWS",
            "band_of", "Critic", "two_sample_test", "view_statistics", "Judgement", "judge", "judge_table",
-           "stats_table"]
+           "stats_table", "random_renders"]
 
 #: What a reconstruct function answers: volumes in the input camera's frame, or (volumes, the input
 #: cameras' elevations in degrees) in the object's frame (:func:`judge`).
@@ -254,7 +254,7 @@ def _turntable(volumes: torch.Tensor, elevations: torch.Tensor, azimuths: Sequen
     return out.reshape(len(azimuths), m, *out.shape[1:])
 
 
-def _random_renders(volumes: torch.Tensor, elevations: torch.Tensor, k: int, settings: RenderSettings,
+def random_renders(volumes: torch.Tensor, elevations: torch.Tensor, k: int, settings: RenderSettings,
                     seed: int) -> torch.Tensor:
     """``(M k, C, R, R)``: each volume m at ``k`` uniformly random turntable azimuths (seeded), ω(φ, θ̂_m)."""
     g = torch.Generator().manual_seed(seed)
@@ -362,7 +362,7 @@ def judge(reconstruct: Callable[[torch.Tensor], Reconstruction], train_photos: t
         return torch.cat([p[0] for p in parts]), torch.cat([p[1] for p in parts])
 
     train_volumes, train_elevations = volumes_of(train_photos)
-    train_renders = [_random_renders(train_volumes, train_elevations, train_views, settings, seed + r)
+    train_renders = [random_renders(train_volumes, train_elevations, train_views, settings, seed + r)
                      for r in range(repeats)]                           # each critic its own random views
     test_volumes, test_elevations = volumes_of(test_photos) if test_volumes is None else \
         _volumes_and_elevations(test_volumes, len(test_photos), "test_volumes")

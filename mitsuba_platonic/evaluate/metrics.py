@@ -202,14 +202,14 @@ def best_tilt(output: ArrayLike, target: ArrayLike, step: float = 5.0,
     Both volumes lie in an input camera's frame (axes d, h, w of ``(N, N, N)``: depth, image row,
     column). β runs over the grid −90°, −90° + ``step``, …, 90° (``step`` must divide 90);
     ``output`` is resampled as seen from a camera raised by β about the frame's horizontal axis,
-    i.e. from the view (0, sin β, cos β) (:func:`mitsuba_platonic.render.closed_form.tilt`,
+    i.e. from the view (0, sin β, cos β) (:func:`mitsuba_platonic.render.pytorch.closed_form.tilt`,
     trilinear), and scored by :func:`volume_iou`. Of equally good β the one nearest 0 wins; where
     no β gives any overlap (best IoU 0, e.g. an output with no voxel at ``threshold``) the tilt is
     undefined and β is NaN. β = 0 for a reconstruction in the truth's pose. For one that stands
     upright in the frame whatever the input camera's elevation θ₀, β ≈ θ₀: the pose failure of
     view-space reconstruction that the paper names (docs/experiments/pose.md).
     """
-    from ..render.closed_form import tilt            # the renderer's resampling (no cycle: it needs no evaluate)
+    from ..render.pytorch.closed_form import tilt            # the renderer's resampling (no cycle: it needs no evaluate)
 
     o, t = _density_pair(output, target)
     th = _threshold(threshold)

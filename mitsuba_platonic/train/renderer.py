@@ -19,7 +19,7 @@ import torch
 
 from ..render import RenderSettings, render_under, render_with
 from ..render.settings import SINGLE_SCATTERING
-from ..render.single_scatter import LightBatch
+from ..render.pytorch.single_scatter import LightBatch
 from ..views import camera_frames
 
 __all__ = ["make_renderer", "RenderFn", "LitRenderFn", "make_lit_renderer", "in_camera"]

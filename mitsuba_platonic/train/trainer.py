@@ -107,8 +107,8 @@ from ..config.train_settings import MODES, MODES_3D, POSES, REC_TARGETS, TASKS  
 from ..model import RING_VIEWS, Model, critic_config
 from ..networks.nets import Discriminator, VolumeDiscriminator, init_critic_he, init_he, init_weights
 from ..networks.photo_colours import photo_volume
-from ..render.closed_form import rotate, tilt
-from ..render.single_scatter import SKY_SHARE, daylights, sample_lights, sky_share
+from ..render.pytorch.closed_form import rotate, tilt
+from ..render.pytorch.single_scatter import SKY_SHARE, daylights, sample_lights, sky_share
 from ..views import DEFAULT_ELEVATION, from_angles, front_view, sample_views, to_angles
 from .augment import augment, augment_photos
 from .data import TrainingData

@@ -68,7 +68,7 @@ def probes(model: Model, train: torch.Tensor, test: torch.Tensor, settings, axis
 
     vt, θt = J._volumes_and_elevations(answer(train), len(train), "train")
     vs, θs = J._volumes_and_elevations(answer(test), len(test), "test")
-    renders = [J._random_renders(vt, θt, J.TRAIN_VIEWS, settings, r) for r in range(J.CRITIC_REPEATS)]
+    renders = [J.random_renders(vt, θt, J.TRAIN_VIEWS, settings, r) for r in range(J.CRITIC_REPEATS)]
     tt = J._turntable(vs, θs, [0.0, 45.0, 90.0, -90.0, 180.0], settings, 0)
     front, side = tt[0], torch.cat([tt[2], tt[3]])
     fronts = torch.cat([front, front])
