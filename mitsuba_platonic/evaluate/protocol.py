@@ -138,7 +138,7 @@ def voxel_mesh(volume: torch.Tensor, threshold: float = VOX_THRESHOLD) -> Mesh:
     The BSDF is two-sided, so the winding does not matter for shading.
     """
     v = as_rgba(volume).numpy()
-    occ = v[3] >= M._threshold(threshold, "vox threshold")
+    occ = v[3] >= M.checked_threshold(threshold, "vox threshold")
     n = occ.shape[0]
     if not occ.any():
         return _empty_mesh()

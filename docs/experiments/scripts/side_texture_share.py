@@ -47,7 +47,7 @@ def main() -> None:
         θ = torch.deg2rad(elevations.detach().float().cpu())
         seen = in_g_frame(front_transmittance(density, θ), θ)
         probe = torch.cat([seen.expand(-1, 3, -1, -1, -1), density], 1)        # colour = the carried share
-        turntable = J._turntable(probe, elevations.double().cpu(), AZIMUTHS, cfg.render, 0)
+        turntable = J.turntable_renders(probe, elevations.double().cpu(), AZIMUTHS, cfg.render, 0)
         r = turntable.shape[-1]
         cells = []
         for i in range(len(AZIMUTHS)):
