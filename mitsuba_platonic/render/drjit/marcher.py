@@ -137,8 +137,8 @@ import torch
 from ..settings import RenderSettings, check_lanes
 from ..variant import ensure_variant, variant_device
 from ..window import Window, check_orthographic, window_or_none
-from .launch import (FREEZE, PACKET, REDUCE_MODE, image_to_per_ray, pair_frames, per_ray_to_image, set_block_size,
-                     shared_float, spread_over_threads)
+from .launch import (FRAME_FLOATS, FREEZE, PACKET, REDUCE_MODE, image_to_per_ray, pair_frames, per_ray_to_image,
+                     set_block_size, shared_float, spread_over_threads)
 
 mi = ensure_variant()
 import drjit as dr  # noqa: E402  (after the variant is set)
