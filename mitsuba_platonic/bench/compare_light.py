@@ -1,9 +1,9 @@
 """Single scattering vs Mitsuba: the ``scatter_march`` formation against ``volpath`` at depth 2.
 
 The light counterpart of :mod:`mitsuba_platonic.bench.compare`. A volume is rendered under a sun and a
-uniform sky (:class:`~.single_scatter.SunAndSky`) by
-:func:`~.scatter_march.render_scatter_march` and by Mitsuba's ``volpath`` with
-``max_depth`` 2 (:func:`~.single_scatter.reference_render`: the same medium, single
+uniform sky (:class:`~mitsuba_platonic.render.pytorch.single_scatter.SunAndSky`) by
+:func:`~mitsuba_platonic.render.drjit.scatter_march.render_scatter_march` and by Mitsuba's ``volpath`` with
+``max_depth`` 2 (:func:`~mitsuba_platonic.render.mitsuba.single_scatter_reference.reference_render`: the same medium, single
 scattering, Monte Carlo) in ``R`` independent renders of ``spp`` samples each. Per case:
 
 - ``rel_total`` = (Σ I − Σ Ī) / Σ Ī over the RGB pixels, Ī the mean of the ``R`` volpath renders;
@@ -20,7 +20,7 @@ scattering, Monte Carlo) in ``R`` independent renders of ``spp`` samples each. P
   ε = 10⁻³, d zero on voxels above 1 − 2ε (so every difference stays inside [0, 1]): the relative
   error |⟨∇L, d⟩ − FD| / max(|FD|, 10⁻¹²); ``grad_finite``: every gradient entry finite;
 - ``ours_ms`` / ``volpath_ms``: forward time per image, the best of ``repeats`` calls after a
-  warm-up (:func:`~.compare.time_render`) / the fastest of volpath's renders of ``spp`` each.
+  warm-up (:func:`~.timing.time_render`) / the fastest of volpath's renders of ``spp`` each.
 
 The cases (:func:`light_cases`): the volume from each view under a random daylight
 (:func:`~.single_scatter.sample_sun_and_sky`, seeded), then the extremes: a cube of exact

@@ -1,12 +1,18 @@
 """Renderers: one entry point, two backends (closed form | Mitsuba) that agree, and the one dispatcher.
 
 ``render(volume, views, model, backend, **options)`` → ``(B, C, H, W)``, differentiable
-w.r.t. ``volume``. See :mod:`.closed_form` and :mod:`.marcher` (the batched Mitsuba/Dr.Jit ray
-marcher: one launch per call) for the maths. :func:`render_with` (settings already checked) is
-the one place that dispatches to a backend; the backends import nothing of this module. Its
-``window`` (:class:`~.window.Window`) zooms and pans the orthographic camera of every backend but
-the torch single scattering (``platonic view``'s camera). Above them: :mod:`.compare` and
-:mod:`.compare_light` (``platonic compare``), and :mod:`.frames`, a volume's turntable.
+w.r.t. ``volume``. See :mod:`.pytorch.closed_form` and :mod:`.drjit.marcher` (the batched
+Mitsuba/Dr.Jit ray marcher: one launch per call) for the maths. :func:`render_with` (settings
+already checked) is the one place that dispatches to a backend; the backends import nothing of
+this module. Its ``window`` (:class:`~.window.Window`) zooms and pans the orthographic camera of
+every backend but the torch single scattering (``platonic view``'s camera).
+
+By backend: :mod:`.pytorch` (the closed form, single scattering in torch), :mod:`.drjit` (the
+marcher, single scattering at its speed, the sky's occlusion, and what their launches share) and
+:mod:`.mitsuba` (the scene files, the per-pair integrator, the path tracer, baked skies), on a
+floor of :mod:`.settings`, :mod:`.window`, :mod:`.grids` and :mod:`.variant`. Above them:
+:mod:`.frames`, a volume's turntable, and ``platonic compare``'s tools
+(:mod:`mitsuba_platonic.bench.compare`, :mod:`mitsuba_platonic.bench.compare_light`).
 """
 
 from __future__ import annotations
