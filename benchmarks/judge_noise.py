@@ -32,8 +32,8 @@ def shared_views(model: Model, train, test, settings, seed: int, critics: int) -
     """The judge's two-sample figures with every critic trained on one set of random views (seeded)."""
     vt, θt = model.reconstruct_upright(train)
     vs, θs = model.reconstruct_upright(test)
-    renders = J._random_renders(vt.cpu().clamp(0, 1), θt.cpu(), J.TRAIN_VIEWS, settings, seed)
-    table = J._turntable(vs.cpu().clamp(0, 1), θs.cpu(), J.SCORE_AZIMUTHS, settings, seed)
+    renders = J.random_renders(vt.cpu().clamp(0, 1), θt.cpu(), J.TRAIN_VIEWS, settings, seed)
+    table = J.turntable_renders(vs.cpu().clamp(0, 1), θs.cpu(), J.SCORE_AZIMUTHS, settings, seed)
     bands = {name: table[[i for i, a in enumerate(J.SCORE_AZIMUTHS) if J.band_of(a) == name]].flatten(0, 1)
              for name, _, _ in J.BANDS}
     out = J.two_sample_test(train, renders, test, bands, seed, repeats=critics)

@@ -23,8 +23,8 @@ import torch
 import mitsuba_platonic as mp
 from mitsuba_platonic import views as V
 from mitsuba_platonic.bench import plain_ea
-from mitsuba_platonic.render.compare import best_of
-from mitsuba_platonic.render.mitsuba_renderer import render_mitsuba
+from mitsuba_platonic.bench.timing import best_of
+from mitsuba_platonic.render.mitsuba.per_pair import render_mitsuba
 from mitsuba_platonic.render.variant import ensure_variant
 from mitsuba_platonic.volume import test_volume
 
@@ -75,7 +75,7 @@ def empty_space(resolutions: List[int], batch: int, repeats: int) -> None:
     empty-space skipping and without it (``marcher.SKIP_EMPTY``), EA, random views."""
     import importlib
     from mitsuba_platonic.data.shapes.registry import generate
-    M = importlib.import_module("mitsuba_platonic.render.marcher")
+    M = importlib.import_module("mitsuba_platonic.render.drjit.marcher")
     print(f"\n## Empty-space skipping: forward ms per image, EA, batch {batch}, best of {repeats}, "
           f"{batch} shapes per class (exact: the images are equal to the last bit)")
     print(f"{'N':>4} {'class':>9} | occupied | {'skipping':>8} | {'every segment':>13} | speed-up")

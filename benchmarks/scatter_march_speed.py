@@ -1,5 +1,5 @@
-"""Benchmark: single scattering at the marcher's speed (render/scatter_march.py) against Mitsuba's
-volpath and the torch formation (render/single_scatter.py), and its cost beside the EA marcher.
+"""Benchmark: single scattering at the marcher's speed (render/drjit/scatter_march.py) against Mitsuba's
+volpath and the torch formation (render/pytorch/single_scatter.py), and its cost beside the EA marcher.
 
     .venv/bin/python benchmarks/scatter_march_speed.py [--cost-only] [--repeats R]
 
@@ -24,28 +24,60 @@ from __future__ import annotations
 import argparse
 import math
 import statistics
-import sys
 import time
-from pathlib import Path
 
 import numpy as np
 import torch
 import torch.nn.functional as F
 
-sys.path.insert(0, str(Path(__file__).resolve().parent.parent / "tests"))
-from test_single_scatter import (FRONT, HORIZON, OBLIQUE, SKY, SUN_ABOVE, SUN_OBLIQUE, _coords,  # noqa: E402
-                                 _scene, _sun)
+from mitsuba_platonic.bench.timing import sync
+from mitsuba_platonic.render import render
+from mitsuba_platonic.render.drjit.scatter_march import light_packet, render_scatter_march
+from mitsuba_platonic.render.mitsuba.single_scatter_reference import reference_render
+from mitsuba_platonic.render.pytorch.single_scatter import LightBatch, SunAndSky, render_single_scatter, sample_sun_and_sky
+from mitsuba_platonic.render.variant import ensure_variant, variant_device
+from mitsuba_platonic.volume import voxel_size
 
-from mitsuba_platonic.render.compare import _sync  # noqa: E402
-from mitsuba_platonic.render import render  # noqa: E402
-from mitsuba_platonic.render.variant import ensure_variant, variant_device  # noqa: E402
-from mitsuba_platonic.render.scatter_march import light_packet, render_scatter_march  # noqa: E402
-from mitsuba_platonic.render.single_scatter import (LightBatch, SunAndSky, reference_render,  # noqa: E402
-                                                    render_single_scatter, sample_sun_and_sky)
+# -- The scenes of tests/test_single_scatter.py (the same definitions: the benchmark reports on what
+# -- the tests assert, and imports nothing of tests/)
+
+N = 16
+
+
+def coords(n: int = N):
+    """World x, y, z of the voxel centres, indexed [d, h, w] (d along −z, h along −y, w along +x)."""
+    c = -1.0 + (torch.arange(n, dtype=torch.float64) + 0.5) * voxel_size(n)
+    z, y, x = torch.meshgrid(-c, -c, c, indexing="ij")
+    return x, y, z
+
+
+def unit(*v):
+    v = np.asarray(v, dtype=np.float64)
+    return tuple(float(x) for x in v / np.linalg.norm(v))
+
+
+def sun(direction, sky=0.0, power=4.0 * math.pi):
+    """A sun of p E_s = 1 (E_s = 4π) and a grey sky."""
+    return SunAndSky(direction, (power,) * 3, (sky,) * 3)
+
+
+def blob_and_box():
+    """A soft blob beside a dense box (v = 0.9, sharp edges), two colours."""
+    x, y, z = coords()
+    blob = 0.8 * torch.exp(-(((x - 0.1) ** 2 + y ** 2 + (z + 0.1) ** 2) / 0.4 ** 2))
+    box = 0.9 * ((x.abs() < 0.3) & ((y + 0.45).abs() < 0.15) & (z.abs() < 0.5)).double()
+    v = (blob + box).clamp(0, 1)
+    colour = [0.8 * torch.ones_like(v), 0.3 + 0.5 * (y > 0).double(), 0.3 * torch.ones_like(v)]
+    return torch.stack([*colour, v])[None].float()
+
+
+SUN_ABOVE, SUN_OBLIQUE, HORIZON = sun((0.0, 1.0, 0.0)), sun(unit(0.5, 0.7, -0.3)), sun((1.0, 0.0, 0.0))
+SKY = SunAndSky((0.0, 1.0, 0.0), (0.0,) * 3, (0.25,) * 3)
+FRONT, OBLIQUE = (0.0, 0.0, 1.0), unit(0.4, 0.5, 0.7)
 
 
 def half_space() -> None:
-    x, y, z = _coords()
+    x, y, z = coords()
     v = (0.999 * ((y < 0.0) & (x.abs() < 0.9) & (z.abs() < 0.9))).float()
     volume = torch.stack([torch.ones_like(v)] * 3 + [v])[None]
     view = torch.tensor([[0.0, 1.0, 0.0]])
@@ -64,10 +96,10 @@ def half_space() -> None:
 
 
 def blob_and_box() -> None:
-    volume = _scene()
+    volume = blob_and_box()
     cases = [("front", FRONT, "sun above", SUN_ABOVE), ("front", FRONT, "sun oblique", SUN_OBLIQUE),
              ("oblique", OBLIQUE, "sun at the horizon", HORIZON),
-             ("oblique", OBLIQUE, "sun behind", _sun(tuple(-a for a in OBLIQUE))),
+             ("oblique", OBLIQUE, "sun behind", sun(tuple(-a for a in OBLIQUE))),
              ("front", FRONT, "sky alone", SKY), ("oblique", OBLIQUE, "sky alone", SKY)]
     configs = [("torch formation (m = 4, shadow 2, spp 4)",
                 lambda w, l: render_single_scatter(volume, w, l, exposure="none", spp=4))]
@@ -108,10 +140,10 @@ def cost(repeats: int) -> None:
 
         def step(f):
             v = volume.clone().requires_grad_()
-            _sync()
+            sync()
             t0 = time.perf_counter()
             f(v).sum().backward()                             # both backward passes end in torch
-            _sync()                                           # queued CUDA work and Dr.Jit launches
+            sync()                                           # queued CUDA work and Dr.Jit launches
             return time.perf_counter() - t0
 
         runs = {"ea": lambda v: render(v, views, "ea", "mitsuba"),

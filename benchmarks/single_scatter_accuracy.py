@@ -28,8 +28,8 @@ import torch
 import torch.nn.functional as F
 
 from mitsuba_platonic.render import render
-from mitsuba_platonic.render.single_scatter import (LightBatch, SunAndSky, reference_render, render_single_scatter,
-                                                    sample_sun_and_sky)
+from mitsuba_platonic.render.mitsuba.single_scatter_reference import reference_render
+from mitsuba_platonic.render.pytorch.single_scatter import LightBatch, SunAndSky, render_single_scatter, sample_sun_and_sky
 from mitsuba_platonic.volume import voxel_size
 
 N = 16

@@ -19,7 +19,7 @@ import platform
 
 import torch
 
-from mitsuba_platonic.render.compare import best_of
+from mitsuba_platonic.bench.timing import best_of
 from mitsuba_platonic.config import load_config
 from mitsuba_platonic.train.data import TrainingData
 from mitsuba_platonic.train.run import drjit_threads, training_threads

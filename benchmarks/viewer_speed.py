@@ -51,13 +51,13 @@ FRAME = re.compile(r"frame (\d+): ([0-9.]+) ms, (full|moving), (\d+)×\d+ px")
 def server_side(volume: torch.Tensor, pixels: int, frames: int = 40) -> None:
     from viser._image_encoding import cv2_imencode_with_fallback
 
-    from mitsuba_platonic.viewer.app import _pad_to_aspect
+    from mitsuba_platonic.viewer.app import pad_to_aspect
     from mitsuba_platonic.viewer.scene import render_frame
 
     def one(i: int, fmt: str) -> float:
         t = time.perf_counter()
         frame = render_frame(volume, tuple(from_angles(3.0 * i, 20.0).tolist()), "marcher", "EA", pixels)
-        cv2_imencode_with_fallback(fmt, _pad_to_aspect(frame.image, 16 / 9), jpeg_quality=90, channel_ordering="rgb")
+        cv2_imencode_with_fallback(fmt, pad_to_aspect(frame.image, 16 / 9), jpeg_quality=90, channel_ordering="rgb")
         return time.perf_counter() - t
 
     start = time.perf_counter()
@@ -70,7 +70,7 @@ def server_side(volume: torch.Tensor, pixels: int, frames: int = 40) -> None:
             t = time.perf_counter()
             frame = render_frame(volume, tuple(from_angles(3.0 * i, 20.0).tolist()), "marcher", "EA", pixels)
             render.append(time.perf_counter() - t)
-            cv2_imencode_with_fallback(fmt, _pad_to_aspect(frame.image, 16 / 9), jpeg_quality=90,
+            cv2_imencode_with_fallback(fmt, pad_to_aspect(frame.image, 16 / 9), jpeg_quality=90,
                                        channel_ordering="rgb")
             total.append(time.perf_counter() - t)
         print(f"server: marcher at {volume.shape[-1]}³, {pixels}×{pixels} px, {frames} views 3° apart: render "

@@ -21,7 +21,7 @@ Its volumes are in the frame of ring view 0, which is the input view ω₀ for r
 A model trained with ``train.pose: elevation`` also has a pose head P (z → the input camera's
 elevation θ̂, :class:`~mitsuba_platonic.networks.nets.PoseHead`): its G builds the object upright, in
 an object frame, and :meth:`Model.reconstruct` turns that volume into the input camera's frame by
-θ̂ (:func:`~mitsuba_platonic.render.closed_form.tilt`), so every model's reconstructions live in
+θ̂ (:func:`~mitsuba_platonic.render.pytorch.closed_form.tilt`), so every model's reconstructions live in
 the frame of their input view (docs/experiments/pose-elevation.md).
 
 A model trained with ``train.light: head`` has a light head L (z → the photo's sun direction
@@ -47,7 +47,7 @@ from .errors import UserError
 from .runtime import budget
 from .networks.nets import Encoder, Generator, LightHead, NetConfig, PoseHead, init_weights
 from .networks.photo_colours import photo_volume
-from .render.closed_form import tilt
+from .render.pytorch.closed_form import tilt
 from .render.settings import RenderSettings
 from .volume import CHANNELS
 

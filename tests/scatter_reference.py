@@ -1,6 +1,6 @@
-"""An independent torch reference of the single-scattering camera pass (render/scatter_march.py):
+"""An independent torch reference of the single-scattering camera pass (render/drjit/scatter_march.py):
 every camera sample of every ray at once, the trilinear lookup and its gradient from the 8 corner
-values by hand, the local light by :func:`~mitsuba_platonic.render.scatter_march.local_depth`,
+values by hand, the local light by :func:`~mitsuba_platonic.render.drjit.scatter_march.local_depth`,
 the camera's sum by cumulative products. Differentiable by autograd (float64 for gradcheck)."""
 
 import math
@@ -8,8 +8,8 @@ import math
 import torch
 
 from mitsuba_platonic.render.grids import extinction
-from mitsuba_platonic.render.sky_light import EPSILON, local_depth, sky_offsets
-from mitsuba_platonic.render.single_scatter import SKY_DIRECTIONS, SKY_WEIGHTS, sweep
+from mitsuba_platonic.render.drjit.sky_light import EPSILON, local_depth, sky_offsets
+from mitsuba_platonic.render.pytorch.single_scatter import SKY_DIRECTIONS, SKY_WEIGHTS, sweep
 from mitsuba_platonic.views import camera_frames
 
 
@@ -72,7 +72,7 @@ def reference_scatter_march(packet, views, light, m, spp, reach):
 
 
 def reference_sky_occlusion(σ, reach):
-    """O (B, 1, N, N, N) of render/sky_light.py from σ (B, 1, N, N, N), in torch: the 14 sweeps of
+    """O (B, 1, N, N, N) of render/drjit/sky_light.py from σ (B, 1, N, N, N), in torch: the 14 sweeps of
     single_scatter.sweep (plane by plane, bilinear in-plane reads), the far reads as padded slices,
     the local factors from central differences."""
     b, n = σ.shape[0], σ.shape[-1]
@@ -106,7 +106,7 @@ def _read(volume, offset):
 
 
 def reference_light_packet(volume, lights, reach):
-    """The camera pass's packet (B, N, N, N, 8) of render/scatter_march.py in torch: σ, the albedo,
+    """The camera pass's packet (B, N, N, N, 8) of render/drjit/scatter_march.py in torch: σ, the albedo,
     the sun's sweep and σ read by grid_sample ``reach`` voxels towards the sun, the sky's O of
     :func:`reference_sky_occlusion`, a zero."""
     σ = extinction(volume[:, 3:])

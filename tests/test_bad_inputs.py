@@ -10,7 +10,7 @@ import sys
 import pytest
 
 from mitsuba_platonic.config import ConfigError, load_config
-from mitsuba_platonic.render import sky
+from mitsuba_platonic.render.mitsuba import sky
 from cli_runner import one_line, run_cli
 from tiny_shapes import TINY
 

@@ -13,7 +13,7 @@ import torch
 
 from mitsuba_platonic.config import ConfigError, load_config
 from mitsuba_platonic.model import RING_VIEWS
-from mitsuba_platonic.render.closed_form import rotate
+from mitsuba_platonic.render.pytorch.closed_form import rotate
 from mitsuba_platonic.train.data import load_training_data
 from mitsuba_platonic.train.trainer import Trainer, ring_views
 from mitsuba_platonic.views import front_view, to_angles

@@ -180,8 +180,9 @@ def test_the_scatter_march_rows_are_measured_against_volpath(quick):
     import drjit as dr
     import numpy as np
 
-    from mitsuba_platonic.render.scatter_march import render_scatter_march
-    from mitsuba_platonic.render.single_scatter import reference_render, sample_lights, sample_sun_and_sky
+    from mitsuba_platonic.render.drjit.scatter_march import render_scatter_march
+    from mitsuba_platonic.render.mitsuba.single_scatter_reference import reference_render
+    from mitsuba_platonic.render.pytorch.single_scatter import sample_lights, sample_sun_and_sky
 
     _, result, _ = quick
     row = rows_of(result, "ea")["scatter march (m 2, spp 1)"]

@@ -6,7 +6,7 @@ import torch
 
 from mitsuba_platonic import render
 from mitsuba_platonic import views as V
-from mitsuba_platonic.render.closed_form import render_closed_form
+from mitsuba_platonic.render.pytorch.closed_form import render_closed_form
 from mitsuba_platonic.volume import test_volume
 from reference import render_ray_loop
 

@@ -62,7 +62,7 @@ def test_collection_has_the_promised_files(tmp_path, formation, renderer):
         assert all("lighting" in r and r["exposure"] > 0 for r in m["images"])
         assert len({tuple(r["lighting"]["sun_direction"]) for r in m["images"]}) == len(m["images"])
         # metered: each image's factor is its light's, 1 / (the sky's mean luminance)
-        from mitsuba_platonic.render.physical import Lighting, metered_exposure
+        from mitsuba_platonic.render.mitsuba.physical import Lighting, metered_exposure
         for r in m["images"]:
             light = Lighting(**{k: tuple(v) if isinstance(v, list) else v for k, v in r["lighting"].items()})
             assert r["exposure"] == metered_exposure(light)

@@ -1,4 +1,4 @@
-"""`platonic compare` (cli/renderers.py + render/compare.py) and the image helpers (images.py)."""
+"""`platonic compare` (cli/renderers.py + bench/compare.py) and the image helpers (images.py)."""
 
 from __future__ import annotations
 
@@ -13,7 +13,7 @@ from PIL import Image
 
 from mitsuba_platonic import render
 from mitsuba_platonic.cli import main
-from mitsuba_platonic.render.compare import compare, format_table
+from mitsuba_platonic.bench.compare import compare, format_table
 from mitsuba_platonic.images import (composite, exr_channel_names, heatmap, load_exr, save_exr,
                                      save_png, to_hwc, to_uint8)
 from mitsuba_platonic.views import front_view, sample_views

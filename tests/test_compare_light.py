@@ -1,4 +1,4 @@
-"""`platonic compare --light` (render/compare_light.py): single scattering against volpath at depth 2."""
+"""`platonic compare --light` (bench/compare_light.py): single scattering against volpath at depth 2."""
 
 from __future__ import annotations
 
@@ -11,8 +11,8 @@ import torch
 from scipy.stats import t as student_t
 
 from cli_runner import run_cli
-from mitsuba_platonic.render.compare import comparison_views
-from mitsuba_platonic.render.compare_light import block_z, compare_light, light_cases
+from mitsuba_platonic.bench.compare import comparison_views
+from mitsuba_platonic.bench.compare_light import block_z, compare_light, light_cases
 from mitsuba_platonic.volume import test_volume
 
 EXTREMES = ("opaque voxels (a cube of 1s in 0s)", "empty volume", "sun at the horizon", "sun behind the camera",

@@ -404,7 +404,7 @@ def test_best_tilt_of_an_upright_reconstruction_is_the_input_elevation(elevation
     """A volume seen from an input camera at elevation θ₀ (its truth in that frame) against the
     same volume seen from the same azimuth at elevation 0 (a reconstruction standing upright in
     the frame): best_tilt finds β = θ₀, where the IoU is near 1; for the truth itself, β = 0."""
-    from mitsuba_platonic.render.closed_form import rotate
+    from mitsuba_platonic.render.pytorch.closed_form import rotate
     from mitsuba_platonic.views import from_angles
     v = test_volume(32, "figure", "ao").reshape(1, 1, 32, 32, 32)
     truth = rotate(v, from_angles(torch.tensor([30.0]), elevation))[0].clamp(0, 1)

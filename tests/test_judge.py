@@ -140,7 +140,7 @@ def test_the_turntable_turns_about_the_objects_vertical_axis_at_the_input_camera
     front). Given the same rod tilted into the input camera's frame, with no elevation, the
     turntable turns about that camera's vertical axis and the side view shows it leaning (its
     column moves by rows). Elevations are checked: one per volume."""
-    from mitsuba_platonic.render.closed_form import tilt
+    from mitsuba_platonic.render.pytorch.closed_form import tilt
     p = voxel_centres(N)
     rod = torch.exp(-((p[..., 0] - 0.3) ** 2 + p[..., 2] ** 2) / (2 * 0.08 ** 2)) * (p[..., 1].abs() < 0.7)
     volume = torch.cat([torch.full((3, N, N, N), 0.5), rod[None].float()])[None].expand(2, -1, -1, -1, -1)

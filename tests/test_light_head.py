@@ -11,7 +11,7 @@ from mitsuba_platonic.errors import UserError
 from mitsuba_platonic.model import Model
 from mitsuba_platonic.networks.nets import LightHead, init_he, init_weights
 from mitsuba_platonic.render import RenderSettings, render_with
-from mitsuba_platonic.render.single_scatter import (SKY_SHARE, LightBatch, daylights, mean_luminance, sample_lights,
+from mitsuba_platonic.render.pytorch.single_scatter import (SKY_SHARE, LightBatch, daylights, mean_luminance, sample_lights,
                                                     sample_sun_and_sky, sky_share)
 from mitsuba_platonic.train import run as R
 from mitsuba_platonic.train.data import load_training_data

@@ -56,7 +56,7 @@ def test_a_too_wide_fov_is_reported_as_the_fov():
 
 
 def test_too_many_views_are_reported_against_views(monkeypatch, tmp_path):
-    from mitsuba_platonic.render import compare as C
+    from mitsuba_platonic.bench import compare as C
 
     monkeypatch.setattr(C, "available_memory", lambda: (2 << 30, "MemAvailable in /proc/meminfo"))
     code, _, stderr = run_cli(["compare", "--views", "100000", "--out", str(tmp_path / "o")])

@@ -176,7 +176,7 @@ def test_early_termination_bias_is_bounded_by_its_threshold():
 def test_vh_and_ao_read_one_channel_ea_reads_rgba_packets(monkeypatch):
     """The batched marcher gathers from the volume it is given: 1 float per voxel for VH/AO, 4 for EA."""
     import importlib
-    M = importlib.import_module("mitsuba_platonic.render.marcher")
+    M = importlib.import_module("mitsuba_platonic.render.drjit.marcher")
     seen = []
     original = M._Batch.__init__
 
@@ -201,7 +201,7 @@ def dr_width(x):
 def test_batched_marcher_equals_the_per_pair_mitsuba_integrator(model):
     """The Mitsuba-scene path (one ``mi.render`` of the ``platonic_raymarch`` integrator per pair)
     and the batched marcher render, and differentiate, the same images."""
-    from mitsuba_platonic.render.mitsuba_renderer import render_mitsuba
+    from mitsuba_platonic.render.mitsuba.per_pair import render_mitsuba
     vol = _pair(model, 16, "cloud", batch=3)
     x, y = vol.clone().requires_grad_(), vol.clone().requires_grad_()
     w = torch.rand(3, 4 if model == "ea" else 1, 16, 16)
@@ -227,7 +227,7 @@ def test_nearest_agrees_except_where_a_sample_sits_on_a_voxel_face():
     """Nearest lookups are discontinuous at voxel faces: a sample within float round-off of a face
     may pick either neighbour in either backend. Everywhere else the two agree to round-off;
     such ties are rare (random views, 32³)."""
-    from mitsuba_platonic.render.closed_form import camera_space_points
+    from mitsuba_platonic.render.pytorch.closed_form import camera_space_points
     n, b = 32, 8
     vol = _pair("ea", n, "figure", batch=b)
     views = V.sample_views(b, seed=11)
@@ -245,7 +245,7 @@ def test_steady_state_replays_recorded_kernels_without_retracing():
     """A second call with new volumes, views and jitter seed (same batch, resolution and settings)
     replays the frozen passes: no new recording, and the same images as a freshly traced call."""
     import importlib
-    M = importlib.import_module("mitsuba_platonic.render.marcher")
+    M = importlib.import_module("mitsuba_platonic.render.drjit.marcher")
     if not M.FREEZE:
         pytest.skip("MITSUBA_PLATONIC_FREEZE=0")
     opts = dict(jitter=True, spp=2, step=0.75)                 # a configuration no other test uses
@@ -310,7 +310,7 @@ def test_two_backward_passes_from_one_forward_are_each_right(model):
 
 def _marcher():
     import importlib
-    return importlib.import_module("mitsuba_platonic.render.marcher")
+    return importlib.import_module("mitsuba_platonic.render.drjit.marcher")
 
 
 @pytest.mark.parametrize("n, spp", [(32, 1), (32, 4), (64, 1)])
@@ -460,7 +460,7 @@ def test_a_box_that_cuts_the_trilinear_footprint_is_caught():
 def test_a_second_backward_through_the_scene_path_raises_instead_of_repeating_the_first():
     """drjit.wrap's render releases its AD graph in the first backward: a second gradient from the
     same render (retain_graph) used to return the first one again, silently."""
-    from mitsuba_platonic.render.mitsuba_renderer import render_mitsuba
+    from mitsuba_platonic.render.mitsuba.per_pair import render_mitsuba
     vol = _pair("ea", 8, "cloud", batch=2)
     views = V.sample_views(2, seed=3)
     x = vol.clone().requires_grad_()
@@ -503,7 +503,7 @@ def test_the_backward_reading_the_recorded_lookups_equals_one_that_looks_up_agai
     gradient comes out of a backward pass that makes the 8 gathers again (tiled at 32³ with step 1,
     per-thread copies otherwise), on a volume with exact 0s and 1s."""
     import importlib
-    M = importlib.import_module("mitsuba_platonic.render.marcher")
+    M = importlib.import_module("mitsuba_platonic.render.drjit.marcher")
     vol = _pair(model, n, "cloud", batch=2)
     vol[:, -1, : n // 4] = 1.0                                 # opaque slabs and empty ones
     vol[:, -1, -n // 4:] = 0.0
@@ -525,7 +525,7 @@ def test_a_differentiable_render_too_large_to_record_is_refused_with_its_size(mo
     """Before it allocates: the message gives rays, segments and the GiB the records would take
     (T_k and the lookup beside it, 5 floats per ray and segment for EA)."""
     import importlib
-    M = importlib.import_module("mitsuba_platonic.render.marcher")
+    M = importlib.import_module("mitsuba_platonic.render.drjit.marcher")
     monkeypatch.setattr(M, "RECORD_LIMIT", 16 * 16 * 16 * 5 - 1)
     x = _pair("ea", 16, "cloud", batch=1).requires_grad_()
     with pytest.raises(ValueError, match=r"256 rays × 16 segments records 0\.0 GiB"):

@@ -571,7 +571,7 @@ def test_photo_texture_carries_each_pixel_along_the_input_cameras_ray():
     independent resampling) is that same texture, exactly where both read a linear colour
     (a ramp photo, away from the cube's faces), and not the untilted one."""
     from mitsuba_platonic.networks.photo_colours import photo_colour, photo_texture
-    from mitsuba_platonic.render.closed_form import tilt
+    from mitsuba_platonic.render.pytorch.closed_form import tilt
     x = _ramp_photo()
     flat = x[:, :3] + (1.0 - x[:, 3:]) * photo_colour(x)[:, :, None, None]
     t0 = photo_texture(x, 16)
@@ -598,7 +598,7 @@ def test_a_photo_texture_model_starts_from_the_photo_at_the_input_view():
     model.photo_texture needs model.photo_colour."""
     from mitsuba_platonic.model import Model
     from mitsuba_platonic.networks.photo_colours import COLOUR_MIN, photo_texture
-    from mitsuba_platonic.render.closed_form import tilt
+    from mitsuba_platonic.render.pytorch.closed_form import tilt
     cfg = load_config(None, ["model.photo_colour=true", "model.photo_texture=true", "model.resolution=16",
                              "model.width=4", "model.latent=8", "model.upsample=resize_last",
                              "train.pose=elevation"])

@@ -113,7 +113,7 @@ def _run(argv, cwd: Path, env=None, timeout: int = 300) -> str:
 def _build_wheel(tmp: Path) -> Path:
     """Bake the skies into a clean tree and build its wheel, as a release would."""
     src = _tracked_copy(tmp / "src")
-    _run([sys.executable, "-m", "mitsuba_platonic.render.sky", "--out", src / "scenes" / "envmaps", "--width", "64"],
+    _run([sys.executable, "-m", "mitsuba_platonic.render.mitsuba.sky", "--out", src / "scenes" / "envmaps", "--width", "64"],
          cwd=tmp)
     _run([sys.executable, "-m", "pip", "wheel", "-q", "--no-deps", "--no-build-isolation", "-w", tmp / "dist", src],
          cwd=tmp)

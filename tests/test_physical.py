@@ -9,7 +9,7 @@ import torch
 from mitsuba_platonic import render
 from mitsuba_platonic import views as V
 from mitsuba_platonic.images import save_exr
-from mitsuba_platonic.render.physical import (V_MAX_PHYSICAL, Lighting, auto_exposure, luminance,
+from mitsuba_platonic.render.mitsuba.physical import (V_MAX_PHYSICAL, Lighting, auto_exposure, luminance,
                                               metered_exposure, render_physical, render_physical_ad,
                                               sample_lighting, sky_mean_luminance)
 from mitsuba_platonic.volume import test_volume

@@ -16,7 +16,7 @@ from mitsuba_platonic.errors import UserError
 from mitsuba_platonic.export import export_held_out
 from mitsuba_platonic.model import Model
 from mitsuba_platonic.networks.nets import PoseHead, init_he, init_weights
-from mitsuba_platonic.render.closed_form import rotate, tilt
+from mitsuba_platonic.render.pytorch.closed_form import rotate, tilt
 from mitsuba_platonic.train import run as R
 from mitsuba_platonic.train.data import load_training_data
 from mitsuba_platonic.train.trainer import Trainer

@@ -101,7 +101,7 @@ def test_a_first_line_says_the_size_at_once_and_long_tenths_get_timed_lines(monk
 
 
 def test_compare_says_its_size_before_the_first_render_and_a_line_per_step(monkeypatch, capsys, tmp_path):
-    from mitsuba_platonic.render import compare as C
+    from mitsuba_platonic.bench import compare as C
     from mitsuba_platonic.volume import test_volume
 
     before_first = []

@@ -6,7 +6,7 @@ Each renderer is checked three ways, on 16³ volumes made here:
   upsampled 2× (bilinear: the upsampled pixel centres are the zoomed pixel centres exactly) and
   cropped to its centre, within a tolerance per renderer (below) on a smooth volume; and, where
   the same rays exist without a window, against them: the marcher's 2N² frame (its sub-pixel rays
-  kept apart, :func:`~mitsuba_platonic.render.marcher.march_pixels`) cropped, to float round-off;
+  kept apart, :func:`~mitsuba_platonic.render.drjit.marcher.march_pixels`) cropped, to float round-off;
 - pan: a window moved by k whole pixels shows the unmoved frame shifted by k pixels (the same
   rays), and a window moved by (c_x, c_y) moves a small object's centroid by −(c_x, c_y) m N/2
   pixels (columns; rows the other way, row 0 at the top);
@@ -32,7 +32,7 @@ import torch.nn.functional as F
 
 from mitsuba_platonic.errors import UserError
 from mitsuba_platonic.render import RenderSettings, Window, render_with
-from mitsuba_platonic.render.closed_form import render_closed_form
+from mitsuba_platonic.render.pytorch.closed_form import render_closed_form
 from mitsuba_platonic.render.window import window_or_none
 from mitsuba_platonic.views import camera_frames, from_angles
 from mitsuba_platonic.volume import voxel_centres
@@ -211,7 +211,7 @@ def test_the_marchers_2x_window_is_the_centre_of_its_2x_finer_frame():
     """Without interpolation: the marcher's 2N² frame keeps its sub-pixel rays apart
     (:func:`march_pixels`), and its central N² are the rays of the 2× window exactly; so are the
     central 2N² of its 4N² frame those of a 2× window at 2N² (here with a pan)."""
-    from mitsuba_platonic.render.marcher import march_pixels
+    from mitsuba_platonic.render.drjit.marcher import march_pixels
 
     v = blob()
     for view in (FRONT, OBLIQUE):
@@ -229,7 +229,7 @@ def test_the_marcher_in_a_window_matches_the_closed_form_in_images_and_gradients
     """The two renderers, each with its own window code (sample positions; the kernels' 12-float
     frames, the tiled backward included), at step 1: the same planes. Measured ≤ 2.4e-7 (images),
     ≤ 1.5e-6 of the gradient's scale; tolerances 1e-5 and 1e-4 × scale."""
-    from mitsuba_platonic.render.marcher import march
+    from mitsuba_platonic.render.drjit.marcher import march
 
     v = blob(sigma=0.25, peak=0.7)
     v = v if model == "ea" else v[:, 3:]
@@ -259,7 +259,7 @@ def test_single_scattering_zoomed_matches_its_torch_reference_with_the_frame_sca
     import scatter_reference
     from test_scatter_march import _random_case
 
-    from mitsuba_platonic.render.scatter_march import _ScatterMarch, light_packet
+    from mitsuba_platonic.render.drjit.scatter_march import _ScatterMarch, light_packet
     from mitsuba_platonic.render.variant import variant_device
 
     window = Window(zoom)
@@ -289,7 +289,7 @@ def test_single_scattering_zoomed_matches_its_torch_reference_with_the_frame_sca
 def test_the_path_tracers_sensor_rays_start_in_the_window():
     """The sensor's to_world through a window: the ray through film point (u, v) starts at lateral
     coordinates (c_x + h x, c_y + h y), x = 2u − 1, y = 1 − 2v, and runs along −ω (float32 maths)."""
-    from mitsuba_platonic.render.physical import _window_transform
+    from mitsuba_platonic.render.mitsuba.physical import _window_transform
     from mitsuba_platonic.render.variant import ensure_variant
 
     mi = ensure_variant()

@@ -8,7 +8,7 @@ import torch
 
 from mitsuba_platonic.config import ConfigError, load_config
 from mitsuba_platonic.render import render
-from mitsuba_platonic.render.closed_form import rotate
+from mitsuba_platonic.render.pytorch.closed_form import rotate
 from mitsuba_platonic.train import trainer as trainer_module
 from mitsuba_platonic.train.data import load_training_data
 from mitsuba_platonic.train.roll import input_frame_roll, roll

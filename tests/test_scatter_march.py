@@ -1,4 +1,4 @@
-"""Single scattering at the marcher's speed (render/scatter_march.py), checked against independent
+"""Single scattering at the marcher's speed (render/drjit/scatter_march.py), checked against independent
 computations: its Dr.Jit camera pass against the per-sample torch reference (tests/scatter_reference.py,
 images and gradients), that reference against finite differences, its axis sweeps against
 single_scatter.sweep, the Lommel–Seeliger law of an opaque half-space under a sun and the closed
@@ -12,10 +12,10 @@ import torch
 
 from mitsuba_platonic.errors import UserError
 from mitsuba_platonic.render import render
-from mitsuba_platonic.render.scatter_march import _ScatterMarch, light_packet, local_depth, render_scatter_march
-from mitsuba_platonic.render.single_scatter import (LightBatch, SunAndSky, reference_render, sample_lights,
-                                                    sample_sun_and_sky)
-from mitsuba_platonic.render.sky_light import sky_occlusion
+from mitsuba_platonic.render.drjit.scatter_march import _ScatterMarch, light_packet, local_depth, render_scatter_march
+from mitsuba_platonic.render.mitsuba.single_scatter_reference import reference_render
+from mitsuba_platonic.render.pytorch.single_scatter import LightBatch, SunAndSky, sample_lights, sample_sun_and_sky
+from mitsuba_platonic.render.drjit.sky_light import sky_occlusion
 from mitsuba_platonic.render.variant import variant_device
 from scatter_reference import reference_light_packet, reference_scatter_march, reference_sky_occlusion
 from test_single_scatter import FRONT, SKY, SUN_ABOVE, _coords, _scene, _sun
@@ -112,8 +112,8 @@ def test_steady_state_replays_the_frozen_launches_without_retracing(monkeypatch)
     replays every frozen launch (camera pass, packet and sky, both ways): no new recording, and the same
     images and gradients as freshly traced launches."""
     import importlib
-    SM = importlib.import_module("mitsuba_platonic.render.scatter_march")
-    SL = importlib.import_module("mitsuba_platonic.render.sky_light")
+    SM = importlib.import_module("mitsuba_platonic.render.drjit.scatter_march")
+    SL = importlib.import_module("mitsuba_platonic.render.drjit.sky_light")
     if not SM.FREEZE:
         pytest.skip("MITSUBA_PLATONIC_FREEZE=0")
     frozen = [SM._frozen_camera_forward, SM._frozen_camera_backward, SM._frozen_assemble,

@@ -11,9 +11,9 @@ import torch
 
 from mitsuba_platonic import render
 from mitsuba_platonic import views as V
-from mitsuba_platonic.render import sky
-from mitsuba_platonic.render.physical import Lighting, _medium_grids, render_physical
-from mitsuba_platonic.render.scenes import SCENES, load_scene, write_scene_grids
+from mitsuba_platonic.render.mitsuba import sky
+from mitsuba_platonic.render.mitsuba.physical import Lighting, _medium_grids, render_physical
+from mitsuba_platonic.render.mitsuba.scenes import SCENES, load_scene, write_scene_grids
 from mitsuba_platonic.render.variant import ensure_variant
 from mitsuba_platonic.volume import test_volume
 
@@ -23,7 +23,7 @@ OBLIQUE = V.from_angles(torch.tensor([37.0, -128.0]), torch.tensor([23.0, -41.0]
 
 def _mi():
     mi = ensure_variant()
-    import mitsuba_platonic.render.raymarch  # noqa: F401  (the project's integrator, for raymarch*.xml)
+    import mitsuba_platonic.render.mitsuba.integrator  # noqa: F401  (the project's integrator, for raymarch*.xml)
     return mi
 
 
@@ -125,7 +125,7 @@ def test_the_ad_scene_keeps_its_fixed_majorant_when_grids_are_bound():
     (which changes every step)."""
     import drjit as dr
 
-    from mitsuba_platonic.render.physical import MAJORANT_HEADROOM, V_MAX_PHYSICAL, _ad_scene
+    from mitsuba_platonic.render.mitsuba.physical import MAJORANT_HEADROOM, V_MAX_PHYSICAL, _ad_scene
 
     mi = _mi()
     σ_max = MAJORANT_HEADROOM * -math.log(1.0 - V_MAX_PHYSICAL) / (2.0 / N)

@@ -1,4 +1,4 @@
-"""Single scattering of a sun and a sky (render/single_scatter.py), checked against independent
+"""Single scattering of a sun and a sky (render/pytorch/single_scatter.py), checked against independent
 computations: the trapezoid sums of its sweeps by hand, the closed form of a constant medium and of
 a linear ramp, the Lommel–Seeliger law of an opaque half-space, Mitsuba's volpath at max_depth 2
 (sun and sky separately, per pixel block within its Monte Carlo error), finite differences."""
@@ -12,9 +12,10 @@ import torch
 from mitsuba_platonic.errors import UserError
 from mitsuba_platonic.render.grids import extinction
 from mitsuba_platonic.render import render
-from mitsuba_platonic.render.single_scatter import (SKY_DIRECTIONS, SKY_WEIGHTS, LightBatch, SunAndSky,
-                                                    reference_render, render_single_scatter, sample_lights,
-                                                    sample_sun_and_sky, sweep, transmittance)
+from mitsuba_platonic.render.mitsuba.single_scatter_reference import reference_render
+from mitsuba_platonic.render.pytorch.single_scatter import (SKY_DIRECTIONS, SKY_WEIGHTS, LightBatch, SunAndSky,
+                                                            render_single_scatter, sample_lights, sample_sun_and_sky,
+                                                            sweep, transmittance)
 from mitsuba_platonic.volume import voxel_size
 
 N = 16

@@ -37,8 +37,9 @@ def modules(root: Path = PACKAGE) -> Dict[str, Path]:
     return out
 
 
-def imports(mods: Dict[str, Path]) -> List[Import]:
-    """Every import of one module of ``mods`` by another, with its line and whether it is in a function."""
+def imports(mods: Dict[str, Path], parents: bool = False) -> List[Import]:
+    """Every import of one module of ``mods`` by another, with its line and whether it is in a function
+    (``parents``: also a child's imports of the packages it is in, which the cycles leave out)."""
     found: List[Import] = []
     for name, path in mods.items():
         is_package = path.name == "__init__.py"
@@ -63,7 +64,8 @@ def imports(mods: Dict[str, Path]) -> List[Import]:
                 targets = [a.name for a in node.names]
             for target in targets:
                 edge = Import(name, target, node.lineno, id(node) in lazy_nodes)
-                if target in mods and target != name and not name.startswith(target + ".") and edge not in found:
+                if (target in mods and target != name and (parents or not name.startswith(target + "."))
+                        and edge not in found):
                     found.append(edge)
     return found
 
@@ -135,7 +137,14 @@ LAYERS = [
     ("I/O: files (writes, output folders, package data, volume files, checkpoints) and images", ["files", "images"]),
     ("the machine: Dr.Jit's backend, memory and disk, progress", ["runtime"]),
     ("the checks every settings section shares", ["settings_checks"]),
-    ("renderer, its backends compared, turntables", ["render"]),
+    ("the renderer's floor: its camera window, the medium's grids, Mitsuba's variant",
+     ["render.window", "render.grids", "render.variant"]),
+    ("the renderers in PyTorch: the closed form, single scattering", ["render.pytorch"]),
+    ("the renderer settings (their filters are the closed form's)", ["render.settings"]),
+    ("the Dr.Jit kernels: the marcher, single scattering at its speed, the sky's occlusion, their launches",
+     ["render.drjit"]),
+    ("the Mitsuba scene side: scene files, the per-pair integrator, the path tracer, skies", ["render.mitsuba"]),
+    ("the renderer's face: the one dispatcher, turntables", ["render"]),
     ("data: collections, photos, the data section", ["data"]),
     ("networks, the colour they read from a photo and the model section", ["networks"]),
     ("the config: every section composed, training's own (train, run), what runs saved read back", ["config"]),
@@ -173,6 +182,18 @@ def test_no_module_imports_a_layer_above_its_own():
             upward.append(f"  {modules()[e.source].relative_to(PACKAGE.parent)}:{e.line} → {e.target}: "
                           f"{LAYERS[layer(e.source)][0]} → {LAYERS[layer(e.target)][0]}")
     assert not upward, "imports up the data flow:\n" + "\n".join(upward)
+
+
+def test_the_backends_import_nothing_of_the_dispatcher():
+    """The renderer's face (``render/__init__.py``: ``render``, ``render_with``) is the one dispatcher
+    and sits above its backends: no module of ``render/`` imports it but the turntables
+    (``render/frames.py``), which render through it. A child's import of its own package is no edge
+    of :func:`imports` by default, so the layers alone would not see one."""
+    face = "mitsuba_platonic.render"
+    back = [f"  {modules()[e.source].relative_to(PACKAGE.parent)}:{e.line} → {e.target}"
+            for e in imports(modules(), parents=True)
+            if e.target == face and e.source.startswith(face + ".") and e.source != face + ".frames"]
+    assert not back, "the backends import the dispatcher:\n" + "\n".join(back)
 
 
 def test_the_checkpoint_loader_imports_no_training_code_and_the_model_imports_it():
@@ -289,3 +310,80 @@ def test_a_cycle_is_found_and_named(tmp_path):
     assert Import("pkg.sub.low", "pkg.high", 4, True) in edges
     assert cycles(edges) == [["pkg.high", "pkg.sub.low"]]
     assert cycles([e for e in edges if not e.lazy]) == []
+
+
+#: Where no module may import another's underscored names: the package, the benchmarks and the
+#: experiment log's scripts (each folder's scripts import their neighbours by bare name).
+PUBLIC_NAMES_ROOTS = [PACKAGE, PACKAGE.parent / "benchmarks", PACKAGE.parent / "docs" / "experiments" / "scripts"]
+
+
+def private(name: str) -> bool:
+    """Whether ``name`` is underscored (``_x``), not a dunder (``__version__``)."""
+    return name.startswith("_") and not (name.startswith("__") and name.endswith("__"))
+
+
+def private_imports(root: Path, project: Path = PACKAGE.parent) -> List[str]:
+    """``path:line name`` for every underscored name that a module under ``root`` takes from another
+    module of the project: by ``from ... import _name`` (relative, from ``mitsuba_platonic``, or from a
+    script of the same folder), or as ``module._name`` of a module it imported by name (``import
+    mitsuba_platonic.x as M``, ``from mitsuba_platonic import x as M``, ``import neighbour``).
+    ``project``: the folder that holds ``mitsuba_platonic/`` (paths are named from it)."""
+    found: List[str] = []
+    for path in sorted(root.rglob("*.py")):
+        neighbours = {p.stem for p in path.parent.glob("*.py")} - {path.stem}
+        tree = ast.parse(path.read_text(), str(path))
+        where = path.relative_to(project)
+        aliases: Set[str] = set()                       # local names bound to a project module
+        for node in ast.walk(tree):
+            if isinstance(node, ast.ImportFrom):
+                module = node.module or ""
+                ours = node.level > 0 or module.split(".")[0] in {"mitsuba_platonic"} | neighbours
+                if not ours:
+                    continue
+                for alias in node.names:
+                    if private(alias.name):
+                        found.append(f"{where}:{node.lineno} {alias.name}")
+                    elif node.level == 0 and module.split(".")[0] == "mitsuba_platonic":
+                        full = f"{module}.{alias.name}".replace(".", "/")
+                        if (project / f"{full}.py").is_file() or (project / full / "__init__.py").is_file():
+                            aliases.add(alias.asname or alias.name)
+                    elif node.level > 0:
+                        aliases.add(alias.asname or alias.name)   # a name or a module: either, _x on it is theirs
+            elif isinstance(node, ast.Import):
+                for alias in node.names:
+                    if alias.name.split(".")[0] in {"mitsuba_platonic"} | neighbours:
+                        aliases.add(alias.asname or alias.name.split(".")[0])
+        for node in ast.walk(tree):
+            if (isinstance(node, ast.Attribute) and private(node.attr) and isinstance(node.value, ast.Name)
+                    and node.value.id in aliases):
+                found.append(f"{where}:{node.lineno} {node.value.id}.{node.attr}")
+    return found
+
+
+def test_no_module_imports_an_underscored_name_from_another():
+    """Public names between modules (issue 57): what two modules share has a public name, documented,
+    in a module of its own where neither owns it; a benchmark or a script of the log uses the
+    package's public face. Names read by ``importlib`` at run time are not seen."""
+    found = [f for root in PUBLIC_NAMES_ROOTS for f in private_imports(root)]
+    assert not found, f"{len(found)} underscored names taken from another module:\n  " + "\n  ".join(found)
+
+
+def test_an_underscored_import_is_found_and_named(tmp_path):
+    """The check itself: ``from .x import _y``, ``from mitsuba_platonic.x import _y``, a neighbour
+    script's ``_y`` and ``M._y`` of an imported module are found; a dunder, a public name and a
+    third party's private module are not."""
+    pkg = tmp_path / "mitsuba_platonic"
+    (pkg / "sub").mkdir(parents=True)
+    (pkg / "__init__.py").write_text("__version__ = '1'\n")
+    (pkg / "sub" / "__init__.py").write_text("")
+    (pkg / "sub" / "low.py").write_text("_x = 1\ny = 2\n")
+    (pkg / "sub" / "high.py").write_text("from .low import _x, y\nfrom .. import __version__\n")
+    (pkg / "user.py").write_text("import mitsuba_platonic.sub.low as L\nfrom mitsuba_platonic.sub import low\n"
+                                 "from viser._image_encoding import encode\nz = L._x + low._x + low.y\n")
+    scripts = tmp_path / "scripts"
+    scripts.mkdir()
+    (scripts / "helper.py").write_text("_h = 1\n")
+    (scripts / "main.py").write_text("from helper import _h\nfrom mitsuba_platonic.sub.low import _x\n")
+    assert private_imports(pkg, tmp_path) == ["mitsuba_platonic/sub/high.py:1 _x", "mitsuba_platonic/user.py:4 L._x",
+                                              "mitsuba_platonic/user.py:4 low._x"]
+    assert private_imports(scripts, tmp_path) == ["scripts/main.py:1 _h", "scripts/main.py:2 _x"]

@@ -14,7 +14,7 @@ import torch
 from torch import nn
 
 from mitsuba_platonic.config.train_settings import MODES, TASKS, TrainConfig
-from mitsuba_platonic.render.single_scatter import SKY_SHARE, sample_lights
+from mitsuba_platonic.render.pytorch.single_scatter import SKY_SHARE, sample_lights
 from mitsuba_platonic.train.step_state import StepState, side_seed
 from mitsuba_platonic.train.terms import G_TERMS, active_terms, g_terms
 from mitsuba_platonic.views import sample_views, to_angles

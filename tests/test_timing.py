@@ -1,10 +1,10 @@
-"""compare.kernel_time: Dr.Jit's kernel history read around one call, and switched off after it."""
+"""bench.timing.kernel_time: Dr.Jit's kernel history read around one call, and switched off after it."""
 
 import math
 
 import pytest
 
-from mitsuba_platonic.render.compare import best_kernel_ms, kernel_time
+from mitsuba_platonic.bench.timing import best_kernel_ms, kernel_time
 from mitsuba_platonic.render.variant import ensure_variant
 
 mi = ensure_variant()

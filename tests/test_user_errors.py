@@ -220,7 +220,7 @@ def test_a_ctrl_c_a_library_swallows_still_interrupts_the_collection(tmp_path, m
 
 
 def test_compare_refuses_a_resolution_that_cannot_fit_in_memory(monkeypatch, tmp_path):
-    from mitsuba_platonic.render import compare as C
+    from mitsuba_platonic.bench import compare as C
     monkeypatch.setattr(C, "available_memory", lambda: (8 << 30, "MemAvailable in /proc/meminfo"))
     assert C.memory_estimate(1000, 4, builtin=True) > 24e9           # the float64 grid alone is 24 GB
     out = tmp_path / "out"
@@ -299,7 +299,7 @@ def test_render_rejects_an_empty_batch_and_meta_tensors(backend):
 
 
 def test_a_bug_keeps_its_traceback_and_a_user_error_is_one_line(monkeypatch, tmp_path):
-    from mitsuba_platonic.render import compare as C
+    from mitsuba_platonic.bench import compare as C
     from mitsuba_platonic.errors import Interrupted, UserError
     argv = ["compare", "--resolution", "8", "--views", "1", "--repeats", "1", "--out", str(tmp_path / "out")]
 

@@ -93,7 +93,7 @@ def test_the_marchers_finer_frames_are_its_sub_pixel_rays():
     """At R = kN the marcher's frame is its k×k sub-pixel rays kept apart: averaged over k×k blocks,
     the marcher's own render with spp = k² (the same rays, averaged in the renderer)."""
     from mitsuba_platonic.render import render
-    from mitsuba_platonic.render.marcher import march_pixels
+    from mitsuba_platonic.render.drjit.marcher import march_pixels
     from mitsuba_platonic.render.settings import RenderSettings
 
     v = test_volume(N, "figure", "ea")
@@ -204,7 +204,7 @@ def test_a_windowed_frame_is_the_renderers_frame_through_the_window():
     """render_frame passes the window to every renderer (and the marcher's finer frames), says so in
     its settings line, and without one (or with the full one) is the frame it was."""
     from mitsuba_platonic.render import RenderSettings, render_with
-    from mitsuba_platonic.render.marcher import march_pixels
+    from mitsuba_platonic.render.drjit.marcher import march_pixels
     from mitsuba_platonic.viewer.scene import Window
 
     v = test_volume(N, "figure", "ea")[0]

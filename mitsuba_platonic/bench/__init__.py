@@ -12,11 +12,11 @@ pairs (the built-in test volume, B random views) is rendered by:
   yardstick for a layer written the obvious way), the *authors' EA layer* (:func:`authors_ea`, the
   image formation of the PlatonicGAN authors' public code: a different image formation, reported
   for its time and for how far its images are from ours), and the differentiable path tracer
-  (``backend="physical"``, :func:`~mitsuba_platonic.render.physical.render_physical_ad`: its own
+  (``backend="physical"``, :func:`~mitsuba_platonic.render.mitsuba.physical.render_physical_ad`: its own
   image formation under a random sky) at spp {1, 4}, and single scattering of a sun and a sky
-  (:func:`~mitsuba_platonic.render.single_scatter.render_single_scatter`, up to 32³) at its
+  (:func:`~mitsuba_platonic.render.pytorch.single_scatter.render_single_scatter`, up to 32³) at its
   defaults and at 2 samples per voxel, and the same light in Dr.Jit
-  (:func:`~mitsuba_platonic.render.scatter_march.render_scatter_march`, up to 64³) at its defaults
+  (:func:`~mitsuba_platonic.render.drjit.scatter_march.render_scatter_march`, up to 64³) at its defaults
   (2 samples per voxel, spp 1), at 4 samples per voxel and at spp 4.
 
 Every row records (all times per image, the best of ``repeats`` timed calls after an untimed
@@ -49,7 +49,7 @@ warm-up call):
 
 Plus training images/s per renderer (closed form, the marcher, single scattering in Dr.Jit, the
 path tracer at spp 1 depth 2)
-for one small reconstruction configuration (:func:`_bench_train`).
+for one small reconstruction configuration (:func:`.train.bench_train`).
 
 Outputs (:func:`write_outputs`): ``bench.json`` (every measured row and the run's settings),
 ``bench.md`` (the tables) and ``pareto_<model>_<N>.png`` (image RMSE vs forward+backward ms per

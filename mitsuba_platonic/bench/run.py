@@ -15,17 +15,16 @@ import numpy as np
 import torch
 
 from ..render import render
-from ..render.single_scatter import LightBatch, reference_render, render_single_scatter, sample_lights, \
-    sample_sun_and_sky
+from ..render.mitsuba.single_scatter_reference import reference_render
+from ..render.pytorch.single_scatter import LightBatch, render_single_scatter, sample_lights, sample_sun_and_sky
 from ..render.variant import ensure_variant
 from ..views import sample_views
 from ..volume import CHANNELS, test_volume
 from .layers import (AUTHORS_DENSITY_FACTOR, AUTHORS_DEPTH_SAMPLES, authors_ea, gradient_error, image_error,
                      loss_weights, plain_ea)
-from .settings import REFERENCE_OPTIONS, BenchSettings, _physical_spps, marcher_configs
-from .timing import RenderFn, _available_bytes, _forward_backward, _measure, _release_memory, _traffic_bytes, \
-    measure_bandwidth
-from .train import _bench_train
+from .settings import REFERENCE_OPTIONS, BenchSettings, marcher_configs, physical_spps
+from .timing import RenderFn, available_bytes, forward_backward, measure, measure_bandwidth, release_memory, traffic_bytes
+from .train import bench_train
 
 __all__ = ["run_bench"]
 
@@ -69,7 +68,7 @@ SCATTER_MARCH_REFERENCE = {"steps_per_voxel": 8, "spp": 4}
 
 
 def _scatter_march(lights: LightBatch, options: Dict[str, Any]) -> RenderFn:
-    from ..render.scatter_march import render_scatter_march  # imports Dr.Jit: on first use
+    from ..render.drjit.scatter_march import render_scatter_march  # imports Dr.Jit: on first use
     return lambda v, w: render_scatter_march(v, w, lights, **options)
 
 
@@ -78,10 +77,10 @@ def _reference(fn: RenderFn, volume: torch.Tensor, views: torch.Tensor,
     """Image and gradient of L of a (slow) reference renderer, one pair at a time (bounded memory)."""
     images, grads = [], []
     for i in range(volume.shape[0]):
-        img, g = _forward_backward(fn, volume[i:i + 1], views[i:i + 1], weights[i:i + 1])
+        img, g = forward_backward(fn, volume[i:i + 1], views[i:i + 1], weights[i:i + 1])
         images.append(img)
         grads.append(g)
-        _release_memory()
+        release_memory()
     return torch.cat(images), torch.cat(grads)
 
 
@@ -164,9 +163,9 @@ def run_bench(settings: BenchSettings, log: Callable[[str], None] = print) -> Di
                 result["rows"].extend(_bench_model(s, n, model, views, repeats, ref_spp, bandwidth, log))
         if s.train:
             if s.quick:
-                result["train"] = _bench_train([min(s.resolutions)], s.train_width, s.batch, 1, 1, log, s.physical)
+                result["train"] = bench_train([min(s.resolutions)], s.train_width, s.batch, 1, 1, log, s.physical)
             else:
-                result["train"] = _bench_train(resolutions, s.train_width, s.train_batch, s.train_steps,
+                result["train"] = bench_train(resolutions, s.train_width, s.train_batch, s.train_steps,
                                                s.train_warmup, log, s.physical)
         result["meta"]["duration_s"] = time.perf_counter() - t_start
         return _clean(result)
@@ -181,7 +180,7 @@ def _bench_model(s: BenchSettings, n: int, model: str, views: torch.Tensor, repe
     volume = test_volume(n, s.volume, model).expand(b, -1, -1, -1, -1).contiguous()
     c_img = 4 if model == "ea" else 1
     weights = loss_weights((b, c_img, n, n), s.seed)
-    traffic = _traffic_bytes(b, CHANNELS[model], c_img, n)
+    traffic = traffic_bytes(b, CHANNELS[model], c_img, n)
     t0 = time.perf_counter()
     ref_image, ref_grad = _reference(_marcher(model, REFERENCE_OPTIONS), volume, views, weights)
     with torch.no_grad():
@@ -193,7 +192,7 @@ def _bench_model(s: BenchSettings, n: int, model: str, views: torch.Tensor, repe
     def add(row: Dict[str, Any], fn: RenderFn, ref: Tuple[torch.Tensor, torch.Tensor],
             vs_closed: bool = True) -> None:
         try:
-            m = _measure(fn, volume, views, weights, repeats)
+            m = measure(fn, volume, views, weights, repeats)
         except (ValueError, RuntimeError, MemoryError) as e:   # e.g. the marcher's record limit
             row["skipped"] = f"{type(e).__name__}: {e}"
             log(f"{n}³ {model}: {row['config']}: skipped ({row['skipped']})")
@@ -201,7 +200,7 @@ def _bench_model(s: BenchSettings, n: int, model: str, views: torch.Tensor, repe
             return
         _fill(row, m, ref[0], ref[1], closed if vs_closed else None, traffic, bandwidth)
         del m
-        _release_memory()
+        release_memory()
         rows.append(row)
         log(f"{n}³ {model}: {row['config']:<28} fwd {row['fwd_ms']:8.3f} ms  f+b {row['fwd_bwd_ms']:8.3f} ms  "
             f"mem {row['mem_fwd_bwd_mb']:7.1f} MB  rmse {row['rmse']:.2e}  grad cos {row['grad_cosine'] or 0:.4f}")
@@ -218,7 +217,7 @@ def _bench_model(s: BenchSettings, n: int, model: str, views: torch.Tensor, repe
     row = _row(n, b, model, "authors", "authors' EA (1024 samples)",
                {"depth_samples": AUTHORS_DEPTH_SAMPLES, "density_factor": AUTHORS_DENSITY_FACTOR},
                formation="authors", reference="ours: marcher step 0.25 spp 16 (a different image formation)")
-    need, avail = _authors_bytes_estimate(b, n), _available_bytes()
+    need, avail = _authors_bytes_estimate(b, n), available_bytes()
     if avail is not None and need > 0.6 * avail:
         row["skipped"] = (f"needs about {need / 2**30:.1f} GiB, {avail / 2**30:.1f} GiB available; "
                           f"use a smaller batch")
@@ -243,10 +242,10 @@ def _path_tracer_rows(s: BenchSettings, n: int, b: int, model: str, volume: torc
     """The path tracer's rows (``add`` measures and records one), against itself at ``ref_spp``."""
     t0 = time.perf_counter()
     # one call for the whole batch: the path tracer draws pair b's sky as the b-th draw from the seed
-    phys_ref = _forward_backward(_physical(ref_spp, s.physical_max_depth, s.seed), volume, views, weights)
-    _release_memory()
+    phys_ref = forward_backward(_physical(ref_spp, s.physical_max_depth, s.seed), volume, views, weights)
+    release_memory()
     log(f"{n}³ ea: path-traced reference (spp {ref_spp}) in {time.perf_counter() - t0:.1f} s")
-    for spp in _physical_spps(s.quick):
+    for spp in physical_spps(s.quick):
         add(_row(n, b, model, "physical", f"path tracer spp {spp}",
                  {"physical_spp": spp, "max_depth": s.physical_max_depth, "lighting": "sunsky", "seed": s.seed},
                  formation="physical", reference=f"path tracer spp {ref_spp}, same scene, views and sky"),
@@ -262,11 +261,11 @@ def _single_scatter_rows(s: BenchSettings, n: int, b: int, model: str, volume: t
     images, grads = [], []
     for i in range(b):                                        # pair by pair: the reference's samples are many
         light = _pair_light(lights, i)
-        img, g = _forward_backward(_single_scatter(light, SINGLE_SCATTER_REFERENCE), volume[i:i + 1],
+        img, g = forward_backward(_single_scatter(light, SINGLE_SCATTER_REFERENCE), volume[i:i + 1],
                                    views[i:i + 1], weights[i:i + 1])
         images.append(img)
         grads.append(g)
-        _release_memory()
+        release_memory()
     log(f"{n}³ ea: single-scattering reference in {time.perf_counter() - t0:.1f} s")
     for label, options in SINGLE_SCATTER_CONFIGS:
         add(_row(n, b, model, "single_scatter", label, {"steps_per_voxel": 4, "shadow_planes": 2, **options},
@@ -289,11 +288,11 @@ def _scatter_march_rows(s: BenchSettings, n: int, b: int, model: str, volume: to
     alphas, grads = [], []
     for i in range(b):                                        # pair by pair: bounded memory
         light = _pair_light(lights, i)
-        img, g = _forward_backward(_scatter_march(light, SCATTER_MARCH_REFERENCE), volume[i:i + 1],
+        img, g = forward_backward(_scatter_march(light, SCATTER_MARCH_REFERENCE), volume[i:i + 1],
                                    views[i:i + 1], weights[i:i + 1])
         alphas.append(img[:, 3])
         grads.append(g)
-        _release_memory()
+        release_memory()
     grad = torch.cat(grads)
     images[:, 3] = torch.cat(alphas)                            # volpath's alpha is not α = 1 − e^{−τ}
     log(f"{n}³ ea: volpath (max_depth 2, spp {spp}) and scatter-march references in "

@@ -9,7 +9,7 @@ from typing import Any, Dict, List, Optional, Sequence, Tuple
 from ..networks.nets import RESOLUTIONS
 from ..volume import CHANNELS
 
-__all__ = ["BenchSettings", "marcher_configs", "REFERENCE_OPTIONS", "RESOLUTIONS"]
+__all__ = ["BenchSettings", "marcher_configs", "physical_spps", "REFERENCE_OPTIONS", "RESOLUTIONS"]
 
 #: The converged reference every row of our image formation is measured against.
 REFERENCE_OPTIONS: Dict[str, Any] = {"step": 0.25, "spp": 16, "jitter": False, "filter": "trilinear"}
@@ -76,5 +76,6 @@ def marcher_configs(quick: bool = False) -> List[Tuple[str, Dict[str, Any]]]:
     ]
 
 
-def _physical_spps(quick: bool) -> Tuple[int, ...]:
+def physical_spps(quick: bool) -> Tuple[int, ...]:
+    """The path tracer's samples per pixel the bench measures: 1 in a quick run, else 1 and 4."""
     return (1,) if quick else (1, 4)

@@ -30,7 +30,7 @@ from ..train.data import TrainingData
 from ..train.run import training_threads
 from ..train.trainer import Trainer
 
-__all__ = ["StepClock", "RENDERERS"]
+__all__ = ["StepClock", "RENDERERS", "bench_train"]
 
 #: The renderers a training row is measured for: (backend, label, extra overrides).
 RENDERERS = [("closed_form", "closed form", []), ("mitsuba", "marcher", []),
@@ -114,7 +114,7 @@ class StepClock:
 PHYSICAL_MAX_RESOLUTION = 32
 
 
-def _bench_train(resolutions: Sequence[int], width: int, batch: int, steps: int, warmup: int,
+def bench_train(resolutions: Sequence[int], width: int, batch: int, steps: int, warmup: int,
                  log: Callable[[str], None], physical: bool = True) -> List[Dict[str, Any]]:
     """Per resolution and renderer (:data:`RENDERERS`; the path tracer only with ``physical`` and
     up to :data:`PHYSICAL_MAX_RESOLUTION`): seconds per quickstart training step and the shares of

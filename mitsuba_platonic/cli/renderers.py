@@ -1,8 +1,8 @@
 """``platonic compare`` and ``platonic bench``: the renderers measured against each other.
 
 - ``compare``: render a volume with the closed-form layers and the Mitsuba ray marcher from a
-  few views and report how far apart and how fast they are (:mod:`mitsuba_platonic.render.compare`);
-  with ``--light``, single scattering against Mitsuba's volpath (:mod:`mitsuba_platonic.render.compare_light`).
+  few views and report how far apart and how fast they are (:mod:`mitsuba_platonic.bench.compare`);
+  with ``--light``, single scattering against Mitsuba's volpath (:mod:`mitsuba_platonic.bench.compare_light`).
 - ``bench``: the renderers' speed/accuracy trade: times, memory, image and gradient errors,
   JSON, Markdown and Pareto plots (:mod:`mitsuba_platonic.bench`).
 """
@@ -82,7 +82,7 @@ def _cmd_compare_light(args: argparse.Namespace, volume, views) -> int:
 
 def _compare_light_into(args: argparse.Namespace, volume: "torch.Tensor", views: "torch.Tensor", out: Path) -> int:
     """``compare --light`` into the claimed, confined folder ``out``."""
-    from ..render.compare_light import BLOCK, compare_light, format_light_table, light_cases, light_figure, write_light_summary
+    from ..bench.compare_light import BLOCK, compare_light, format_light_table, light_cases, light_figure, write_light_summary
 
     cases = light_cases(volume, views, seed=args.seed)
     results = compare_light(cases, spp=args.ref_spp, renders=args.ref_renders, steps_per_voxel=args.steps_per_voxel,
@@ -102,7 +102,7 @@ def _compare_light_into(args: argparse.Namespace, volume: "torch.Tensor", views:
 
 
 def _cmd_compare(args: argparse.Namespace) -> int:
-    from ..render.compare import check_memory, comparison_views
+    from ..bench.compare import check_memory, comparison_views
     from ..files.volume_io import BUILTIN_PREFIX, load_volume
     from ..runtime import budget
 
@@ -136,7 +136,7 @@ def _cmd_compare(args: argparse.Namespace) -> int:
 def _compare_into(args: argparse.Namespace, volume: "torch.Tensor", views: "torch.Tensor", models: List[str],
                   options: Dict[str, Any], out: Path) -> int:
     """``compare`` into the claimed, confined folder ``out``."""
-    from ..render.compare import compare, format_table, write_summary
+    from ..bench.compare import compare, format_table, write_summary
 
     results = compare(volume, views, models, filter=args.filter, options=options, out_dir=out,
                       repeats=args.repeats, progress=not args.quiet)

@@ -5,7 +5,7 @@ from its own random view, in one image formation:
 
 - ``vh`` / ``ao`` / ``ea``: the PlatonicGAN layers, with either renderer (closed form or Mitsuba);
 - ``physical``: Mitsuba's volumetric path tracer on the same medium under random natural light
-  (:mod:`mitsuba_platonic.render.physical`).
+  (:mod:`mitsuba_platonic.render.mitsuba.physical`).
 
 This module renders; the rest of a collection lives beside it and is re-exported here:
 :mod:`.collection_spec` (:class:`CollectionSpec`, the plan every image derives from),
@@ -35,7 +35,7 @@ from ..files.fileio import InputFileRefused, atomic_write, check_input_file, con
 from ..files.volume_io import write_vol
 from ..images import save_exr, save_png, to_hwc, to_png_rgba
 from ..render import render
-from ..render.physical import render_physical
+from ..render.mitsuba.physical import render_physical
 from ..runtime import budget
 from ..runtime.progress import progress_bar
 from ..volume import CHANNELS

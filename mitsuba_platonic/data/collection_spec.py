@@ -19,7 +19,7 @@ import torch
 
 from .. import views as V
 from ..errors import UserError
-from ..render.physical import sample_lighting
+from ..render.mitsuba.physical import sample_lighting
 from ..render.settings import FILTERS, FORMATIONS, LIGHTINGS, RenderSettings
 from . import shapes
 from .envmaps import check_envmap
@@ -53,7 +53,7 @@ class CollectionSpec:
         'perspective' pinhole; physical images are orthographic only).
     exposure: 'metered' (k = 1 / the light's mean luminance) | 'auto' (per image, the camera-like
         95th percentile; collections made before metering read as this) (physical only; see
-        :mod:`mitsuba_platonic.render.physical`).
+        :mod:`mitsuba_platonic.render.mitsuba.physical`).
     seed: master seed of shapes, views and lighting.
     """
 

@@ -16,7 +16,7 @@ import numpy as np
 
 from ..errors import UserError
 from ..images import exr_channel_names
-from ..render.sky import ENVMAPS, baked_envmaps
+from ..render.mitsuba.sky import ENVMAPS, baked_envmaps
 from ..render.variant import ensure_variant
 
 __all__ = ["default_envmaps", "check_envmap"]
@@ -24,7 +24,7 @@ __all__ = ["default_envmaps", "check_envmap"]
 
 def default_envmaps() -> List[str]:
     """Environment maps in the package's ``scenes/envmaps/`` (``*.exr``: any a user dropped there)
-    and the skies baked from Mitsuba's ``sunsky`` (:func:`mitsuba_platonic.render.sky.baked_envmaps`:
+    and the skies baked from Mitsuba's ``sunsky`` (:func:`mitsuba_platonic.render.mitsuba.sky.baked_envmaps`:
     carried by the package where they were baked before it was built, else baked on first use;
     no photographic map ships for want of a licence)."""
 

@@ -79,7 +79,7 @@ from . import image_stats as S
 
 __all__ = ["BANDS", "SCORE_AZIMUTHS", "STAT_VIEWS", "CRITIC_STEPS", "CRITIC_REPEATS", "TRAIN_VIEWS",
            "band_of", "Critic", "two_sample_test", "view_statistics", "Judgement", "judge", "judge_table",
-           "stats_table"]
+           "stats_table", "random_renders", "turntable_renders", "volumes_and_elevations", "train_critic"]
 
 #: What a reconstruct function answers: volumes in the input camera's frame, or (volumes, the input
 #: cameras' elevations in degrees) in the object's frame (:func:`judge`).
@@ -136,7 +136,9 @@ def _check_images(x: torch.Tensor, name: str) -> torch.Tensor:
     return x.detach().float().cpu()
 
 
-def _train_critic(photos: torch.Tensor, renders: torch.Tensor, seed: int, steps: int, batch: int) -> Critic:
+def train_critic(photos: torch.Tensor, renders: torch.Tensor, seed: int, steps: int, batch: int) -> Critic:
+    """A :class:`Critic` trained ``steps`` steps of ``batch`` to tell ``photos`` from ``renders``
+    (seeded: its initial weights and batches)."""
     g = torch.Generator().manual_seed(seed)
     torch.manual_seed(seed)                                       # the critic's initial weights
     critic = Critic(photos.shape[1], photos.shape[-1])
@@ -218,7 +220,7 @@ def _score_critics(train_photos: torch.Tensor, train_renders: Sequence[torch.Ten
     """Train ``repeats`` critics and append their accuracies to ``acc`` (per band) and ``train_acc``,
     the share of held-out photos each calls photos to ``photo_pass``, and their AUCs to ``auc``."""
     for r in range(repeats):
-        critic = _train_critic(train_photos, train_renders[r], seed + r, steps, batch)
+        critic = train_critic(train_photos, train_renders[r], seed + r, steps, batch)
         with torch.no_grad():
             f_photo = critic(test_photos).flatten()
             real = float((f_photo > 0).float().mean())
@@ -244,8 +246,8 @@ def _render_pairs(volumes: torch.Tensor, index: torch.Tensor, views: torch.Tenso
     return torch.cat(out)
 
 
-def _turntable(volumes: torch.Tensor, elevations: torch.Tensor, azimuths: Sequence[float], settings: RenderSettings,
-               seed: int) -> torch.Tensor:
+def turntable_renders(volumes: torch.Tensor, elevations: torch.Tensor, azimuths: Sequence[float], settings: RenderSettings,
+                      seed: int) -> torch.Tensor:
     """``(A, M, C, R, R)``: every volume m rendered at every azimuth, ω(φ, θ̂_m) (``elevations`` in degrees)."""
     m = len(volumes)
     phi = torch.tensor(list(azimuths), dtype=torch.float64).repeat_interleave(m)                 # (A M,)
@@ -254,8 +256,8 @@ def _turntable(volumes: torch.Tensor, elevations: torch.Tensor, azimuths: Sequen
     return out.reshape(len(azimuths), m, *out.shape[1:])
 
 
-def _random_renders(volumes: torch.Tensor, elevations: torch.Tensor, k: int, settings: RenderSettings,
-                    seed: int) -> torch.Tensor:
+def random_renders(volumes: torch.Tensor, elevations: torch.Tensor, k: int, settings: RenderSettings,
+                   seed: int) -> torch.Tensor:
     """``(M k, C, R, R)``: each volume m at ``k`` uniformly random turntable azimuths (seeded), ω(φ, θ̂_m)."""
     g = torch.Generator().manual_seed(seed)
     phi = torch.rand(len(volumes) * k, generator=g, dtype=torch.float64) * 360.0 - 180.0
@@ -263,7 +265,7 @@ def _random_renders(volumes: torch.Tensor, elevations: torch.Tensor, k: int, set
     return _render_pairs(volumes, index, from_angles(phi, elevations.double()[index]), settings, seed)
 
 
-def _volumes_and_elevations(out: Any, n: int, what: str) -> Tuple[torch.Tensor, torch.Tensor]:
+def volumes_and_elevations(out: Any, n: int, what: str) -> Tuple[torch.Tensor, torch.Tensor]:
     """A reconstruct function's answer for ``n`` photos, volumes or (volumes, elevations in degrees),
     as float32 CPU volumes in [0, 1] and float64 elevations (0 where none are given)."""
     v, θ = out if isinstance(out, tuple) else (out, None)
@@ -357,17 +359,17 @@ def judge(reconstruct: Callable[[torch.Tensor], Reconstruction], train_photos: t
 
     def volumes_of(x: torch.Tensor) -> Tuple[torch.Tensor, torch.Tensor]:
         with torch.no_grad():
-            parts = [_volumes_and_elevations(reconstruct(x[i:i + batch]), len(x[i:i + batch]), "reconstruct")
+            parts = [volumes_and_elevations(reconstruct(x[i:i + batch]), len(x[i:i + batch]), "reconstruct")
                      for i in range(0, len(x), batch)]
         return torch.cat([p[0] for p in parts]), torch.cat([p[1] for p in parts])
 
     train_volumes, train_elevations = volumes_of(train_photos)
-    train_renders = [_random_renders(train_volumes, train_elevations, train_views, settings, seed + r)
+    train_renders = [random_renders(train_volumes, train_elevations, train_views, settings, seed + r)
                      for r in range(repeats)]                           # each critic its own random views
     test_volumes, test_elevations = volumes_of(test_photos) if test_volumes is None else \
-        _volumes_and_elevations(test_volumes, len(test_photos), "test_volumes")
+        volumes_and_elevations(test_volumes, len(test_photos), "test_volumes")
     azimuths = sorted(set(SCORE_AZIMUTHS) | set(FIGURE_AZIMUTHS))
-    table = _turntable(test_volumes, test_elevations, azimuths, settings, seed)     # (A, M, C, R, R)
+    table = turntable_renders(test_volumes, test_elevations, azimuths, settings, seed)     # (A, M, C, R, R)
     at = {a: table[i] for i, a in enumerate(azimuths)}
     bands = {name: torch.cat([at[a] for a in SCORE_AZIMUTHS if band_of(a) == name]) for name, _, _ in BANDS}
     result = Judgement(two_sample_test(train_photos, train_renders, test_photos, bands, seed, steps, repeats))

@@ -42,7 +42,7 @@ from ..volume import voxel_size
 
 __all__ = ["dssim", "display_image", "image_rmse", "silhouette_iou", "volume_rmse", "volume_iou",
            "chamfer_distance", "best_tilt", "depth_stripes", "half_opacity_depth", "load_feature_network", "vgg_distance",
-           "fid", "SSIM_SIGMA", "IOU_THRESHOLD", "SILHOUETTE_THRESHOLD"]
+           "fid", "SSIM_SIGMA", "IOU_THRESHOLD", "SILHOUETTE_THRESHOLD", "checked_threshold"]
 
 #: Gaussian window of SSIM (Wang et al. 2004): σ = 1.5 px, truncated at 3.5σ → 11×11 pixels.
 SSIM_SIGMA = 1.5
@@ -111,7 +111,9 @@ def _density_pair(a: ArrayLike, b: ArrayLike, names=("output", "target")) -> Tup
     return da, db
 
 
-def _threshold(t: float, name: str = "threshold") -> float:
+def checked_threshold(t: float, name: str = "threshold") -> float:
+    """``t`` as a float, checked to be a number in (0, 1] (a :class:`~mitsuba_platonic.errors.UserError`
+    naming ``name`` otherwise)."""
     if isinstance(t, bool) or not isinstance(t, (int, float)) or not 0.0 < float(t) <= 1.0:
         raise UserError(f"{name} must be a number in (0, 1], got {t!r}")
     return float(t)
@@ -189,7 +191,7 @@ def volume_rmse(output: ArrayLike, target: ArrayLike) -> float:
 def volume_iou(output: ArrayLike, target: ArrayLike, threshold: float = IOU_THRESHOLD) -> float:
     """|O ∩ T| / |O ∪ T| of the occupied voxels, density ≥ ``threshold``; 1 when both are empty."""
     o, t = _density_pair(output, target)
-    th = _threshold(threshold)
+    th = checked_threshold(threshold)
     so, st = o >= th, t >= th
     union = int((so | st).sum())
     return 1.0 if union == 0 else float((so & st).sum()) / union
@@ -202,17 +204,17 @@ def best_tilt(output: ArrayLike, target: ArrayLike, step: float = 5.0,
     Both volumes lie in an input camera's frame (axes d, h, w of ``(N, N, N)``: depth, image row,
     column). β runs over the grid −90°, −90° + ``step``, …, 90° (``step`` must divide 90);
     ``output`` is resampled as seen from a camera raised by β about the frame's horizontal axis,
-    i.e. from the view (0, sin β, cos β) (:func:`mitsuba_platonic.render.closed_form.tilt`,
+    i.e. from the view (0, sin β, cos β) (:func:`mitsuba_platonic.render.pytorch.closed_form.tilt`,
     trilinear), and scored by :func:`volume_iou`. Of equally good β the one nearest 0 wins; where
     no β gives any overlap (best IoU 0, e.g. an output with no voxel at ``threshold``) the tilt is
     undefined and β is NaN. β = 0 for a reconstruction in the truth's pose. For one that stands
     upright in the frame whatever the input camera's elevation θ₀, β ≈ θ₀: the pose failure of
     view-space reconstruction that the paper names (docs/experiments/pose.md).
     """
-    from ..render.closed_form import tilt            # the renderer's resampling (no cycle: it needs no evaluate)
+    from ..render.pytorch.closed_form import tilt            # the renderer's resampling (no cycle: it needs no evaluate)
 
     o, t = _density_pair(output, target)
-    th = _threshold(threshold)
+    th = checked_threshold(threshold)
     if isinstance(step, bool) or not isinstance(step, (int, float)) or not 0.0 < step <= 90.0 \
             or abs(90.0 / step - round(90.0 / step)) > 1e-9:
         raise UserError(f"step must be a number of degrees that divides 90 (e.g. 5), got {step!r}")
@@ -296,7 +298,7 @@ def chamfer_distance(output: ArrayLike, target: ArrayLike, threshold: float = IO
     from scipy.ndimage import distance_transform_edt  # lazy: scipy is slow to import
 
     o, t = _density_pair(output, target)
-    th = _threshold(threshold)
+    th = checked_threshold(threshold)
     occupied = t >= th
     if not occupied.any():
         raise UserError(f"chamfer_distance: the target has no voxel with density ≥ {th} (range "

@@ -75,7 +75,7 @@ from ..data.photos import PhotoCollection
 from ..errors import UserError
 from ..model import Model
 from ..render import RenderSettings, render_with
-from ..render.closed_form import rotate
+from ..render.pytorch.closed_form import rotate
 from ..views import from_angles, front_view, to_angles
 from ..volume import CHANNELS
 from . import metrics as M

@@ -4,12 +4,12 @@ A reconstruction and its reference volume (the ground truth resampled into the i
 frame, see :func:`truth_in_input_frame`) are rendered from the same ``n_views`` = 10 seeded
 random views (uniform on the sphere, the paper's p_view) under the same random natural
 illumination (one Hosek–Wilkie ``sunsky`` per view, drawn by
-:func:`mitsuba_platonic.render.physical.sample_lighting`), with four methods:
+:func:`mitsuba_platonic.render.mitsuba.physical.sample_lighting`), with four methods:
 
 - ``IF``: the training image formation ρ (VH, AO or EA) through :func:`mitsuba_platonic.render`
   (closed form by default; no illumination: ρ is what the network was trained on).
 - ``VOL``: Mitsuba's volumetric path tracer on the medium
-  (:func:`mitsuba_platonic.render.physical.render_physical`): σ_t from the density, albedo from
+  (:func:`mitsuba_platonic.render.mitsuba.physical.render_physical`): σ_t from the density, albedo from
   the colour.
 - ``ISO``: the iso-surface at density 0.1 (marching cubes, :func:`mitsuba_platonic.export.extract_mesh`)
   as a Mitsuba mesh with linear vertex colours on a diffuse BSDF, path traced (``path``).
@@ -18,7 +18,7 @@ illumination (one Hosek–Wilkie ``sunsky`` per view, drawn by
 
 VH/AO volumes have no colour: their VOL/ISO/VOX renders use a grey albedo :data:`GREY` for both
 members of the pair. Exposure: each VOL/ISO/VOX image pair is scaled by one factor, the
-auto-exposure of the *reference* image (:func:`~mitsuba_platonic.render.physical.auto_exposure`),
+auto-exposure of the *reference* image (:func:`~mitsuba_platonic.render.mitsuba.physical.auto_exposure`),
 so the two members are compared at the same exposure. Images are ``(V, 4, R, R)`` premultiplied
 linear RGB + alpha (``IF`` under VH/AO: ``(V, 1, R, R)`` opacity).
 
@@ -41,9 +41,9 @@ from ..files.fileio import check_input_file
 from ..export import extract_mesh
 from ..images import srgb_to_linear
 from ..render import render
-from ..render.closed_form import rotate
-from ..render.mitsuba_renderer import sensor_dict
-from ..render.physical import Lighting, auto_exposure, render_physical, sample_lighting
+from ..render.pytorch.closed_form import rotate
+from ..render.mitsuba.per_pair import sensor_dict
+from ..render.mitsuba.physical import Lighting, auto_exposure, render_physical, sample_lighting
 from ..render.variant import ensure_variant
 from ..views import camera_frames, from_angles, front_view, sample_views, turntable
 from ..volume import CHANNELS, MODELS
@@ -139,7 +139,7 @@ def voxel_mesh(volume: torch.Tensor, threshold: float = VOX_THRESHOLD) -> Mesh:
     The BSDF is two-sided, so the winding does not matter for shading.
     """
     v = as_rgba(volume).numpy()
-    occ = v[3] >= M._threshold(threshold, "vox threshold")
+    occ = v[3] >= M.checked_threshold(threshold, "vox threshold")
     n = occ.shape[0]
     if not occ.any():
         return _empty_mesh()

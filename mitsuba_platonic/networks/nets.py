@@ -31,7 +31,7 @@ import torch
 import torch.nn.functional as F
 from torch import nn
 
-from ..render.single_scatter import SKY_SHARE
+from ..render.pytorch.single_scatter import SKY_SHARE
 from .net_settings import NetSettings
 from .photo_colours import COLOUR_MIN
 
@@ -371,13 +371,13 @@ class PoseHead(nn.Module):
 
 class LightHead(nn.Module):
     """L: E's code z ``(B, latent)`` → the light of the photo it encodes, as the single-scattering
-    formation's grey daylight (:func:`~mitsuba_platonic.render.single_scatter.daylights`): the sun's
+    formation's grey daylight (:func:`~mitsuba_platonic.render.pytorch.single_scatter.daylights`): the sun's
     direction in the *camera's* frame (right, up, ω: the input camera's frame is the world's) and the
     sky's share of the mean luminance,
 
         ω̂_s = u / |u|,   u = W_d z + b_d;        ŝ = s₀ + (s₁ − s₀) · sigmoid(w_s · z + b_s)
 
-    with [s₀, s₁] the prior's range of shares (:data:`~mitsuba_platonic.render.single_scatter.SKY_SHARE`).
+    with [s₀, s₁] the prior's range of shares (:data:`~mitsuba_platonic.render.pytorch.single_scatter.SKY_SHARE`).
     W and w start at 0 and b_d at (0, 1, 0), b_s at 0: every estimate starts as a sun straight
     above the camera and the prior's middle share. Plain parameters, as :class:`PoseHead`'s, so no
     network initialisation redraws them. ``train.light: head`` (:mod:`mitsuba_platonic.train.trainer`)

@@ -25,9 +25,10 @@ import torch
 import torch.nn.functional as F
 from torch import nn
 
-from ..render.closed_form import tilt, transmittance_before
+from ..render.pytorch.closed_form import tilt, transmittance_before
 
-__all__ = ["COLOUR_MIN", "photo_colour", "photo_texture", "front_transmittance", "texture_corrected", "photo_volume"]
+__all__ = ["COLOUR_MIN", "photo_colour", "photo_texture", "front_transmittance", "texture_corrected", "photo_volume",
+           "in_g_frame"]
 
 
 #: Where :func:`photo_colour` clamps a mean colour, so that its logit stays finite (≈ ±5.5).
@@ -144,20 +145,21 @@ def front_transmittance(density: torch.Tensor, elevation: Optional[torch.Tensor]
     frame (held constant) and the input camera at ``elevation`` θ (None: the volume in the camera's
     frame).
 
-    In the camera's frame (:func:`~mitsuba_platonic.render.closed_form.tilt` by θ: planes k = 0
+    In the camera's frame (:func:`~mitsuba_platonic.render.pytorch.closed_form.tilt` by θ: planes k = 0
     nearest the camera), with τ = 1 − v each voxel's transmittance (EA at one sample per voxel),
 
         T_front,k = Π_{k'<k} τ_k'
 
-    It goes back into G's frame with :func:`_in_g_frame`."""
+    It goes back into G's frame with :func:`in_g_frame`."""
     v = density.detach().clamp(0.0, 1.0)
     if elevation is not None:
         v = tilt(v, elevation.detach())
     return transmittance_before(1.0 - v, 2)
 
 
-def _in_g_frame(weight: torch.Tensor, elevation: Optional[torch.Tensor]) -> torch.Tensor:
-    """A weight in [0, 1] of the input camera's frame (:func:`front_transmittance`) back in G's frame."""
+def in_g_frame(weight: torch.Tensor, elevation: Optional[torch.Tensor]) -> torch.Tensor:
+    """A weight in [0, 1] of the input camera's frame (:func:`front_transmittance`) back in G's frame:
+    tilted back by the input's ``elevation`` (None: the frames are one), clamped to [0, 1]."""
     return weight if elevation is None else tilt(weight, -elevation.detach()).clamp(0.0, 1.0)
 
 
@@ -187,7 +189,7 @@ def texture_corrected(conv: nn.Module, volume: torch.Tensor, offsets: torch.Tens
     (``model.offsets_behind``): G's colour offsets act only where the input camera sees,
     ℓ' ← T_front (ℓ + δ_c), so the body behind that surface keeps the turned cameras' texture as read."""
     ρ = volume[:, 3:]
-    front = _in_g_frame(front_transmittance(ρ, elevation), elevation)
+    front = in_g_frame(front_transmittance(ρ, elevation), elevation)
     if behind is not None:
         texture = front * texture.to(volume) + (1.0 - front) * behind.to(volume)
     t = torch.logit(texture.to(volume).clamp(COLOUR_MIN, 1.0 - COLOUR_MIN))

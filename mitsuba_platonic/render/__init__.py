@@ -1,12 +1,18 @@
 """Renderers: one entry point, two backends (closed form | Mitsuba) that agree, and the one dispatcher.
 
 ``render(volume, views, model, backend, **options)`` → ``(B, C, H, W)``, differentiable
-w.r.t. ``volume``. See :mod:`.closed_form` and :mod:`.marcher` (the batched Mitsuba/Dr.Jit ray
-marcher: one launch per call) for the maths. :func:`render_with` (settings already checked) is
-the one place that dispatches to a backend; the backends import nothing of this module. Its
-``window`` (:class:`~.window.Window`) zooms and pans the orthographic camera of every backend but
-the torch single scattering (``platonic view``'s camera). Above them: :mod:`.compare` and
-:mod:`.compare_light` (``platonic compare``), and :mod:`.frames`, a volume's turntable.
+w.r.t. ``volume``. See :mod:`.pytorch.closed_form` and :mod:`.drjit.marcher` (the batched
+Mitsuba/Dr.Jit ray marcher: one launch per call) for the maths. :func:`render_with` (settings
+already checked) is the one place that dispatches to a backend; the backends import nothing of
+this module. Its ``window`` (:class:`~.window.Window`) zooms and pans the orthographic camera of
+every backend but the torch single scattering (``platonic view``'s camera).
+
+By backend: :mod:`.pytorch` (the closed form, single scattering in torch), :mod:`.drjit` (the
+marcher, single scattering at its speed, the sky's occlusion, and what their launches share) and
+:mod:`.mitsuba` (the scene files, the per-pair integrator, the path tracer, baked skies), on a
+floor of :mod:`.settings`, :mod:`.window`, :mod:`.grids` and :mod:`.variant`. Above them:
+:mod:`.frames`, a volume's turntable, and ``platonic compare``'s tools
+(:mod:`mitsuba_platonic.bench.compare`, :mod:`mitsuba_platonic.bench.compare_light`).
 """
 
 from __future__ import annotations
@@ -18,7 +24,7 @@ import torch
 from ..errors import UserError
 from ..views import validate_views
 from ..volume import validate_volume
-from .closed_form import render_closed_form
+from .pytorch.closed_form import render_closed_form
 from .settings import BACKENDS, MODELS, RenderSettings, check_lanes
 from .window import Window, window_or_none
 
@@ -84,12 +90,12 @@ def render_with(volume: torch.Tensor, views: torch.Tensor, settings: RenderSetti
                                   window)
     if settings.backend == "mitsuba":
         check_lanes(volume.shape[0], volume.shape[-1], settings.spp)   # before Dr.Jit: say why, up front
-        from .marcher import march       # imports Dr.Jit and sets Mitsuba's variant: on the first Mitsuba render
+        from .drjit.marcher import march       # imports Dr.Jit and sets Mitsuba's variant: on the first Mitsuba render
         return march(volume, views, settings, seed, window)
     if settings.backend in ("single_scatter", "scatter_march"):
-        from .single_scatter import sample_lights             # torch only; kept off the import path
+        from .pytorch.single_scatter import sample_lights             # torch only; kept off the import path
         return render_under(volume, views, settings, sample_lights(volume.shape[0], seed), window)
-    from .physical import render_physical_ad    # the path tracer (its scene files, Mitsuba): on first use
+    from .mitsuba.physical import render_physical_ad    # the path tracer (its scene files, Mitsuba): on first use
     return render_physical_ad(volume, views, lighting=settings.lighting, spp=settings.physical_spp,
                               max_depth=settings.max_depth, seed=seed, filter=settings.filter, window=window)
 
@@ -106,11 +112,11 @@ def render_under(volume: torch.Tensor, views: torch.Tensor, settings: RenderSett
         if window is not None:
             raise UserError("window: the single_scatter backend renders the whole cross-section only; zoom and "
                             "pan with 'scatter_march' (the same light at the marcher's speed)")
-        from .single_scatter import render_single_scatter     # torch only; kept off the import path
+        from .pytorch.single_scatter import render_single_scatter     # torch only; kept off the import path
         return render_single_scatter(volume, views.to(volume.device), lights, steps_per_voxel=settings.steps_per_voxel,
                                      shadow_planes=settings.shadow_planes, spp=settings.spp)
     if settings.backend == "scatter_march":
-        from .scatter_march import render_scatter_march       # imports Dr.Jit: on first use
+        from .drjit.scatter_march import render_scatter_march       # imports Dr.Jit: on first use
         return render_scatter_march(volume, views, lights, steps_per_voxel=settings.steps_per_voxel, spp=settings.spp,
                                     window=window)
     raise ValueError(f"render_under: expected backend 'single_scatter' or 'scatter_march', got {settings.backend!r}")

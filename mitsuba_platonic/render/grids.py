@@ -1,7 +1,7 @@
 """Torch volumes as Mitsuba grids: the layout and the path tracer's extinction.
 
 The lowest module of the Mitsuba side: the ray marcher, the path tracer and the scene files'
-grids (:func:`~mitsuba_platonic.render.scenes.write_scene_grids`) convert volumes here, and it
+grids (:func:`~mitsuba_platonic.render.mitsuba.scenes.write_scene_grids`) convert volumes here, and it
 imports nothing of theirs.
 
 Grid layout (docs/rendering.md, "The Mitsuba side"): a torch ``(C, D, H, W)`` volume becomes a

@@ -16,7 +16,7 @@ from typing import Any, Dict, Optional, Tuple
 from ..errors import UserError
 from ..views import CAMERAS, lens
 from ..volume import MODELS
-from .closed_form import FILTERS as GRID_SAMPLE_MODES
+from .pytorch.closed_form import FILTERS as GRID_SAMPLE_MODES
 
 __all__ = ["RenderSettings", "BACKENDS", "LIT", "SINGLE_SCATTERING", "MODELS", "FILTERS", "LIGHTINGS", "FORMATIONS", "CAMERAS", "OPTIONS_OF"]
 

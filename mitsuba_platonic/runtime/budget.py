@@ -1,7 +1,7 @@
 """Will it fit: the memory and disk this process has, and the one-line refusal where a command's
 estimate exceeds them, before any work.
 
-The one owner of "available memory" and "will it fit": ``compare`` (:func:`mitsuba_platonic.render.compare.check_memory`),
+The one owner of "available memory" and "will it fit": ``compare`` (:func:`mitsuba_platonic.bench.compare.check_memory`),
 the networks and the batch of a training (:mod:`mitsuba_platonic.train.fits`), ``generate``
 (:mod:`mitsuba_platonic.export`) and ``make-dataset`` (:mod:`mitsuba_platonic.data.collection`) read
 :func:`available_memory` and :func:`free_disk` here and refuse through :func:`check_fits`. Estimates

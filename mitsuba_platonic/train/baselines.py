@@ -32,7 +32,7 @@ import torch
 import torch.nn.functional as F
 
 from ..model import RING_VIEWS
-from ..render.closed_form import rotate
+from ..render.pytorch.closed_form import rotate
 from ..views import from_angles
 from .losses import g_loss
 from .step_state import StepState

@@ -54,7 +54,7 @@ from typing import Callable, Optional, Tuple
 import torch
 import torch.nn.functional as F
 
-from ..render.closed_form import transmittance_before
+from ..render.pytorch.closed_form import transmittance_before
 
 __all__ = ["d_loss", "g_loss", "gradient_penalty", "r1_penalty", "colour_tv", "colour_offset", "depth_spread", "turned", "turn", "solidity", "mean_colour", "colour_match", "soft_accuracy_counts", "hard_accuracy_counts"]
 

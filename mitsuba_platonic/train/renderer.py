@@ -4,7 +4,7 @@ scattering under a given light (``train.light: head``).
 A light read from the photo (``train.light: head``, docs/experiments/training-through-light.md, "A light read from the
 photo"): the random views are rendered under lights drawn from the prior, pair i's from the step's
 seed as :func:`~mitsuba_platonic.render.render_with` draws them
-(:func:`~mitsuba_platonic.render.single_scatter.sample_lights`), so the
+(:func:`~mitsuba_platonic.render.pytorch.single_scatter.sample_lights`), so the
 trainer knows them; a light head learns to read them from those renders, in each view's camera
 frame (:func:`in_camera`: the sun direction's components along the camera's right, up and ω), and
 the input view, whose camera frame is the world's, is rendered under the light it reads from the
@@ -19,7 +19,7 @@ import torch
 
 from ..render import RenderSettings, render_under, render_with
 from ..render.settings import SINGLE_SCATTERING
-from ..render.single_scatter import LightBatch
+from ..render.pytorch.single_scatter import LightBatch
 from ..views import camera_frames
 
 __all__ = ["make_renderer", "RenderFn", "LitRenderFn", "make_lit_renderer", "in_camera"]
@@ -39,7 +39,7 @@ def make_renderer(settings: RenderSettings) -> RenderFn:
 def make_lit_renderer(settings: RenderSettings) -> LitRenderFn:
     """``fn(volume, views, lights) → images``, differentiable w.r.t. ``volume``: single scattering
     (``settings.backend`` 'single_scatter' or 'scatter_march', with its steps and samples) under the
-    given :class:`~mitsuba_platonic.render.single_scatter.LightBatch`, one light per pair, in place
+    given :class:`~mitsuba_platonic.render.pytorch.single_scatter.LightBatch`, one light per pair, in place
     of the prior's."""
     settings = settings.validate()
     if settings.backend not in SINGLE_SCATTERING:

@@ -47,7 +47,7 @@ from torch import nn
 
 from ..config import Config
 from ..config.train_settings import TrainConfig
-from ..render.single_scatter import SKY_SHARE, sample_lights, sky_share
+from ..render.pytorch.single_scatter import SKY_SHARE, sample_lights, sky_share
 from ..views import to_angles
 from .losses import colour_match, colour_offset, colour_tv, depth_spread, g_loss, solidity, turn
 from .renderer import in_camera
@@ -164,7 +164,7 @@ def _pose(ctx: StepContext, i_view: torch.Tensor, views: torch.Tensor, out: Dict
 def _light(ctx: StepContext, i_view: torch.Tensor, views: torch.Tensor, seed: int,
            out: Dict[str, float]) -> torch.Tensor:
     """L_light over G's renders ``i_view`` (detached) from ``views``, lit by the prior's lights for
-    ``seed`` (the renderer's own draw, :func:`~mitsuba_platonic.render.single_scatter.sample_lights`):
+    ``seed`` (the renderer's own draw, :func:`~mitsuba_platonic.render.pytorch.single_scatter.sample_lights`):
     the light head learns the sun's direction in each view's camera frame and the sky's share.
     Logs ``loss_light``."""
     lights = sample_lights(len(i_view), seed)

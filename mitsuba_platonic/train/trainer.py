@@ -104,8 +104,8 @@ from ..config.train_settings import MODES, MODES_3D, POSES, REC_TARGETS, TASKS  
 from ..model import Model, critic_config
 from ..networks.nets import Discriminator, VolumeDiscriminator, init_critic_he, init_he, init_weights
 from ..networks.photo_colours import photo_volume
-from ..render.closed_form import tilt
-from ..render.single_scatter import daylights
+from ..render.pytorch.closed_form import tilt
+from ..render.pytorch.single_scatter import daylights
 from ..views import DEFAULT_ELEVATION, front_view, sample_views, to_angles
 from .augment import augment, augment_photos
 from .baselines import BaselineModes, ring_views

@@ -73,7 +73,7 @@ from .scene import (BACKGROUND, WINDOW_SNAP, ZOOM_RANGE, Exports, Frame, Scene, 
 from .start import DISTANCE, FOV, address, start_server, stop_server
 
 __all__ = ["ViewerApp", "SETTLE_S", "MAX_SPP", "MAX_SEED", "MAX_COORDINATE", "log_ignored", "checked_seed",
-           "checked_camera"]
+           "checked_camera", "pad_to_aspect"]
 
 #: A camera at rest this long gets its full-resolution frame.
 SETTLE_S = 0.2
@@ -162,7 +162,7 @@ def _same_camera(view_a: np.ndarray, window_a: Optional[Window], view_b: np.ndar
             and max(abs(a - b) for a, b in zip(window_a.centre, window_b.centre)) <= WINDOW_SNAP)
 
 
-def _pad_to_aspect(image: np.ndarray, aspect: float) -> np.ndarray:
+def pad_to_aspect(image: np.ndarray, aspect: float) -> np.ndarray:
     """A square ``(R, R, 3)`` frame as the background image of a canvas of width/height ``aspect``:
     enlarged (nearest: each pixel a k×k block) to at least :data:`MIN_SHOWN` pixels a side, so that
     padding it to the aspect in whole pixels keeps it square on the canvas within 0.2 %, then padded
@@ -246,7 +246,7 @@ class ViewerApp:
         try:
             frame = self.frame_for(initial_key(self.scene))
             from viser._image_encoding import cv2_imencode_with_fallback   # lazy: viser's own encoder, warmed only
-            image = _pad_to_aspect(frame.image, 16 / 9)
+            image = pad_to_aspect(frame.image, 16 / 9)
             for fmt in ("png", "jpeg"):
                 cv2_imencode_with_fallback(fmt, image, jpeg_quality=90, channel_ordering="rgb")
         except Exception:                                  # the page's own request renders it and shows why
@@ -548,7 +548,7 @@ class ClientView:
         if self.stopped:
             return
         # full frames lossless (PNG, what the tests compare), moving ones as JPEG (a tenth of the encoding time)
-        self.client.scene.set_background_image(_pad_to_aspect(frame.image, aspect),
+        self.client.scene.set_background_image(pad_to_aspect(frame.image, aspect),
                                                format="png" if quality == "full" else "jpeg", jpeg_quality=90)
         self.count += 1
         self.frame, self.shown = frame, request

@@ -200,7 +200,7 @@ def render_frame(volume: torch.Tensor, view: Tuple[float, float, float], rendere
     renderers is the one of seed 0 (the same in every frame).
 
     At k > 1 the marcher keeps its k² regular sub-pixel rays per pixel apart
-    (:func:`~mitsuba_platonic.render.marcher.march_pixels`: the same kernel, k² times the rays); the
+    (:func:`~mitsuba_platonic.render.drjit.marcher.march_pixels`: the same kernel, k² times the rays); the
     other renderers render the volume resampled trilinearly to (kN)³ (their images are the volume's
     resolution), which costs them about k³ times the work.
     """
@@ -247,7 +247,7 @@ def render_frame(volume: torch.Tensor, view: Tuple[float, float, float], rendere
             v = v[:, 3:]
         v = v.contiguous()
         if backend == "mitsuba" and k > 1:
-            from ..render.marcher import march_pixels          # lazy: imports Dr.Jit, on the marcher's first frame
+            from ..render.drjit.marcher import march_pixels          # lazy: imports Dr.Jit, on the marcher's first frame
             image = march_pixels(v, w, settings, k, window)[0]
         else:
             image = render_with(v, w, settings, 0, window)[0]

@@ -66,10 +66,10 @@ def probes(model: Model, train: torch.Tensor, test: torch.Tensor, settings, axis
     def answer(x: torch.Tensor):
         return model.reconstruct_upright(x) if axis == "object" else model.reconstruct(x)
 
-    vt, θt = J._volumes_and_elevations(answer(train), len(train), "train")
-    vs, θs = J._volumes_and_elevations(answer(test), len(test), "test")
-    renders = [J._random_renders(vt, θt, J.TRAIN_VIEWS, settings, r) for r in range(J.CRITIC_REPEATS)]
-    tt = J._turntable(vs, θs, [0.0, 45.0, 90.0, -90.0, 180.0], settings, 0)
+    vt, θt = J.volumes_and_elevations(answer(train), len(train), "train")
+    vs, θs = J.volumes_and_elevations(answer(test), len(test), "test")
+    renders = [J.random_renders(vt, θt, J.TRAIN_VIEWS, settings, r) for r in range(J.CRITIC_REPEATS)]
+    tt = J.turntable_renders(vs, θs, [0.0, 45.0, 90.0, -90.0, 180.0], settings, 0)
     front, side = tt[0], torch.cat([tt[2], tt[3]])
     fronts = torch.cat([front, front])
     out = {"held-out photos": test, "photos, flat colour": flat(test), "photos, hard silhouette": hard(test),
@@ -97,7 +97,7 @@ def main() -> None:
         rows: Dict[str, list] = {k: [] for k in shown}
         grad = torch.zeros(side.shape[1:])
         for seed in range(J.CRITIC_REPEATS):
-            critic = J._train_critic(train, renders[seed], seed, J.CRITIC_STEPS, 32)   # its own views, as the judge
+            critic = J.train_critic(train, renders[seed], seed, J.CRITIC_STEPS, 32)   # its own views, as the judge
             with torch.no_grad():
                 for k, x in shown.items():
                     f = critic(x)

@@ -23,11 +23,12 @@ from typing import Any
 import torch
 
 from mitsuba_platonic import views as V
-from mitsuba_platonic.render.compare import best_kernel_ms
+from mitsuba_platonic.bench.timing import best_kernel_ms
+from mitsuba_platonic.render.drjit.launch import pair_frames, shared_float, spread_over_threads
 from mitsuba_platonic.render.settings import RenderSettings
 from mitsuba_platonic.volume import test_volume
 
-M = importlib.import_module("mitsuba_platonic.render.marcher")     # the module, not render()'s name
+M = importlib.import_module("mitsuba_platonic.render.drjit.marcher")     # the module, not render()'s name
 mi, dr = M.mi, M.dr
 
 
@@ -63,12 +64,12 @@ def main() -> None:
         vol = test_volume(n, "figure", "ea").expand(b, -1, -1, -1, -1).contiguous()
         views = V.sample_views(b, seed=1)
         keep: list = []
-        data = M._shared(M._channels_last(vol, keep), keep)
-        frames = M._frames(views, keep)
+        data = shared_float(M._channels_last(vol, keep), keep)
+        frames = pair_frames(views, keep)
         opt = RenderSettings(backend="mitsuba", model="ea").validate()
 
         def lookups() -> None:
-            M._spread_over_threads(b * n * n, 4)
+            spread_over_threads(b * n * n, 4)
             batch = M._Batch(data, frames, b, 4, n, opt, dr.opaque(mi.UInt32, 0))
             dr.eval(lookups_only(batch))
 

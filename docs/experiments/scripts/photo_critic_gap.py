@@ -21,7 +21,7 @@ import numpy as np
 import torch
 
 from mitsuba_platonic.files.checkpoint import read_checkpoint
-from mitsuba_platonic.evaluate.judge import _random_renders
+from mitsuba_platonic.evaluate.judge import random_renders
 from mitsuba_platonic.evaluate.photos import photo_splits
 from mitsuba_platonic.config.loading import checkpoint_config, model_from_checkpoint
 from mitsuba_platonic.model import Model, critic_config
@@ -51,7 +51,7 @@ def main() -> None:
         d = critic_of(ckpt, cfg)
         with torch.no_grad():
             volumes, elevations = model.reconstruct_upright(held)      # the turntable about the object's axis
-            renders = _random_renders(volumes.clamp(0, 1), elevations, 8, cfg.render, seed=0)
+            renders = random_renders(volumes.clamp(0, 1), elevations, 8, cfg.render, seed=0)
             lt, lh, lr = (float(d(x).mean()) for x in (train, held, renders))
         print(f"| {run.name} | {ckpt.step} | {lt:+.2f} | {lh:+.2f} | {lr:+.2f} | {lt - lh:+.2f} | {lh - lr:+.2f} |",
               flush=True)

@@ -14,7 +14,7 @@ from mitsuba_platonic.config.loading import checkpoint_config, model_from_checkp
 from mitsuba_platonic.evaluate.photo_truth import PhotoTruth, truth_pairs
 from mitsuba_platonic.files.checkpoint import read_checkpoint
 from mitsuba_platonic.model import Model
-from mitsuba_platonic.render.closed_form import tilt
+from mitsuba_platonic.render.pytorch.closed_form import tilt
 
 
 def upright_run(run: Path) -> Tuple[Model, Any]:

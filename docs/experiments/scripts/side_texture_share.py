@@ -26,7 +26,7 @@ import torch
 
 from mitsuba_platonic.evaluate import judge as J
 from mitsuba_platonic.evaluate.photos import photo_splits
-from mitsuba_platonic.networks.photo_colours import _in_g_frame, front_transmittance
+from mitsuba_platonic.networks.photo_colours import in_g_frame, front_transmittance
 from photo_runs import upright_run
 
 AZIMUTHS = (0.0, 45.0, 90.0, -90.0, 180.0)
@@ -45,9 +45,9 @@ def main() -> None:
         volumes, elevations = model.reconstruct_upright(held)
         density = volumes[:, 3:].detach().float().cpu()
         θ = torch.deg2rad(elevations.detach().float().cpu())
-        seen = _in_g_frame(front_transmittance(density, θ), θ)
+        seen = in_g_frame(front_transmittance(density, θ), θ)
         probe = torch.cat([seen.expand(-1, 3, -1, -1, -1), density], 1)        # colour = the carried share
-        turntable = J._turntable(probe, elevations.double().cpu(), AZIMUTHS, cfg.render, 0)
+        turntable = J.turntable_renders(probe, elevations.double().cpu(), AZIMUTHS, cfg.render, 0)
         r = turntable.shape[-1]
         cells = []
         for i in range(len(AZIMUTHS)):

@@ -63,7 +63,7 @@ def main() -> None:
         except UserError as e:                               # the tree photos and other real folders: no truth
             print(f"(no truth: {e})")
         for name, (v, el) in answers.items():
-            turntable = J._turntable(v.detach().float().cpu().clamp(0.0, 1.0), el.double(), AZIMUTHS, cfg.render, 0)
+            turntable = J.turntable_renders(v.detach().float().cpu().clamp(0.0, 1.0), el.double(), AZIMUTHS, cfg.render, 0)
             for i, φ in enumerate(AZIMUTHS):
                 print(row(f"{name}, {φ:+.0f}°", silhouette_figures(turntable[i, :, -1])))
 

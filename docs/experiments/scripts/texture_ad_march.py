@@ -32,11 +32,11 @@ from typing import Any, Callable, Tuple
 import torch
 
 from mitsuba_platonic import views as V
-from mitsuba_platonic.render.compare import best_kernel_ms, best_of
+from mitsuba_platonic.bench.timing import best_kernel_ms, best_of
 from mitsuba_platonic.render.settings import RenderSettings
 from mitsuba_platonic.volume import test_volume
 
-M = importlib.import_module("mitsuba_platonic.render.marcher")     # the module, not render()'s name
+M = importlib.import_module("mitsuba_platonic.render.drjit.marcher")     # the module, not render()'s name
 mi, dr = M.mi, M.dr
 
 

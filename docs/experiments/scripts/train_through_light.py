@@ -34,7 +34,7 @@ from typing import Tuple
 
 import torch
 
-from mitsuba_platonic.render.compare import kernel_time
+from mitsuba_platonic.bench.timing import kernel_time
 from mitsuba_platonic.config import load_config
 from mitsuba_platonic.train.data import load_training_data
 from mitsuba_platonic.train.trainer import Trainer

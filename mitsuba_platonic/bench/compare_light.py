@@ -1,9 +1,9 @@
 """Single scattering vs Mitsuba: the ``scatter_march`` formation against ``volpath`` at depth 2.
 
-The light counterpart of :mod:`mitsuba_platonic.render.compare`. A volume is rendered under a sun and a
-uniform sky (:class:`~.single_scatter.SunAndSky`) by
-:func:`~.scatter_march.render_scatter_march` and by Mitsuba's ``volpath`` with
-``max_depth`` 2 (:func:`~.single_scatter.reference_render`: the same medium, single
+The light counterpart of :mod:`mitsuba_platonic.bench.compare`. A volume is rendered under a sun and a
+uniform sky (:class:`~mitsuba_platonic.render.pytorch.single_scatter.SunAndSky`) by
+:func:`~mitsuba_platonic.render.drjit.scatter_march.render_scatter_march` and by Mitsuba's ``volpath`` with
+``max_depth`` 2 (:func:`~mitsuba_platonic.render.mitsuba.single_scatter_reference.reference_render`: the same medium, single
 scattering, Monte Carlo) in ``R`` independent renders of ``spp`` samples each. Per case:
 
 - ``rel_total`` = (Σ I − Σ Ī) / Σ Ī over the RGB pixels, Ī the mean of the ``R`` volpath renders;
@@ -20,7 +20,7 @@ scattering, Monte Carlo) in ``R`` independent renders of ``spp`` samples each. P
   ε = 10⁻³, d zero on voxels above 1 − 2ε (so every difference stays inside [0, 1]): the relative
   error |⟨∇L, d⟩ − FD| / max(|FD|, 10⁻¹²); ``grad_finite``: every gradient entry finite;
 - ``ours_ms`` / ``volpath_ms``: forward time per image, the best of ``repeats`` calls after a
-  warm-up (:func:`~.compare.time_render`) / the fastest of volpath's renders of ``spp`` each.
+  warm-up (:func:`~.timing.time_render`) / the fastest of volpath's renders of ``spp`` each.
 
 The cases (:func:`light_cases`): the volume from each view under a random daylight
 (:func:`~.single_scatter.sample_sun_and_sky`, seeded), then the extremes: a cube of exact
@@ -47,8 +47,9 @@ from ..files.fileio import atomic_write, make_folder, write_text
 from ..images import linear_to_srgb
 from ..runtime.progress import progress_bar
 from ..views import front_view
-from .compare import time_render
-from .single_scatter import SunAndSky, reference_render, sample_sun_and_sky
+from .timing import time_render
+from ..render.mitsuba.single_scatter_reference import reference_render
+from ..render.pytorch.single_scatter import SunAndSky, sample_sun_and_sky
 
 __all__ = ["LightCase", "light_cases", "compare_light", "format_light_table", "write_light_summary",
            "light_figure", "block_z", "BLOCK", "FD_EPSILON", "SE_FLOOR"]
@@ -150,7 +151,7 @@ def compare_light(cases: Sequence[LightCase], spp: int = 128, renders: int = 8, 
     """Each case through ``scatter_march`` and through ``volpath`` at depth 2 (``renders`` × ``spp``);
     one dict per case with the figures of the module docstring, the images ``ours`` and ``volpath``
     (the renders' mean), ``(4, H, W)``, and ``z`` per block, ``(3, H/4, W/4)``."""
-    from .scatter_march import render_scatter_march    # imports Dr.Jit: on first use
+    from ..render.drjit.scatter_march import render_scatter_march    # imports Dr.Jit: on first use
 
     for name, value, least in (("spp", spp, 1), ("renders", renders, 4)):
         if isinstance(value, bool) or not isinstance(value, int) or value < least:

@@ -16,8 +16,9 @@ it) and a uniform sky of radiance L_sky. Light that scatters *once* reaches the 
 the sky's visibility V a 14-point quadrature over the grid's axes and diagonals, each weighted by
 the solid angle nearest to it (:data:`SKY_DIRECTIONS`, :data:`SKY_WEIGHTS`).
 This is what Mitsuba's ``volpath`` computes at ``max_depth`` 2 on the same medium under
-``scenes/emitters/sun_and_sky.xml`` (:func:`reference_render`), exactly for the sun and up to the
-quadrature for the sky.
+``scenes/emitters/sun_and_sky.xml``
+(:func:`~mitsuba_platonic.render.mitsuba.single_scatter_reference.reference_render`), exactly for
+the sun and up to the quadrature for the sky.
 
 Light: transmittance volumes (deep shadow maps), one per light direction (the sun and the 14 of
 the sky), by :func:`sweep`: the grid's planes perpendicular to the direction's dominant axis,
@@ -62,13 +63,13 @@ import numpy as np
 import torch
 import torch.nn.functional as F
 
-from ..errors import UserError
-from ..views import camera_frames, validate_views
-from ..volume import voxel_size, world_to_grid
-from .grids import extinction
+from ...errors import UserError
+from ...views import camera_frames, validate_views
+from ...volume import voxel_size, world_to_grid
+from ..grids import extinction
 
 __all__ = ["SunAndSky", "LightBatch", "sample_sun_and_sky", "sample_lights", "SKY_DIRECTIONS", "SKY_WEIGHTS",
-           "Sweep", "sweep", "transmittance", "render_single_scatter", "reference_render", "mean_luminance",
+           "Sweep", "sweep", "transmittance", "render_single_scatter", "checked_lights", "mean_luminance",
            "EXPOSURES", "SKY_SHARE", "daylights", "sky_share"]
 
 #: Rec. 709 / sRGB luminance weights of linear RGB.
@@ -332,7 +333,7 @@ def render_single_scatter(volume: torch.Tensor, views: torch.Tensor, lights: Any
     ``spp``: rays per pixel, a square number (the defaults, and what fewer cost in accuracy:
     docs/rendering.md, "Single scattering").
     """
-    batch = _check(volume, views, lights, exposure)
+    batch = checked_lights(volume, views, lights, exposure)
     for name, value, least in (("steps_per_voxel", steps_per_voxel, 1), ("shadow_planes", shadow_planes, 0),
                                ("spp", spp, 1)):
         if isinstance(value, bool) or not isinstance(value, int) or value < least:
@@ -372,7 +373,10 @@ def render_single_scatter(volume: torch.Tensor, views: torch.Tensor, lights: Any
     return F.avg_pool2d(torch.cat([rgb, alpha], dim=1), s)    # a pixel: the mean of its rays
 
 
-def _check(volume: torch.Tensor, views: torch.Tensor, lights: Any, exposure: str) -> LightBatch:
+def checked_lights(volume: torch.Tensor, views: torch.Tensor, lights: Any, exposure: str) -> LightBatch:
+    """Check a single-scattering call's inputs (an RGBA ``(B, 4, N, N, N)`` volume in [0, 1], ``(B, 3)``
+    unit views, an exposure of :data:`EXPOSURES`, one light per volume) and return its lights as a
+    :class:`LightBatch`; a :class:`~mitsuba_platonic.errors.UserError` naming what is wrong otherwise."""
     if not isinstance(volume, torch.Tensor) or volume.dim() != 5 or volume.shape[1] != 4:
         raise UserError(f"single scattering renders RGBA volumes (B, 4, N, N, N), got "
                         f"{tuple(volume.shape) if isinstance(volume, torch.Tensor) else type(volume).__name__}")
@@ -385,15 +389,3 @@ def _check(volume: torch.Tensor, views: torch.Tensor, lights: Any, exposure: str
     if len(batch) != volume.shape[0]:
         raise UserError(f"one light per volume expected: {len(batch)} for batch {volume.shape[0]}")
     return batch
-
-
-def reference_render(volume: torch.Tensor, views: torch.Tensor, lights: Sequence[SunAndSky], spp: int = 1024,
-                     seed: int = 0, exposure: str = "metered") -> torch.Tensor:
-    """Mitsuba's ``volpath`` at ``max_depth`` 2 (single scattering) on the same medium and light:
-    the reference :func:`render_single_scatter` is checked against, ``(B, 4, N, N)``, forward only."""
-    batch = _check(volume, views, lights, exposure)
-    from .physical import render_physical                  # Mitsuba's scene: on first use
-    images, _ = render_physical(volume, views, list(lights), spp=spp, max_depth=2, seed=seed, exposure="none")
-    if exposure == "metered":
-        images[:, :3] /= mean_luminance(batch).to(images)[:, None, None, None]
-    return images

@@ -3,14 +3,14 @@
 Per (volume, view) pair the volume's grids are written into a cached Mitsuba scene
 (a ``heterogeneous`` medium and an ``orthographic`` sensor at the view, loaded from the scene
 files ``scenes/raymarch.xml`` / ``scenes/raymarch_ea.xml``) and rendered with
-:class:`~mitsuba_platonic.render.raymarch.RayMarcher`. ``drjit.wrap`` turns each render into
+:class:`~mitsuba_platonic.render.mitsuba.integrator.RayMarcher`. ``drjit.wrap`` turns each render into
 a PyTorch autograd function, so gradients flow back to the torch volume.
 
 Grid layout (docs/rendering.md, "The Mitsuba side"). A torch ``(C, D, H, W)`` volume becomes a Mitsuba ``[Z, Y, X, C]``
 grid by a permute and two flips (Z = N−1−d, Y = N−1−h, X = w) that maps onto [−1, 1]³
 (``to_world`` = translate(−1)·scale(2)). Outside the cube the closed form sees zeros
 (``grid_sample`` zero padding); the ray marcher reproduces that by weighting each lookup with
-the zero-padding ramp (see :mod:`.raymarch`) instead of padding the data, which keeps the grid
+the zero-padding ramp (see :mod:`.integrator`) instead of padding the data, which keeps the grid
 a power of two wide: for N = 2^k, texture coordinates of dyadic points are exact in float32.
 Together with a dyadic near-clip distance (2⁻⁷, in the scene file) this makes the front view's samples land exactly on
 voxel centres, so the front view agrees with the closed form to accumulation round-off.
@@ -23,14 +23,14 @@ from typing import Any, Dict, Optional, Tuple
 
 import torch
 
-from ..views import camera_frames
-from ..volume import CHANNELS, voxel_size
-from .grids import to_mitsuba_grid
+from ...views import camera_frames
+from ...volume import CHANNELS, voxel_size
+from ..grids import to_mitsuba_grid
 from .scenes import load_scene
-from .settings import RenderSettings
-from .variant import ensure_variant, variant_device
+from ..settings import RenderSettings
+from ..variant import ensure_variant, variant_device
 
-__all__ = ["to_mitsuba_grid", "render_mitsuba", "build_scene", "sensor_dict"]
+__all__ = ["to_mitsuba_grid", "render_mitsuba", "build_scene", "sensor_dict", "sensor_transform", "differentiable_render"]
 
 
 @dataclass
@@ -179,8 +179,10 @@ class _OnceOnly(torch.autograd.Function):
         return grad
 
 
-def _sensor_transform(mi, right, up, w):
-    """Orthographic camera at 2ω looking at the origin, image up = ``up``; film covers [−1, 1]²."""
+def sensor_transform(mi: Any, right: torch.Tensor, up: torch.Tensor, w: torch.Tensor) -> Any:
+    """The sensor's ``to_world`` of one view (its frame ``right``, ``up``, ``w`` = ω from
+    :func:`~mitsuba_platonic.views.camera_frames`; ``mi`` the Mitsuba module): an orthographic camera
+    at 2ω looking at the origin, image up = ``up``; its film covers [−1, 1]². ``right`` is implied."""
     origin = [2.0 * float(x) for x in w]
     return mi.ScalarTransform4f().look_at(origin=origin, target=[0.0, 0.0, 0.0], up=[float(x) for x in up])
 
@@ -205,7 +207,7 @@ def render_mitsuba(volume: torch.Tensor, views: torch.Tensor, model: str,
     for b in range(volume.shape[0]):
         v = src[b]
         grids = (to_mitsuba_grid(v[-1:]),) if model != "ea" else (to_mitsuba_grid(v[3:4]), to_mitsuba_grid(v[:3]))
-        settings = {"sensor.to_world": _sensor_transform(mi, right[b], up[b], w[b])}
+        settings = {"sensor.to_world": sensor_transform(mi, right[b], up[b], w[b])}
         image = differentiable_render(bundle.scene, bundle.params, dict(zip(bundle.keys, grids)), settings,
                                       options.spp, seed + 2 * b)     # (H, W, 3 or 4)
         images.append(image[..., :out_channels].permute(2, 0, 1))

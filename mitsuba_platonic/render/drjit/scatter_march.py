@@ -71,14 +71,14 @@ from typing import Any, Optional, Tuple
 
 import torch
 
-from ..errors import UserError
-from .grids import extinction
-from .marcher import (_MODE, FRAME_FLOATS, FREEZE, _frames, _image_to_per_ray, _per_ray_to_image, _shared,
-                      _spread_over_threads)
-from .single_scatter import SKY_DIRECTIONS, SKY_WEIGHTS, LightBatch, _check, mean_luminance, sweep
-from .sky_light import _Key, local_depth, local_depth_partials, sky_occlusion, sky_offsets
-from .variant import ensure_variant, variant_device
-from .window import Window, window_or_none
+from ...errors import UserError
+from ..grids import extinction
+from ..pytorch.single_scatter import SKY_DIRECTIONS, SKY_WEIGHTS, LightBatch, checked_lights, mean_luminance, sweep
+from ..variant import ensure_variant, variant_device
+from ..window import Window, window_or_none
+from .launch import (FRAME_FLOATS, FREEZE, REDUCE_MODE, LaunchKey, image_to_per_ray, pair_frames, per_ray_to_image,
+                     shared_float, spread_over_threads)
+from .sky_light import local_depth, local_depth_partials, sky_occlusion, sky_offsets
 
 mi = ensure_variant()
 import drjit as dr  # noqa: E402  (after the variant is set)
@@ -133,7 +133,7 @@ class _Assembly:
         return sum(w * dr.gather(mi.Float, grads, idx, inside) for idx, inside, w in self.corners(-1))
 
 
-def _assemble(σ: Any, rgba: Any, A: Any, O: Any, offsets: Any, key: _Key) -> Any:
+def _assemble(σ: Any, rgba: Any, A: Any, O: Any, offsets: Any, key: LaunchKey) -> Any:
     """The packet's launch: (σ, a, A_s, σ_s, O, 0) per voxel, two 4-float halves."""
     b, n = key.values
     at = _Assembly(offsets, b, n)
@@ -146,7 +146,7 @@ def _assemble(σ: Any, rgba: Any, A: Any, O: Any, offsets: Any, key: _Key) -> An
     return packet
 
 
-def _assemble_backward(g_A_s: Any, g_σ_s: Any, offsets: Any, key: _Key) -> Tuple[Any, Any]:
+def _assemble_backward(g_A_s: Any, g_σ_s: Any, offsets: Any, key: LaunchKey) -> Tuple[Any, Any]:
     """Its adjoint for the sun's reads: ∂L/∂A and ∂L/∂σ through them (the other channels pass through)."""
     at = _Assembly(offsets, *key.values)
     out = (at.read_adjoint(g_A_s), at.read_adjoint(g_σ_s))
@@ -168,10 +168,10 @@ class _Packet(torch.autograd.Function):
         b, n3 = σ.shape
         n = round(n3 ** (1.0 / 3.0))
         keep: list = []
-        inputs = [_shared(x.detach().contiguous(), keep) for x in (σ, rgba, A, O)]
-        o_d = _shared(offsets.to(torch.float32).contiguous(), keep)
-        _spread_over_threads(b * n3, 4)
-        packet = (_frozen_assemble if FREEZE else _assemble)(*inputs, o_d, _Key(b, n))
+        inputs = [shared_float(x.detach().contiguous(), keep) for x in (σ, rgba, A, O)]
+        o_d = shared_float(offsets.to(torch.float32).contiguous(), keep)
+        spread_over_threads(b * n3, 4)
+        packet = (_frozen_assemble if FREEZE else _assemble)(*inputs, o_d, LaunchKey(b, n))
         ctx.saved = (o_d, b, n)
         ctx.keep = keep
         out = packet.torch().view(b, n3, PACKET)                  # in Dr.Jit's memory, no copy
@@ -182,9 +182,9 @@ class _Packet(torch.autograd.Function):
     def backward(ctx, g: torch.Tensor):
         o_d, b, n = ctx.saved
         g = g.to(torch.float32).contiguous()
-        g_A_s, g_σ_s = _shared(g[..., 4].contiguous(), ctx.keep), _shared(g[..., 5].contiguous(), ctx.keep)
-        _spread_over_threads(b * n ** 3, 4)
-        g_A, g_σ = (_frozen_assemble_backward if FREEZE else _assemble_backward)(g_A_s, g_σ_s, o_d, _Key(b, n))
+        g_A_s, g_σ_s = shared_float(g[..., 4].contiguous(), ctx.keep), shared_float(g[..., 5].contiguous(), ctx.keep)
+        spread_over_threads(b * n ** 3, 4)
+        g_A, g_σ = (_frozen_assemble_backward if FREEZE else _assemble_backward)(g_A_s, g_σ_s, o_d, LaunchKey(b, n))
         g_A_t, g_σ_t = g_A.torch().view(b, -1), g_σ.torch().view(b, -1)
         g_rgba = torch.zeros(b, 4, n ** 3, device=g.device)         # the opacity's gradient comes through σ
         g_rgba[:, :3] = g[..., 1:4].transpose(1, 2)
@@ -220,7 +220,7 @@ def _sky_constants(Δ: float, reach: float) -> list:
 
 class _Rays:
     """One call's rays (lane r: pair r // (N²·spp), pixel, sub-sample), their samples and lookups;
-    ``windowed``: 12 floats per pair's frame, with the window's origin (:func:`.marcher._frames`)."""
+    ``windowed``: 12 floats per pair's frame, with the window's origin (:func:`.launch.pair_frames`)."""
 
     def __init__(self, data: Any, frames: Any, light: Any, b: int, n: int, m: int, spp: int, reach: float,
                  windowed: bool = False):
@@ -359,9 +359,9 @@ class _Rays:
             pσ = dr.select(inside, w * gσ + dr.dot(dw, ggq), 0.0)
             wi = dr.select(inside, w, 0.0)
             dr.scatter_reduce(dr.ReduceOp.Add, grad, mi.Vector4f(pσ, w * ga.x, w * ga.y, w * ga.z), 2 * idx,
-                              mode=_MODE)
+                              mode=REDUCE_MODE)
             dr.scatter_reduce(dr.ReduceOp.Add, grad, mi.Vector4f(wi * gA, wi * gσ_s, wi * gO, 0.0), 2 * idx + 1,
-                              mode=_MODE)
+                              mode=REDUCE_MODE)
 
     @dr.syntax
     def forward(self) -> Tuple[Any, Any]:
@@ -399,7 +399,7 @@ class _Rays:
             k += 1
 
 
-def _camera_forward(data: Any, frames: Any, light: Any, key: _Key) -> list:
+def _camera_forward(data: Any, frames: Any, light: Any, key: LaunchKey) -> list:
     """The forward launch: [r, g, b, α] per ray."""
     rays = _Rays(data, frames, light, *key.values)
     C, T = rays.forward()
@@ -408,7 +408,7 @@ def _camera_forward(data: Any, frames: Any, light: Any, key: _Key) -> list:
     return values
 
 
-def _camera_backward(data: Any, frames: Any, light: Any, values: list, δ: list, key: _Key) -> Any:
+def _camera_backward(data: Any, frames: Any, light: Any, values: list, δ: list, key: LaunchKey) -> Any:
     """The adjoint launch: ∂L/∂packet from the per-ray gradients δ and the forward's totals."""
     b, n = key.values[:2]
     rays = _Rays(data, frames, light, *key.values)
@@ -433,14 +433,14 @@ class _ScatterMarch(torch.autograd.Function):
         ctx.inputs = 6 + len(window)                               # apply's arguments: one gradient (or None) each
         window = window[0] if window else None                    # optional: (…, reach) or (…, reach, window)
         keep: list = []
-        data = _shared(packet.detach().contiguous(), keep)
-        frames = _frames(views, keep, window)
+        data = shared_float(packet.detach().contiguous(), keep)
+        frames = pair_frames(views, keep, window)
         windowed = window is not None
-        light_arr = _shared(light.detach().to(torch.float32).contiguous(), keep)
-        _spread_over_threads(b * n * n * spp, 4)
+        light_arr = shared_float(light.detach().to(torch.float32).contiguous(), keep)
+        spread_over_threads(b * n * n * spp, 4)
         run = _frozen_camera_forward if FREEZE else _camera_forward
-        values = run(data, frames, light_arr, _Key(b, n, m, spp, reach, windowed))
-        image = _per_ray_to_image(values, b, n, spp)
+        values = run(data, frames, light_arr, LaunchKey(b, n, m, spp, reach, windowed))
+        image = per_ray_to_image(values, b, n, spp)
         ctx.args = (data, frames, light_arr, values, (b, n, m, spp, reach, windowed))
         ctx.keep = keep
         return image
@@ -448,10 +448,10 @@ class _ScatterMarch(torch.autograd.Function):
     @staticmethod
     def backward(ctx, grad_image: torch.Tensor):
         data, frames, light_arr, values, (b, n, m, spp, reach, windowed) = ctx.args
-        δ = list(_image_to_per_ray(grad_image.to(torch.float32).contiguous(), spp, ctx.keep))
-        _spread_over_threads(b * n * n * spp, 1)
+        δ = list(image_to_per_ray(grad_image.to(torch.float32).contiguous(), spp, ctx.keep))
+        spread_over_threads(b * n * n * spp, 1)
         run = _frozen_camera_backward if FREEZE else _camera_backward
-        grad = run(data, frames, light_arr, values, δ, _Key(b, n, m, spp, reach, windowed))
+        grad = run(data, frames, light_arr, values, δ, LaunchKey(b, n, m, spp, reach, windowed))
         out = grad.torch().view(b, n, n, n, PACKET)
         dr.sync_thread()                                          # nothing in flight reads ``keep``
         return (out,) + (None,) * (ctx.inputs - 1)
@@ -471,7 +471,7 @@ def render_scatter_march(volume: torch.Tensor, views: torch.Tensor, lights: Any,
     the full cross-section). Accuracy and cost against ``volpath`` and the EA marcher: docs/rendering.md.
     """
     window = window_or_none(window)
-    batch = _check(volume, views, lights, exposure)
+    batch = checked_lights(volume, views, lights, exposure)
     for name, value, least in (("steps_per_voxel", steps_per_voxel, 2), ("spp", spp, 1)):
         if isinstance(value, bool) or not isinstance(value, int) or value < least:
             raise UserError(f"{name}: expected an int ≥ {least}, got {value!r}")

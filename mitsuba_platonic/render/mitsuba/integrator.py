@@ -45,12 +45,12 @@ from __future__ import annotations
 
 import math
 
-from .variant import ensure_variant
+from ..variant import ensure_variant
 
 mi = ensure_variant()
 import drjit as dr  # noqa: E402  (after the variant is set)
 
-from .marcher import V_MAX, n_segments, segment_transmittance  # noqa: E402  (one owner of the formulas)
+from ..drjit.marcher import V_MAX, n_segments, segment_transmittance  # noqa: E402  (one owner of the formulas)
 
 __all__ = ["RayMarcher", "INTEGRATOR_NAME", "V_MAX"]
 

@@ -21,10 +21,8 @@ VH/AO, where ``A`` is the opacity).
 from __future__ import annotations
 
 import json
-import sys
-import time
 from pathlib import Path
-from typing import Any, Callable, Dict, List, Mapping, Optional, Sequence, Tuple, Union
+from typing import Any, Dict, List, Mapping, Optional, Sequence, Union
 
 import numpy as np
 import torch
@@ -36,11 +34,12 @@ from ..runtime.budget import available_memory
 from ..runtime.progress import progress_bar
 from ..views import front_view, sample_views, to_angles, validate_views
 from ..volume import CHANNELS
-from . import MODELS, render
-from .settings import OPTIONS_OF, RenderSettings
-from .variant import ensure_variant
+from ..render import MODELS, render
+from ..render.settings import OPTIONS_OF, RenderSettings
+from ..render.variant import ensure_variant
+from .timing import time_render
 
-__all__ = ["compare", "format_table", "time_render", "best_of", "kernel_time", "best_kernel_ms", "DISPLAY_BACKGROUND", "HEATMAP_CMAP",
+__all__ = ["compare", "format_table", "DISPLAY_BACKGROUND", "HEATMAP_CMAP",
            "memory_estimate", "available_memory", "check_memory", "comparison_views", "write_summary"]
 
 #: Grey level EA renders (premultiplied RGBA) are composited over for display.
@@ -93,63 +92,6 @@ def _most_views(n: int, views: int, builtin: bool, have: float) -> int:
         else:
             hi = mid - 1
     return lo
-
-
-def _sync() -> None:
-    """Wait for queued CUDA work and Dr.Jit launches (if Dr.Jit is loaded), so timings are whole."""
-    if torch.cuda.is_available():
-        torch.cuda.synchronize()
-    if "drjit" in sys.modules:
-        sys.modules["drjit"].sync_thread()
-
-
-def best_of(fn: Callable[[], Any], repeats: int) -> float:
-    """The shortest wall time of ``repeats`` calls of ``fn`` (seconds; CUDA work synchronised)."""
-    best = float("inf")
-    for _ in range(repeats):
-        t0 = time.perf_counter()
-        fn()
-        _sync()
-        best = min(best, time.perf_counter() - t0)
-    return best
-
-
-def kernel_time(fn: Callable[[], Any]) -> Tuple[float, int]:
-    """Run ``fn`` once with Dr.Jit's kernel history on: (milliseconds of JIT-kernel execution,
-    launches of every kind: kernels, copies, clears, reductions). The history is on only for this
-    call, because recording it makes every launch wait for its timing query."""
-    import drjit as dr  # lazy: Dr.Jit only after the backend check (ensure_variant)
-    dr.sync_thread()
-    dr.set_flag(dr.JitFlag.KernelHistory, True)
-    try:
-        dr.kernel_history()                                  # clears it
-        fn()
-        dr.sync_thread()
-        history = dr.kernel_history()
-    finally:
-        dr.set_flag(dr.JitFlag.KernelHistory, False)
-    return sum(k["execution_time"] for k in history if str(k["type"]).endswith("JIT")), len(history)
-
-
-def best_kernel_ms(fn: Callable[[], Any], repeats: int) -> float:
-    """The shortest JIT-kernel time (:func:`kernel_time`, ms) of ``repeats`` calls of ``fn`` after
-    one warm-up call (which absorbs tracing and compilation)."""
-    fn()
-    return min(kernel_time(fn)[0] for _ in range(repeats))
-
-
-def time_render(fn: Callable[[], torch.Tensor], repeats: int = 3) -> tuple[torch.Tensor, float]:
-    """Run ``fn`` once untimed (warm-up), then ``repeats`` timed runs; return (first output, best s).
-
-    The warm-up output is returned: with fixed options and seeds every run gives the same images.
-    """
-    if not isinstance(repeats, int) or isinstance(repeats, bool) or repeats < 1:
-        raise UserError(f"repeats must be a positive int, got {repeats!r}")
-    with torch.no_grad():
-        out = fn()
-        _sync()
-        best = best_of(fn, repeats)
-    return out, best
 
 
 def _model_volume(volume: torch.Tensor, model: str, batch: int) -> torch.Tensor:

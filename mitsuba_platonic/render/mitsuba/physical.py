@@ -51,15 +51,15 @@ from typing import Any, Dict, List, Optional, Sequence, Tuple
 import numpy as np
 import torch
 
-from ..errors import UserError
-from ..views import camera_frames, validate_views
-from ..volume import validate_volume, voxel_size
-from .grids import V_MAX_PHYSICAL, extinction, to_mitsuba_grid
-from .mitsuba_renderer import _sensor_transform, differentiable_render
+from ...errors import UserError
+from ...views import camera_frames, validate_views
+from ...volume import validate_volume, voxel_size
+from ..grids import V_MAX_PHYSICAL, extinction, to_mitsuba_grid
+from .per_pair import differentiable_render, sensor_transform
 from .scenes import load_scene
-from .settings import RenderSettings, check_lanes
-from .variant import ensure_variant, variant_device
-from .window import Window, window_or_none
+from ..settings import RenderSettings, check_lanes
+from ..variant import ensure_variant, variant_device
+from ..window import Window, window_or_none
 
 __all__ = ["Lighting", "sample_lighting", "render_physical", "render_physical_ad", "extinction",
            "V_MAX_PHYSICAL", "luminance", "auto_exposure", "sky_mean_luminance", "metered_exposure",
@@ -194,7 +194,7 @@ def _alpha(density: torch.Tensor, views: torch.Tensor, filter: str, window: Opti
     validate_volume(density, "ao")
     validate_views(views, batch=density.shape[0])
     check_lanes(density.shape[0], density.shape[-1], settings.spp)   # before Dr.Jit: say why, up front
-    from .marcher import march       # imports Dr.Jit and sets Mitsuba's variant: on the first alpha pass
+    from ..drjit.marcher import march       # imports Dr.Jit and sets Mitsuba's variant: on the first alpha pass
     return march(density, views, settings, 0, window)
 
 
@@ -321,7 +321,7 @@ def render_physical_ad(volume: torch.Tensor, views: torch.Tensor, lighting: str 
     images = []
     for b in range(volume.shape[0]):
         light = sample_lighting(rng, "sunsky")
-        to_world = (_sensor_transform(mi, right[b], up[b], w[b]) if window is None
+        to_world = (sensor_transform(mi, right[b], up[b], w[b]) if window is None
                     else _window_transform(mi, right[b], up[b], w[b], window))
         settings = {"sensor.to_world": to_world,
                     "emitter.sun_direction": mi.Vector3f(*light.sun_direction),

@@ -14,7 +14,7 @@ the sun towards +z) on first use and returns their paths: a package built after 
 carries them in ``scenes/envmaps/`` (the folder ``platonic make-dataset --lighting envmap`` reads;
 ``*.exr`` is git-ignored); missing ones are baked into :func:`~mitsuba_platonic.files.resources.sky_cache`
 (that folder in a checkout, the user's cache folder in an installed package). From a shell:
-``python -m mitsuba_platonic.render.sky`` (``--help`` for the folder and size).
+``python -m mitsuba_platonic.render.mitsuba.sky`` (``--help`` for the folder and size).
 """
 
 from __future__ import annotations
@@ -26,10 +26,10 @@ from typing import List, Optional, Sequence, Tuple, Union
 
 import numpy as np
 
-from ..files.fileio import atomic_write
-from ..files.resources import sky_cache
+from ...files.fileio import atomic_write
+from ...files.resources import sky_cache
 from .scenes import SCENES, load_scene
-from .variant import ensure_variant
+from ..variant import ensure_variant
 
 __all__ = ["SKIES", "ENVMAPS", "sun_direction", "sky_name", "bake_sky", "baked_envmaps", "latlong_direction"]
 
@@ -45,7 +45,7 @@ SUN_APERTURE = 0.5338
 
 def sun_direction(elevation: float, azimuth: float = 0.0) -> Tuple[float, float, float]:
     """Unit vector towards a sun at ``elevation`` degrees above the horizon, ``azimuth`` degrees
-    from +z towards +x (the convention of :func:`~mitsuba_platonic.render.physical.sample_lighting`)."""
+    from +z towards +x (the convention of :func:`~mitsuba_platonic.render.mitsuba.physical.sample_lighting`)."""
     e, a = math.radians(elevation), math.radians(azimuth)
     return (math.cos(e) * math.sin(a), math.sin(e), math.cos(e) * math.cos(a))
 
@@ -147,8 +147,8 @@ def baked_envmaps(folder: Union[str, Path, None] = None, skies: Sequence[Tuple[f
 
 
 def main(argv: Optional[Sequence[str]] = None) -> None:
-    """``python -m mitsuba_platonic.render.sky``: bake the skies of :data:`SKIES`."""
-    parser = argparse.ArgumentParser(prog="python -m mitsuba_platonic.render.sky",
+    """``python -m mitsuba_platonic.render.mitsuba.sky``: bake the skies of :data:`SKIES`."""
+    parser = argparse.ArgumentParser(prog="python -m mitsuba_platonic.render.mitsuba.sky",
                                      description="Bake lat-long EXR skies from Mitsuba's sunsky for envmap lighting.")
     parser.add_argument("--out", default=str(sky_cache()),
                         help="folder (default: %(default)s: scenes/envmaps in a checkout, where a wheel "

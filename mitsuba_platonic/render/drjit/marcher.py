@@ -127,8 +127,6 @@ fills and a reduction of B·N³·C floats per call) and ``Auto`` (atomics) on CU
 
 from __future__ import annotations
 
-import ctypes
-import glob
 import math
 import os
 from dataclasses import replace
@@ -136,10 +134,11 @@ from typing import Any, Dict, Optional, Tuple
 
 import torch
 
-from ..views import camera_frames
-from .settings import RenderSettings, check_lanes
-from .variant import ensure_variant, variant_device
-from .window import Window, check_orthographic, window_or_none
+from ..settings import RenderSettings, check_lanes
+from ..variant import ensure_variant, variant_device
+from ..window import Window, check_orthographic, window_or_none
+from .launch import (FRAME_FLOATS, FREEZE, PACKET, REDUCE_MODE, image_to_per_ray, pair_frames, per_ray_to_image,
+                     set_block_size, shared_float, spread_over_threads)
 
 mi = ensure_variant()
 import drjit as dr  # noqa: E402  (after the variant is set)
@@ -182,45 +181,6 @@ def segment_transmittance(model: str, unit: bool, v: Any, s: Any) -> Tuple[Any, 
     return dr.exp(s * log1m), dr.select(v >= V_MAX, 0.0, -s * dr.exp((s - 1.0) * log1m))
 
 
-# -- Threads -------------------------------------------------------------------------------
-
-
-def _core_function(symbol: str, restype: Any, argtypes: list):
-    """A function of Dr.Jit's LLVM backend that Python does not expose, or None where it is absent."""
-    if not mi.variant().startswith("llvm"):
-        return None
-    pattern = os.path.join(os.path.dirname(dr.__file__), "libdrjit-core*.so*")
-    for path in glob.glob(pattern):
-        try:
-            fn = getattr(ctypes.PyDLL(path), symbol)                 # PyDLL: keeps the GIL held
-        except (OSError, AttributeError):
-            continue
-        fn.argtypes, fn.restype = argtypes, restype
-        return fn
-    return None
-
-
-#: ``jit_llvm_set_block_size(n)``: lanes per block of work (a power of two); each block runs on one thread.
-_set_block_size = _core_function("_Z23jit_llvm_set_block_sizej", None, [ctypes.c_uint32])
-_vector_width = _core_function("_Z21jit_llvm_vector_widthv", ctypes.c_uint32, [])
-#: Lanes per SIMD packet of the LLVM backend (16 with AVX-512, 8 with AVX2); 0 off the LLVM backend.
-PACKET = int(_vector_width()) if _vector_width is not None else 0
-
-
-def _spread_over_threads(lanes: int, blocks_per_thread: int) -> None:
-    """Split a launch of ``lanes`` rays into about ``blocks_per_thread`` blocks per thread.
-
-    Dr.Jit's default block is 16,384 lanes, so a 32³ batch of 8 (8,192 rays) would run on one
-    thread. The backward pass asks for one block per thread: its ``Expand`` scatters give every
-    block its own copy of the gradient, which is cleared and summed at the end.
-    """
-    if _set_block_size is None:
-        return
-    threads = max(1, dr.thread_count())
-    block = -(-lanes // (blocks_per_thread * threads))
-    _set_block_size(1 << max(6, min(20, (block - 1).bit_length())))   # a power of two ≥ the packet
-
-
 # -- The marcher ---------------------------------------------------------------------------
 
 
@@ -244,7 +204,7 @@ class _Batch:
         # tiled: whole pairs of idle lanes pad the launch to > 2 blocks per thread (:func:`_tiled_pairs`)
         self.n_lanes = _tiled_pairs(b) * n * n * opt.spp if tiled else b * n * n * opt.spp
         # tiled: no two threads add into the same volume (module docstring)
-        self.mode = dr.ReduceMode.NoConflicts if tiled else _MODE
+        self.mode = dr.ReduceMode.NoConflicts if tiled else REDUCE_MODE
         #: the backward's gradient in the pair layout (:meth:`splat`): single-channel trilinear, tiled
         self.pairs = pair_layout(tiled, c, opt)
         self.model, self.seed = opt.model, seed
@@ -583,7 +543,7 @@ def tiled_backward(n: int, spp: int) -> bool:
     rays make a power-of-two block of at least one packet and N is a multiple of 4 (the tiles).
     """
     rays = n * n * spp
-    return (TILED and _set_block_size is not None and PACKET > 0 and n % 4 == 0
+    return (TILED and set_block_size is not None and PACKET > 0 and n % 4 == 0
             and rays & (rays - 1) == 0 and rays >= PACKET)
 
 
@@ -601,49 +561,6 @@ RECORD_LOOKUPS = os.environ.get("MITSUBA_PLATONIC_RECORD_LOOKUPS", "1") != "0"
 #: Forward-only calls skip empty space (module docstring, "Empty space"; exact)
 #: (``MITSUBA_PLATONIC_SKIP_EMPTY=0``: march every segment, for comparisons).
 SKIP_EMPTY = os.environ.get("MITSUBA_PLATONIC_SKIP_EMPTY", "1") != "0"
-
-
-#: Scatter-add mode of the backward pass (``Expand``: per-thread copies on the LLVM backend).
-_MODE = dr.ReduceMode.Expand if mi.variant().startswith("llvm") else dr.ReduceMode.Auto
-
-
-def _shared(t: torch.Tensor, keep: list) -> Any:
-    """A Dr.Jit Float sharing the memory of the contiguous torch tensor ``t`` (no copy).
-
-    ``t`` goes into ``keep``, which the caller holds until Dr.Jit is done with the array: Dr.Jit
-    may release its last reference inside a launch, where the GIL is not held, and freeing torch
-    memory there aborts the interpreter.
-    """
-    t = t.reshape(-1)
-    keep.append(t)
-    return mi.Float(t)
-
-
-#: Floats per pair in a call's frames, without and with a window (:func:`_frames`).
-FRAME_FLOATS = {False: 9, True: 12}
-
-
-def _frames(views: torch.Tensor, keep: list, window: Optional[Window] = None) -> Any:
-    """(B, 3) views → a Float of 9 per pair: right, up, ω; with a ``window`` (not the full one) 12:
-    h right, h up, ω, o (module docstring, "Window"). float64 maths, stored as float32."""
-    right, up, w = camera_frames(views)
-    if window is None:
-        return _shared(torch.cat([right, up, w], dim=1).to(torch.float32).contiguous(), keep)
-    right, up, origin = window.frames(right, up)
-    return _shared(torch.cat([right, up, w, origin], dim=1).to(torch.float32).contiguous(), keep)
-
-
-def _per_ray_to_image(values, b: int, n: int, spp: int) -> torch.Tensor:
-    """Per-ray Dr.Jit Floats (one per channel) → the (B, C, H, W) image, the mean over each pixel's rays."""
-    rays = torch.stack([v.torch().view(b, n, n, spp) for v in values], dim=1)   # (B, C, H, W, spp)
-    return rays[..., 0] if spp == 1 else rays.mean(dim=-1)
-
-
-def _image_to_per_ray(grad: torch.Tensor, spp: int, keep: list) -> Tuple[Any, ...]:
-    """(B, C, H, W) gradient → per-ray Floats: each ray of a pixel gets 1/spp of it."""
-    g = (grad / spp if spp > 1 else grad).transpose(0, 1)                          # (C, B, H, W)
-    return tuple(_shared(g[ch].unsqueeze(-1).expand(-1, -1, -1, spp).contiguous(), keep)
-                 for ch in range(grad.shape[1]))
 
 
 class _Static:
@@ -712,10 +629,6 @@ def _backward_pass(data: Any, frames: Any, seed: Any, Ts: Any, marched: Any, δ:
     return out
 
 
-#: Replay the recorded kernels of both passes instead of re-tracing them (Dr.Jit's ``dr.freeze``):
-#: a new (batch, resolution, settings, thread count) records once, later calls only launch. Set
-#: ``MITSUBA_PLATONIC_FREEZE=0`` to trace every call.
-FREEZE = os.environ.get("MITSUBA_PLATONIC_FREEZE", "1") != "0"
 _frozen_forward = dr.freeze(_forward_pass, limit=64, warn_after=10_000)
 _frozen_backward = dr.freeze(_backward_pass, limit=64, warn_after=10_000)
 
@@ -792,18 +705,18 @@ class _March(torch.autograd.Function):
             raise ValueError(f"a differentiable render of {lanes} rays × {steps} segments records "
                              f"{4 * floats * lanes * steps / 2**30:.1f} GiB; use fewer pairs, spp or a larger step")
         keep: list = []                                           # torch memory Dr.Jit reads
-        data = _shared(_channels_last(volume, keep), keep)        # the (B, N, N, N, C) batch
-        frames = _frames(views, keep, window)
-        _spread_over_threads(lanes, 4)
+        data = shared_float(_channels_last(volume, keep), keep)        # the (B, N, N, N, C) batch
+        frames = pair_frames(views, keep, window)
+        spread_over_threads(lanes, 4)
         run = _frozen_forward if FREEZE else _forward_pass
         seed_arr = dr.opaque(mi.UInt32, seed if opt.jitter else 0)   # an input array: a new seed replays
         skip = SKIP_EMPTY and not record                          # forward-only: skip empty space
-        boxes = _shared(occupied_boxes(volume), keep) if skip else None
+        boxes = shared_float(occupied_boxes(volume), keep) if skip else None
         # the records in the order of the backward's lanes: tiled where the backward will be
         records_tiled = record and tiled_backward(n, opt.spp)
         values, Ts, marched = run(data, frames, seed_arr, boxes,
                                   _Static((b, c, n), opt, record, records_tiled, windowed))
-        image = _per_ray_to_image(values, b, n, opt.spp)
+        image = per_ray_to_image(values, b, n, opt.spp)
         ctx.args = (data, frames, seed_arr, Ts, marched, _Static((b, c, n), opt, False, windowed=windowed), lanes,
                     records_tiled)
         ctx.keep = keep
@@ -812,13 +725,13 @@ class _March(torch.autograd.Function):
     @staticmethod
     def backward(ctx, grad_image: torch.Tensor):
         data, frames, seed_arr, Ts, marched, static, lanes, records_tiled = ctx.args
-        δ = list(_image_to_per_ray(grad_image.to(torch.float32), static.opt.spp, ctx.keep))
+        δ = list(image_to_per_ray(grad_image.to(torch.float32), static.opt.spp, ctx.keep))
         b, c, n = static.shape
         tiled = records_tiled                                     # the lane order the forward recorded in
         if tiled:
-            _set_block_size(n * n * static.opt.spp)               # one block per pair: threads own volumes
+            set_block_size(n * n * static.opt.spp)               # one block per pair: threads own volumes
         else:
-            _spread_over_threads(lanes, 1)
+            spread_over_threads(lanes, 1)
         run = _frozen_backward if FREEZE else _backward_pass
         grad = run(data, frames, seed_arr, Ts, marched, δ,
                    _Static(static.shape, static.opt, False, tiled, static.windowed))
@@ -875,11 +788,11 @@ def march_pixels(volume: torch.Tensor, views: torch.Tensor, settings: RenderSett
     check_lanes(b, n, opt.spp)
     keep: list = []
     with torch.no_grad():
-        data = _shared(_channels_last(src, keep), keep)
-        frames = _frames(views.detach().to(torch.float64).cpu(), keep, window)
-        _spread_over_threads(b * n * n * opt.spp, 4)
+        data = shared_float(_channels_last(src, keep), keep)
+        frames = pair_frames(views.detach().to(torch.float64).cpu(), keep, window)
+        spread_over_threads(b * n * n * opt.spp, 4)
         run = _frozen_forward if FREEZE else _forward_pass
-        boxes = _shared(occupied_boxes(src), keep) if SKIP_EMPTY else None
+        boxes = shared_float(occupied_boxes(src), keep) if SKIP_EMPTY else None
         values, _, _ = run(data, frames, dr.opaque(mi.UInt32, 0), boxes,
                            _Static((b, c, n), opt, False, False, window is not None))
         rays = torch.stack([v.torch().view(b, n, n, k, k) for v in values], dim=1)     # (B, C, i, j, sy, sx)

@@ -48,9 +48,9 @@ import torch.nn.functional as F
 import math
 from typing import Optional, Tuple
 
-from ..views import camera_frames
-from ..volume import voxel_size, world_to_grid
-from .window import Window, check_orthographic, window_or_none
+from ...views import camera_frames
+from ...volume import voxel_size, world_to_grid
+from ..window import Window, check_orthographic, window_or_none
 
 __all__ = ["FILTERS", "ORTHOGRAPHIC", "camera_space_points", "path_factor", "rotate", "tilt", "transmittance_before", "reduce_depth",
            "render_closed_form"]

@@ -38,9 +38,9 @@ from typing import Any, List, Tuple
 import numpy as np
 import torch
 
-from .marcher import FREEZE, _shared, _spread_over_threads
-from .single_scatter import SKY_DIRECTIONS, SKY_WEIGHTS
-from .variant import ensure_variant, variant_device
+from ..pytorch.single_scatter import SKY_DIRECTIONS, SKY_WEIGHTS
+from ..variant import ensure_variant, variant_device
+from .launch import FREEZE, LaunchKey, shared_float, spread_over_threads
 
 mi = ensure_variant()
 import drjit as dr  # noqa: E402  (after the variant is set)
@@ -284,23 +284,7 @@ class _Voxels:
         return gσ, gg, c
 
 
-class _Key:
-    """The Python values a launch depends on (sizes, settings) and Dr.Jit's thread count (``Expand``
-    scatters size their per-thread copies when a kernel is recorded), as one hashable argument:
-    ``dr.freeze`` records a launch once per key and replays it after (:data:`.marcher.FREEZE`)."""
-
-    def __init__(self, *values: Any):
-        self.values = values
-        self.key = (values, dr.thread_count())
-
-    def __hash__(self) -> int:
-        return hash(self.key)
-
-    def __eq__(self, other: object) -> bool:
-        return isinstance(other, _Key) and self.key == other.key
-
-
-def _lines_forward(σ: Any, tables: Tuple[Any, ...], key: _Key) -> Any:
+def _lines_forward(σ: Any, tables: Tuple[Any, ...], key: LaunchKey) -> Any:
     """Launch 1: τ (B, 14, N³)."""
     b, n = key.values
     τ = dr.empty(mi.Float, b * 14 * n ** 3)                       # every entry is written by one line
@@ -309,14 +293,14 @@ def _lines_forward(σ: Any, tables: Tuple[Any, ...], key: _Key) -> Any:
     return τ
 
 
-def _voxels_forward(σ: Any, g: Any, τ: Any, key: _Key) -> Any:
+def _voxels_forward(σ: Any, g: Any, τ: Any, key: LaunchKey) -> Any:
     """Launch 2: O per voxel."""
     O = _Voxels(σ, g, *key.values).occlusion(τ)
     dr.eval(O)
     return O
 
 
-def _voxels_backward(σ: Any, g: Any, τ: Any, gO: Any, key: _Key) -> Tuple[Any, ...]:
+def _voxels_backward(σ: Any, g: Any, τ: Any, gO: Any, key: LaunchKey) -> Tuple[Any, ...]:
     """Launch 2's adjoint: ∂L/∂σ(p), ∂L/∂∇σ(p) (three Floats) and c(p)."""
     gσ, gg, c = _Voxels(σ, g, *key.values).occlusion_backward(τ, gO)
     out = (mi.Float(gσ), gg.x, gg.y, gg.z, mi.Float(c))
@@ -325,7 +309,7 @@ def _voxels_backward(σ: Any, g: Any, τ: Any, gO: Any, key: _Key) -> Tuple[Any,
 
 
 def _lines_backward(τ: Any, σ: Any, g: Any, c: Any, tables: Tuple[Any, ...], terms: Tuple[Any, ...],
-                    key: _Key) -> Any:
+                    key: LaunchKey) -> Any:
     """Launch 1's adjoint: ∂L/∂σ per direction (B, 14, N³)."""
     b, n = key.values
     gσ_k = dr.empty(mi.Float, b * 14 * n ** 3)                    # every entry is written by one line
@@ -334,7 +318,7 @@ def _lines_backward(τ: Any, σ: Any, g: Any, c: Any, tables: Tuple[Any, ...], t
     return gσ_k
 
 
-#: The four launches, replayed after their first call with the same key (:data:`.marcher.FREEZE`).
+#: The four launches, replayed after their first call with the same key (:data:`.launch.FREEZE`).
 _FROZEN = {f.__name__: dr.freeze(f, limit=64, warn_after=10_000)
            for f in (_lines_forward, _voxels_forward, _voxels_backward, _lines_backward)}
 
@@ -376,13 +360,13 @@ class _SkyOcclusion(torch.autograd.Function):
         b, n = σ.shape[0], σ.shape[-1]
         n3 = n ** 3
         keep: list = []
-        σ_d = _shared(σ.detach().contiguous(), keep)
-        g_d = _shared(_central_differences(σ.detach()).contiguous(), keep)
+        σ_d = shared_float(σ.detach().contiguous(), keep)
+        g_d = shared_float(_central_differences(σ.detach()).contiguous(), keep)
         tables = _line_arrays(n)
-        _spread_over_threads(b * dr.width(tables[0]), 4)
-        τ = _run(_lines_forward, σ_d, tables, _Key(b, n))
-        _spread_over_threads(b * n3, 4)
-        O = _run(_voxels_forward, σ_d, g_d, τ, _Key(b, n, reach))
+        spread_over_threads(b * dr.width(tables[0]), 4)
+        τ = _run(_lines_forward, σ_d, tables, LaunchKey(b, n))
+        spread_over_threads(b * n3, 4)
+        O = _run(_voxels_forward, σ_d, g_d, τ, LaunchKey(b, n, reach))
         ctx.saved = (σ_d, g_d, τ, b, n, reach)
         ctx.keep = keep
         out = O.torch().view(b, n, n, n).clone()
@@ -392,12 +376,12 @@ class _SkyOcclusion(torch.autograd.Function):
     @staticmethod
     def backward(ctx, gO: torch.Tensor):
         σ_d, g_d, τ, b, n, reach = ctx.saved
-        gO_d = _shared(gO.to(torch.float32).contiguous(), ctx.keep)
-        _spread_over_threads(b * n ** 3, 4)
-        gσ, gx, gy, gz, c = _run(_voxels_backward, σ_d, g_d, τ, gO_d, _Key(b, n, reach))
+        gO_d = shared_float(gO.to(torch.float32).contiguous(), ctx.keep)
+        spread_over_threads(b * n ** 3, 4)
+        gσ, gx, gy, gz, c = _run(_voxels_backward, σ_d, g_d, τ, gO_d, LaunchKey(b, n, reach))
         tables = _line_arrays(n)
-        _spread_over_threads(b * dr.width(tables[0]), 4)
-        gσ_k = _run(_lines_backward, τ, σ_d, g_d, c, tables, _term_arrays(n, reach), _Key(b, n))
+        spread_over_threads(b * dr.width(tables[0]), 4)
+        gσ_k = _run(_lines_backward, τ, σ_d, g_d, c, tables, _term_arrays(n, reach), LaunchKey(b, n))
         gg = torch.stack([gx.torch(), gy.torch(), gz.torch()], dim=-1).view(b, n, n, n, 3)
         out = (gσ.torch().view(b, n, n, n) + gσ_k.torch().view(b, 14, n, n, n).sum(1)
                + _central_differences_adjoint(gg))

@@ -3,7 +3,7 @@
 The files are the single description of every scene the project renders (scenes/README.md):
 
     raymarch.xml        VH / AO: the density as a ``heterogeneous`` medium, the ``platonic_raymarch``
-                        integrator (:mod:`.raymarch`), an orthographic camera
+                        integrator (:mod:`.integrator`), an orthographic camera
     raymarch_ea.xml     the same for EA (density and colour)
     physical.xml        the path tracer's scene: the medium in a null-BSDF cube under a sky
                         (``volpath`` or ``prbvolpath``), lit by emitters/$lighting.xml
@@ -27,11 +27,11 @@ from typing import Any, Dict, Mapping, Optional, Sequence, Union
 
 import torch
 
-from ..files.resources import scenes_folder
-from ..files.volume_io import read_npz, write_vol
-from ..runtime import budget
-from .grids import extinction
-from .variant import ensure_variant
+from ...files.resources import scenes_folder
+from ...files.volume_io import read_npz, write_vol
+from ...runtime import budget
+from ..grids import extinction
+from ..variant import ensure_variant
 
 __all__ = ["SCENES", "scene_path", "load_scene", "xml_value", "write_scene_grids"]
 
@@ -70,7 +70,7 @@ def xml_value(value: Any) -> str:
 
 def _register_integrators() -> None:
     """Register the project's integrator (``platonic_raymarch``) with Mitsuba: the one place it happens."""
-    from . import raymarch  # noqa: F401  (registers on import)
+    from . import integrator  # noqa: F401  (registers on import)
 
 
 def load_scene(name: Union[str, Path], grids: Optional[Mapping[str, Any]] = None,
@@ -131,8 +131,8 @@ def write_scene_grids(volume: Any, folder: Union[str, Path]) -> Dict[str, Path]:
 
 
 def main(argv: Optional[Sequence[str]] = None) -> None:
-    """``python -m mitsuba_platonic.render.scenes VOLUME.npz OUT``: write OUT/{density,albedo,sigma_t}.vol."""
-    parser = argparse.ArgumentParser(prog="python -m mitsuba_platonic.render.scenes",
+    """``python -m mitsuba_platonic.render.mitsuba.scenes VOLUME.npz OUT``: write OUT/{density,albedo,sigma_t}.vol."""
+    parser = argparse.ArgumentParser(prog="python -m mitsuba_platonic.render.mitsuba.scenes",
                                      description="Write the .vol grids the scenes/*.xml files read for a "
                                                  "volume saved as .npz (array 'volume', (C, N, N, N)).")
     parser.add_argument("volume", help="an .npz written by platonic generate/reconstruct")
