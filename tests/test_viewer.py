@@ -59,7 +59,7 @@ N = 16
 WAIT_MS = 30_000                      # one wait for the page (the marcher's first frame traces its kernel)
 TOLERANCE = 1.0                       # mean |Δ| in 8-bit sRGB levels (measured: 0, the same pixels)
 TOLERANCE_MAX = 3.0                   # at the 95th percentile
-FRAME = re.compile(r"frame (\d+): ([0-9.]+) ms, (full|moving), (\d+)×\d+ px, az (-?[0-9.]+)° el (-?[0-9.]+)°")
+FRAME = re.compile(r"frame (\d+): ([0-9.]+) ms, (full|moving|progressive), (\d+)×\d+ px, az (-?[0-9.]+)° el (-?[0-9.]+)°")
 WINDOW = re.compile(r"zoom ([0-9.]+)×, centre \(([-+][0-9.]+), ([-+][0-9.]+)\)")
 #: √(silhouette area ratio) / zoom − 1: measured 1.1 % (2× by the button) and 0.8 % (1.36× by the
 #: wheel): the silhouette's whole pixels; allowed 4 %.

@@ -68,8 +68,11 @@ import viser
 
 from ..errors import UserError
 from ..views import camera_frames, from_angles, to_angles
-from .scene import (BACKGROUND, WINDOW_SNAP, ZOOM_RANGE, Exports, Frame, Scene, Window, camera_window,
-                    formations_for, render_frame, renderers_for, resolutions_for, zoom_distance)
+from ..render.window import window_or_none
+from .scene import (BACKGROUND, PASS_SPP, WINDOW_SNAP, ZOOM_RANGE, Exports, Frame, Scene, Window, camera_window,
+                    formations_for, passes_for, plan_frame, render_frame, renderers_for, resolutions_for, to_display,
+                    zoom_distance)
+from .worker import PathWorker
 from .start import DISTANCE, FOV, address, start_server, stop_server
 
 __all__ = ["ViewerApp", "SETTLE_S", "MAX_SPP", "MAX_SEED", "MAX_COORDINATE", "log_ignored", "checked_seed",
@@ -218,6 +221,7 @@ class ViewerApp:
         self.server = server
         self.host, self.port = host, self.server.get_port()
         self.clients = {}
+        self.worker = PathWorker()                          # the path tracer's passes, in a process of their own
         self.warming = threading.Thread(target=self._warm_up, name="warm-up", daemon=True)
         self.warming.start()
         # viser calls the connect handler for the pages connected already too (those that opened the
@@ -277,6 +281,7 @@ class ViewerApp:
     def stop(self) -> None:
         for view in list(self.clients.values()):
             view.stop()
+        self.worker.stop()
         stop_server(self.server)
 
 
@@ -295,6 +300,7 @@ class ClientView:
         self.count = 0
         self.frame: Optional[Frame] = None
         self.times = {}                                    # renderer → last full frame's seconds
+        self.trace: Optional[_Trace] = None                # the path trace in progress
         self.limits = (0.01, 1e4)                          # the browser's dolly limits as set (viser's defaults)
         self.connected = time.monotonic()
         self.placed = False                                # has the page reported the initial camera yet?
@@ -529,36 +535,115 @@ class ClientView:
             request = None
             try:
                 request = self._request()
+                if request[0][1] == "path tracer":
+                    self._trace(request)
+                    continue
+                self._drop_trace()
                 if request == self.shown:
                     continue
                 self._render(request)
             except UserError as e:
                 self.info.content = f"frame: error: {e}"
                 self.shown = request
+                self._drop_trace(keep=True)
             except Exception as e:                          # the page stays up; the error shows there
                 if self.stopped:
                     return
                 self.info.content = f"frame: error: {type(e).__name__}: {e}"
                 self.shown = request
+                self._drop_trace(keep=True)
 
-    def _render(self, request: Tuple) -> None:
+    def _render(self, request: Tuple, note: str = "") -> None:
         key, aspect, quality = request
-        view, renderer, _, res, _, _, window = key
         frame = self.app.frame_for(key)
         if self.stopped:
             return
-        # full frames lossless (PNG, what the tests compare), moving ones as JPEG (a tenth of the encoding time)
+        self._show(frame, key, aspect, quality, note)
+        self.shown = request
+
+    def _show(self, frame: Frame, key: Tuple, aspect: float, quality: str, note: str = "") -> None:
+        """Draw ``frame`` (rendered for ``key``) and write its frame and settings lines."""
+        view, renderer, _, res, _, _, window = key
+        # full frames lossless (PNG, what the tests compare), the others as JPEG (a tenth of the encoding time)
         self.client.scene.set_background_image(_pad_to_aspect(frame.image, aspect),
                                                format="png" if quality == "full" else "jpeg", jpeg_quality=90)
         self.count += 1
-        self.frame, self.shown = frame, request
+        self.frame = frame
         if quality == "full":
             self.times[renderer] = frame.seconds
         az, el = (float(a) for a in to_angles(torch.tensor(view)))
         zoom, (cx, cy) = (1.0, (0.0, 0.0)) if window is None else (window.zoom, window.centre)
+        res = frame.resolution
         self.info.content = (f"frame {self.count}: {1000 * frame.seconds:.1f} ms, {quality}, {res}×{res} px, "
-                             f"az {az:.1f}° el {el:.1f}°, zoom {zoom:.3f}×, centre ({cx:+.3f}, {cy:+.3f})")
-        self.settings.content = frame.settings
+                             f"az {az:.1f}° el {el:.1f}°, zoom {zoom:.3f}×, centre ({cx:+.3f}, {cy:+.3f}){note}")
+        self.settings.content = frame.settings + (" (the path tracer's preview while its passes render)"
+                                                  if note.startswith(", path tracer's preview") else "")
+
+    # -- the path tracer: passes in the worker, each shown ------------------------------------------
+
+    def _drop_trace(self, keep: bool = False) -> None:
+        """Stop this page's path trace: its queued pass is dropped, the one in flight ignored when it
+        comes back (``keep``: the trace stays, marked done, so that the same request is not traced again)."""
+        trace = self.trace
+        if trace is None:
+            return
+        self.app.worker.cancel(self)
+        if keep:
+            trace.failed = True
+        else:
+            self.trace = None
+
+    def _trace(self, request: Tuple) -> None:
+        """One step of this page's path trace for ``request``: while the camera moves, the closed form's
+        preview; for a new request (a camera, a setting, a volume), the preview at once and pass 0 queued;
+        for a pass come back, the running mean of the passes so far drawn and the next pass queued."""
+        key, aspect, quality = request
+        view, _, _, res, spp, version, window = key
+        n = self.app.scene.volume.shape[-1]
+        preview = ((view, "closed form", "EA", res if quality == "moving" else max(n, res // 4), spp, version,
+                    window), aspect, "moving")
+        if quality == "moving":
+            self._drop_trace()
+            if preview != self.shown:
+                self._render(preview, ", path tracer's preview (closed form)")
+            return
+        trace = self.trace
+        if trace is None or trace.key != key:
+            self._drop_trace()
+            trace = self.trace = _Trace(key, aspect, passes_for(spp))
+            if self.shown is None or self.shown[0][0] != view or self.shown[0][6] != window or \
+                    self.shown[0][5] != version:
+                self._render(preview, ", path tracer's preview (closed form)")   # a new camera: a frame now
+        if trace.failed or trace.done == trace.passes:
+            return
+        if trace.future is None:
+            with self.app.scene_lock:
+                volume, version_now = self.app.scene.volume, self.app.version
+            if version_now != version:
+                return                                      # the next request has the new volume
+            trace.future = self.app.worker.submit(self, volume, version, view, res, trace.done, window)
+            trace.future.add_done_callback(lambda _: self.wake.set())
+            return
+        if not trace.future.done():
+            return
+        future, trace.future = trace.future, None
+        if future.cancelled():
+            return
+        image, seconds = future.result()                    # a WorkerError: the loop shows it
+        pass_image = torch.from_numpy(image)
+        trace.total = pass_image if trace.total is None else trace.total + pass_image
+        trace.done += 1
+        trace.seconds += seconds
+        plan = plan_frame(self.app.scene.volume, "path tracer", "EA", res, spp, window)
+        frame = Frame(to_display(trace.total / trace.done), trace.seconds, plan.line, view, "path tracer", "EA",
+                      plan.resolution, window_or_none(window))
+        last = trace.done == trace.passes
+        self._show(frame, key, aspect, "full" if last else "progressive",
+                   f", pass {trace.done} of {trace.passes} ({trace.done * PASS_SPP} spp of {spp})")
+        if last:
+            self.shown = request
+        else:
+            self.wake.set()                                 # queue the next pass now
 
     # -- exports ----------------------------------------------------------------------------------
 
@@ -585,4 +670,16 @@ class ClientView:
 
     def stop(self) -> None:
         self.stopped = True
+        self._drop_trace()
         self.wake.set()
+
+
+class _Trace:
+    """A page's path trace in progress: its request's ``key`` and canvas ``aspect``, ``passes`` in all,
+    ``done`` so far (their sum ``total`` and ``seconds``), the ``future`` of the pass in flight."""
+
+    def __init__(self, key: Tuple, aspect: float, passes: int):
+        self.key, self.aspect, self.passes = key, aspect, passes
+        self.done, self.total, self.seconds = 0, None, 0.0
+        self.future = None
+        self.failed = False
