@@ -31,6 +31,16 @@ served when :class:`ViewerApp` takes the server (viser calls its connect handler
 connected already). As the app starts, a thread renders the frame a page asks for first
 (:func:`initial_key`) while the browser loads the page.
 
+The path tracer's frames are not rendered there: a page that shows it asks
+:class:`~.worker.PathWorker` (a process of its own, at a lower priority) for one pass of
+:data:`~.scene.PASS_SPP` spp at a time and draws the running mean of the passes come back
+("progressive", the frame line naming "pass k of P"; the last one "full", bit for bit
+:func:`~.scene.render_frame`'s frame). A new request (a camera move, a setting, another volume)
+supersedes the trace: its queued pass is dropped, the pass in flight ignored when it comes back,
+and the closed form's frame at the volume's resolution is drawn at once as the preview ("moving")
+while the first pass at the new camera renders; a closed tab drops its pass likewise. So one
+page's path trace never holds another page's frames (they render in this process meanwhile).
+
 While the camera keeps moving (a message within :data:`SETTLE_S`), the thread renders a
 low-resolution frame (a quarter of the resolution, at least the volume's; the same resolution
 with "low resolution while moving" off), sent as JPEG; once it rests, the full one, as PNG.
@@ -70,7 +80,7 @@ from ..errors import UserError
 from ..views import camera_frames, from_angles, to_angles
 from ..render.window import window_or_none
 from .scene import (BACKGROUND, PASS_SPP, WINDOW_SNAP, ZOOM_RANGE, Exports, Frame, Scene, Window, camera_window,
-                    formations_for, passes_for, plan_frame, render_frame, renderers_for, resolutions_for, to_display,
+                    formations_for, formations_of, passes_for, plan_frame, render_frame, renderers_for, resolutions_for, to_display,
                     zoom_distance)
 from .worker import PathWorker
 from .start import DISTANCE, FOV, address, start_server, stop_server
@@ -331,8 +341,9 @@ class ClientView:
             self.spp = gui.add_slider("path tracer spp", min=1, max=64, step=1, initial_value=INITIAL_SPP)
             self.low = gui.add_checkbox("low resolution while moving", initial_value=True,
                                         hint="a quarter of the resolution (at least the volume's) while the camera moves")
-            for handle in (self.renderer, self.formation, self.resolution, self.spp, self.low):
+            for handle in (self.formation, self.resolution, self.spp, self.low):
                 handle.on_update(lambda _: self.wake.set())
+            self.renderer.on_update(lambda _: self._offer_formations())
         with gui.add_folder("Camera"):
             for label, daz, delv in (("azimuth -30", -30.0, 0.0), ("azimuth +30", 30.0, 0.0),
                                      ("elevation -15", 0.0, -15.0), ("elevation +15", 0.0, 15.0)):
@@ -350,6 +361,16 @@ class ClientView:
             gui.add_button("save view (PNG)").on_click(lambda _: self._export_png())
             gui.add_button("save volume (.npz .vol .ply)").on_click(lambda _: self._export_volume())
             self.exported = gui.add_markdown(f"into `{self.app.exports.folder}`")
+
+    def _offer_formations(self) -> None:
+        """Offer the formations the chosen renderer renders (:func:`~.scene.formations_of`): the lit ones
+        EA only (they offered VH and AO and drew EA), the others the volume's."""
+        offered = formations_of(self.renderer.value, self.app.scene.volume.shape[0])
+        if tuple(self.formation.options) != tuple(offered):
+            keep = self.formation.value if self.formation.value in offered else offered[-1]
+            self.formation.options = offered
+            self.formation.value = keep
+        self.wake.set()
 
     def source_gui(self, gui) -> None:
         scene = self.app.scene
@@ -600,7 +621,7 @@ class ClientView:
         key, aspect, quality = request
         view, _, _, res, spp, version, window = key
         n = self.app.scene.volume.shape[-1]
-        preview = ((view, "closed form", "EA", res if quality == "moving" else max(n, res // 4), spp, version,
+        preview = ((view, "closed form", "EA", n, spp, version,
                     window), aspect, "moving")
         if quality == "moving":
             self._drop_trace()

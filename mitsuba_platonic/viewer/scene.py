@@ -43,7 +43,7 @@ from ..volume import CHANNELS
 from .start import check_source, volume_title
 
 __all__ = ["RENDERERS", "FORMATIONS", "BACKGROUND", "Frame", "Scene", "Exports", "open_source", "render_frame",
-           "formations_for", "renderers_for", "resolutions_for", "to_display", "clean_name", "camera_window",
+           "formations_for", "formations_of", "renderers_for", "resolutions_for", "to_display", "clean_name", "camera_window",
            "zoom_distance", "ZOOM_RANGE", "Window", "PASS_SPP", "Plan", "plan_frame", "path_pass",
            "passes_for"]
 
@@ -75,6 +75,14 @@ PathLike = Union[str, Path]
 def formations_for(channels: int) -> List[str]:
     """The formation labels a volume of ``channels`` channels can be rendered with (EA needs colour)."""
     return ["VH", "AO", "EA"] if channels == 4 else ["VH", "AO"]
+
+
+def formations_of(renderer: str, channels: int) -> List[str]:
+    """The formation labels ``renderer`` renders a volume of ``channels`` channels with: the lit
+    renderers (single scattering, the path tracer) form EA only; the others :func:`formations_for`."""
+    if renderer not in RENDERERS:
+        raise UserError(f"renderer: expected one of {list(RENDERERS)}, got {renderer!r}")
+    return ["EA"] if RENDERERS[renderer] in _LIT else formations_for(channels)
 
 
 def renderers_for(channels: int) -> List[str]:
