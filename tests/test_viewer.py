@@ -225,6 +225,38 @@ def test_a_windowed_frame_is_the_renderers_frame_through_the_window():
         "mitsuba", "ea"), 2, window)[0]))
 
 
+def test_the_path_workers_passes_average_to_the_path_tracers_frame():
+    """The worker process's passes (1 spp each, samples of seed 0, 1, 2 under the sky of seed 0),
+    summed in order and divided by their count, are render_frame's path-traced frame of 3 spp bit for
+    bit; the passes differ from each other (other samples); a page's new pass supersedes its queued
+    one, and cancel drops it (their futures cancelled, never run)."""
+    from mitsuba_platonic.viewer.scene import PASS_SPP, passes_for
+    from mitsuba_platonic.viewer.worker import PathWorker
+
+    v = test_volume(N, "figure", "ea")[0]
+    frame = render_frame(v, (0.0, 0.0, 1.0), "path tracer", "EA", N, spp=3)
+    assert PASS_SPP == 1 and passes_for(3) == 3 and "spp 3 in passes of 1" in frame.settings
+    worker = PathWorker()
+    try:
+        passes = [torch.from_numpy(worker.submit("page", v, 0, (0.0, 0.0, 1.0), N, i, None).result(timeout=600)[0])
+                  for i in range(3)]
+        total = passes[0] + passes[1] + passes[2]
+        np.testing.assert_array_equal(to_display(total / 3), frame.image)
+        assert not torch.equal(passes[0], passes[1])
+        worker._cond.acquire()                          # hold the dispatcher: the slots stay queued
+        try:
+            first = worker.submit("a", v, 0, (0.0, 0.0, 1.0), N, 0, None)
+            second = worker.submit("a", v, 0, (0.0, 0.0, 1.0), N, 1, None)
+            third = worker.submit("b", v, 0, (0.0, 0.0, 1.0), N, 0, None)
+            worker.cancel("b")
+        finally:
+            worker._cond.release()
+        assert first.cancelled() and third.cancelled()
+        assert second.result(timeout=600)[0].shape == (4, N, N)
+    finally:
+        worker.stop()
+
+
 def test_frames_follow_the_formation_and_the_volume_channels():
     v = test_volume(N, "figure", "ea")[0]
     assert resolutions_for(N) == [16, 32, 64, 128]
