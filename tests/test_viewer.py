@@ -59,7 +59,7 @@ N = 16
 WAIT_MS = 30_000                      # one wait for the page (the marcher's first frame traces its kernel)
 TOLERANCE = 1.0                       # mean |Δ| in 8-bit sRGB levels (measured: 0, the same pixels)
 TOLERANCE_MAX = 3.0                   # at the 95th percentile
-FRAME = re.compile(r"frame (\d+): ([0-9.]+) ms, (full|moving), (\d+)×\d+ px, az (-?[0-9.]+)° el (-?[0-9.]+)°")
+FRAME = re.compile(r"frame (\d+): ([0-9.]+) ms, (full|moving|progressive), (\d+)×\d+ px, az (-?[0-9.]+)° el (-?[0-9.]+)°")
 WINDOW = re.compile(r"zoom ([0-9.]+)×, centre \(([-+][0-9.]+), ([-+][0-9.]+)\)")
 #: √(silhouette area ratio) / zoom − 1: measured 1.1 % (2× by the button) and 0.8 % (1.36× by the
 #: wheel): the silhouette's whole pixels; allowed 4 %.
@@ -223,6 +223,38 @@ def test_a_windowed_frame_is_the_renderers_frame_through_the_window():
     fine = render_frame(v, tuple(w.tolist()), "marcher", "EA", 2 * N, window=window)
     np.testing.assert_array_equal(fine.image, to_display(march_pixels(v[None], w[None], RenderSettings.for_call(
         "mitsuba", "ea"), 2, window)[0]))
+
+
+def test_the_path_workers_passes_average_to_the_path_tracers_frame():
+    """The worker process's passes (1 spp each, samples of seed 0, 1, 2 under the sky of seed 0),
+    summed in order and divided by their count, are render_frame's path-traced frame of 3 spp bit for
+    bit; the passes differ from each other (other samples); a page's new pass supersedes its queued
+    one, and cancel drops it (their futures cancelled, never run)."""
+    from mitsuba_platonic.viewer.scene import PASS_SPP, passes_for
+    from mitsuba_platonic.viewer.worker import PathWorker
+
+    v = test_volume(N, "figure", "ea")[0]
+    frame = render_frame(v, (0.0, 0.0, 1.0), "path tracer", "EA", N, spp=3)
+    assert PASS_SPP == 1 and passes_for(3) == 3 and "spp 3 in passes of 1" in frame.settings
+    worker = PathWorker()
+    try:
+        passes = [torch.from_numpy(worker.submit("page", v, 0, (0.0, 0.0, 1.0), N, i, None).result(timeout=600)[0])
+                  for i in range(3)]
+        total = passes[0] + passes[1] + passes[2]
+        np.testing.assert_array_equal(to_display(total / 3), frame.image)
+        assert not torch.equal(passes[0], passes[1])
+        worker._cond.acquire()                          # hold the dispatcher: the slots stay queued
+        try:
+            first = worker.submit("a", v, 0, (0.0, 0.0, 1.0), N, 0, None)
+            second = worker.submit("a", v, 0, (0.0, 0.0, 1.0), N, 1, None)
+            third = worker.submit("b", v, 0, (0.0, 0.0, 1.0), N, 0, None)
+            worker.cancel("b")
+        finally:
+            worker._cond.release()
+        assert first.cancelled() and third.cancelled()
+        assert second.result(timeout=600)[0].shape == (4, N, N)
+    finally:
+        worker.stop()
 
 
 def test_frames_follow_the_formation_and_the_volume_channels():
@@ -650,7 +682,7 @@ def test_the_path_tracers_frames_take_longer_than_the_marchers(page):
         _choose(page, 0, renderer)
         page.get_by_text(re.compile(rf"^{renderer} \(")).wait_for()
         page.get_by_role("button", name="azimuth +30").click()    # a second frame: the first traced the kernels
-        m = _frame(page, r"az 30\.0° el 0\.0°")
+        m = _frame(page, r"full, .*az 30\.0° el 0\.0°")            # the path tracer's last pass, not its preview
         times[renderer] = float(m.group(2))
         page.get_by_role("button", name="front view").click()
         _frame(page, r"az 0\.0° el 0\.0°")
@@ -699,6 +731,112 @@ def test_dragging_the_canvas_orbits_with_low_resolution_frames_while_moving(page
     expected = render_frame(volume, tuple(from_angles(az, el).tolist()), "closed form", "EA", 4 * N).image
     mean, p95 = _difference(shown, expected)                         # the angles printed to 0.1°
     assert mean <= 2 * TOLERANCE and p95 <= 4 * TOLERANCE_MAX, (mean, p95)
+
+
+def _line(page) -> str:
+    return page.get_by_text(re.compile(r"^frame \d+:")).inner_text()
+
+
+def _pass(line: str) -> tuple:
+    """(passes done, passes in all) that a path tracer's frame line names; (0, 0) for another frame."""
+    m = re.search(r"pass (\d+) of (\d+)", line)
+    return (int(m.group(1)), int(m.group(2))) if m else (0, 0)
+
+
+def _path_trace(page) -> None:
+    """Start a slow path trace on ``page``: 128² (the 16³ volume resampled to 128³), 4 passes of 1 spp,
+    and wait for its first pass."""
+    _frame(page)
+    _choose(page, 2, str(8 * N))
+    _choose(page, 0, "path tracer")
+    page.get_by_text(re.compile(r"^frame \d+: .*az 0\.0° el 0\.0°.*pass 1 of 4")).wait_for(timeout=300_000)
+
+
+def test_the_lit_renderers_offer_the_formation_they_render_only(page):
+    """Single scattering and the path tracer render EA whatever the formation says (their frames for VH
+    and AO were EA's): the page offers them EA only, and the other renderers the volume's formations."""
+    from mitsuba_platonic.viewer.scene import formations_of
+
+    assert formations_of("single scattering", 4) == formations_of("path tracer", 4) == ["EA"]
+    assert formations_of("marcher", 4) == ["VH", "AO", "EA"] and formations_of("closed form", 1) == ["VH", "AO"]
+
+    def offered() -> list:
+        page.get_by_role("combobox").nth(1).click()
+        options = page.get_by_role("option")
+        options.first.wait_for()
+        names = [options.nth(i).inner_text() for i in range(options.count())]
+        page.keyboard.press("Escape")
+        return names
+
+    _frame(page)
+    assert offered() == ["VH", "AO", "EA"]
+    _choose(page, 0, "single scattering")
+    page.get_by_text(re.compile(r"^single scattering \(")).wait_for()
+    assert offered() == ["EA"]
+    _choose(page, 0, "closed form")
+    page.get_by_text(re.compile(r"^closed form \(")).wait_for()
+    assert offered() == ["VH", "AO", "EA"]
+
+
+def test_another_tabs_marcher_frame_comes_while_a_path_trace_runs(browser, server):
+    """With a path trace running in one tab, another tab's marcher frame arrives before the trace has
+    moved on by more than the pass in flight: the path tracer's passes run in a worker process of their
+    own, not under the server's render lock (before: the other tab's 8 ms frame waited for the whole
+    path-traced frame, 6.25 s). The time it took is printed; the ordering is asserted (a wall-clock bound
+    is no test on a shared 2-core machine)."""
+    other = browser.new_page(viewport={"width": 1400, "height": 600})
+    other.set_default_timeout(WAIT_MS)
+    tracing = browser.new_page(viewport={"width": 1400, "height": 600})
+    tracing.set_default_timeout(WAIT_MS)
+    try:
+        other.goto(server.url)
+        _frame(other)
+        _choose(other, 0, "marcher")
+        _frame(other, r"full, .*az 0\.0°")
+        other.get_by_text(re.compile(r"^marcher \(")).wait_for()
+        tracing.goto(server.url)
+        _path_trace(tracing)
+        before = _pass(_line(tracing))
+        start = time.monotonic()
+        other.get_by_role("button", name="azimuth +30").click()
+        _frame(other, r"full, .*az 30\.0° el 0\.0°")
+        took = time.monotonic() - start
+        after = _pass(_line(tracing))
+        print(f"the other tab's marcher frame: {took:.2f} s after the click; the path trace at pass {before} "
+              f"then, {after} when it came")
+        assert before[1] == 4 and after[1] == 4 and after[0] - before[0] <= 1 and after[0] < 4, (before, after)
+        tracing.get_by_text(re.compile(r"^frame \d+: .*full, .*pass 4 of 4")).wait_for(timeout=300_000)
+    finally:
+        other.close()
+        tracing.close()
+
+
+def test_a_camera_move_during_a_path_trace_shows_a_new_frame_before_the_next_pass(page):
+    """A camera move during a path trace draws a frame at the new camera at once (the closed form's
+    preview), before any further pass of the old camera, then the trace starts over there: its passes
+    1 … 4 at the new camera, the last one "full". The time to the new frame is printed."""
+    _path_trace(page)
+    before = _pass(_line(page))
+    start = time.monotonic()
+    page.get_by_role("button", name="azimuth +30").click()
+    seen = []
+    deadline = time.monotonic() + WAIT_MS / 1000
+    while time.monotonic() < deadline:
+        line = _line(page)
+        if not seen or seen[-1] != line:
+            seen.append(line)
+        if "az 30.0°" in line:
+            break
+        time.sleep(0.02)
+    took = time.monotonic() - start
+    first_new = seen[-1]
+    print(f"a camera move during a path trace: a new frame {took:.2f} s after the click ({first_new!r}); "
+          f"the trace was at pass {before}")
+    assert "az 30.0°" in first_new and "path tracer's preview" in first_new, seen
+    assert all(_pass(line)[0] <= before[0] + 1 for line in seen[:-1]), seen    # at most the pass in flight
+    page.get_by_text(re.compile(r"^frame \d+: .*az 30\.0° el 0\.0°.*pass 1 of 4")).wait_for(timeout=300_000)
+    page.get_by_text(re.compile(r"^frame \d+: .*full, .*az 30\.0° el 0\.0°.*pass 4 of 4")).wait_for(timeout=300_000)
+    assert int(_frame(page, r"full, .*az 30\.0° el 0\.0°.*pass 4 of 4").group(4)) == 8 * N
 
 
 def test_a_reconstruction_run_steps_through_its_held_out_inputs(browser, runs, tmp_path, monkeypatch):

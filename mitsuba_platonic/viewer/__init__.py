@@ -7,6 +7,9 @@
   folder, a photo run with a photo) opened as volumes, a frame of the current volume rendered by
   one of the project's renderers at a camera direction, and the exports a page may ask for,
   kept inside the output folder. Imports torch and the package, never the web library.
+- :mod:`.worker`: the path tracer's passes in a child process of lower priority, a page's newest
+  pass only (superseded, cancelled), round-robin between pages. Imports neither torch nor viser
+  at the top (the child imports the scene).
 - :mod:`.app`: the page, on `viser <https://viser.studio>`_ (the library nerfstudio's viewer runs
   on): each browser's camera → a view ω (from the object towards the camera) → a frame rendered on
   the server and set as the page's background image (a low-resolution frame while the camera

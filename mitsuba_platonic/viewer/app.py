@@ -31,6 +31,16 @@ served when :class:`ViewerApp` takes the server (viser calls its connect handler
 connected already). As the app starts, a thread renders the frame a page asks for first
 (:func:`initial_key`) while the browser loads the page.
 
+The path tracer's frames are not rendered there: a page that shows it asks
+:class:`~.worker.PathWorker` (a process of its own, at a lower priority) for one pass of
+:data:`~.scene.PASS_SPP` spp at a time and draws the running mean of the passes come back
+("progressive", the frame line naming "pass k of P"; the last one "full", bit for bit
+:func:`~.scene.render_frame`'s frame). A new request (a camera move, a setting, another volume)
+supersedes the trace: its queued pass is dropped, the pass in flight ignored when it comes back,
+and the closed form's frame at the volume's resolution is drawn at once as the preview ("moving")
+while the first pass at the new camera renders; a closed tab drops its pass likewise. So one
+page's path trace never holds another page's frames (they render in this process meanwhile).
+
 While the camera keeps moving (a message within :data:`SETTLE_S`), the thread renders a
 low-resolution frame (a quarter of the resolution, at least the volume's; the same resolution
 with "low resolution while moving" off), sent as JPEG; once it rests, the full one, as PNG.
@@ -68,8 +78,11 @@ import viser
 
 from ..errors import UserError
 from ..views import camera_frames, from_angles, to_angles
-from .scene import (BACKGROUND, WINDOW_SNAP, ZOOM_RANGE, Exports, Frame, Scene, Window, camera_window,
-                    formations_for, render_frame, renderers_for, resolutions_for, zoom_distance)
+from ..render.window import window_or_none
+from .scene import (BACKGROUND, PASS_SPP, WINDOW_SNAP, ZOOM_RANGE, Exports, Frame, Scene, Window, camera_window,
+                    formations_for, formations_of, passes_for, plan_frame, render_frame, renderers_for, resolutions_for, to_display,
+                    zoom_distance)
+from .worker import PathWorker
 from .start import DISTANCE, FOV, address, start_server, stop_server
 
 __all__ = ["ViewerApp", "SETTLE_S", "MAX_SPP", "MAX_SEED", "MAX_COORDINATE", "log_ignored", "checked_seed",
@@ -218,6 +231,7 @@ class ViewerApp:
         self.server = server
         self.host, self.port = host, self.server.get_port()
         self.clients = {}
+        self.worker = PathWorker()                          # the path tracer's passes, in a process of their own
         self.warming = threading.Thread(target=self._warm_up, name="warm-up", daemon=True)
         self.warming.start()
         # viser calls the connect handler for the pages connected already too (those that opened the
@@ -277,6 +291,7 @@ class ViewerApp:
     def stop(self) -> None:
         for view in list(self.clients.values()):
             view.stop()
+        self.worker.stop()
         stop_server(self.server)
 
 
@@ -295,6 +310,7 @@ class ClientView:
         self.count = 0
         self.frame: Optional[Frame] = None
         self.times = {}                                    # renderer → last full frame's seconds
+        self.trace: Optional[_Trace] = None                # the path trace in progress
         self.limits = (0.01, 1e4)                          # the browser's dolly limits as set (viser's defaults)
         self.connected = time.monotonic()
         self.placed = False                                # has the page reported the initial camera yet?
@@ -325,8 +341,9 @@ class ClientView:
             self.spp = gui.add_slider("path tracer spp", min=1, max=64, step=1, initial_value=INITIAL_SPP)
             self.low = gui.add_checkbox("low resolution while moving", initial_value=True,
                                         hint="a quarter of the resolution (at least the volume's) while the camera moves")
-            for handle in (self.renderer, self.formation, self.resolution, self.spp, self.low):
+            for handle in (self.formation, self.resolution, self.spp, self.low):
                 handle.on_update(lambda _: self.wake.set())
+            self.renderer.on_update(lambda _: self._offer_formations())
         with gui.add_folder("Camera"):
             for label, daz, delv in (("azimuth -30", -30.0, 0.0), ("azimuth +30", 30.0, 0.0),
                                      ("elevation -15", 0.0, -15.0), ("elevation +15", 0.0, 15.0)):
@@ -344,6 +361,16 @@ class ClientView:
             gui.add_button("save view (PNG)").on_click(lambda _: self._export_png())
             gui.add_button("save volume (.npz .vol .ply)").on_click(lambda _: self._export_volume())
             self.exported = gui.add_markdown(f"into `{self.app.exports.folder}`")
+
+    def _offer_formations(self) -> None:
+        """Offer the formations the chosen renderer renders (:func:`~.scene.formations_of`): the lit ones
+        EA only (they offered VH and AO and drew EA), the others the volume's."""
+        offered = formations_of(self.renderer.value, self.app.scene.volume.shape[0])
+        if tuple(self.formation.options) != tuple(offered):
+            keep = self.formation.value if self.formation.value in offered else offered[-1]
+            self.formation.options = offered
+            self.formation.value = keep
+        self.wake.set()
 
     def source_gui(self, gui) -> None:
         scene = self.app.scene
@@ -529,36 +556,115 @@ class ClientView:
             request = None
             try:
                 request = self._request()
+                if request[0][1] == "path tracer":
+                    self._trace(request)
+                    continue
+                self._drop_trace()
                 if request == self.shown:
                     continue
                 self._render(request)
             except UserError as e:
                 self.info.content = f"frame: error: {e}"
                 self.shown = request
+                self._drop_trace(keep=True)
             except Exception as e:                          # the page stays up; the error shows there
                 if self.stopped:
                     return
                 self.info.content = f"frame: error: {type(e).__name__}: {e}"
                 self.shown = request
+                self._drop_trace(keep=True)
 
-    def _render(self, request: Tuple) -> None:
+    def _render(self, request: Tuple, note: str = "") -> None:
         key, aspect, quality = request
-        view, renderer, _, res, _, _, window = key
         frame = self.app.frame_for(key)
         if self.stopped:
             return
-        # full frames lossless (PNG, what the tests compare), moving ones as JPEG (a tenth of the encoding time)
+        self._show(frame, key, aspect, quality, note)
+        self.shown = request
+
+    def _show(self, frame: Frame, key: Tuple, aspect: float, quality: str, note: str = "") -> None:
+        """Draw ``frame`` (rendered for ``key``) and write its frame and settings lines."""
+        view, renderer, _, res, _, _, window = key
+        # full frames lossless (PNG, what the tests compare), the others as JPEG (a tenth of the encoding time)
         self.client.scene.set_background_image(pad_to_aspect(frame.image, aspect),
                                                format="png" if quality == "full" else "jpeg", jpeg_quality=90)
         self.count += 1
-        self.frame, self.shown = frame, request
+        self.frame = frame
         if quality == "full":
             self.times[renderer] = frame.seconds
         az, el = (float(a) for a in to_angles(torch.tensor(view)))
         zoom, (cx, cy) = (1.0, (0.0, 0.0)) if window is None else (window.zoom, window.centre)
+        res = frame.resolution
         self.info.content = (f"frame {self.count}: {1000 * frame.seconds:.1f} ms, {quality}, {res}×{res} px, "
-                             f"az {az:.1f}° el {el:.1f}°, zoom {zoom:.3f}×, centre ({cx:+.3f}, {cy:+.3f})")
-        self.settings.content = frame.settings
+                             f"az {az:.1f}° el {el:.1f}°, zoom {zoom:.3f}×, centre ({cx:+.3f}, {cy:+.3f}){note}")
+        self.settings.content = frame.settings + (" (the path tracer's preview while its passes render)"
+                                                  if note.startswith(", path tracer's preview") else "")
+
+    # -- the path tracer: passes in the worker, each shown ------------------------------------------
+
+    def _drop_trace(self, keep: bool = False) -> None:
+        """Stop this page's path trace: its queued pass is dropped, the one in flight ignored when it
+        comes back (``keep``: the trace stays, marked done, so that the same request is not traced again)."""
+        trace = self.trace
+        if trace is None:
+            return
+        self.app.worker.cancel(self)
+        if keep:
+            trace.failed = True
+        else:
+            self.trace = None
+
+    def _trace(self, request: Tuple) -> None:
+        """One step of this page's path trace for ``request``: while the camera moves, the closed form's
+        preview; for a new request (a camera, a setting, a volume), the preview at once and pass 0 queued;
+        for a pass come back, the running mean of the passes so far drawn and the next pass queued."""
+        key, aspect, quality = request
+        view, _, _, res, spp, version, window = key
+        n = self.app.scene.volume.shape[-1]
+        preview = ((view, "closed form", "EA", n, spp, version,
+                    window), aspect, "moving")
+        if quality == "moving":
+            self._drop_trace()
+            if preview != self.shown:
+                self._render(preview, ", path tracer's preview (closed form)")
+            return
+        trace = self.trace
+        if trace is None or trace.key != key:
+            self._drop_trace()
+            trace = self.trace = _Trace(key, aspect, passes_for(spp))
+            if self.shown is None or self.shown[0][0] != view or self.shown[0][6] != window or \
+                    self.shown[0][5] != version:
+                self._render(preview, ", path tracer's preview (closed form)")   # a new camera: a frame now
+        if trace.failed or trace.done == trace.passes:
+            return
+        if trace.future is None:
+            with self.app.scene_lock:
+                volume, version_now = self.app.scene.volume, self.app.version
+            if version_now != version:
+                return                                      # the next request has the new volume
+            trace.future = self.app.worker.submit(self, volume, version, view, res, trace.done, window)
+            trace.future.add_done_callback(lambda _: self.wake.set())
+            return
+        if not trace.future.done():
+            return
+        future, trace.future = trace.future, None
+        if future.cancelled():
+            return
+        image, seconds = future.result()                    # a WorkerError: the loop shows it
+        pass_image = torch.from_numpy(image)
+        trace.total = pass_image if trace.total is None else trace.total + pass_image
+        trace.done += 1
+        trace.seconds += seconds
+        plan = plan_frame(self.app.scene.volume, "path tracer", "EA", res, spp, window)
+        frame = Frame(to_display(trace.total / trace.done), trace.seconds, plan.line, view, "path tracer", "EA",
+                      plan.resolution, window_or_none(window))
+        last = trace.done == trace.passes
+        self._show(frame, key, aspect, "full" if last else "progressive",
+                   f", pass {trace.done} of {trace.passes} ({trace.done * PASS_SPP} spp of {spp})")
+        if last:
+            self.shown = request
+        else:
+            self.wake.set()                                 # queue the next pass now
 
     # -- exports ----------------------------------------------------------------------------------
 
@@ -585,4 +691,16 @@ class ClientView:
 
     def stop(self) -> None:
         self.stopped = True
+        self._drop_trace()
         self.wake.set()
+
+
+class _Trace:
+    """A page's path trace in progress: its request's ``key`` and canvas ``aspect``, ``passes`` in all,
+    ``done`` so far (their sum ``total`` and ``seconds``), the ``future`` of the pass in flight."""
+
+    def __init__(self, key: Tuple, aspect: float, passes: int):
+        self.key, self.aspect, self.passes = key, aspect, passes
+        self.done, self.total, self.seconds = 0, None, 0.0
+        self.future = None
+        self.failed = False

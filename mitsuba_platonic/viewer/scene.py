@@ -43,8 +43,9 @@ from ..volume import CHANNELS
 from .start import check_source, volume_title
 
 __all__ = ["RENDERERS", "FORMATIONS", "BACKGROUND", "Frame", "Scene", "Exports", "open_source", "render_frame",
-           "formations_for", "renderers_for", "resolutions_for", "to_display", "clean_name", "camera_window",
-           "zoom_distance", "ZOOM_RANGE", "Window"]
+           "formations_for", "formations_of", "renderers_for", "resolutions_for", "to_display", "clean_name", "camera_window",
+           "zoom_distance", "ZOOM_RANGE", "Window", "PASS_SPP", "Plan", "plan_frame", "path_pass",
+           "passes_for"]
 
 #: The renderers the page offers: label → backend (mitsuba_platonic.render.BACKENDS).
 RENDERERS: Dict[str, str] = {"closed form": "closed_form", "marcher": "mitsuba",
@@ -74,6 +75,14 @@ PathLike = Union[str, Path]
 def formations_for(channels: int) -> List[str]:
     """The formation labels a volume of ``channels`` channels can be rendered with (EA needs colour)."""
     return ["VH", "AO", "EA"] if channels == 4 else ["VH", "AO"]
+
+
+def formations_of(renderer: str, channels: int) -> List[str]:
+    """The formation labels ``renderer`` renders a volume of ``channels`` channels with: the lit
+    renderers (single scattering, the path tracer) form EA only; the others :func:`formations_for`."""
+    if renderer not in RENDERERS:
+        raise UserError(f"renderer: expected one of {list(RENDERERS)}, got {renderer!r}")
+    return ["EA"] if RENDERERS[renderer] in _LIT else formations_for(channels)
 
 
 def renderers_for(channels: int) -> List[str]:
@@ -187,29 +196,32 @@ def zoom_distance(zoom: float, fov: float, aspect: float = 1.0) -> float:
     return 1.0 / (float(zoom) * _lens_scale(fov, aspect))
 
 
-def render_frame(volume: torch.Tensor, view: Tuple[float, float, float], renderer: str = "closed form",
-                 formation: str = "EA", resolution: Optional[int] = None, spp: int = 4,
-                 window: Optional[Window] = None) -> Frame:
-    """Render the ``(C, N, N, N)`` ``volume`` (checked when it was opened) from the unit ``view`` ω.
+#: The path tracer's samples per pixel in one pass: its frames are the average of passes of this many
+#: spp under one sky (:func:`path_pass`), each shown as it arrives (the viewer's progressive frames).
+PASS_SPP = 1
 
-    ``renderer``: a label of :data:`RENDERERS`; ``formation``: one of :data:`FORMATIONS` (a lit
-    renderer always forms EA); ``resolution``: the image's R = kN, k a positive int (default N);
-    ``spp``: the path tracer's samples per pixel; ``window``: the orthographic camera's zoom and pan
-    (:class:`~mitsuba_platonic.render.window.Window`, every renderer; None: the whole cube's
-    cross-section, the frame as without a window, bit for bit). The random sky of the lit
-    renderers is the one of seed 0 (the same in every frame).
 
-    At k > 1 the marcher keeps its k² regular sub-pixel rays per pixel apart
-    (:func:`~mitsuba_platonic.render.drjit.marcher.march_pixels`: the same kernel, k² times the rays); the
-    other renderers render the volume resampled trilinearly to (kN)³ (their images are the volume's
-    resolution), which costs them about k³ times the work.
-    """
+@dataclass(frozen=True)
+class Plan:
+    """What :func:`render_frame` renders: the ``backend`` and ``model``, the image's ``resolution``
+    R and its ``k`` = R/N, the renderer's :class:`RenderSettings` and the settings line."""
+
+    backend: str
+    model: str
+    resolution: int
+    k: int
+    settings: RenderSettings
+    line: str
+
+
+def plan_frame(volume: torch.Tensor, renderer: str, formation: str, resolution: Optional[int], spp: int,
+               window: Optional[Window]) -> Plan:
+    """Check a frame's request (:func:`render_frame`'s arguments) and say how it is rendered."""
     if renderer not in RENDERERS:
         raise UserError(f"renderer: expected one of {list(RENDERERS)}, got {renderer!r}")
     if formation not in FORMATIONS:
         raise UserError(f"formation: expected one of {list(FORMATIONS)}, got {formation!r}")
     backend = RENDERERS[renderer]
-    window = window_or_none(window)
     c, n = volume.shape[0], volume.shape[-1]
     model = "ea" if backend in _LIT else FORMATIONS[formation]
     if CHANNELS[model] == 4 and c != 4:
@@ -231,29 +243,93 @@ def render_frame(volume: torch.Tensor, view: Tuple[float, float, float], rendere
     if backend == "physical":
         if isinstance(spp, bool) or not isinstance(spp, int) or spp < 1:
             raise UserError(f"spp: expected a positive int, got {spp!r}")
-        options["physical_spp"] = spp
-        shown.append(f"spp {spp}, max depth {RenderSettings().max_depth}, sun and sky of seed 0")
+        options["physical_spp"] = PASS_SPP
+        shown.append(f"spp {spp} in passes of {PASS_SPP}, max depth {RenderSettings().max_depth}, "
+                     f"sun and sky of seed 0")
     elif backend == "scatter_march":
         shown.append(f"{RenderSettings().steps_per_voxel} samples per voxel, sun and sky of seed 0")
+    window = window_or_none(window)
     if window is not None:
         shown.append(f"zoom {window.zoom:.3g}×, centre ({window.centre[0]:+.3f}, {window.centre[1]:+.3f})")
-    settings = RenderSettings.for_call(backend, model, **options)
+    return Plan(backend, model, r, k, RenderSettings.for_call(backend, model, **options), ", ".join(shown))
+
+
+def _unit(view: Tuple[float, float, float]) -> torch.Tensor:
     w = torch.tensor([view], dtype=torch.float64)
-    w = (w / w.norm()).to(torch.float32)
+    return (w / w.norm()).to(torch.float32)
+
+
+def _prepared(volume: torch.Tensor, plan: Plan) -> torch.Tensor:
+    """The volume as the plan's renderer takes it: ``(1, C', R', R', R')``."""
+    v = volume[None] if plan.backend == "mitsuba" else _at_resolution(volume, plan.resolution)
+    if CHANNELS[plan.model] == 1 and volume.shape[0] == 4:
+        v = v[:, 3:]
+    return v.contiguous()
+
+
+def path_pass(volume: torch.Tensor, view: Tuple[float, float, float], resolution: Optional[int] = None,
+              index: int = 0, window: Optional[Window] = None) -> torch.Tensor:
+    """Pass ``index`` of the path tracer's frame: :data:`PASS_SPP` spp under the sky of seed 0, the
+    samples of seed ``index`` (:func:`~mitsuba_platonic.render.mitsuba.physical.render_physical_ad`'s
+    ``sample_seed``), as the linear premultiplied RGBA ``(4, R, R)``. The frame of S spp is the mean
+    of passes 0 … S/PASS_SPP − 1, summed in that order (:func:`render_frame`)."""
+    from ..render.mitsuba.physical import render_physical_ad           # lazy: Mitsuba, on the path tracer's first pass
+
+    plan = plan_frame(volume, "path tracer", "EA", resolution, PASS_SPP, window)
+    s = plan.settings
+    with torch.no_grad():
+        return render_physical_ad(_prepared(volume, plan), _unit(view), lighting=s.lighting, spp=PASS_SPP,
+                                  max_depth=s.max_depth, seed=0, filter=s.filter, window=window_or_none(window),
+                                  sample_seed=int(index))[0]
+
+
+def passes_for(spp: int) -> int:
+    """How many passes the path tracer's frame of ``spp`` samples per pixel takes."""
+    return max(1, -(-int(spp) // PASS_SPP))
+
+
+def render_frame(volume: torch.Tensor, view: Tuple[float, float, float], renderer: str = "closed form",
+                 formation: str = "EA", resolution: Optional[int] = None, spp: int = 4,
+                 window: Optional[Window] = None) -> Frame:
+    """Render the ``(C, N, N, N)`` ``volume`` (checked when it was opened) from the unit ``view`` ω.
+
+    ``renderer``: a label of :data:`RENDERERS`; ``formation``: one of :data:`FORMATIONS` (a lit
+    renderer always forms EA); ``resolution``: the image's R = kN, k a positive int (default N);
+    ``spp``: the path tracer's samples per pixel; ``window``: the orthographic camera's zoom and pan
+    (:class:`~mitsuba_platonic.render.window.Window`, every renderer; None: the whole cube's
+    cross-section, the frame as without a window, bit for bit). The random sky of the lit
+    renderers is the one of seed 0 (the same in every frame).
+
+    At k > 1 the marcher keeps its k² regular sub-pixel rays per pixel apart
+    (:func:`~mitsuba_platonic.render.drjit.marcher.march_pixels`: the same kernel, k² times the rays); the
+    other renderers render the volume resampled trilinearly to (kN)³ (their images are the volume's
+    resolution), which costs them about k³ times the work. The path tracer's frame is the mean of
+    its passes (:func:`path_pass`): P passes of :data:`PASS_SPP` spp, P = ⌈spp / PASS_SPP⌉,
+
+        image = (pass₀ + pass₁ + … + pass_{P−1}) / P      (summed in that order, float32)
+
+    what the page shows once its last pass has arrived.
+    """
+    plan = plan_frame(volume, renderer, formation, resolution, spp, window)
+    window = window_or_none(window)
+    w = _unit(view)
     start = time.perf_counter()
     with torch.no_grad():
-        v = volume[None] if backend == "mitsuba" else _at_resolution(volume, r)
-        if CHANNELS[model] == 1 and c == 4:
-            v = v[:, 3:]
-        v = v.contiguous()
-        if backend == "mitsuba" and k > 1:
+        if plan.backend == "physical":
+            total = None
+            for i in range(passes_for(spp)):
+                image = path_pass(volume, view, plan.resolution, i, window)
+                total = image if total is None else total + image
+            image = total / passes_for(spp)
+        elif plan.backend == "mitsuba" and plan.k > 1:
             from ..render.drjit.marcher import march_pixels          # lazy: imports Dr.Jit, on the marcher's first frame
-            image = march_pixels(v, w, settings, k, window)[0]
+            image = march_pixels(_prepared(volume, plan), w, plan.settings, plan.k, window)[0]
         else:
-            image = render_with(v, w, settings, 0, window)[0]
+            image = render_with(_prepared(volume, plan), w, plan.settings, 0, window)[0]
         image = to_display(image)
     seconds = time.perf_counter() - start
-    return Frame(image, seconds, ", ".join(shown), tuple(float(x) for x in w[0]), renderer, formation, r, window)
+    return Frame(image, seconds, plan.line, tuple(float(x) for x in w[0]), renderer, formation, plan.resolution,
+                 window)
 
 
 # --------------------------------------------------------------------------- sources

@@ -294,7 +294,7 @@ def _window_transform(mi: Any, right: torch.Tensor, up: torch.Tensor, w: torch.T
 
 def render_physical_ad(volume: torch.Tensor, views: torch.Tensor, lighting: str = "sunsky", spp: int = 4,
                        max_depth: int = 4, seed: int = 0, filter: str = "trilinear",
-                       window: Optional[Window] = None) -> torch.Tensor:
+                       window: Optional[Window] = None, sample_seed: Optional[int] = None) -> torch.Tensor:
     """Differentiable path tracing of ``(B, 4, N, N, N)`` RGBA volumes under random skies.
 
     Each pair gets a random sun (drawn from ``seed``, see :func:`sample_lighting`), Mitsuba's
@@ -304,8 +304,12 @@ def render_physical_ad(volume: torch.Tensor, views: torch.Tensor, lighting: str 
     ``volume`` through σ_t, the albedo and the alpha. Only ``lighting='sunsky'`` is supported.
     ``window``: the orthographic camera's zoom and pan (:class:`~.window.Window`: the sensor's
     to_world, :func:`_window_transform`, and the alpha pass's rays; None: the whole cross-section).
+    ``sample_seed``: the path samples' seed (pair b: ``sample_seed + 2b``) apart from the skies'
+    ``seed`` (None: ``seed``), so that passes under one sky with other samples can be averaged
+    (the viewer's progressive frames).
     """
     window = window_or_none(window)
+    samples = seed if sample_seed is None else int(sample_seed)
     if lighting != "sunsky":
         raise ValueError(f"differentiable physical rendering supports lighting 'sunsky' only, got {lighting!r}")
     if volume.dim() != 5 or volume.shape[1] != 4:
@@ -328,6 +332,6 @@ def render_physical_ad(volume: torch.Tensor, views: torch.Tensor, lighting: str 
                     "emitter.turbidity": mi.Float(light.turbidity)}
         grids = {"volume.interior_medium.sigma_t.data": to_mitsuba_grid(σ[b].float().to(device)),
                  "volume.interior_medium.albedo.data": to_mitsuba_grid(volume[b, :3].float().to(device))}
-        rgb = differentiable_render(scene, params, grids, settings, spp, seed + 2 * b).permute(2, 0, 1)
+        rgb = differentiable_render(scene, params, grids, settings, spp, samples + 2 * b).permute(2, 0, 1)
         images.append(torch.cat([rgb.to(volume.device) * metered_exposure(light), alpha[b]]))
     return torch.stack(images)
