@@ -27,7 +27,7 @@ import torch
 from mitsuba_platonic.config import load_config
 from mitsuba_platonic.evaluate.protocol import held_out_scores, held_out_truths
 from mitsuba_platonic.evaluate import metrics as M
-from mitsuba_platonic.data.collection import load_manifest
+from mitsuba_platonic.data.render_collection import load_manifest
 from mitsuba_platonic.evaluate.protocol import NOVEL_VIEWS
 from mitsuba_platonic.networks.nets import Discriminator, init_weights
 from mitsuba_platonic.render import render
@@ -63,7 +63,7 @@ VARIANTS = {
     "d_batchnorm": [],                                                 # the paper's D (_paper_d)
     "d_kaiming_lrd1e-4_gate08": ["model.critic_init=he", "train.lr_d=1e-4", "train.d_gate=0.8"],
     "d_kaiming_lrd1e-4_dsteps5": ["model.critic_init=he", "train.lr_d=1e-4", "train.d_steps=5"],
-    "roll": [*VIEW_SPACE, "train.d_roll=uniform"],                                  # D's images turned (train/roll.py)
+    "roll": [*VIEW_SPACE, "train.d_roll=uniform"],                                  # D's images turned (train/image_roll.py)
     "d_kaiming_lrd1e-4_roll": [*VIEW_SPACE, "model.critic_init=he", "train.lr_d=1e-4", "train.d_roll=uniform"],
     "d_kaiming_lrd1e-4_views4_roll": [*VIEW_SPACE, "model.critic_init=he", "train.lr_d=1e-4", "train.random_views=4",
                                       "train.d_roll=uniform"],
@@ -90,7 +90,7 @@ VARIANTS = {
     "critic32": ["model.critic_width=32"],
     "init_he_critic32": ["model.init=he", "model.critic_width=32"],
     "init_he_critic64": ["model.init=he", "model.critic_width=64"],
-    # D's reals turned by the tilt a right volume's random view has (train.d_roll, train/roll.py)
+    # D's reals turned by the tilt a right volume's random view has (train.d_roll, train/image_roll.py)
     "roll_matched": [*VIEW_SPACE, "train.d_roll=matched"],
     "roll_uniform": [*VIEW_SPACE, "train.d_roll=uniform"],
     # where G's volume stands (train.pose): the paper's view space, or upright and tilted by an

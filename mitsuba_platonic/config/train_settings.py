@@ -50,7 +50,7 @@ LOSS_WEIGHTS = ("gp_weight", "rec_weight", "weight_3d", "pose_weight", "r1_weigh
 PRGAN = "the PrGAN-style baseline ('prgan')"
 #: The GAN losses of :func:`~mitsuba_platonic.train.losses.d_loss` / ``g_loss`` (anything but the first is WGAN-GP).
 LOSSES = ("nonsaturating", "wgan-gp")
-#: train.d_roll: 'none' (D sees the images as rendered) | 'uniform' | 'matched' (:mod:`mitsuba_platonic.train.roll`).
+#: train.d_roll: 'none' (D sees the images as rendered) | 'uniform' | 'matched' (:mod:`mitsuba_platonic.train.image_roll`).
 ROLLS = ("none", "uniform", "matched")
 #: The transforms ``train.d_augment`` may list, applied in this order (:mod:`mitsuba_platonic.train.augment`).
 AUGMENTS = ("flip", "translation", "cutout")
@@ -117,7 +117,7 @@ class TrainConfig:
     (reconstruction): the reals turned by the tilt a right volume's view would have, for an input elevation
     drawn from the collection's view distribution (procedural data; for photos the train section's);
     measured to gain nothing on the mushrooms, kept for collections with a wide spread of elevations and
-    pose 'input' (:mod:`mitsuba_platonic.train.roll`, lab/d-roll.md).
+    pose 'input' (:mod:`mitsuba_platonic.train.image_roll`, lab/d-roll.md).
     d_augment: the differentiable augmentations of every image D sees, real or rendered, in D's and G's
     updates, from 'flip', 'translation', 'cutout' (none by default; for small photo collections, "The photo
     config's choices"; :mod:`mitsuba_platonic.train.augment`).

@@ -15,7 +15,7 @@
    and the rest with it, while D's soft accuracy on this batch, ½(mean σ(l_real) + 1 − mean σ(l_fake)),
    is above ``d_gate``); with ``d_roll: uniform`` D sees each of them turned in-plane by its own
    random angle (the images of G's adversarial term too), with ``matched`` the reals turned by the
-   tilt of a right volume's view (:mod:`.roll`); with ``d_augment`` both sides augmented alike
+   tilt of a right volume's view (:mod:`.image_roll`); with ``d_augment`` both sides augmented alike
    (:mod:`.augment`); Platonic3D's D3 then on ground-truth volumes vs v;
 5. **update G and E** (:meth:`Trainer._update_generator`) on the sum of the named terms of
    :data:`.terms.G_TERMS` that the config sets, each λ · value:
@@ -112,7 +112,7 @@ from .baselines import BaselineModes, ring_views
 from .data import TrainingData
 from .losses import d_loss, gradient_penalty, hard_accuracy_counts, r1_penalty, soft_accuracy_counts
 from .renderer import make_lit_renderer, make_renderer
-from .roll import input_frame_roll, roll
+from .image_roll import input_frame_roll, roll
 from .step_state import D_AUGMENT, PHOTO_AUGMENT, RENDER, StepState, side_generator, side_seed
 from .terms import active_terms, g_terms
 
@@ -300,7 +300,7 @@ class Trainer(BaselineModes):
         return s
 
     def _roll_angles(self, g: torch.Generator, views: torch.Tensor) -> Tuple[Optional[torch.Tensor], Optional[torch.Tensor]]:
-        """``train.d_roll``: the angles D's reals and fakes are turned by (train/roll.py); None: as they are.
+        """``train.d_roll``: the angles D's reals and fakes are turned by (train/image_roll.py); None: as they are.
         'uniform': an angle per real and per fake image; 'matched': the reals turned as a right
         volume's views are, for input elevations drawn from the collection's views (photos: p_view)."""
         cfg, t = self.cfg, self.cfg.train
