@@ -22,10 +22,10 @@ A model trained with ``train.pose: elevation`` also has a pose head P (z → the
 elevation θ̂, :class:`~mitsuba_platonic.networks.nets.PoseHead`): its G builds the object upright, in
 an object frame, and :meth:`Model.reconstruct` turns that volume into the input camera's frame by
 θ̂ (:func:`~mitsuba_platonic.render.pytorch.closed_form.tilt`), so every model's reconstructions live in
-the frame of their input view (lab/pose-elevation.md).
+the frame of their input view (docs/training.md, "The measurements").
 
 A model trained with ``train.light: head`` has a light head L (z → the photo's sun direction
-and sky share, :class:`~mitsuba_platonic.networks.nets.LightHead`; lab/training-through-light.md,
+and sky share, :class:`~mitsuba_platonic.networks.nets.LightHead`; docs/training.md, "The measurements",
 "A light read from the photo").
 
 Its state dict keys are the checkpoint's (``E.*``, ``G.*``, ``P.*``, ``L.*``): a checkpoint's ``nets``

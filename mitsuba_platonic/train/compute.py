@@ -4,7 +4,7 @@ torch and Dr.Jit use while it trains.
 Data parallel: launch with ``torchrun --nproc-per-node N -m mitsuba_platonic.cli train ...``
 (CUDA + NCCL, or CPU + gloo); :func:`distributed` initialises the process group and says which
 rank this process is. Threads: :func:`training_threads` sets ``run.threads`` and
-:func:`drjit_threads` for the run and restores both afterwards (lab/threads.md).
+:func:`drjit_threads` for the run and restores both afterwards (docs/training.md, "The measurements").
 """
 
 from __future__ import annotations
@@ -43,7 +43,7 @@ def distributed() -> Tuple[int, int, int]:
     return dist.get_rank(), dist.get_world_size(), int(os.environ.get("LOCAL_RANK", "0"))
 
 
-#: 'auto' runs the marcher's launches on the training thread up to this resolution (lab/threads.md).
+#: 'auto' runs the marcher's launches on the training thread up to this resolution (docs/training.md, "The measurements").
 SERIAL_MARCHER_MAX_RESOLUTION = 32
 
 
@@ -54,7 +54,7 @@ def drjit_threads(cfg: Config) -> Optional[int]:
     when the marcher trains at N ≤ :data:`SERIAL_MARCHER_MAX_RESOLUTION` on the LLVM backend,
     because Dr.Jit's idle workers keep spinning for 20 ms after every launch and take the cores
     from torch's convolutions, while a 32³ launch only takes a few ms (measured in
-    lab/threads.md; at 64³ the workers pay for themselves); otherwise
+    docs/training.md, "The measurements"; at 64³ the workers pay for themselves); otherwise
     ``run.threads`` (all cores when 0). The closed form uses no Dr.Jit.
     """
     if cfg.render.backend == "closed_form":

@@ -45,7 +45,7 @@ v lives in the input camera's frame: I_front renders it from ω₀ and the rando
 around that frame. A camera above the object sees its up axis tilted, so a right volume is tilted
 by the input's elevation θ₀ in that frame, its views from random ω are rolled, and D, whose photos
 were all taken by upright cameras, pushes G to build the object upright in every input frame
-instead (lab/pose.md). With 'elevation' G builds the object
+instead (docs/training.md, "The measurements"). With 'elevation' G builds the object
 upright, in its own frame; a pose head P reads the input camera's elevation θ̂ = P(z) from E's
 code, and
 
@@ -53,7 +53,7 @@ code, and
     I_view  = R(ω, v),  ω ~ p_view     (around the upright object, as the photos' cameras were)
 
 The input-view term alone does not teach P the elevation (it stays uncorrelated with θ₀,
-lab/pose-elevation.md), so P also learns from G's own renders, whose elevations are known:
+docs/training.md, "The measurements"), so P also learns from G's own renders, whose elevations are known:
 
     L_pose = λ_pose · mean (P(E(I_view)) − asin ω_y)²      (I_view detached: it trains E and P)
 
@@ -70,7 +70,7 @@ elevations:
 
 ((s₀, s₁) the prior's range of shares); the input view is then rendered under L(z), held constant,
 so the input-view term compares colour and shading under the photo's light, not a random one
-(lab/training-through-light.md, "A light read from the photo").
+(docs/training.md, "The measurements").
 
 The reconstruction term compares images by default (``train.rec_target: image``, as above). With
 ``rec_target: volume`` (the 3D modes) it compares volumes instead: λ_rec ‖v − v*‖², where v* is
