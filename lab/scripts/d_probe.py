@@ -34,9 +34,9 @@ from mitsuba_platonic.train.data import load_training_data
 from mitsuba_platonic.train.losses import d_loss
 from mitsuba_platonic.train.trainer import Trainer
 from mitsuba_platonic.views import front_view, sample_views
-from presets import add_preset_argument, expand
+from common import add_preset_argument, config_path, expand
 
-CONFIG = Path(__file__).resolve().parents[2] / "configs" / "quickstart.yaml"
+CONFIG = config_path("quickstart")
 
 #: The probed discriminators: (initialisation, learning rate)
 CRITICS = (("he", 1e-4), ("dcgan", 2e-5))

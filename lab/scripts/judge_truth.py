@@ -27,7 +27,7 @@ import torch
 
 from mitsuba_platonic.evaluate.judge import judge
 from mitsuba_platonic.evaluate.photos import photo_splits
-from photo_runs import upright_run, upright_truth
+from common import upright_run, upright_truth
 
 KEYS = [("c2st_input", "acc. input", 3), ("c2st_near", "acc. near", 3), ("c2st_side", "acc. side", 3),
         ("c2st_back", "acc. back", 3), ("roughness_side", "rough. side", 2), ("delta_e_side", "ΔE side", 1),

@@ -27,7 +27,7 @@ import torch
 from mitsuba_platonic.evaluate import judge as J
 from mitsuba_platonic.evaluate.photos import photo_splits
 from mitsuba_platonic.networks.photo_colours import in_g_frame, front_transmittance
-from photo_runs import upright_run
+from common import upright_run
 
 AZIMUTHS = (0.0, 45.0, 90.0, -90.0, 180.0)
 

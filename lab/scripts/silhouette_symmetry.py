@@ -28,7 +28,7 @@ import torch
 from mitsuba_platonic.errors import UserError
 from mitsuba_platonic.evaluate import judge as J
 from mitsuba_platonic.evaluate.photos import photo_splits
-from photo_runs import upright_run, upright_truth
+from common import upright_run, upright_truth
 
 AZIMUTHS = (0.0, 45.0, 90.0, -90.0, 180.0)
 

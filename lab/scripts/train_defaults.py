@@ -36,7 +36,7 @@ from mitsuba_platonic.quickstart.procedural import CONFIG
 from mitsuba_platonic.train.data import collection_folder, load_training_data
 from mitsuba_platonic.train.losses import colour_tv
 from mitsuba_platonic.train.trainer import Trainer
-from presets import PRESETS, add_preset_argument, expand
+from common import PRESETS, add_preset_argument, expand
 
 #: The view-space reconstruction the quickstart used before train.pose: elevation (the paper's); the
 #: variants that only exist there (D's rolls, the 3D-supervised baselines) start from it

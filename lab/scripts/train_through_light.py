@@ -29,7 +29,6 @@ from __future__ import annotations
 
 import argparse
 import time
-from pathlib import Path
 from typing import Tuple
 
 import torch
@@ -39,7 +38,9 @@ from mitsuba_platonic.config import load_config
 from mitsuba_platonic.train.data import load_training_data
 from mitsuba_platonic.train.trainer import Trainer
 
-CONFIG = Path(__file__).resolve().parents[2] / "configs" / "procedural_physical.yaml"
+from common import config_path
+
+CONFIG = config_path("procedural_physical")
 
 ROWS = {
     "EA, Mitsuba ray marcher": ["render.backend=mitsuba"],
