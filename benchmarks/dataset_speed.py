@@ -16,7 +16,7 @@ import time
 from pathlib import Path
 
 from mitsuba_platonic.data import shapes
-from mitsuba_platonic.data.collection import CollectionSpec, make_collection
+from mitsuba_platonic.data.render_collection import CollectionSpec, make_collection
 
 
 def main() -> None:

@@ -1,4 +1,4 @@
-"""Benchmark: the real-photo judge's figures over seeds, per config (the table of docs/experiments/photos.md).
+"""Benchmark: the real-photo judge's figures over seeds, per config (the table of lab/photos.md).
 
     .venv/bin/python benchmarks/photo_seeds.py LABEL=EVAL_DIR[,EVAL_DIR...] [LABEL=...]
 

@@ -64,7 +64,7 @@ from typing import Dict, List, NamedTuple, Optional, Sequence
 import numpy as np
 
 from mitsuba_platonic.config import load_config
-from mitsuba_platonic.data.collection import CollectionSpec, make_collection
+from mitsuba_platonic.data.render_collection import CollectionSpec, make_collection
 from mitsuba_platonic.evaluate.judge import CRITIC_STEPS
 from mitsuba_platonic.evaluate.photo_truth import score_against_truth
 from mitsuba_platonic.errors import Interrupted, UserError

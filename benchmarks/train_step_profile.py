@@ -9,7 +9,7 @@ settings, and prints:
 - the seconds per step without the profiler (timed over the same number of steps first) and the
   renderer / networks / optimiser split of :class:`mitsuba_platonic.bench.train.StepClock`;
 - the operators with the largest self CPU time, as a share of all self CPU time (the table of
-  docs/experiments/step-time.md).
+  lab/step-time.md).
 
 Figures only: nothing is asserted.
 """

@@ -6,7 +6,7 @@ Prints figures only (no assertions); every ratio is measured within one run on o
 
 Per resolution: seconds per training step (reconstruction, EA, width 16, batch 8, random images)
 through the closed form, through the marcher with Dr.Jit's thread pool on every core, and through
-the marcher with ``run.drjit_threads: auto`` (the default; docs/experiments/threads.md). Dr.Jit's
+the marcher with ``run.drjit_threads: auto`` (the default; lab/threads.md). Dr.Jit's
 idle workers keep spinning for 20 ms after each launch; where a launch is short, that spinning
 costs torch's convolutions more than the second thread gains the marcher.
 """

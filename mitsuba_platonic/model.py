@@ -11,7 +11,7 @@ This module sits above the config and the checkpoint reader (:mod:`mitsuba_plato
 which it imports and which never imports it): a ``cfg`` argument is a
 :class:`~mitsuba_platonic.config.Config`, read by its sections' attributes; reading a checkpoint
 is :mod:`mitsuba_platonic.config.loading`'s, and whether a config's networks fit in memory
-:mod:`mitsuba_platonic.train.fits`'.
+:mod:`mitsuba_platonic.train.memory_fit`'.
 
 A PrGAN-style model (``train.mode: prgan``) takes the view as part of its latent: G's input is
 z followed by a one-hot code of one of :data:`RING_VIEWS` views on a ring (:meth:`Model.code`).
@@ -22,10 +22,10 @@ A model trained with ``train.pose: elevation`` also has a pose head P (z → the
 elevation θ̂, :class:`~mitsuba_platonic.networks.nets.PoseHead`): its G builds the object upright, in
 an object frame, and :meth:`Model.reconstruct` turns that volume into the input camera's frame by
 θ̂ (:func:`~mitsuba_platonic.render.pytorch.closed_form.tilt`), so every model's reconstructions live in
-the frame of their input view (docs/experiments/pose-elevation.md).
+the frame of their input view (docs/training.md, "The measurements").
 
 A model trained with ``train.light: head`` has a light head L (z → the photo's sun direction
-and sky share, :class:`~mitsuba_platonic.networks.nets.LightHead`; docs/experiments/training-through-light.md,
+and sky share, :class:`~mitsuba_platonic.networks.nets.LightHead`; docs/training.md, "The measurements",
 "A light read from the photo").
 
 Its state dict keys are the checkpoint's (``E.*``, ``G.*``, ``P.*``, ``L.*``): a checkpoint's ``nets``
@@ -84,7 +84,7 @@ def check_weights_fit(cls: type, net: NetConfig, cfg: Any) -> None:
     weights of ``cls(net, ...)``, counted on PyTorch's meta device (nothing allocated), take more than
     the memory free at :data:`BYTES_PER_WEIGHT` bytes each (a lower bound: ``generate`` and ``view``
     of a run whose config says ``model.width: 100000``). Nothing is counted where the default device
-    is the meta device already (the count of :func:`~mitsuba_platonic.train.fits.parameter_count`)."""
+    is the meta device already (the count of :func:`~mitsuba_platonic.train.memory_fit.parameter_count`)."""
     if torch.empty(0).device.type == "meta":
         return
     with torch.device("meta"):

@@ -153,7 +153,7 @@ def test_quickstart_refuses_a_width_that_cannot_fit_before_rendering(tmp_path):
 
 
 def test_sizes_that_fit_pass():
-    from mitsuba_platonic.train.fits import check_model_fits
+    from mitsuba_platonic.train.memory_fit import check_model_fits
     check_model_fits(load_config("paper"))
 
 

@@ -135,7 +135,7 @@ def test_volume_rec_term_compares_v_with_its_images_truth_in_the_input_frame(cac
     view) through the evaluation's truth_in_input_frame; and v* rendered from the input view
     reproduces the image, so the pairing and the frame are those of the photo."""
     import numpy as np
-    from mitsuba_platonic.data.collection import load_manifest
+    from mitsuba_platonic.data.render_collection import load_manifest
     from mitsuba_platonic.evaluate.protocol import truth_in_input_frame
     from mitsuba_platonic.render import render
     from mitsuba_platonic.train.data import collection_folder

@@ -10,8 +10,8 @@ from PIL import Image
 
 from mitsuba_platonic import render
 from mitsuba_platonic.data import shapes
-from mitsuba_platonic.data import collection as C
-from mitsuba_platonic.data.collection import CollectionSpec, load_manifest, make_collection
+from mitsuba_platonic.data import render_collection as C
+from mitsuba_platonic.data.render_collection import CollectionSpec, load_manifest, make_collection
 from mitsuba_platonic.images import load_exr, save_exr
 
 CLASS = shapes.list_classes()[0]

@@ -43,7 +43,9 @@ def test_a_table_holds_each_entry_once_with_its_defaults():
     rows = table.splitlines()[2:]
     assert rows[0].startswith("| `name`, `out_dir` | `run`, `runs` | the run folder is `out_dir/name`")
     assert rows[1].startswith("| `log_every`, `sample_every`, `checkpoint_every` | 10, 250, 250 | ")
-    assert rows[2].startswith("| `drjit_threads` | `auto` | ") and "[threads](experiments/threads.md)" in rows[2]
+    assert rows[2].startswith("| `drjit_threads` | `auto` | ") and '[training](training.md), "The measurements"' in rows[2]
+    in_guide = option_table("run", ["drjit_threads"], headings=["The measurements"]).splitlines()[2]
+    assert "([The measurements](#the-measurements))" in in_guide          # the guide's own section: in-page
     assert len(rows) == 3
     assert "| `lr_d` | 2e-5 |" in option_table("train", ["lr_d"])
     assert "`vh` \\| `ao` \\| `ea`" in option_table("render", ["model"])      # a | inside a cell is escaped

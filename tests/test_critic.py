@@ -119,7 +119,7 @@ def _critic_accuracy_after_training(init, steps=200):
 
 
 def test_a_he_initialised_critic_learns_where_a_dcgan_one_without_norm_barely_moves():
-    """docs/experiments/critic-that-learns.md: at lr_D 2e-5 and no normalisation,
+    """lab/critic-that-learns.md: at lr_D 2e-5 and no normalisation,
     200 updates on an easy task (discs against bars) leave a DCGAN-initialised D near chance and
     take a He-initialised one well above it (measured 0.51 and 0.69)."""
     assert _critic_accuracy_after_training("dcgan") < 0.56

@@ -336,7 +336,7 @@ def test_evaluate_runs_on_a_tiny_collection_with_a_stand_in_model(tmp_path, monk
     report. The trained networks are replaced by a stand-in that returns the ground truth for the
     held-out image, so the trained row must score perfectly (IoU 1, RMSE 0, DSSIM 0)."""
     from mitsuba_platonic.config import load_config
-    from mitsuba_platonic.data.collection import load_manifest
+    from mitsuba_platonic.data.render_collection import load_manifest
     from mitsuba_platonic.train.data import collection_folder, load_training_data
 
     cfg = load_config(None, [f"data.cache={tmp_path / 'data'}", "data.shape_class=mushroom", "data.n_shapes=2",

@@ -36,7 +36,7 @@ from PIL import Image
 from mitsuba_platonic.files.checkpoint import (CHECKPOINT_VERSION, checkpoint_files, read_checkpoint,
                                          save_checkpoint)
 from mitsuba_platonic.config import load_config
-from mitsuba_platonic.data.collection import load_manifest
+from mitsuba_platonic.data.render_collection import load_manifest
 from mitsuba_platonic.files.fileio import atomic_write
 from mitsuba_platonic.images import load_exr
 from mitsuba_platonic.train import run as R

@@ -11,7 +11,7 @@ import torch
 
 from mitsuba_platonic.cli import main
 from mitsuba_platonic.config import ConfigError, load_config
-from mitsuba_platonic.data.collection import CollectionSpec, load_manifest, make_collection
+from mitsuba_platonic.data.render_collection import CollectionSpec, load_manifest, make_collection
 from mitsuba_platonic.train import run as R
 from mitsuba_platonic.train.trainer import Trainer
 from cli_runner import one_line

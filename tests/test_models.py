@@ -330,7 +330,7 @@ def _spread_through_g(init):
 
 
 def test_he_initialised_e_and_g_carry_the_image_to_the_volume_and_start_in_the_fog():
-    """docs/experiments/init-and-critic-width.md: with the DCGAN initialisation and no
+    """lab/init-and-critic-width.md: with the DCGAN initialisation and no
     normalisation the spread of G's last hidden layer over 16 images is ≈ 3e-6 (every image
     starts with the same volume), with He's it stays ≈ 0.1 through every layer; the first volume
     is still the fog of density 1/R and colour about ½ (G's output layer keeps its start)."""
@@ -682,7 +682,7 @@ def test_texture_corrected_adds_the_convolutions_output_to_gs_logits():
 
 def test_texture_conv_is_a_layer_of_g_that_training_reaches_and_the_config_checks():
     """G has the layer only with texture_conv; the model's initialisation draws it as G's other
-    convolutions (N(0, 0.02), not zero: the configuration measured in docs/experiments/texture-conv.md); the
+    convolutions (N(0, 0.02), not zero: the configuration measured in lab/texture-conv.md); the
     photo recipe (photo_volume) applies it, and the gradient of the volume reaches its weights;
     the config refuses it without photo_texture."""
     from mitsuba_platonic.model import Model

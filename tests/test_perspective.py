@@ -130,7 +130,7 @@ def test_training_data_is_rendered_with_the_training_camera(tmp_path):
     pinhole: the config's camera reaches the collection spec, and the cache keeps it apart from
     the orthographic collection of the same settings."""
     from mitsuba_platonic.config import load_config
-    from mitsuba_platonic.data.collection import load_manifest
+    from mitsuba_platonic.data.render_collection import load_manifest
     from mitsuba_platonic.train.data import collection_folder, load_training_data
 
     base = [f"data.cache={tmp_path}", "data.n_shapes=2", "data.views_per_shape=1", "model.resolution=16",

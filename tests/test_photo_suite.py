@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 import torch
 
-from mitsuba_platonic.data.collection import CollectionSpec
+from mitsuba_platonic.data.render_collection import CollectionSpec
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "benchmarks"))
 import photo_suite as S  # noqa: E402

@@ -9,7 +9,7 @@ import pytest
 import torch
 
 from mitsuba_platonic.config import load_config
-from mitsuba_platonic.data.collection import CollectionSpec, make_collection
+from mitsuba_platonic.data.render_collection import CollectionSpec, make_collection
 from mitsuba_platonic.data.photos import decode_image
 from mitsuba_platonic.data.photos.frame import frame_and_resample, framing
 from mitsuba_platonic.data.photos.prepare import photo_framing

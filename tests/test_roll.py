@@ -1,4 +1,4 @@
-"""train.d_roll: the images D judges turned in-plane (train/roll.py): the turn's direction and
+"""train.d_roll: the images D judges turned in-plane (train/image_roll.py): the turn's direction and
 exactness, the tilt it exists for, and what D sees in a training step."""
 
 import math
@@ -11,7 +11,7 @@ from mitsuba_platonic.render import render
 from mitsuba_platonic.render.pytorch.closed_form import rotate
 from mitsuba_platonic.train import trainer as trainer_module
 from mitsuba_platonic.train.data import load_training_data
-from mitsuba_platonic.train.roll import input_frame_roll, roll
+from mitsuba_platonic.train.image_roll import input_frame_roll, roll
 from mitsuba_platonic.train.trainer import Trainer
 from mitsuba_platonic.views import camera_frames, from_angles
 from mitsuba_platonic.volume import test_volume

@@ -151,7 +151,7 @@ def _pixel_direction(image, index):
 @pytest.mark.parametrize("elevation, azimuth, turbidity", [(35.0, 0.0, 3.0), (20.0, 120.0, 6.0),
                                                            (65.0, -75.0, 2.0)])
 def test_a_baked_sky_is_a_latlong_exr_with_the_sun_where_asked(tmp_path, elevation, azimuth, turbidity):
-    from mitsuba_platonic.data.collection import check_envmap
+    from mitsuba_platonic.data.render_collection import check_envmap
     from mitsuba_platonic.images import exr_channel_names
 
     mi = _mi()

@@ -1,7 +1,7 @@
-"""The scripts outside the package (benchmarks/, docs/experiments/scripts/) import only what the
+"""The scripts outside the package (benchmarks/, lab/scripts/) import only what the
 package has: every ``from mitsuba_platonic… import names`` and ``import mitsuba_platonic…`` in them,
 at any depth of the file, names a module that imports and names that module defines. The package's
-layers move (docs/experiments/README.md, "Scripts", says the experiment scripts run from HEAD); this
+layers move (lab/README.md, "Scripts", says the experiment scripts run from HEAD); this
 catches a script left behind without running it."""
 
 import ast
@@ -11,7 +11,7 @@ from pathlib import Path
 import pytest
 
 ROOT = Path(__file__).resolve().parents[1]
-SCRIPTS = sorted([*ROOT.glob("benchmarks/*.py"), *ROOT.glob("docs/experiments/scripts/*.py")])
+SCRIPTS = sorted([*ROOT.glob("benchmarks/*.py"), *ROOT.glob("lab/scripts/*.py")])
 
 
 def _package_imports(path: Path):
@@ -26,7 +26,7 @@ def _package_imports(path: Path):
 
 
 def test_the_scripts_are_found():
-    assert len([p for p in SCRIPTS if "experiments" in p.parts]) >= 10 and len(SCRIPTS) >= 20
+    assert len([p for p in SCRIPTS if "lab" in p.parts]) >= 10 and len(SCRIPTS) >= 20
 
 
 def _missing(path: Path):

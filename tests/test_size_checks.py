@@ -12,7 +12,7 @@ import pytest
 from mitsuba_platonic.runtime import budget
 from mitsuba_platonic.config import ConfigError, load_config
 from mitsuba_platonic.train import run as R
-from mitsuba_platonic.train.fits import batch_bytes, check_batch_fits
+from mitsuba_platonic.train.memory_fit import batch_bytes, check_batch_fits
 from cli_runner import one_line, run_cli
 from tiny_shapes import TINY, tiny_run_overrides
 
@@ -147,8 +147,8 @@ def test_make_dataset_refuses_what_the_disk_cannot_hold_for_every_class(tmp_path
 
 
 def test_make_dataset_renders_a_shape_in_chunks_and_says_its_size_first(tmp_path, monkeypatch, capsys, tiny_class):
-    from mitsuba_platonic.data import collection as C
-    from mitsuba_platonic.data.collection import CollectionSpec, make_collection
+    from mitsuba_platonic.data import render_collection as C
+    from mitsuba_platonic.data.render_collection import CollectionSpec, make_collection
 
     monkeypatch.setattr(C, "VIEW_CHUNK", 2)
     batches, seen = [], []
@@ -168,8 +168,8 @@ def test_make_dataset_renders_a_shape_in_chunks_and_says_its_size_first(tmp_path
 
 
 def test_finished_images_are_counted_from_the_records_not_every_index(tmp_path, monkeypatch, tiny_class):
-    from mitsuba_platonic.data import collection as C
-    from mitsuba_platonic.data.collection import CollectionSpec, make_collection
+    from mitsuba_platonic.data import render_collection as C
+    from mitsuba_platonic.data.render_collection import CollectionSpec, make_collection
 
     spec = CollectionSpec(shape_class=TINY, n_shapes=2, views_per_shape=2, resolution=16)
     make_collection(tmp_path / "d", spec, progress=False)
@@ -182,7 +182,7 @@ def test_finished_images_are_counted_from_the_records_not_every_index(tmp_path, 
 
 
 def test_a_resumed_collection_counts_the_images_already_on_disk(tmp_path, monkeypatch):
-    from mitsuba_platonic.data.collection import CollectionSpec, check_collection_fits, collection_needs, recorded_images
+    from mitsuba_platonic.data.render_collection import CollectionSpec, check_collection_fits, collection_needs, recorded_images
 
     spec = CollectionSpec(shape_class=TINY, n_shapes=10, views_per_shape=10, resolution=16)
     _, disk = collection_needs(spec)

@@ -314,7 +314,7 @@ def test_a_cycle_is_found_and_named(tmp_path):
 
 #: Where no module may import another's underscored names: the package, the benchmarks and the
 #: experiment log's scripts (each folder's scripts import their neighbours by bare name).
-PUBLIC_NAMES_ROOTS = [PACKAGE, PACKAGE.parent / "benchmarks", PACKAGE.parent / "docs" / "experiments" / "scripts"]
+PUBLIC_NAMES_ROOTS = [PACKAGE, PACKAGE.parent / "benchmarks", PACKAGE.parent / "lab" / "scripts"]
 
 
 def private(name: str) -> bool:

@@ -91,7 +91,7 @@ def test_make_dataset_envmap_that_is_not_an_exr(tmp_path):
 
 
 def test_collection_spec_checks_envmaps_are_exr(tmp_path):
-    from mitsuba_platonic.data.collection import CollectionSpec
+    from mitsuba_platonic.data.render_collection import CollectionSpec
     from mitsuba_platonic.errors import UserError
     fake = tmp_path / "sky.exr"
     fake.write_bytes(b"\x89PNG\r\n\x1a\n" + bytes(32))
@@ -192,7 +192,7 @@ def test_ctrl_c_interrupts_a_command_whose_parent_blocked_sigint(tmp_path):
 def test_a_ctrl_c_a_library_swallows_still_interrupts_the_collection(tmp_path, monkeypatch):
     """A compiled library can clear the KeyboardInterrupt raised in Python code it calls; within
     the command line's handler the press is noted and the next shape raises it again."""
-    from mitsuba_platonic.data import collection as C
+    from mitsuba_platonic.data import render_collection as C
     from mitsuba_platonic.errors import Interrupted, remembering_ctrl_c
     real = C.save_exr
     swallowed = []
@@ -358,6 +358,6 @@ def test_warnings_on_the_command_line_are_one_line_each(tmp_path):
     lines = err.strip().splitlines()
     warned = [x for x in lines if x.startswith("platonic train: warning: skipped ")]
     assert len(warned) == 2 and any("a.png" in x for x in warned) and any("b.jpg" in x for x in warned)
-    assert not any("collection.py" in x or x.lstrip().startswith("full = ") for x in lines), err
+    assert not any("dataset.py" in x or "collection.py" in x or x.lstrip().startswith("full = ") for x in lines), err
     errors = [x for x in lines if x.startswith("platonic train: error: ")]
     assert len(errors) == 1 and "no usable images" in errors[0]

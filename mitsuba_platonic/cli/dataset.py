@@ -1,5 +1,5 @@
 """``platonic make-dataset``: a procedural shape class rendered to an image collection
-(:func:`mitsuba_platonic.data.collection.make_collection` per class), or contact sheets with
+(:func:`mitsuba_platonic.data.render_collection.make_collection` per class), or contact sheets with
 ``--preview``."""
 
 from __future__ import annotations
@@ -50,7 +50,7 @@ def _check_dataset_flags(args: argparse.Namespace) -> None:
 
 def _cmd_make_dataset(args: argparse.Namespace) -> int:
     from ..data import shapes
-    from ..data.collection import CollectionSpec, check_collection_fits, make_collection, recorded_images
+    from ..data.render_collection import CollectionSpec, check_collection_fits, make_collection, recorded_images
     from ..data.envmaps import check_envmap, default_envmaps
     from ..data.preview import contact_sheet
 

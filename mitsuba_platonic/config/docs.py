@@ -121,10 +121,10 @@ def _markdown(text: str, headings: Sequence[str]) -> str:
         return f"`{'.'.join(target.split('.')[-1 if m.group(1) else -2:])}`"      # ~: its name; else also its owner
     text = _ROLE.sub(role, text)
     text = re.sub(r"``([^`]+)``", r"`\1`", text)
-    text = re.sub(r"docs/experiments/([\w-]+)\.md", r"[\1](experiments/\1.md)", text)
     text = re.sub(r"(?<![\w/\[])docs/([\w-]+)\.md", r"[\1](\1.md)", text)
     text = re.sub(r"(?<![\w`])'([\w./-]+)'(?![\w`])", r"`\1`", text)     # a choice, 'cpu': as code
     for heading in headings:
+        text = re.sub(rf'\[[\w-]+\]\([\w-]+\.md\), (?="{re.escape(heading)}")', "", text)   # this guide's section
         anchor = re.sub(r"[^\w\- ]", "", heading.lower()).replace(" ", "-")
         text = text.replace(f'"{heading}"', f"[{heading}](#{anchor})")
     return text.replace("|", "\\|")

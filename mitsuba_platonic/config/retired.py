@@ -3,7 +3,7 @@
 Old run folders load as they did (:mod:`.loading`, ``train/folder.py``): a saved config that holds a
 retired option at the value that left it off loads without it (:func:`without_retired`); one that had
 it on is refused, naming the last commit with the option's code, which that run needs. Retiring an
-option is a line here; the experiment log (docs/experiments/) has each one's measurement. Imports no
+option is a line here; docs/training.md, "The measurements", links each one's measurement. Imports no
 config: what it reads and returns is the plain mapping a run saved.
 """
 
@@ -16,7 +16,7 @@ from ..settings_checks import ConfigError
 __all__ = ["RETIRED", "without_retired"]
 
 #: Options tried, measured and not adopted, then removed from the config (issues 43, 44): ``(section,
-#: key)`` → their value when off, and the last commit with their code (docs/experiments/ has each).
+#: key)`` → their value when off, and the last commit with their code (docs/training.md, "The measurements").
 RETIRED: Dict[Tuple[str, str], Tuple[Any, str]] = {
     ("model", "texture_surface"): (False, "3afe14f"),
     ("model", "texture_sides"): (False, "3afe14f"),
@@ -25,10 +25,10 @@ RETIRED: Dict[Tuple[str, str], Tuple[Any, str]] = {
     ("train", "light_warmup"): (0, "3afe14f"),
     ("train", "light_fade"): (0, "3afe14f"),
     ("train", "r1_every"): (1, "3afe14f"),
-    ("train", "silhouette_weight"): (0.0, "60a45a0"),      # issue 43: docs/experiments/photo-sides.md
-    ("train", "symmetry"): (0.0, "3bef62f"),               # issue 43: docs/experiments/photo-sides.md
-    ("train", "turn_about"): ("volume", "55e7013"),        # issue 43: docs/experiments/photo-sides.md
-    ("model", "texture_rim"): (90.0, "f98b5e7"),           # issue 43: docs/experiments/photo-sides.md
+    ("train", "silhouette_weight"): (0.0, "60a45a0"),      # issue 43
+    ("train", "symmetry"): (0.0, "3bef62f"),               # issue 43
+    ("train", "turn_about"): ("volume", "55e7013"),        # issue 43
+    ("model", "texture_rim"): (90.0, "f98b5e7"),           # issue 43
 }
 
 
@@ -41,6 +41,7 @@ def without_retired(saved: Dict[str, Any]) -> Dict[str, Any]:
         if isinstance(values, dict) and key in values:
             value = values.pop(key)
             if value != off:
-                raise ConfigError(f"{section}.{key}: {value!r} was tried and retired (docs/experiments/); "
+                raise ConfigError(f"{section}.{key}: {value!r} was tried and retired "
+                                  f"(docs/training.md, 'The measurements'); "
                                   f"this run needs the code of commit {commit}")
     return out

@@ -28,12 +28,12 @@ class RunConfig:
     seed: the master seed: every draw of a run (batches, views, initialisation) follows from it; a resumed
     run draws what an uninterrupted one would.
     device: 'cpu', 'cuda', or 'auto' (CUDA when present).
-    steps: training steps; the photo configs gain nothing from more (docs/experiments/longer-and-stronger-d.md).
+    steps: training steps; the photo configs gain nothing from more (docs/training.md, "The measurements").
     log_every, sample_every, checkpoint_every: the cadence in steps of ``scalars.csv``, sample grids and checkpoints.
     threads: torch's and Dr.Jit's CPU threads (0: all cores).
     drjit_threads: Dr.Jit's worker threads while training, 'auto' or a count (1: its launches run on the
     training thread alone); 'auto' picks 1 for the marcher at N ≤ 32 on a CPU, where idle workers would
-    spin against torch, and uses them at 64³ (docs/experiments/threads.md).
+    spin against torch, and uses them at 64³ (docs/training.md, "The measurements").
     keep_checkpoints: how many numbered checkpoints are kept besides ``last.pt``.
     """
 

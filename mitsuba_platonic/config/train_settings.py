@@ -33,11 +33,11 @@ MODES_3D = ("platonic3d", "gan3d")
 #: input view, or v with the input image's ground-truth volume (3D modes)
 REC_TARGETS = ("image", "volume")
 #: train.rec_loss: the input-view term's distance, the paper's mean squared error or the mean
-#: absolute error (docs/experiments/rec-loss-l1.md)
+#: absolute error (docs/training.md, "The measurements")
 REC_LOSSES = ("l2", "l1")
 #: train.rec_channels: what of the input image the image term compares, all its channels or its
 #: opacity alone (for a lit renderer whose light is not the photo's:
-#: docs/experiments/training-through-light.md)
+#: docs/training.md, "The measurements")
 REC_CHANNELS = ("all", "alpha")
 #: train.pose: G's volume in the input camera's frame, or upright and tilted by an elevation E reads
 POSES = ("input", "elevation")
@@ -50,7 +50,7 @@ LOSS_WEIGHTS = ("gp_weight", "rec_weight", "weight_3d", "pose_weight", "r1_weigh
 PRGAN = "the PrGAN-style baseline ('prgan')"
 #: The GAN losses of :func:`~mitsuba_platonic.train.losses.d_loss` / ``g_loss`` (anything but the first is WGAN-GP).
 LOSSES = ("nonsaturating", "wgan-gp")
-#: train.d_roll: 'none' (D sees the images as rendered) | 'uniform' | 'matched' (:mod:`mitsuba_platonic.train.roll`).
+#: train.d_roll: 'none' (D sees the images as rendered) | 'uniform' | 'matched' (:mod:`mitsuba_platonic.train.image_roll`).
 ROLLS = ("none", "uniform", "matched")
 #: The transforms ``train.d_augment`` may list, applied in this order (:mod:`mitsuba_platonic.train.augment`).
 AUGMENTS = ("flip", "translation", "cutout")
@@ -67,10 +67,10 @@ class TrainConfig:
     mode: 'platonic' (the 2D critic only), 'platonic3d' (+ a 3D critic on ground-truth volumes; G learns from
     both), 'gan3d' (the 3D-GAN baseline: WGAN-GP on volumes, no rendering) or 'prgan' (the PrGAN-style
     baseline: VH only, views from 8 azimuths on the ring at ``elevation`` (0° by default; reconstruction:
-    0°, the input view's), G(z, one-hot view); docs/experiments/baselines.md).
+    0°, the input view's), G(z, one-hot view); docs/training.md, "Baselines (Table 2)").
     batch_size, random_views: the global batch (split across processes), and random views per volume per step:
     two reduce the depth stripes, with novel-view scores within one seed's noise
-    (docs/experiments/depth-stripes-and-views.md).
+    (docs/training.md, "The measurements").
     view_distribution, elevation: p_view, where the random views are drawn; for photos, the band the
     photos' cameras were in ('band', [-10, 40]).
     pose, pose_weight: where G's volume stands, 'input' (in the input camera's frame, the paper's view-space
@@ -78,53 +78,53 @@ class TrainConfig:
     (reconstruction, mode 'platonic'): G builds the object upright in its own frame, a pose head reads the
     input camera's elevation θ̂ from E's code, the input-view term renders the volume tilted by θ̂ and the
     random views are drawn around the upright object, as the photos' cameras were ("The quickstart's
-    choices"; docs/experiments/pose.md); pose_weight: λ of the term that teaches the head the elevations of
+    choices"; docs/training.md, "The measurements"); pose_weight: λ of the term that teaches the head the elevations of
     G's own renders from those random views (0: none; only with 'elevation';
-    docs/experiments/pose-elevation.md).
+    docs/training.md, "The measurements").
     rec_weight: λ of the input-view (reconstruction) term (the shipped configs: 10; the photo configs: 20,
     against the turn's pull towards round).
     rec_target: what that term compares, 'image' (the input image with the render of v at the input view:
     PlatonicGAN's, 2D data only) or 'volume' (v with the input image's ground-truth volume in its camera's
     frame: 3D supervision, the 3D modes only; the 3D-GAN baseline's, which renders nothing;
-    docs/experiments/3d-supervision.md).
+    docs/training.md, "The measurements").
     rec_loss: the image term's distance, 'l2' (mean (I_front − x)², the paper's) or 'l1' (mean |I_front − x|:
     the median, not the mean, of what the code cannot tell apart; image targets only; the photo configs',
-    docs/experiments/rec-loss-l1.md).
+    docs/training.md, "The measurements").
     rec_channels: what the image term compares, 'all' channels (the paper's) or 'alpha' (the opacity alone,
     EA images: the silhouette and its soft edge), for a lit renderer whose light is drawn from a prior, not
     the photo's, where comparing the shading made shape noise (3D IoU 0.17 → 0.26 through single
-    scattering; docs/experiments/training-through-light.md).
+    scattering; docs/training.md, "The measurements").
     light: the light of the input view's render under single scattering (render.backend 'single_scatter' or
     'scatter_march'), 'prior' (drawn from the prior, as every random view's is) or 'head': a light head reads
     the photo's sun direction and sky share from E's code, learnt from G's renders under the prior's
     lights, and the input view is rendered under it, so that the image term can compare colour and shading
     (rec_channels 'all'); it re-renders held-out shapes under new light better than EA (RMSE 13.21 against
-    14.18) at the same 3D IoU (docs/experiments/training-through-light.md, "A light read from the photo").
+    14.18) at the same 3D IoU (docs/training.md, "The measurements").
     loss, gp_weight: the GAN loss, 'nonsaturating' | 'wgan-gp' (the 3D-GAN baseline's), and the WGAN-GP
     penalty's weight λ.
     lr_d: D's Adam learning rate: with the gate and no normalisation the authors' 1e-5 leaves novel views
     thinner than the billboard (IoU 0.156 against 0.493); the quickstart uses 1e-4 with R1
-    (docs/experiments/d-gate-and-lr-d.md).
+    (docs/training.md, "The measurements").
     d_gate: update D only while its *soft* accuracy ½(mean σ(l_real) + 1 − mean σ(l_fake)) ≤ this (0.6, the
     authors' gate; null: always, as with R1); it never triggers at lr_d 2e-5 in the quickstart, and keeps a
     faster D (lr_d 1e-4) from collapsing G, which it does ungated (IoU 0 ungated, 0.642 gated).
     r1_weight: γ of the R1 penalty γ/2 · E‖∇ₓD(x)‖² on real images (Mescheder et al. 2018), added to every
     critic's non-saturating loss (0: none; WGAN-GP has its own penalty; 1 in the shipped configs:
-    :func:`mitsuba_platonic.train.losses.r1_penalty`, docs/experiments/r1.md).
+    :func:`mitsuba_platonic.train.losses.r1_penalty`, docs/training.md, "The measurements").
     d_steps: D (or D3) updates per G update, each on a fresh loss, in every mode.
     d_roll: 'none' | 'uniform': D sees every real and rendered image turned in-plane by its own random
     angle, so that the tilt of views drawn in the input camera's frame cannot give fakes away; 'matched'
     (reconstruction): the reals turned by the tilt a right volume's view would have, for an input elevation
     drawn from the collection's view distribution (procedural data; for photos the train section's);
     measured to gain nothing on the mushrooms, kept for collections with a wide spread of elevations and
-    pose 'input' (:mod:`mitsuba_platonic.train.roll`, docs/experiments/d-roll.md).
+    pose 'input' (:mod:`mitsuba_platonic.train.image_roll`, docs/training.md, "The measurements").
     d_augment: the differentiable augmentations of every image D sees, real or rendered, in D's and G's
     updates, from 'flip', 'translation', 'cutout' (none by default; for small photo collections, "The photo
     config's choices"; :mod:`mitsuba_platonic.train.augment`).
     weight_3d: the weight of the 3D critic's adversarial term ('platonic3d').
     colour_tv: the weight of G's density-weighted colour total variation (EA, not 'gan3d'; 0: none); it helps
     the photo configs' unseen side, and costs the procedural quickstart 0.02–0.03 of novel-view IoU
-    (:func:`mitsuba_platonic.train.losses.colour_tv`, docs/experiments/colour-tv.md).
+    (:func:`mitsuba_platonic.train.losses.colour_tv`, docs/training.md, "The measurements").
     colour_match: the weight of the term that holds the mean colour of each random view's object to the input
     photo's (reconstruction, EA, mode 'platonic'; 0: none; a photo config's colour term:
     :func:`mitsuba_platonic.train.losses.colour_match`).
@@ -142,10 +142,10 @@ class TrainConfig:
     photo_augment: transforms of each step's photos before E, the reconstruction target and D read them, from
     'flip', 'colour' (none by default; modes 'platonic' and 'prgan', image targets; 'colour' needs EA), so
     that E reads colour from a photo instead of memorising a few dozen photos
-    (:func:`mitsuba_platonic.train.augment.augment_photos`, docs/experiments/photos.md).
+    (:func:`mitsuba_platonic.train.augment.augment_photos`, docs/training.md, "The measurements").
     ema: null, or the decay β of an exponential moving average of E's and G's weights, which samples,
     checkpoints' inference weights and evaluation then use (0.99 in the shipped configs:
-    :meth:`mitsuba_platonic.train.trainer.Trainer.inference_model`, docs/experiments/ema.md).
+    :meth:`mitsuba_platonic.train.trainer.Trainer.inference_model`, docs/training.md, "The measurements").
     lr_g, lr_e, betas: G's and E's Adam learning rates and Adam's betas, as the paper's.
     """
 

@@ -1,5 +1,5 @@
 """Data: procedural shape classes with 3D ground truth (:mod:`.shapes`), rendered collections
-(:mod:`.collection`, ``platonic make-dataset``), contact sheets (:mod:`.preview`), the
+(:mod:`.render_collection`, ``platonic make-dataset``), contact sheets (:mod:`.preview`), the
 photo-collection loader (:mod:`.photos`) and the config's ``data:`` section (:mod:`.settings`)."""
 
 from . import shapes

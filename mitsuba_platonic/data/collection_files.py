@@ -16,7 +16,7 @@ Layout of a collection folder::
 ``collection.json``, ``records.jsonl``, ``manifest.json``) and the temporaries it writes
 (:func:`overwrite_plan`); if the folder holds anything else where a collection writes
 (``images/``, ``exr/``, ``volumes/``, the records), or is no collection at all but has files
-there, it refuses and deletes nothing. Rendering into the folder is :mod:`.collection`'s job.
+there, it refuses and deletes nothing. Rendering into the folder is :mod:`.render_collection`'s job.
 """
 
 from __future__ import annotations

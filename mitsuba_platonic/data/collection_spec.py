@@ -5,7 +5,7 @@ formation and its renderer, and the master ``seed`` from which every shape seed,
 derives (:meth:`CollectionSpec.shape_seed`, :meth:`~CollectionSpec.view`,
 :meth:`~CollectionSpec.lighting_of`), so that an image depends on ``seed`` and its index alone and
 a resumed collection renders exactly what an uninterrupted one would. Rendering the plan is
-:mod:`.collection`'s job, keeping its files :mod:`.collection_files`'.
+:mod:`.render_collection`'s job, keeping its files :mod:`.collection_files`'.
 """
 
 from __future__ import annotations

@@ -1,7 +1,7 @@
 """The data section of a config (``data:``): where the training images come from and how they are made.
 
 :class:`DataConfig` is the section's dataclass; :data:`SOURCES` its choice of source. It sits
-beside the data code it configures (``data/collection.py`` renders a procedural collection,
+beside the data code it configures (``data/render_collection.py`` renders a procedural collection,
 ``data/photos/`` loads a folder of photos) and imports no config: the config composes it.
 """
 

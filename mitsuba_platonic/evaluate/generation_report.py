@@ -23,7 +23,7 @@ from typing import Any, Dict, List, Optional, Sequence, Tuple, Union
 import numpy as np
 import torch
 
-from ..data.collection import load_manifest
+from ..data.render_collection import load_manifest
 from ..errors import UserError
 from ..render.frames import display_frames
 from ..sheets import GRID_VIEW, save_interpolation, save_sample_grid, save_sheet, save_turntables

@@ -209,7 +209,7 @@ def best_tilt(output: ArrayLike, target: ArrayLike, step: float = 5.0,
     no β gives any overlap (best IoU 0, e.g. an output with no voxel at ``threshold``) the tilt is
     undefined and β is NaN. β = 0 for a reconstruction in the truth's pose. For one that stands
     upright in the frame whatever the input camera's elevation θ₀, β ≈ θ₀: the pose failure of
-    view-space reconstruction that the paper names (docs/experiments/pose.md).
+    view-space reconstruction that the paper names (docs/evaluation.md, "3D: the volumes").
     """
     from ..render.pytorch.closed_form import tilt            # the renderer's resampling (no cycle: it needs no evaluate)
 

@@ -24,13 +24,13 @@ class NetSettings:
     latent: the size of z (the paper: 200).
     width: channels at the highest resolution (the paper: 64).
     norm: 'batch' (the paper's) | 'instance' | 'none' (the default: with BatchNorm the reconstruction loss
-    stays at 0.21 and the gate blocks D on 96 % of steps, docs/experiments/d-gate-and-lr-d.md).
+    stays at 0.21 and the gate blocks D on 96 % of steps, docs/training.md, "The measurements").
     encoder_hidden: width of E's last layer before its Linear to z; 0: none, E's trunk feeds the Linear
     directly (the authors': 1024, docs/paper.md).
     upsample: how G doubles its resolution, 'transposed' (the paper's k4 s2) | 'resize' (nearest ×2, k3, in
     every stage) | 'resize_last' (in the last stage only: the quickstart's, "The quickstart's choices").
     precision: the networks' arithmetic, 'fp32' | 'bf16' (convolutions in bfloat16: the paper's set-up on a
-    CPU then takes 1.07 s a step; at the quickstart's size it is not faster, docs/experiments/step-time.md).
+    CPU then takes 1.07 s a step; at the quickstart's size it is not faster, docs/training.md, "Speed").
     photo_colour: G's colour as an offset from the input photo's mean colour (reconstruction, EA,
     orthographic: "The photo config's choices").
     photo_texture: with photo_colour, the offset is from the photo's own colour at each voxel's pixel,

@@ -54,7 +54,7 @@ INITS = ("dcgan", "he")
 #: matrix products in bfloat16 under :func:`torch.autocast` (weights, optimiser state and every
 #: network's output stay float32; the renderers never see bfloat16). bfloat16 keeps float32's range
 #: with an 8-bit mantissa: on a CPU with AVX-512 BF16 (or a GPU) the paper-scale step is 1.5×
-#: faster; what it does to training is measured in docs/experiments/step-time.md.
+#: faster; what it does to training is measured in docs/training.md, "Speed".
 PRECISIONS = ("fp32", "bf16")
 
 
@@ -171,7 +171,7 @@ class ResizeConv3d(nn.Conv3d):
     padding of the upsampled grid is zero padding of x. The parameters (so initialisation,
     :func:`fan_in`, checkpoints and their gradients) stay the k3 convolution's; the work is a
     transposed convolution's at the input's resolution instead of 27 taps per output at twice it:
-    4× faster forward and backward for G's last stage at 32³ (docs/experiments/step-time.md). The
+    4× faster forward and backward for G's last stage at 32³ (docs/training.md, "Speed"). The
     sums of taps keep the k3 form's smoothness: no period-2 checkerboard.
     """
 
@@ -222,7 +222,7 @@ class Generator(nn.Module):
         #: needs the input camera's elevation
         self.texture_conv: Optional[nn.Conv3d] = nn.Conv3d(8, 4, 3, padding=1) if cfg.texture_conv else None
         # channels-last 3D weights and activations: oneDNN's 3D convolutions on a CPU run about twice
-        # as fast in this layout (docs/experiments/step-time.md); the maths is the same
+        # as fast in this layout (docs/training.md, "Speed"); the maths is the same
         self.to(memory_format=torch.channels_last_3d)
 
     def init_density(self) -> None:
@@ -235,7 +235,7 @@ class Generator(nn.Module):
         steps come the generator can overshoot to an empty volume with its sigmoid saturated,
         where it stays: the VH baseline (reconstruction loss 0.136 after 200 steps, empty images;
         0.031 from v₀ = 1/R) and EA on path-traced images (0.049 after 400 steps, empty; 0.0077).
-        Measured in docs/experiments/initial-density.md.
+        Measured in docs/training.md, "The measurements".
         """
         out = self.convolutions()[-1]
         v0 = 1.0 / self.cfg.resolution
@@ -418,7 +418,7 @@ def init_critic_he(m: nn.Module) -> None:
 
     Without normalisation the DCGAN initialisation N(0, 0.02) shrinks activations by about
     0.02 √fan-in ≈ 0.3 a layer: an untrained D's logits have a standard deviation of 5e-4, and at
-    lr_D 2e-5 it does not learn in thousands of steps (docs/experiments/critic-that-learns.md). He's
+    lr_D 2e-5 it does not learn in thousands of steps (docs/training.md, "The measurements"). He's
     variance 2 / ((1 + 0.2²) fan-in) keeps them O(0.1).
     """
     if isinstance(m, (nn.Conv2d, nn.Conv3d, nn.Linear)):
@@ -450,7 +450,7 @@ def init_he(net: nn.Module) -> None:
     normalisation the DCGAN initialisation shrinks the signal by ≈ 0.02 √fan_in a layer: in the
     quickstart's E and G (width 16), the spread of G's last hidden layer over 16 images is 3e-6
     (0.08 with this initialisation), so every image starts with the same volume
-    (docs/experiments/init-and-critic-width.md).
+    (docs/training.md, "The measurements").
     """
     if not isinstance(net, Generator):                       # E: strided convolutions and LeakyReLU(0.2),
         net.apply(init_critic_he)                            # a critic's trunk: the critics' He initialisation

@@ -12,7 +12,7 @@ from the photo itself, c = σ(ℓ + logit base) (:meth:`~mitsuba_platonic.networ
 
 with :func:`front_transmittance` (a deep shadow map of G's density towards the input camera) for
 the last, and :func:`photo_volume` the one recipe that training and
-:meth:`~mitsuba_platonic.model.Model.reconstruct` share. docs/experiments/photos.md has the
+:meth:`~mitsuba_platonic.model.Model.reconstruct` share. docs/training.md, "The measurements" has the
 measurements behind each.
 """
 

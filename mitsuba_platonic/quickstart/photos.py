@@ -33,7 +33,7 @@ from ..files.outputs import output_lock
 from ..files.resources import config_path
 from ..model import Model
 from ..train import run as training_run
-from ..train.fits import check_model_fits
+from ..train.memory_fit import check_model_fits
 from .procedural import QUICKSTART_PARTS, claim_quickstart_folder, stopped
 
 __all__ = ["photo_quickstart", "PHOTO_CONFIG"]

@@ -33,7 +33,7 @@ from ..files.resources import config_path
 from ..model import Model
 from ..train import data as training_data
 from ..train import run as training_run
-from ..train.fits import check_model_fits
+from ..train.memory_fit import check_model_fits
 from ..train.folder import is_run_folder
 
 __all__ = ["quickstart", "stopped", "claim_quickstart_folder"]

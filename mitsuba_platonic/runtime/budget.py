@@ -2,8 +2,8 @@
 estimate exceeds them, before any work.
 
 The one owner of "available memory" and "will it fit": ``compare`` (:func:`mitsuba_platonic.bench.compare.check_memory`),
-the networks and the batch of a training (:mod:`mitsuba_platonic.train.fits`), ``generate``
-(:mod:`mitsuba_platonic.export`) and ``make-dataset`` (:mod:`mitsuba_platonic.data.collection`) read
+the networks and the batch of a training (:mod:`mitsuba_platonic.train.memory_fit`), ``generate``
+(:mod:`mitsuba_platonic.export`) and ``make-dataset`` (:mod:`mitsuba_platonic.data.render_collection`) read
 :func:`available_memory` and :func:`free_disk` here and refuse through :func:`check_fits`. Estimates
 are lower bounds where a command's true need is not known exactly (what is written and held alone):
 a refusal is certain, a pass is not a promise.

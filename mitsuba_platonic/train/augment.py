@@ -24,7 +24,7 @@ Every transform is an index gather or a mask product, so ∂T(x)/∂x is exact.
 keeps D from memorising the photos; it does nothing for E, which reads every photo of a step as
 it is. With a few dozen photos E memorises them too: each training photo is reconstructed with
 its own colour (CIE76 ΔE ≈ 3 at the input view on the tree photos) while a held-out photo gets a
-blend of the training photos' colours (ΔE ≈ 19; docs/experiments/photos.md). These
+blend of the training photos' colours (ΔE ≈ 19; docs/training.md, "The measurements"). These
 transforms change a step's photos *before* E reads them, so the reconstruction target, E's input
 and D's reals are the same new photo; each is a photo the class could have produced:
 

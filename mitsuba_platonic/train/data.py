@@ -20,7 +20,7 @@ import torch
 
 from ..config import Config, ConfigError
 from ..config.train_settings import MODES_3D
-from ..data.collection import CollectionSpec, load_manifest, make_collection
+from ..data.render_collection import CollectionSpec, load_manifest, make_collection
 from ..data.photos import PhotoCollection, decode_image, prepare_image
 from ..data.settings import SOURCES  # noqa: F401  (the choice list, also named here)
 from ..errors import UserError

@@ -1,8 +1,8 @@
 """The rendering layer R(ω, v) a run trains through, chosen by ``config.render``, and single
 scattering under a given light (``train.light: head``).
 
-A light read from the photo (``train.light: head``, docs/experiments/training-through-light.md, "A light read from the
-photo"): the random views are rendered under lights drawn from the prior, pair i's from the step's
+A light read from the photo (``train.light: head``, docs/training.md, "The measurements"): the random
+views are rendered under lights drawn from the prior, pair i's from the step's
 seed as :func:`~mitsuba_platonic.render.render_with` draws them
 (:func:`~mitsuba_platonic.render.pytorch.single_scatter.sample_lights`), so the
 trainer knows them; a light head learns to read them from those renders, in each view's camera

@@ -15,8 +15,8 @@ A run folder (``run.out_dir/run.name``) holds::
     run.lock                 held while a run writes to the folder (the pid of its process)
 
 The loop is this module's; the rest of a run lives beside it, its public names re-exported here:
-:mod:`.folder` (what a run folder is, its lock, its ``config.yaml``), :mod:`.keeper` (which
-checkpoints are kept, resume), :mod:`.logs` (scalars and samples) and :mod:`.machine` (device,
+:mod:`.folder` (what a run folder is, its lock, its ``config.yaml``), :mod:`.checkpoints` (which
+checkpoints are kept, resume), :mod:`.logs` (scalars and samples) and :mod:`.compute` (device,
 data-parallel processes, threads).
 
 Checkpoints are written to a temporary file and renamed over the old one, so a kill at any
@@ -65,11 +65,11 @@ from ..files.fileio import confined
 from ..model import Model
 from ..runtime.progress import progress_bar
 from .data import TrainingData, load_training_data
-from .fits import check_model_fits
+from .memory_fit import check_model_fits
 from .folder import RUN_MARKER, RUN_PARTS, claim_run_folder, prepare_run_folder, read_run_config, run_lock
-from .keeper import Checkpoints, non_finite
+from .checkpoints import Checkpoints, non_finite
 from .logs import SAMPLE_VIEWS, ScalarLog, write_samples
-from .machine import SERIAL_MARCHER_MAX_RESOLUTION, distributed, drjit_threads, run_device, training_threads
+from .compute import SERIAL_MARCHER_MAX_RESOLUTION, distributed, drjit_threads, run_device, training_threads
 from .trainer import Trainer
 
 __all__ = ["train", "load_run", "RunError", "save_checkpoint", "load_checkpoint", "load_latest_checkpoint",

@@ -15,7 +15,7 @@
    and the rest with it, while D's soft accuracy on this batch, ½(mean σ(l_real) + 1 − mean σ(l_fake)),
    is above ``d_gate``); with ``d_roll: uniform`` D sees each of them turned in-plane by its own
    random angle (the images of G's adversarial term too), with ``matched`` the reals turned by the
-   tilt of a right volume's view (:mod:`.roll`); with ``d_augment`` both sides augmented alike
+   tilt of a right volume's view (:mod:`.image_roll`); with ``d_augment`` both sides augmented alike
    (:mod:`.augment`); Platonic3D's D3 then on ground-truth volumes vs v;
 5. **update G and E** (:meth:`Trainer._update_generator`) on the sum of the named terms of
    :data:`.terms.G_TERMS` that the config sets, each λ · value:
@@ -45,7 +45,7 @@ v lives in the input camera's frame: I_front renders it from ω₀ and the rando
 around that frame. A camera above the object sees its up axis tilted, so a right volume is tilted
 by the input's elevation θ₀ in that frame, its views from random ω are rolled, and D, whose photos
 were all taken by upright cameras, pushes G to build the object upright in every input frame
-instead (docs/experiments/pose.md). With 'elevation' G builds the object
+instead (docs/training.md, "The measurements"). With 'elevation' G builds the object
 upright, in its own frame; a pose head P reads the input camera's elevation θ̂ = P(z) from E's
 code, and
 
@@ -53,7 +53,7 @@ code, and
     I_view  = R(ω, v),  ω ~ p_view     (around the upright object, as the photos' cameras were)
 
 The input-view term alone does not teach P the elevation (it stays uncorrelated with θ₀,
-docs/experiments/pose-elevation.md), so P also learns from G's own renders, whose elevations are known:
+docs/training.md, "The measurements"), so P also learns from G's own renders, whose elevations are known:
 
     L_pose = λ_pose · mean (P(E(I_view)) − asin ω_y)²      (I_view detached: it trains E and P)
 
@@ -70,7 +70,7 @@ elevations:
 
 ((s₀, s₁) the prior's range of shares); the input view is then rendered under L(z), held constant,
 so the input-view term compares colour and shading under the photo's light, not a random one
-(docs/experiments/training-through-light.md, "A light read from the photo").
+(docs/training.md, "The measurements").
 
 The reconstruction term compares images by default (``train.rec_target: image``, as above). With
 ``rec_target: volume`` (the 3D modes) it compares volumes instead: λ_rec ‖v − v*‖², where v* is
@@ -112,7 +112,7 @@ from .baselines import BaselineModes, ring_views
 from .data import TrainingData
 from .losses import d_loss, gradient_penalty, hard_accuracy_counts, r1_penalty, soft_accuracy_counts
 from .renderer import make_lit_renderer, make_renderer
-from .roll import input_frame_roll, roll
+from .image_roll import input_frame_roll, roll
 from .step_state import D_AUGMENT, PHOTO_AUGMENT, RENDER, StepState, side_generator, side_seed
 from .terms import active_terms, g_terms
 
@@ -300,7 +300,7 @@ class Trainer(BaselineModes):
         return s
 
     def _roll_angles(self, g: torch.Generator, views: torch.Tensor) -> Tuple[Optional[torch.Tensor], Optional[torch.Tensor]]:
-        """``train.d_roll``: the angles D's reals and fakes are turned by (train/roll.py); None: as they are.
+        """``train.d_roll``: the angles D's reals and fakes are turned by (train/image_roll.py); None: as they are.
         'uniform': an angle per real and per fake image; 'matched': the reals turned as a right
         volume's views are, for input elevations drawn from the collection's views (photos: p_view)."""
         cfg, t = self.cfg, self.cfg.train

@@ -18,7 +18,7 @@ The pipeline, one module per step (each module's docstring states its maths and 
 4. :mod:`.frame` — crop, centred transparent padding to a square, antialiased resampling
    (:mod:`.prepare` chains 3 and 4 for one image);
 5. :mod:`.split` — train / val / test by seeded content hash;
-6. :mod:`.collection` — the ``Dataset``.
+6. :mod:`.dataset` — the ``Dataset``.
 
 Bad input never stops the loading of the others and is never dropped silently: each rejected
 file is named in a :class:`PhotoCollectionWarning` and recorded in
@@ -34,7 +34,7 @@ Example::
     loader = torch.utils.data.DataLoader(train, batch_size=8, shuffle=True)
 """
 
-from .collection import PhotoCollection
+from .dataset import PhotoCollection
 from .decode import SUPPORTED_FORMATS, DecodedImage, decode_image
 from .frame import CROPS, MAX_ASPECT, frame_and_resample
 from .mask import BACKGROUNDS, clean_mask, premultiplied_linear, srgb_decoding_table, \

@@ -33,7 +33,7 @@ factor k, returned so the radiance can be recovered:
   radiance in units of it: the same volume under the same light has the same pixel values
   whatever it looks like, a dark albedo stays dark and a view of the shadowed side stays darker
   than one of the lit side. Because k does not depend on the volume, it is a constant for the
-  gradient and the training loss means what it means for the EA layer (docs/experiments/training-through-light.md).
+  gradient and the training loss means what it means for the EA layer (docs/training.md, "The measurements").
 - ``auto``: like a camera's auto-exposure, the 95th percentile luminance of the image's covered
   pixels maps to 0.8 (:func:`auto_exposure`; collections made before metering). It depends on
   the rendered volume: a near-empty render with a few dim covered pixels gets a huge factor.
