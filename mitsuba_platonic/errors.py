@@ -10,13 +10,15 @@ that stop a command.
 - :class:`Interrupted` (a ``KeyboardInterrupt``): Ctrl-C, with a message saying what was saved
   and how to continue. The command line prints it as one line and exits with code 130 (143 for SIGTERM).
 
-The stop signals (:data:`STOP_SIGNALS`): SIGINT (Ctrl-C) and SIGTERM (what ``kill``, ``timeout``,
-Slurm, systemd and container runtimes send) stop a command alike: each raises
+The stop signals (:data:`STOP_SIGNALS`): SIGINT (Ctrl-C), SIGTERM (what ``kill``, ``timeout``,
+Slurm, systemd and container runtimes send) and SIGHUP (a closed terminal or SSH session) stop a
+command alike: each raises
 ``KeyboardInterrupt`` (:func:`remembering_ctrl_c`), or, inside a training loop, asks it to stop
 after the current step (:class:`StopBetweenSteps`), so that what is done is saved and one line
 says so. The first signal is remembered (:func:`stopped_by`): the ``platonic`` console script
-then ends by that signal (:func:`end_by_signal`: exit status 130 or 143 as a shell sees it, so
-that a script running ``platonic train; platonic evaluate`` stops as well).
+then ends by that signal (:func:`end_by_signal`: exit status 130, 143 or 129 as a shell sees it, so
+that a script running ``platonic train; platonic evaluate`` stops as well). A signal that is
+ignored when the command starts stays ignored: under ``nohup`` a hang-up does not stop a training.
 
 A Ctrl-C is not lost where a C extension swallows it: Python raises ``KeyboardInterrupt`` in
 whatever Python code runs when the signal arrives, and that can be code a compiled library
@@ -36,10 +38,13 @@ from contextlib import contextmanager
 from typing import Dict, Iterator, List, Optional
 
 __all__ = ["UserError", "Interrupted", "STOP_SIGNALS", "remembering_ctrl_c", "catch_stop_signals", "raise_if_ctrl_c",
-           "stopped_by", "interrupt_exit_code", "interrupt_caught", "StopBetweenSteps", "end_by_signal"]
+           "stopped_by", "stop_words", "interrupt_exit_code", "interrupt_caught", "StopBetweenSteps", "end_by_signal"]
 
 #: The signals that stop a command as Ctrl-C does, by name (those the platform has).
-STOP_SIGNALS = ("SIGINT", "SIGTERM")
+STOP_SIGNALS = ("SIGINT", "SIGTERM", "SIGHUP")
+
+#: How a command's one line names the signal that stopped it (SIGINT, or none: "interrupted").
+_STOP_WORDS = {"SIGTERM": "terminated (SIGTERM)", "SIGHUP": "hung up (SIGHUP)"}
 
 #: ``pressed``: a stop signal raised (or was swallowed); ``signal``: the first stop signal that came;
 #: ``caught``: the command line has caught the interrupt (:func:`interrupt_caught`): later signals only note.
@@ -122,13 +127,20 @@ def raise_if_ctrl_c() -> None:
 
 
 def stopped_by() -> Optional[int]:
-    """The first stop signal (``signal.SIGINT``, ``signal.SIGTERM``) that came in the command, else None."""
+    """The first stop signal (``signal.SIGINT``, ``SIGTERM``, ``SIGHUP``) that came in the command, else None."""
     return _ctrl_c["signal"]  # type: ignore[return-value]
+
+
+def stop_words() -> str:
+    """What stopped the command, for its one line: 'terminated (SIGTERM)', 'hung up (SIGHUP)', else
+    'interrupted' (Ctrl-C, or a ``KeyboardInterrupt`` raised by code)."""
+    sig = stopped_by()
+    return _STOP_WORDS.get(signal.Signals(sig).name, "interrupted") if sig is not None else "interrupted"
 
 
 def interrupt_exit_code() -> int:
     """The exit code of a command stopped by an interrupt: 128 + the signal (130 for Ctrl-C, 143
-    for SIGTERM), 130 where no signal came (a ``KeyboardInterrupt`` raised by code)."""
+    for SIGTERM, 129 for SIGHUP), 130 where no signal came (a ``KeyboardInterrupt`` raised by code)."""
     sig = stopped_by()
     return 128 + int(sig) if sig is not None else 130
 
@@ -141,16 +153,18 @@ def interrupt_caught() -> None:
 
 
 class StopBetweenSteps:
-    """While it is active (until :meth:`restore`), SIGINT and SIGTERM do not raise: the first is
+    """While it is active (until :meth:`restore`), the stop signals do not raise: the first is
     noted (:attr:`signal`, and :func:`stopped_by`) for a loop that checks it between steps, saves
-    and stops. In the main thread only (elsewhere it does nothing)."""
+    and stops. A signal ignored before (``nohup`` ignores SIGHUP) stays ignored. In the main thread
+    only (elsewhere it does nothing)."""
 
     def __init__(self) -> None:
         self.signal: Optional[int] = None
         self._previous: Dict[int, object] = {}
         if threading.current_thread() is threading.main_thread():
             for s in _stop_signals():
-                self._previous[s] = signal.signal(s, self._stop)
+                if signal.getsignal(s) is not signal.SIG_IGN:
+                    self._previous[s] = signal.signal(s, self._stop)
 
     def _stop(self, signum: int, frame: object) -> None:
         if self.signal is None:

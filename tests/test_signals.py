@@ -44,7 +44,7 @@ def _wait_for(path: Path, process: subprocess.Popen) -> None:
 
 
 @pytest.mark.parametrize("via_shell", [False, True], ids=["train", "bash around train"])
-@pytest.mark.parametrize("sig", [signal.SIGTERM, signal.SIGINT], ids=["SIGTERM", "SIGINT"])
+@pytest.mark.parametrize("sig", [signal.SIGTERM, signal.SIGINT, signal.SIGHUP], ids=["SIGTERM", "SIGINT", "SIGHUP"])
 def test_a_signal_saves_says_so_in_one_line_and_ends_the_process_by_it(tmp_path, sig, via_shell):
     command = _train_command(tmp_path)
     if via_shell:
@@ -65,11 +65,34 @@ def test_a_signal_saves_says_so_in_one_line_and_ends_the_process_by_it(tmp_path,
     assert "next" not in stdout                          # the script's next line did not run
     lines = [line for line in stderr.splitlines() if line.strip()]
     assert len(lines) == 1 and "Traceback" not in stderr, stderr
-    what = "terminated (SIGTERM)" if sig == signal.SIGTERM else "interrupted"
+    what = {signal.SIGTERM: "terminated (SIGTERM)", signal.SIGHUP: "hung up (SIGHUP)"}.get(sig, "interrupted")
     assert lines[0].startswith(f"platonic train: {what}: after step "), lines[0]
     assert "last.pt holds step" in lines[0] and "--resume" in lines[0], lines[0]
     step = read_checkpoint(tmp_path / "runs" / "r").step
     assert step >= 1 and f"holds step {step};" in lines[0], (step, lines[0])
+
+
+def test_a_hang_up_under_nohup_does_not_stop_a_training(tmp_path):
+    """``nohup`` ignores SIGHUP before the command starts: the training keeps that, and runs on."""
+    process = subprocess.Popen(["nohup", *_train_command(tmp_path)], stdout=subprocess.PIPE, stderr=subprocess.PIPE,
+                               text=True, stdin=subprocess.DEVNULL, cwd=tmp_path, start_new_session=True)
+    try:
+        samples = tmp_path / "runs" / "r" / "samples"
+        _wait_for(samples / "step_0000001.png", process)
+        process.send_signal(signal.SIGHUP)
+        seen = len(list(samples.glob("step_*.png")))
+        deadline = time.monotonic() + 300
+        while len(list(samples.glob("step_*.png"))) < seen + 2 and process.poll() is None and time.monotonic() < deadline:
+            time.sleep(0.2)
+        assert process.poll() is None, process.communicate()      # still training after the hang-up
+        assert len(list(samples.glob("step_*.png"))) >= seen + 2
+        process.send_signal(signal.SIGTERM)
+        process.communicate(timeout=600)
+    finally:
+        if process.poll() is None:
+            os.killpg(process.pid, signal.SIGKILL)
+    assert process.returncode == -signal.SIGTERM
+    assert read_checkpoint(tmp_path / "runs" / "r").step >= 3
 
 
 _TWICE = """
@@ -122,13 +145,13 @@ main(["train", "--quiet"])
 """
 
 
-@pytest.mark.parametrize("sig", ["SIGINT", "SIGTERM"])
+@pytest.mark.parametrize("sig", ["SIGINT", "SIGTERM", "SIGHUP"])
 def test_a_signal_while_the_console_script_loads_is_one_line(tmp_path, sig):
     r = subprocess.run([sys.executable, "-c", _WHILE_LOADING.format(sig=sig)], capture_output=True, text=True,
                        timeout=300, stdin=subprocess.DEVNULL, cwd=tmp_path)
     assert r.returncode == -getattr(signal, sig), r.stderr
     err = r.stderr.strip()
-    what = "terminated (SIGTERM)" if sig == "SIGTERM" else "interrupted"
+    what = {"SIGTERM": "terminated (SIGTERM)", "SIGHUP": "hung up (SIGHUP)"}.get(sig, "interrupted")
     assert err == f"platonic: {what}: while starting; nothing was written", err
 
 

@@ -28,7 +28,7 @@ prints its page's address while torch loads (:mod:`.viewer`).
 Exit codes: 0 on success; 2 on a user error (usage errors, unreadable or invalid files, invalid
 options: :class:`~mitsuba_platonic.errors.UserError`, which ``ConfigError``, ``RunError`` and
 ``CLIError`` are, ``BackendError``, and ``OSError`` from files and disks), printed as one line on
-stderr without a traceback; 130 on Ctrl-C and 143 on SIGTERM, one line saying what was saved (the
+stderr without a traceback; 130 on Ctrl-C, 143 on SIGTERM and 129 on SIGHUP, one line saying what was saved (the
 console script, :mod:`mitsuba_platonic.console`, then ends by the signal itself, so that a calling
 shell stops too). Any other exception is a bug and keeps its traceback (exit code 1).
 """

@@ -9,12 +9,11 @@ set (``p.set_defaults(interrupted=...)``), else :data:`STARTING`.
 from __future__ import annotations
 
 import argparse
-import signal
 import sys
 import warnings
 from typing import Optional
 
-from ..errors import Interrupted, stopped_by
+from ..errors import Interrupted, stop_words
 from ..files.fileio import interrupt_behind
 from .args import PROG
 
@@ -35,7 +34,7 @@ def interrupt_message(args: Optional[argparse.Namespace], e: BaseException) -> s
     command = getattr(args, "command", None)
     where = f"{PROG} {command}" if command else PROG
     detail = str(e) if isinstance(e, Interrupted) and str(e) else getattr(args, "interrupted", STARTING)
-    what = "terminated (SIGTERM)" if stopped_by() == getattr(signal, "SIGTERM", None) else "interrupted"
+    what = stop_words()
     return f"{where}: {what}: {one_line(detail)}"
 
 

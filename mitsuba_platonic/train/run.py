@@ -25,10 +25,10 @@ temporaries a killed one left; ``scalars.csv`` is written before each checkpoint
 loses no row); a full disk ends the run with one line naming the file, the good checkpoints
 as they were. ``resume=True`` continues from ``last.pt``;
 because every random draw of a step derives from (seed, step), the continued run matches an
-uninterrupted one step for step (on CPU). Ctrl-C (SIGINT) and SIGTERM (``kill``, ``timeout``,
-Slurm, systemd) finish the current step, save a checkpoint and raise
+uninterrupted one step for step (on CPU). Ctrl-C (SIGINT), SIGTERM (``kill``, ``timeout``,
+Slurm, systemd) and SIGHUP (a closed terminal or SSH session; not under ``nohup``) finish the current step, save a checkpoint and raise
 :class:`~mitsuba_platonic.errors.Interrupted` saying which step it holds (the command line: one
-line on stderr, then the process ends by the signal: exit status 130 or 143), so that
+line on stderr, then the process ends by the signal: exit status 130, 143 or 129), so that
 ``train && evaluate``, and ``train; evaluate`` in a script, stop.
 
 What is saved: a checkpoint is written only on a clean stop (a periodic checkpoint, the last
@@ -141,7 +141,7 @@ def _train(cfg: Config, run_dir: Path, resume: bool, progress: bool, stop_at: Op
     def samples(at: int) -> None:
         write_samples(trainer.inference_model, sample_inputs, run_dir / "samples", at, samples_seed)
 
-    stop = StopBetweenSteps()                                # Ctrl-C and SIGTERM: stop after this step, save
+    stop = StopBetweenSteps()                                # Ctrl-C, SIGTERM, SIGHUP: stop after this step, save
     log = ScalarLog(run_dir, start) if rank == 0 else None
     end = cfg.run.steps if stop_at is None else min(stop_at, cfg.run.steps)
     bar = progress_bar(cfg.run.steps, initial=start, disable=not progress or rank != 0, unit="step", desc="train")
@@ -190,7 +190,7 @@ def _log_step(log: ScalarLog, bar, step: int, scalars: Dict[str, float], rate: f
 
 
 def _stop_together(stop: StopBetweenSteps, world: int) -> bool:
-    """Whether Ctrl-C or SIGTERM came during this step, on any process (so all stop together)."""
+    """Whether a stop signal (Ctrl-C, SIGTERM, SIGHUP) came during this step, on any process (so all stop together)."""
     flag = torch.tensor(float(stop.signal is not None))
     if world > 1:
         dist.all_reduce(flag)                               # stop together
