@@ -1,7 +1,8 @@
 """``platonic quickstart``, ``train`` and ``evaluate``: the pipeline, its training and its scores.
 
 - ``quickstart``: :func:`mitsuba_platonic.quickstart.procedural.quickstart` (a procedural collection) or
-  :func:`mitsuba_platonic.quickstart.photos.photo_quickstart` (``--photos DIR``).
+  :func:`mitsuba_platonic.quickstart.photos.photo_quickstart` (``--photos DIR``) or
+  :func:`mitsuba_platonic.quickstart.generate.generation_quickstart` (``--photos DIR --generate``).
 - ``train``: :func:`mitsuba_platonic.train.train` with a YAML config and ``--set`` overrides.
 - ``evaluate``: :mod:`mitsuba_platonic.evaluate.report`, which declares its own flags.
 """
@@ -12,13 +13,20 @@ import argparse
 import os
 from pathlib import Path
 
-from .args import positive_int
+from .args import CLIError, positive_int
 
 __all__ = ["add_quickstart", "add_train", "add_evaluate"]
 
 
 def _cmd_quickstart(args: argparse.Namespace) -> int:
-    if args.photos is not None:
+    if args.generate and args.photos is None:
+        raise CLIError("--generate: it trains a generator on your photos; expected --photos DIR with it")
+    if args.generate:
+        from ..quickstart.generate import generation_quickstart
+
+        report = generation_quickstart(Path(args.photos), Path(args.out or "quickstart-generate"), steps=args.steps,
+                                       progress=not args.quiet, overrides=args.set or (), overwrite=args.overwrite)
+    elif args.photos is not None:
         from ..quickstart.photos import photo_quickstart
 
         report = photo_quickstart(Path(args.photos), Path(args.out or "quickstart-photos"), steps=args.steps,
@@ -46,19 +54,25 @@ def add_quickstart(sub: "argparse._SubParsersAction") -> None:
                                    "at 32³ through the batched Mitsuba ray marcher (EA), reconstruct held-out images and "
                                    "write turntables, meshes and a report. With --photos DIR: train on your folder of "
                                    "cut-out photos instead and judge the held-out photos' reconstructions from every "
-                                   "side.")
+                                   "side. With --photos DIR --generate: train a generator of new objects of their "
+                                   "class and judge its samples.")
     p.add_argument("--photos", default=None, metavar="DIR",
                    help="train on your own folder of cut-out photos of one class instead (configs/photos.yaml), and "
                         "judge the held-out photos' reconstructions from every side")
+    p.add_argument("--generate", action="store_true",
+                   help="with --photos: train a generator of new objects of the photos' class instead "
+                        "(configs/photos_generate.yaml), judge its random samples against the held-out photos and "
+                        "export 16 samples")
     p.add_argument("--out", default=None,
-                   help="output folder (default: quickstart/, or quickstart-photos/ with --photos): new, empty or "
-                        "an earlier quickstart's, which it continues")
+                   help="output folder (default: quickstart/, quickstart-photos/ with --photos, quickstart-generate/ "
+                        "with --generate): new, empty or an earlier quickstart's, which it continues")
     p.add_argument("--overwrite", action="store_true",
                    help="write into an --out that holds files the quickstart did not write, replacing those of "
-                        "its names (report.md, run/, data/, reconstructions/)")
+                        "its names (report.md, run/, data/, reconstructions/, samples/)")
     p.add_argument("--steps", type=positive_int, default=None, help="training steps (default: the config's)")
     p.add_argument("--set", action="append", metavar="KEY=VALUE",
-                   help="override a key of configs/quickstart.yaml (configs/photos.yaml with --photos), e.g. "
+                   help="override a key of configs/quickstart.yaml (configs/photos.yaml with --photos, "
+                        "configs/photos_generate.yaml with --generate), e.g. "
                         "model.resolution=16 (repeatable)")
     p.add_argument("--quiet", action="store_true")
     p.set_defaults(handler=_cmd_quickstart,

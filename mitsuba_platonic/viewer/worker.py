@@ -66,7 +66,7 @@ def serve(conn: Any) -> None:
     except OSError:
         pass
     import torch                                           # lazy: the child's own imports
-    from .scene import path_pass
+    from .scene import path_pass                           # lazy: Dr.Jit and Mitsuba load in the child, after its nice
 
     volume = None
     while True:
