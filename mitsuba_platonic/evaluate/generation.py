@@ -74,12 +74,13 @@ import torch
 import torch.nn.functional as F
 
 from ..errors import UserError
-from ..render import RenderSettings, render_with
+from ..render import RenderSettings
 from ..views import DEFAULT_ELEVATION, from_angles, sample_views, to_angles, turntable
 from ..volume import voxel_centres, world_to_grid
 from . import image_stats as S
 from . import metrics as M
-from .judge import BANDS, CRITIC_REPEATS, CRITIC_STEPS, SCORE_AZIMUTHS, TRAIN_VIEWS, band_of, two_sample_test
+from .judge import (BANDS, CRITIC_REPEATS, CRITIC_STEPS, SCORE_AZIMUTHS, TRAIN_VIEWS, band_of, render_pairs,
+                    two_sample_test)
 
 __all__ = ["EVAL_RESOLUTION", "FILL", "TURNS", "COLLAPSE", "SAMPLES", "DIVERSITY_VIEWS", "GENERATION_BANDS",
            "run_views", "normalised_occupancy", "turned", "iou_matrix", "nearest_truth", "volume_diversity",
@@ -220,21 +221,10 @@ def collapse_warnings(diversity: Dict[str, Optional[float]], threshold: float = 
     return lines
 
 
-def _render(volumes: torch.Tensor, index: torch.Tensor, views: torch.Tensor, settings: RenderSettings, seed: int,
-            chunk: int = 64) -> torch.Tensor:
-    """``(P, C, R, R)``: volume ``index[p]`` from ``views[p]``, clipped to [0, 1]."""
-    out = []
-    with torch.no_grad():
-        for i in range(0, len(index), chunk):
-            out.append(render_with(volumes[index[i:i + chunk]].contiguous(), views[i:i + chunk].contiguous(),
-                                   settings, seed).detach().float().cpu().clamp(0.0, 1.0))
-    return torch.cat(out)
-
-
 def _random_renders(volumes: torch.Tensor, train: Any, k: int, settings: RenderSettings, seed: int) -> torch.Tensor:
     """Each volume at ``k`` random p_view views (seeded): ``(len(volumes) k, C, R, R)``."""
     index = torch.arange(len(volumes)).repeat_interleave(k)
-    return _render(volumes, index, run_views(train, len(index), seed), settings, seed)
+    return render_pairs(volumes, index, run_views(train, len(index), seed), settings, seed)
 
 
 def _mean(values: Sequence[Optional[float]]) -> Optional[float]:
@@ -296,7 +286,7 @@ def judge_generation(model: Any, train_photos: torch.Tensor, test_photos: torch.
     _, θ = to_angles(run_views(train, n_samples, seed + 7))
     azimuths = list(SCORE_AZIMUTHS)
     phi = torch.tensor(azimuths, dtype=torch.float64).repeat_interleave(n_samples)
-    table = _render(volumes, torch.arange(n_samples).repeat(len(azimuths)),
+    table = render_pairs(volumes, torch.arange(n_samples).repeat(len(azimuths)),
                     from_angles(phi, θ.double().repeat(len(azimuths))), settings, seed)
     table = table.reshape(len(azimuths), n_samples, *table.shape[1:])
     bands: Dict[str, torch.Tensor] = {"random": rand}
@@ -309,7 +299,7 @@ def judge_generation(model: Any, train_photos: torch.Tensor, test_photos: torch.
         train_renders = [_random_renders(train_volumes, train, train_views, settings, seed + 1000 + r)
                          for r in range(repeats)]
         c2st = two_sample_test(train_photos, train_renders, test_photos, bands, seed, steps, repeats, batch)
-    shared = torch.stack([_render(volumes, torch.arange(n_samples), w.expand(n_samples, 3), settings, seed)
+    shared = torch.stack([render_pairs(volumes, torch.arange(n_samples), w.expand(n_samples, 3), settings, seed)
                           for w in DIVERSITY_VIEWS])                           # (V, n, C, R, R)
     diversity = {"volumes": volume_diversity(list(volumes)),
                  "renders": _mean([image_diversity(x) for x in shared]),

@@ -79,7 +79,8 @@ from . import image_stats as S
 
 __all__ = ["BANDS", "SCORE_AZIMUTHS", "STAT_VIEWS", "CRITIC_STEPS", "CRITIC_REPEATS", "TRAIN_VIEWS",
            "band_of", "Critic", "two_sample_test", "view_statistics", "Judgement", "judge", "judge_table",
-           "stats_table", "random_renders", "turntable_renders", "volumes_and_elevations", "train_critic"]
+           "stats_table", "render_pairs", "random_renders", "turntable_renders", "volumes_and_elevations",
+           "train_critic"]
 
 #: What a reconstruct function answers: volumes in the input camera's frame, or (volumes, the input
 #: cameras' elevations in degrees) in the object's frame (:func:`judge`).
@@ -234,7 +235,7 @@ def _score_critics(train_photos: torch.Tensor, train_renders: Sequence[torch.Ten
                                     + float((critic(train_renders[r]) <= 0).float().mean())))
 
 
-def _render_pairs(volumes: torch.Tensor, index: torch.Tensor, views: torch.Tensor, settings: RenderSettings,
+def render_pairs(volumes: torch.Tensor, index: torch.Tensor, views: torch.Tensor, settings: RenderSettings,
                   seed: int, chunk: int = 64) -> torch.Tensor:
     """``(P, C, R, R)``: volume ``index[p]`` rendered from ``views[p]`` for every pair p, in chunks of
     pairs, clipped to [0, 1]."""
@@ -252,7 +253,7 @@ def turntable_renders(volumes: torch.Tensor, elevations: torch.Tensor, azimuths:
     m = len(volumes)
     phi = torch.tensor(list(azimuths), dtype=torch.float64).repeat_interleave(m)                 # (A M,)
     views = from_angles(phi, elevations.double().repeat(len(azimuths)))
-    out = _render_pairs(volumes, torch.arange(m).repeat(len(azimuths)), views, settings, seed)
+    out = render_pairs(volumes, torch.arange(m).repeat(len(azimuths)), views, settings, seed)
     return out.reshape(len(azimuths), m, *out.shape[1:])
 
 
@@ -262,7 +263,7 @@ def random_renders(volumes: torch.Tensor, elevations: torch.Tensor, k: int, sett
     g = torch.Generator().manual_seed(seed)
     phi = torch.rand(len(volumes) * k, generator=g, dtype=torch.float64) * 360.0 - 180.0
     index = torch.arange(len(volumes)).repeat_interleave(k)
-    return _render_pairs(volumes, index, from_angles(phi, elevations.double()[index]), settings, seed)
+    return render_pairs(volumes, index, from_angles(phi, elevations.double()[index]), settings, seed)
 
 
 def volumes_and_elevations(out: Any, n: int, what: str) -> Tuple[torch.Tensor, torch.Tensor]:
