@@ -132,7 +132,7 @@ def test_config_files_load(tmp_path):
     configs = sorted((Path(__file__).resolve().parents[1] / "configs").glob("*.yaml"))
     assert configs
     for path in configs:
-        if path.name in ("photos.yaml", "photos64.yaml"):      # templates for the user's folder
+        if path.name in ("photos.yaml", "photos64.yaml", "photos_generate.yaml"):   # templates for the user's folder
             with pytest.raises(ConfigError, match="data.path"):
                 load_config(path)
             cfg = load_config(path, [f"data.path={tmp_path}"])
