@@ -48,7 +48,7 @@ def scored(monkeypatch):
 
     def scoring(*args):
         calls.append(args)
-        return [E.Row("run (platonic, step 1)", "EA", pairs=[{"iou": 1.0}])], ["synthetic"], []
+        return [E.Row("run (platonic, step 1)", "EA", pairs=[{"iou": 1.0}])], ["synthetic"], [], []   # rows, notes, photo and generation sections
 
     monkeypatch.setattr(E, "_evaluate_runs", scoring)
     return calls
