@@ -34,6 +34,12 @@ def _train_command(tmp_path: Path):
             *[arg for s in sets for arg in ("--set", s)]]
 
 
+def _hang_up_as_a_terminal_would() -> None:
+    """In the child: SIGHUP with its default action, as under a terminal (the test itself may run under
+    ``nohup``, which a child would inherit as an ignored SIGHUP)."""
+    signal.signal(signal.SIGHUP, signal.SIG_DFL)
+
+
 def _wait_for(path: Path, process: subprocess.Popen) -> None:
     """Until ``path`` exists (training has run a step); fail with its output if the process ends first."""
     while not path.exists():
@@ -50,7 +56,8 @@ def test_a_signal_saves_says_so_in_one_line_and_ends_the_process_by_it(tmp_path,
     if via_shell:
         command = ["bash", "-c", f"{shlex.join(command)}; echo next"]
     process = subprocess.Popen(command, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
-                               stdin=subprocess.DEVNULL, cwd=tmp_path, start_new_session=True)
+                               stdin=subprocess.DEVNULL, cwd=tmp_path, start_new_session=True,
+                               preexec_fn=_hang_up_as_a_terminal_would)
     try:
         _wait_for(tmp_path / "runs" / "r" / "samples" / "step_0000001.png", process)
         if via_shell:
@@ -148,7 +155,7 @@ main(["train", "--quiet"])
 @pytest.mark.parametrize("sig", ["SIGINT", "SIGTERM", "SIGHUP"])
 def test_a_signal_while_the_console_script_loads_is_one_line(tmp_path, sig):
     r = subprocess.run([sys.executable, "-c", _WHILE_LOADING.format(sig=sig)], capture_output=True, text=True,
-                       timeout=300, stdin=subprocess.DEVNULL, cwd=tmp_path)
+                       timeout=300, stdin=subprocess.DEVNULL, cwd=tmp_path, preexec_fn=_hang_up_as_a_terminal_would)
     assert r.returncode == -getattr(signal, sig), r.stderr
     err = r.stderr.strip()
     what = {"SIGTERM": "terminated (SIGTERM)", "SIGHUP": "hung up (SIGHUP)"}.get(sig, "interrupted")
