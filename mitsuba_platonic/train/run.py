@@ -213,7 +213,7 @@ def _close_loop(cfg: Config, clean: bool, step: int, rank: int, world: int, trai
                     samples(step)
         except OSError as e:                                 # the final samples on a full disk
             clean = False
-            raise RunError(f"after step {step}: {e}; {checkpoints.held()}") from None
+            raise RunError(f"after step {step}: {e}; {checkpoints.held()}{checkpoints.no_room(e)}") from None
         except BaseException:
             clean = False
             raise
@@ -258,7 +258,7 @@ def _say_what_failed(e: BaseException, where: str, trainer: Trainer, checkpoints
     if isinstance(e, RunError):
         return
     if isinstance(e, (UserError, OSError)):                  # the user's input, a full disk: one line
-        raise RunError(f"training failed {where}: {e}; {checkpoints.kept()}") from e
+        raise RunError(f"training failed {where}: {e}; {checkpoints.kept()}{checkpoints.no_room(e)}") from e
     bad = non_finite(trainer.state_dict()) if isinstance(e, ValueError) else None
     if bad is not None:                                      # a diverged run (NaN or Inf in the weights), not a bug
         raise RunError(f"training failed {where}: {e} (the training state is not finite: NaN or Inf in "
