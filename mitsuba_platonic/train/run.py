@@ -121,6 +121,18 @@ def _warn_ignored_settings(cfg: Config) -> None:
                       f"{'them' if len(ignored) > 1 else 'it'}", stacklevel=2)
 
 
+def _warn_batch_beyond_images(cfg: Config, n_images: int) -> None:
+    """Warn (naming the counts) where ``train.batch_size`` exceeds the ``n_images`` training images:
+    a step draws its batch with replacement, so the batch repeats images (each with its own views)."""
+    batch = cfg.train.batch_size
+    if batch > n_images:
+        warnings.warn(f"train.batch_size: {batch} is more than the {n_images} training image"
+                      f"{'s' if n_images != 1 else ''}; a step draws its batch with replacement, so each image "
+                      f"comes about {batch / n_images:.3g} times in every batch (under other random views), at the cost of "
+                      f"{batch / n_images:.3g} batches of {n_images}; expected at most {n_images} (or add images)",
+                      stacklevel=3)
+
+
 def _train(cfg: Config, run_dir: Path, resume: bool, progress: bool, stop_at: Optional[int],
            rank: int, world: int, local_rank: int, config_file: Optional[Path] = None) -> Path:
 
@@ -131,6 +143,8 @@ def _train(cfg: Config, run_dir: Path, resume: bool, progress: bool, stop_at: Op
     if world > 1:
         dist.barrier()                                       # rank 0 checked the folder first
     data = _training_data(cfg, run_dir, resume, progress, rank, world)
+    if rank == 0:
+        _warn_batch_beyond_images(cfg, len(data.images))
     trainer = Trainer(cfg, data, device, rank, world)
     checkpoints = Checkpoints(run_dir, cfg)                  # and the newest good one on disk
     start = checkpoints.resume(trainer, device, warn=rank == 0) if resume else 0
