@@ -9,12 +9,12 @@ from __future__ import annotations
 
 import argparse
 from pathlib import Path
-from typing import Callable, List
+from typing import Callable, List, Mapping, Optional, Sequence
 
 from ..errors import UserError
 
 __all__ = ["PROG", "CLIError", "positive_int", "non_negative_int", "resolution", "positive_float", "seed",
-           "MAX_SEED", "parse_models", "check_out_folder"]
+           "MAX_SEED", "parse_models", "check_out_folder", "check_settings_once"]
 
 PROG = "platonic"
 
@@ -74,3 +74,26 @@ def check_out_folder(out: Path) -> None:
     """Refuse an ``--out`` that exists and is not a folder (before any work)."""
     if out.exists() and not out.is_dir():
         raise CLIError(f"--out {str(out)!r} exists and is not a folder")
+
+
+#: How long a ``--set`` item is quoted in a message at most (the rest cut, with an ellipsis).
+_QUOTED = 80
+
+
+def _flag(item: str) -> str:
+    return f"--set {item if len(item) <= _QUOTED else item[:_QUOTED - 1] + '…'}"
+
+
+def check_settings_once(sets: Optional[Sequence[str]], flags: Mapping[str, str] = {}) -> None:
+    """Refuse a config key that two ``--set`` items give, or that a ``--set`` item and a flag both
+    give (``flags``: key → the flag as given, ``{'run.steps': '--steps 5'}``), naming both: one of
+    them would win without a word. An item without ``=`` is left to the config's own message."""
+    seen = {}
+    for item in sets or ():
+        if "=" not in item:
+            continue
+        key = item.split("=", 1)[0].strip()
+        first = flags.get(key) or (_flag(seen[key]) if key in seen else None)
+        if first is not None:
+            raise CLIError(f"{key}: given twice, by {first} and by {_flag(item)}; expected one setting of it")
+        seen[key] = item

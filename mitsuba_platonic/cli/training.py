@@ -13,7 +13,7 @@ import argparse
 import os
 from pathlib import Path
 
-from .args import CLIError, positive_int
+from .args import CLIError, check_settings_once, positive_int
 
 __all__ = ["add_quickstart", "add_train", "add_evaluate"]
 
@@ -21,6 +21,8 @@ __all__ = ["add_quickstart", "add_train", "add_evaluate"]
 def _cmd_quickstart(args: argparse.Namespace) -> int:
     if args.generate and args.photos is None:
         raise CLIError("--generate: it trains a generator on your photos; expected --photos DIR with it")
+    fixed = {"run.steps": f"--steps {args.steps}"} if args.steps is not None else {}
+    check_settings_once(args.set, fixed)
     if args.generate:
         from ..quickstart.generate import generation_quickstart
 
@@ -84,6 +86,7 @@ def _cmd_train(args: argparse.Namespace) -> int:
     from ..config import load_config
     from ..train import train
 
+    check_settings_once(args.set)
     cfg = load_config(args.config, args.set or ())
     config_file = Path(args.config) if args.config else None
     run_dir = train(cfg, resume=args.resume, progress=not args.quiet, config_file=config_file)
