@@ -281,6 +281,7 @@ def test_exports_stay_inside_the_output_folder(tmp_path):
     assert [p.name for p in paths] == ["escape.png", "etc_passwd.png", "a_______b.png", "view.png", "view_2.png",
                                        "view_3.png"]
     assert clean_name("x" * 100) == "x" * 64
+    assert clean_name("Stühle/木 ñ") == "Stühle_木_ñ"                       # readable in any script, never a path
     vol = ex.volume(test_volume(8, "figure", "ea")[0], "../shape")
     assert sorted(p.name for p in vol) == ["shape.npz", "shape.ply", "shape.vol"]
     assert not (tmp_path / "shape.npz").exists()

@@ -21,7 +21,6 @@
 from __future__ import annotations
 
 import math
-import re
 import time
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -35,6 +34,7 @@ from PIL import Image
 from ..errors import UserError
 from ..export import extract_mesh, save_ply
 from ..files.fileio import atomic_write
+from ..files.names import readable_name
 from ..files.volume_io import save_volume
 from ..render import RenderSettings, render_with
 from ..render.window import Window, window_or_none
@@ -469,13 +469,11 @@ def open_source(source: PathLike, photo: Optional[PathLike] = None, array: Optio
 
 # --------------------------------------------------------------------------- exports
 
-_UNSAFE = re.compile(r"[^A-Za-z0-9_+-]")
-
-
 def clean_name(text: str, default: str = "view") -> str:
-    """A page's name for an export → a plain file stem: letters, digits and ``_ + -`` only (every other
-    character, the path separators and dots included, becomes ``_``), at most 64 characters."""
-    name = _UNSAFE.sub("_", str(text).strip())[:64].strip("_")
+    """A page's name for an export → a plain file stem: letters and digits of any script and ``_ + -``
+    only (:func:`~mitsuba_platonic.files.names.readable_name`: every other character, the path
+    separators and dots included, becomes ``_``), at most 64 characters."""
+    name = readable_name(str(text).strip(), keep="_+-")[:64].strip("_")
     return name or default
 
 
