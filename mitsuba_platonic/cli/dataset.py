@@ -9,6 +9,7 @@ from pathlib import Path
 from typing import Tuple, Union
 
 from ..files.fileio import confined
+from ..files.outputs import output_lock
 from .args import CLIError, positive_float, positive_int, seed
 
 __all__ = ["add_make_dataset"]
@@ -74,7 +75,7 @@ def _cmd_make_dataset(args: argparse.Namespace) -> int:
     _check_dataset_flags(args)
     out = Path(args.out)
     if args.preview:
-        with confined(out):                                  # no contact sheet written through a link in --out
+        with confined(out), output_lock(out, "make-dataset"):   # no sheet written through a link; one command at a time
             for c in classes:
                 path = contact_sheet(c, out / f"preview_{c}.png", n_shapes=args.preview_shapes,
                                      resolution=args.resolution, seed=args.seed)
