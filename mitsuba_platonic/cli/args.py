@@ -80,20 +80,13 @@ def check_out_folder(out: Path) -> None:
 _QUOTED = 80
 
 
-def _flag(item: str) -> str:
-    return f"--set {item if len(item) <= _QUOTED else item[:_QUOTED - 1] + '…'}"
-
-
-def check_settings_once(sets: Optional[Sequence[str]], flags: Mapping[str, str] = {}) -> None:
-    """Refuse a config key that two ``--set`` items give, or that a ``--set`` item and a flag both
-    give (``flags``: key → the flag as given, ``{'run.steps': '--steps 5'}``), naming both: one of
-    them would win without a word. An item without ``=`` is left to the config's own message."""
-    seen = {}
+def check_settings_once(sets: Optional[Sequence[str]], flags: Mapping[str, str]) -> None:
+    """Refuse a config key that a flag and a ``--set`` item both give (``flags``: key → the flag as
+    given, ``{'run.steps': '--steps 5'}``), naming both: one of them would win without a word. (Two
+    ``--set`` items of one key are one spelling given twice: the later wins, as ``--set``'s help says.)
+    An item without ``=`` is left to the config's own message."""
     for item in sets or ():
-        if "=" not in item:
-            continue
-        key = item.split("=", 1)[0].strip()
-        first = flags.get(key) or (_flag(seen[key]) if key in seen else None)
-        if first is not None:
-            raise CLIError(f"{key}: given twice, by {first} and by {_flag(item)}; expected one setting of it")
-        seen[key] = item
+        key = item.split("=", 1)[0].strip() if "=" in item else None
+        if key in flags:
+            shown = item if len(item) <= _QUOTED else item[:_QUOTED - 1] + "…"
+            raise CLIError(f"{key}: given twice, by {flags[key]} and by --set {shown}; expected one of them")

@@ -75,7 +75,8 @@ def add_quickstart(sub: "argparse._SubParsersAction") -> None:
     p.add_argument("--set", action="append", metavar="KEY=VALUE",
                    help="override a key of configs/quickstart.yaml (configs/photos.yaml with --photos, "
                         "configs/photos_generate.yaml with --generate), e.g. "
-                        "model.resolution=16 (repeatable)")
+                        "model.resolution=16 (repeatable; of two settings of one key the later wins; --steps and "
+                        "a --set of run.steps are refused together)")
     p.add_argument("--quiet", action="store_true")
     p.set_defaults(handler=_cmd_quickstart,
                    interrupted="nothing was written beyond what the folder held; run the same command again to "
@@ -86,7 +87,6 @@ def _cmd_train(args: argparse.Namespace) -> int:
     from ..config import load_config
     from ..train import train
 
-    check_settings_once(args.set)
     cfg = load_config(args.config, args.set or ())
     config_file = Path(args.config) if args.config else None
     run_dir = train(cfg, resume=args.resume, progress=not args.quiet, config_file=config_file)
@@ -107,7 +107,8 @@ def add_train(sub: "argparse._SubParsersAction") -> None:
     p.add_argument("--config", default=None,
                    help="YAML config: a file, or a packaged config's name (e.g. paper, or configs/paper.yaml "
                         "where no such file is here) (default: the built-in defaults)")
-    p.add_argument("--set", action="append", metavar="KEY=VALUE", help="override a config key (repeatable)")
+    p.add_argument("--set", action="append", metavar="KEY=VALUE",
+                   help="override a config key (repeatable; of two settings of one key the later wins)")
     p.add_argument("--resume", action="store_true", help="continue the run from its last checkpoint")
     p.add_argument("--quiet", action="store_true", help="no progress bars")
     p.set_defaults(handler=_cmd_train,
