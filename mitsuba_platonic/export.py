@@ -26,6 +26,7 @@ import torch.nn.functional as F
 
 from .errors import UserError
 from .files.fileio import atomic_write, make_folder, remove
+from .files.names import readable_name
 from .files.volume_io import save_volume
 from .images import composite, linear_to_srgb, save_png, to_hwc
 from .render.frames import display_frames, save_gif, turntable_frames
@@ -165,29 +166,29 @@ def export_held_out(model: "Model", images: torch.Tensor, folder: PathLike, n: i
 #: The files :func:`export_volume` writes per name (``.ply`` only for reconstructions).
 EXPORT_EXTENSIONS = (".npz", ".vol", ".gif", ".ply")
 
-_UNSAFE = re.compile(r"[^A-Za-z0-9._+-]")
 
 
 def output_names(images: Sequence[PathLike]) -> List[str]:
     """One distinct output name per input image, all inside the output folder.
 
     The name is the image's file name without its last extension (``shot.v1.png`` → ``shot.v1``),
-    with characters other than letters, digits and ``. _ + -`` replaced by ``_`` and leading dots by
-    ``_`` (``..png`` → ``_``: never ``.``, ``..`` or a hidden file). A name an earlier input (in
+    with characters other than letters and digits of any script (``Tür.jpg`` → ``Tür``;
+    :func:`~mitsuba_platonic.files.names.readable_name`) and ``. _ + -`` replaced by ``_`` and leading
+    dots by ``_`` (``..png`` → ``_``: never ``.``, ``..`` or a hidden file). A name an earlier input (in
     command-line order) already took, compared without regard to case, gets ``_2``, ``_3``, …
     (``a/x.png b/x.png`` → ``x``, ``x_2``).
     """
     names: List[str] = []
     taken = set()
     for image in images:
-        base = _UNSAFE.sub("_", Path(image).stem)
+        base = readable_name(Path(image).stem, keep="._+-")
         if base.startswith(".") or not base:
             base = "_" + base.lstrip(".")
         name, k = base, 1
-        while name.lower() in taken:
+        while name.casefold() in taken:
             k += 1
             name = f"{base}_{k}"
-        taken.add(name.lower())
+        taken.add(name.casefold())
         names.append(name)
     return names
 

@@ -291,3 +291,13 @@ def test_a_config_file_larger_than_any_config_is_refused_unread(tmp_path):
     big.write_text("run:\n  name: " + "x" * (MAX_TEXT_BYTES + 1) + "\n")
     with pytest.raises(ValueError, match=rf"config file '{big}' is [0-9,]+ bytes, more than the "):
         load_config(big)
+
+
+def test_quickstart_steps_and_a_set_of_run_steps_are_refused_naming_both(tmp_path):
+    """--steps is run.steps: with a --set of it too, one of them would win without a word."""
+    code, _, err = run_cli(["quickstart", "--steps", "5", "--set", "model.width=4", "--set", "run.steps=10",
+                            "--out", str(tmp_path / "q")])
+    assert code == 2
+    assert one_line(err, "quickstart", kind="error") == ("platonic quickstart: error: run.steps: given twice, by "
+                                                         "--steps 5 and by --set run.steps=10; expected one of them")
+    assert not (tmp_path / "q").exists()

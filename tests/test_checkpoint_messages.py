@@ -159,3 +159,44 @@ def test_convert_checkpoint_asks_on_a_terminal_and_a_no_converts_nothing(run_dir
     assert code == 1 and asked == ["Convert? [y/N] "]
     assert f"{last} names posix.system" in stdout and "nothing was converted" in stdout
     assert not marker.exists() and last.read_bytes() == before
+
+
+def test_a_checkpoint_past_the_size_bound_is_refused_before_a_byte_is_read(run_dir, tmp_path, monkeypatch):
+    """A last.pt larger than MAX_CHECKPOINT_BYTES (sparse here: no disk used) is refused in one line,
+    torch.load never called on it; the run falls back to its newest numbered checkpoint with a warning."""
+    from mitsuba_platonic.files import checkpoint as C
+    from mitsuba_platonic.files.fileio import MAX_CHECKPOINT_BYTES
+
+    last = run_dir / "checkpoints" / "last.pt"
+    os.truncate(last, MAX_CHECKPOINT_BYTES + 1)
+    real, loaded = torch.load, []
+
+    def watched(path, *args, **kwargs):
+        loaded.append(Path(path).name)
+        return real(path, *args, **kwargs)
+
+    monkeypatch.setattr(C.torch, "load", watched)
+    with pytest.raises(C.RunError) as info:
+        load_checkpoint(last)
+    assert str(info.value) == (f"checkpoint {str(last)!r} is {MAX_CHECKPOINT_BYTES + 1:,} bytes, more than the "
+                               f"{MAX_CHECKPOINT_BYTES:,} such a file may be; nothing was read from it: expected a "
+                               f"checkpoint platonic train wrote (tens to hundreds of MB)")
+    assert loaded == []
+    code, _, stderr = _generate(run_dir, tmp_path)
+    assert code == 0, stderr
+    warning = one_line(stderr, "generate", "warning")
+    assert warning.startswith(f"platonic generate: warning: could not load {last} ({MAX_CHECKPOINT_BYTES + 1:,} "
+                              f"bytes, more than the {MAX_CHECKPOINT_BYTES:,} a checkpoint may be); using"), warning
+    assert "step_0000004.pt (step 4)" in warning and "last.pt" not in loaded, warning
+
+
+def test_a_fifo_as_last_pt_is_passed_over_without_blocking(run_dir, tmp_path):
+    last = run_dir / "checkpoints" / "last.pt"
+    last.unlink()
+    os.mkfifo(last)
+    code, _, stderr = _generate(run_dir, tmp_path)
+    assert code == 0, stderr
+    warning = one_line(stderr, "generate", "warning")
+    assert f"could not load {last} (not a checkpoint file); using" in warning, warning
+    with pytest.raises(R.RunError, match=r"no checkpoint at .*last.pt: checkpoint '.*last.pt' is a FIFO"):
+        load_checkpoint(last)

@@ -166,6 +166,34 @@ def test_cli_make_dataset_sides_and_its_refusals(tmp_path, capsys):
     assert not (tmp_path / "x").exists() and not (tmp_path / "y" / "images").exists()
 
 
+@pytest.mark.parametrize("flags, message", [
+    (["--formation", "physical", "--renderer", "mitsuba"],
+     "--renderer mitsuba: --formation physical always path-traces with Mitsuba and would ignore it; drop it, or "
+     "use --formation vh, ao or ea"),
+    (["--fov", "60"], "--fov: only --camera perspective reads it, and --camera orthographic would ignore it; "
+                      "drop it or add --camera perspective"),
+    (["--camera", "orthographic", "--fov", "60", "--distance", "3"],
+     "--fov, --distance: only --camera perspective reads them, and --camera orthographic would ignore them"),
+])
+def test_cli_make_dataset_refuses_flags_its_formation_or_camera_would_ignore(tmp_path, capsys, flags, message):
+    """A flag the chosen formation or camera never reads is refused in one line before anything is written."""
+    from mitsuba_platonic.cli import main
+    out = tmp_path / "d"
+    assert main(["make-dataset", "--class", CLASS, "--shapes", "1", "--views", "1", "--resolution", "16",
+                 *flags, "--out", str(out), "--quiet"]) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and f"platonic make-dataset: error: {message}" in err, err
+    assert not out.exists()
+
+
+def test_cli_make_dataset_perspective_takes_fov_and_defaults_the_renderer(tmp_path):
+    from mitsuba_platonic.cli import main
+    assert main(["make-dataset", "--class", CLASS, "--shapes", "1", "--views", "1", "--resolution", "16",
+                 "--camera", "perspective", "--fov", "50", "--out", str(tmp_path / "d"), "--quiet"]) == 0
+    spec = load_manifest(tmp_path / "d")["spec"]
+    assert spec["fov"] == 50.0 and spec["camera"] == "perspective" and spec["renderer"] == "closed_form"
+
+
 def test_resume_finishes_without_rerendering(tmp_path, monkeypatch):
     spec = _spec(n_shapes=3, views_per_shape=2)
     calls = []

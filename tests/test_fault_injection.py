@@ -305,6 +305,57 @@ def test_a_full_disk_while_saving_a_checkpoint_keeps_the_old_one(tmp_path, monke
     assert path.read_bytes() == old and temporaries(tmp_path) == []
 
 
+def test_a_full_disk_at_the_checkpoint_write_says_what_is_kept_and_what_to_free(base_run, tmp_path, monkeypatch):
+    """ENOSPC injected at the checkpoint's write (the temporary's ``open``): the run's one line names
+    the file, the step the untouched last.pt still holds, the disk and what to free there, and how
+    to go on; every checkpoint is as it was."""
+    from mitsuba_platonic.files import checkpoint as C
+
+    run_dir = _copy_run(base_run, tmp_path)
+    checkpoints = _snapshot(run_dir / "checkpoints")
+    real = C.atomic_write
+
+    def no_room(path, write, durable=False):
+        def full(tmp):
+            raise OSError(errno.ENOSPC, os.strerror(errno.ENOSPC), str(tmp))
+        return real(path, full, durable)
+
+    monkeypatch.setattr(C, "atomic_write", no_room)
+    argv = ["train", "--resume", "--quiet", *_set(_tiny_overrides(tmp_path / "runs", base_run[1], "run.steps=6"))]
+    code, _, stderr = run_cli(argv)
+    assert code == 2
+    err = one_line(stderr, "train", kind="error")
+    last = run_dir / "checkpoints" / "last.pt"
+    assert err.startswith(f"platonic train: error: step 6: the checkpoint could not be written ([Errno 28] No space left on device: "
+                          f"'{last}'); nothing was saved: {last} still holds step 4; the disk holding "
+                          f"{run_dir / 'checkpoints'} is full ("), err
+    assert err.endswith("free now): free space on it (other runs and collections; run.keep_checkpoints=2 keeps "
+                        "fewer step_*.pt), or write elsewhere; then run the same command with --resume to go on "
+                        "from step 4"), err
+    assert _snapshot(run_dir / "checkpoints") == checkpoints and read_checkpoint(run_dir).step == 4
+    assert temporaries(run_dir) == []
+
+
+def test_a_full_disk_no_command_explained_says_what_is_kept_and_what_to_free(tmp_path):
+    """An ``OSError`` of a full disk reaching the command line (an export, a report): the file, that
+    writes are whole or not at all, the disk of the file and what to do; other OS errors as they are."""
+    import argparse
+
+    from mitsuba_platonic.cli.exits import error_message
+
+    args = argparse.Namespace(command="evaluate")
+    path = tmp_path / "eval" / "report.md"
+    line = error_message(args, OSError(errno.ENOSPC, os.strerror(errno.ENOSPC), str(path)))
+    assert line.startswith(f"platonic evaluate: error: [Errno 28] No space left on device: '{path}'; {path} was not "
+                           f"written (files are written whole or not at all: a copy there before is as it was, and "
+                           f"the files written before it are complete); the disk holding {tmp_path} is full ("), line
+    assert line.endswith("free now): free space on it, or write elsewhere; then run the same command again"), line
+    quota = error_message(args, OSError(errno.EDQUOT, os.strerror(errno.EDQUOT), str(path)))
+    assert f"{tmp_path}: its disk quota is used up (" in quota, quota
+    denied = error_message(args, PermissionError(errno.EACCES, os.strerror(errno.EACCES), str(path)))
+    assert denied == f"platonic evaluate: error: [Errno 13] Permission denied: '{path}'"
+
+
 def test_atomic_write_names_the_file_of_a_failed_write(tmp_path):
     """A writer that reports a full disk as its own exception (Mitsuba's FileStream, OpenEXR) is an
     OSError naming the file; any other exception of a writer is a bug and keeps its type."""
@@ -400,8 +451,13 @@ def test_resume_on_a_disk_that_fills_up_is_one_line_and_keeps_the_run(base_run, 
     if where == "checkpoints":
         last = run_dir / "checkpoints" / "last.pt"
         assert f"'{last}'" in err and f"{last} still holds step 4" in err, err
+        assert f"the disk holding {run_dir / 'checkpoints'} is full (" in err, err
+        assert "free space on it (other runs and collections; run.keep_checkpoints=" in err, err
+        assert err.endswith("then run the same command with --resume to go on from step 4"), err
     else:
         assert f"'{run_dir / 'config.yaml'}'" in err, err
+        assert f"{run_dir / 'config.yaml'} was not written (files are written whole or not at all" in err, err
+        assert f"the disk holding {run_dir} is full (" in err and "or write elsewhere" in err, err
         assert _snapshot(run_dir)["config.yaml"] == files["config.yaml"]
     assert _snapshot(run_dir / "checkpoints") == checkpoints
     assert temporaries(run_dir) == [] and not (run_dir / "run.lock").exists()

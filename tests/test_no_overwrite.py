@@ -127,6 +127,18 @@ def test_reconstruct_gives_each_input_its_own_name_inside_out(run, tmp_path, mon
         assert str(i) in stdout
 
 
+def test_output_names_keep_the_letters_of_any_script():
+    """Non-ASCII photo names stay readable (NFC: a decomposed ü is the typed one); what is no letter,
+    mark or digit (a space, a bidirectional override, an undecodable byte) becomes ``_``."""
+    import unicodedata
+
+    from mitsuba_platonic.export import output_names
+
+    decomposed = unicodedata.normalize("NFD", "Tür.jpg")
+    assert output_names(["ñandú.png", "木の椅子.jpg", "हिन्दी.png", decomposed, "TÜR.png", "a b\u202e.png",
+                         "bad\udcff.png"]) == ["ñandú", "木の椅子", "हिन्दी", "Tür", "TÜR_2", "a_b_", "bad_"]
+
+
 def test_reconstruct_refuses_to_replace_an_earlier_calls_results(run, tmp_path):
     photo = _photo(tmp_path / "x.png", run[1])
     out = tmp_path / "rec"

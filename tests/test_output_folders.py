@@ -21,6 +21,7 @@ from mitsuba_platonic.errors import Interrupted
 from mitsuba_platonic.evaluate import report as E
 from mitsuba_platonic.files.outputs import LOCK, MARKER, made_by, output_lock
 from cli_runner import one_line, run_cli
+from tiny_shapes import TINY
 
 
 def _snapshot(folder: Path):
@@ -276,6 +277,25 @@ def test_every_output_folder_command_takes_the_lock(tmp_path, benched, stopped_t
         assert f"pid {os.getpid()}, platonic evaluate" in one_line(stderr, command, "error")
         assert sorted(p.name for p in out.iterdir()) == [LOCK] and not benched and not stopped_training
     assert not out.exists()                                           # made for the lock alone: removed again
+
+
+def test_make_dataset_preview_takes_the_lock(tmp_path, tiny_class):
+    """Contact sheets into an ``--out`` another command is writing: refused in one line naming it,
+    no sheet written; with the folder free they are written and the lock is gone."""
+    out = tmp_path / "o"
+    argv = ["make-dataset", "--preview", "--class", TINY, "--preview-shapes", "1", "--resolution", "16",
+            "--out", str(out)]
+    with output_lock(out, "evaluate"):
+        code, _, stderr = run_cli(argv)
+        assert code == 2, stderr
+        err = one_line(stderr, "make-dataset", "error")
+        assert err == (f"platonic make-dataset: error: --out {out} is in use by another command (pid {os.getpid()}, "
+                       f"platonic evaluate; lock {out / LOCK}); nothing was written: wait for it to end, or choose "
+                       f"another --out"), err
+        assert sorted(p.name for p in out.iterdir()) == [LOCK]
+    code, _, stderr = run_cli(argv)
+    assert code == 0, stderr
+    assert sorted(p.name for p in out.iterdir()) == [f"preview_{TINY}.png"]
 
 
 # --------------------------------------------------------------------------- ~ in the config

@@ -457,3 +457,22 @@ def test_training_threads_are_restored_after_the_run_even_on_an_error():
     finally:
         torch.set_num_threads(saved[0])
         dr.set_thread_count(saved[1])
+
+
+def test_a_batch_larger_than_the_training_images_is_warned_with_the_counts(tmp_path):
+    """6 shapes × 2 views, split 0.8: 10 training images; a batch of 25 draws each about 2.5 times."""
+    with pytest.warns(UserWarning) as caught:
+        R.train(_cfg(tmp_path, "run.steps=1", "train.batch_size=25"), progress=False)
+    lines = [str(w.message) for w in caught if str(w.message).startswith("train.batch_size:")]
+    assert lines == ["train.batch_size: 25 is more than the 10 training images; a step draws its batch with "
+                     "replacement, so each image comes about 2.5 times in every batch (under other random views), "
+                     "at the cost of 2.5 batches of 10; expected at most 10 (or add images)"], lines
+
+
+def test_a_batch_within_the_training_images_is_not_warned(tmp_path):
+    import warnings
+
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        R.train(_cfg(tmp_path, "run.steps=1", "train.batch_size=10"), progress=False)
+    assert not [w for w in caught if "train.batch_size" in str(w.message)]

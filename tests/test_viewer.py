@@ -44,6 +44,7 @@ import pytest
 import torch
 
 from cli_runner import one_line, run_cli
+from mitsuba_platonic.errors import UserError
 from mitsuba_platonic.views import from_angles
 from mitsuba_platonic.volume import test_volume
 from mitsuba_platonic.files.volume_io import read_vol, read_volume_file, write_vol
@@ -281,10 +282,43 @@ def test_exports_stay_inside_the_output_folder(tmp_path):
     assert [p.name for p in paths] == ["escape.png", "etc_passwd.png", "a_______b.png", "view.png", "view_2.png",
                                        "view_3.png"]
     assert clean_name("x" * 100) == "x" * 64
+    assert clean_name("Stühle/木 ñ") == "Stühle_木_ñ"                       # readable in any script, never a path
     vol = ex.volume(test_volume(8, "figure", "ea")[0], "../shape")
     assert sorted(p.name for p in vol) == ["shape.npz", "shape.ply", "shape.vol"]
     assert not (tmp_path / "shape.npz").exists()
     assert torch.equal(read_volume_file(out / "shape.vol")[0], test_volume(8, "figure", "ea")[0])
+
+
+def test_an_export_into_a_folder_another_command_holds_writes_nothing(tmp_path):
+    """Each export holds --out's lock while it picks its name and writes: where another command (or a
+    second viewer) holds it, one line naming the holder and nothing written; free again, it exports."""
+    import os
+
+    from mitsuba_platonic.files.outputs import LOCK, output_lock
+
+    out = tmp_path / "exports"
+    ex = Exports(out)
+    frame = render_frame(test_volume(8, "figure", "ea")[0], (0.0, 0.0, 1.0))
+    with output_lock(out, "view"):
+        with pytest.raises(UserError, match=rf"--out {out} is in use by another command \(pid {os.getpid()}, "
+                                            r"platonic view; lock .*\); nothing was written"):
+            ex.png(frame, "held")
+        with pytest.raises(UserError, match="is in use by another command"):
+            ex.volume(test_volume(8, "figure", "ea")[0], "held")
+        assert sorted(p.name for p in out.iterdir()) == [LOCK]
+    assert ex.png(frame, "held").name == "held.png" and sorted(p.name for p in out.iterdir()) == ["held.png"]
+
+
+def test_an_export_through_a_link_in_the_folder_is_refused(tmp_path):
+    out = tmp_path / "exports"
+    out.mkdir()
+    (tmp_path / "elsewhere").mkdir()
+    (out / "sub").symlink_to(tmp_path / "elsewhere")
+    (out / "platonic.lock").symlink_to(tmp_path / "elsewhere" / "victim")
+    frame = render_frame(test_volume(8, "figure", "ea")[0], (0.0, 0.0, 1.0))
+    with pytest.raises(UserError, match="is a symbolic link"):
+        Exports(out).png(frame, "view")
+    assert list((tmp_path / "elsewhere").iterdir()) == []
 
 
 def test_nothing_outside_the_viewer_imports_the_web_library():

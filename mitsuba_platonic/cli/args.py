@@ -9,12 +9,12 @@ from __future__ import annotations
 
 import argparse
 from pathlib import Path
-from typing import Callable, List
+from typing import Callable, List, Mapping, Optional, Sequence
 
 from ..errors import UserError
 
 __all__ = ["PROG", "CLIError", "positive_int", "non_negative_int", "resolution", "positive_float", "seed",
-           "MAX_SEED", "parse_models", "check_out_folder"]
+           "MAX_SEED", "parse_models", "check_out_folder", "check_settings_once"]
 
 PROG = "platonic"
 
@@ -74,3 +74,19 @@ def check_out_folder(out: Path) -> None:
     """Refuse an ``--out`` that exists and is not a folder (before any work)."""
     if out.exists() and not out.is_dir():
         raise CLIError(f"--out {str(out)!r} exists and is not a folder")
+
+
+#: How long a ``--set`` item is quoted in a message at most (the rest cut, with an ellipsis).
+_QUOTED = 80
+
+
+def check_settings_once(sets: Optional[Sequence[str]], flags: Mapping[str, str]) -> None:
+    """Refuse a config key that a flag and a ``--set`` item both give (``flags``: key → the flag as
+    given, ``{'run.steps': '--steps 5'}``), naming both: one of them would win without a word. (Two
+    ``--set`` items of one key are one spelling given twice: the later wins, as ``--set``'s help says.)
+    An item without ``=`` is left to the config's own message."""
+    for item in sets or ():
+        key = item.split("=", 1)[0].strip() if "=" in item else None
+        if key in flags:
+            shown = item if len(item) <= _QUOTED else item[:_QUOTED - 1] + "…"
+            raise CLIError(f"{key}: given twice, by {flags[key]} and by --set {shown}; expected one of them")

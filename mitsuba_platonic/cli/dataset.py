@@ -9,6 +9,7 @@ from pathlib import Path
 from typing import Tuple, Union
 
 from ..files.fileio import confined
+from ..files.outputs import output_lock
 from .args import CLIError, positive_float, positive_int, seed
 
 __all__ = ["add_make_dataset"]
@@ -40,6 +41,18 @@ def _check_dataset_flags(args: argparse.Namespace) -> None:
     for key, (_, default) in _PHYSICAL_FLAGS.items():
         if getattr(args, key) is None:
             setattr(args, key, default)
+    if args.renderer is not None and args.formation == "physical":
+        raise CLIError(f"--renderer {args.renderer}: --formation physical always path-traces with Mitsuba and "
+                       f"would ignore it; drop it, or use --formation vh, ao or ea")
+    args.renderer = args.renderer or "closed_form"
+    lens = [flag for flag, value in (("--fov", args.fov), ("--distance", args.distance)) if value is not None]
+    if lens and args.camera != "perspective":
+        raise CLIError(f"{', '.join(lens)}: only --camera perspective reads {'them' if len(lens) > 1 else 'it'}, "
+                       f"and --camera {args.camera} would ignore {'them' if len(lens) > 1 else 'it'}; drop "
+                       f"{'them' if len(lens) > 1 else 'it'} or add --camera perspective")
+    if args.fov is None:
+        from ..render.settings import RenderSettings
+        args.fov = RenderSettings.fov
     if args.elevation is not None and args.view_dist == "sphere":
         raise CLIError("--elevation: --view-dist sphere covers every elevation and would ignore it; drop it, or "
                        "use --view-dist band or sides (low,high) or ring (one number)")
@@ -62,7 +75,7 @@ def _cmd_make_dataset(args: argparse.Namespace) -> int:
     _check_dataset_flags(args)
     out = Path(args.out)
     if args.preview:
-        with confined(out):                                  # no contact sheet written through a link in --out
+        with confined(out), output_lock(out, "make-dataset"):   # no sheet written through a link; one command at a time
             for c in classes:
                 path = contact_sheet(c, out / f"preview_{c}.png", n_shapes=args.preview_shapes,
                                      resolution=args.resolution, seed=args.seed)
@@ -109,8 +122,8 @@ def add_make_dataset(sub: "argparse._SubParsersAction") -> None:
     p.add_argument("--resolution", type=positive_int, default=64, help="N, 16 … 128 (default: %(default)s)")
     p.add_argument("--formation", choices=FORMATIONS, default="ea",
                    help="image formation (default: %(default)s)")
-    p.add_argument("--renderer", choices=RENDERERS, default="closed_form",
-                   help="renderer for vh/ao/ea (default: %(default)s)")
+    p.add_argument("--renderer", choices=RENDERERS, default=None,
+                   help="renderer for vh/ao/ea (default: closed_form)")
     p.add_argument("--filter", choices=FILTERS, default="trilinear")
     p.add_argument("--view-dist", choices=COLLECTION_DISTRIBUTIONS, default="sphere",
                    help="view distribution: sides = azimuths within ±SIDE_WIDTH of the side views ±90° "
@@ -132,8 +145,8 @@ def add_make_dataset(sub: "argparse._SubParsersAction") -> None:
                    help="physical formation only: longest path (default: 8)")
     p.add_argument("--camera", choices=CAMERAS, default="orthographic",
                    help="vh/ao/ea images: the camera (default: %(default)s)")
-    p.add_argument("--fov", type=positive_float, default=RenderSettings.fov,
-                   help="perspective: full field of view in degrees (default: %(default)s)")
+    p.add_argument("--fov", type=positive_float, default=None,
+                   help="perspective: full field of view in degrees (default: {:g})".format(RenderSettings.fov))
     p.add_argument("--distance", type=positive_float, default=None,
                    help="perspective: camera distance from the centre, > 1 (default: 1 / tan(fov/2))")
     p.add_argument("--seed", type=seed, default=0, help="master seed (default: %(default)s)")

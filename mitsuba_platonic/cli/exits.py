@@ -15,6 +15,7 @@ from typing import Optional
 
 from ..errors import Interrupted, stop_words
 from ..files.fileio import interrupt_behind
+from ..files.no_room import full_disk_line, no_room
 from .args import PROG
 
 __all__ = ["STARTING", "one_line", "interrupt_message", "error_message", "interrupt_behind", "printable_streams",
@@ -39,8 +40,11 @@ def interrupt_message(args: Optional[argparse.Namespace], e: BaseException) -> s
 
 
 def error_message(args: Optional[argparse.Namespace], e: BaseException) -> str:
-    """The one line of a user error: ``platonic <command>: error: <message>``."""
-    return f"{PROG} {getattr(args, 'command', None)}: error: {one_line(e)}"
+    """The one line of a user error: ``platonic <command>: error: <message>``; for a full disk (an
+    ``OSError`` no command explained) also what was kept and what to free where."""
+    full = no_room(e) if isinstance(e, OSError) else None
+    more = f"; {full_disk_line(full)}" if full is not None else ""
+    return f"{PROG} {getattr(args, 'command', None)}: error: {one_line(e)}{more}"
 
 
 def printable_streams() -> None:

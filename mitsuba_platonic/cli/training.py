@@ -13,7 +13,7 @@ import argparse
 import os
 from pathlib import Path
 
-from .args import CLIError, positive_int
+from .args import CLIError, check_settings_once, positive_int
 
 __all__ = ["add_quickstart", "add_train", "add_evaluate"]
 
@@ -21,6 +21,8 @@ __all__ = ["add_quickstart", "add_train", "add_evaluate"]
 def _cmd_quickstart(args: argparse.Namespace) -> int:
     if args.generate and args.photos is None:
         raise CLIError("--generate: it trains a generator on your photos; expected --photos DIR with it")
+    fixed = {"run.steps": f"--steps {args.steps}"} if args.steps is not None else {}
+    check_settings_once(args.set, fixed)
     if args.generate:
         from ..quickstart.generate import generation_quickstart
 
@@ -73,7 +75,8 @@ def add_quickstart(sub: "argparse._SubParsersAction") -> None:
     p.add_argument("--set", action="append", metavar="KEY=VALUE",
                    help="override a key of configs/quickstart.yaml (configs/photos.yaml with --photos, "
                         "configs/photos_generate.yaml with --generate), e.g. "
-                        "model.resolution=16 (repeatable)")
+                        "model.resolution=16 (repeatable; of two settings of one key the later wins; --steps and "
+                        "a --set of run.steps are refused together)")
     p.add_argument("--quiet", action="store_true")
     p.set_defaults(handler=_cmd_quickstart,
                    interrupted="nothing was written beyond what the folder held; run the same command again to "
@@ -104,7 +107,8 @@ def add_train(sub: "argparse._SubParsersAction") -> None:
     p.add_argument("--config", default=None,
                    help="YAML config: a file, or a packaged config's name (e.g. paper, or configs/paper.yaml "
                         "where no such file is here) (default: the built-in defaults)")
-    p.add_argument("--set", action="append", metavar="KEY=VALUE", help="override a config key (repeatable)")
+    p.add_argument("--set", action="append", metavar="KEY=VALUE",
+                   help="override a config key (repeatable; of two settings of one key the later wins)")
     p.add_argument("--resume", action="store_true", help="continue the run from its last checkpoint")
     p.add_argument("--quiet", action="store_true", help="no progress bars")
     p.set_defaults(handler=_cmd_train,

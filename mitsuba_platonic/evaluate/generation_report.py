@@ -15,7 +15,6 @@ docs/evaluation.md, "Generation runs", explains every figure.
 from __future__ import annotations
 
 import json
-import re
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, Dict, List, Optional, Sequence, Tuple, Union
@@ -25,6 +24,7 @@ import torch
 
 from ..data.render_collection import load_manifest
 from ..errors import UserError
+from ..files.names import readable_stem
 from ..render.frames import display_frames
 from ..sheets import GRID_VIEW, save_interpolation, save_sample_grid, save_sheet, save_turntables
 from ..views import from_angles
@@ -147,10 +147,6 @@ def _num(value: Optional[float], digits: int = 3) -> str:
     return "—" if value is None else f"{value:.{digits}f}"
 
 
-def _slug(text: str) -> str:
-    return re.sub(r"[^A-Za-z0-9_.-]+", "_", text).strip("_") or "run"
-
-
 def _critic_table(j: GenerationJudgement) -> str:
     heads = {"random": "random p_view views", "front": "front (0°)", "near": "near (15–45°)",
              "side": "side (60–120°)", "back": "back (135–180°)"}
@@ -183,7 +179,7 @@ def _truth_table(j: GenerationJudgement) -> str:
 def _figures(section: GenerationSection, out: Path) -> Dict[str, Path]:
     """Write the section's figures into ``out/figures``; name → path."""
     j, model = section.judgement, section.model
-    base = out / "figures" / _slug(section.run)
+    base = out / "figures" / readable_stem(section.run, "run")
     names = [f"sample_{i:03d}" for i in range(j.samples)]
     k = min(FIGURE_SAMPLES, j.samples)
     figs = {"samples": save_sample_grid(j.volumes, model.formation, f"{base}_samples.png", columns=8, labels=names,

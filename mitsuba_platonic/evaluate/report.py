@@ -28,7 +28,6 @@ from __future__ import annotations
 
 import argparse
 import json
-import re
 import time
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -40,6 +39,7 @@ import torch
 from ..config.loading import checkpoint_config, model_from_checkpoint
 from ..errors import UserError, raise_if_ctrl_c
 from ..files.checkpoint import read_checkpoint
+from ..files.names import readable_stem
 from ..files.fileio import confined, make_folder, write_text
 from ..files.outputs import MARKER, check_output_folder, claim_output_folder, output_lock
 from ..model import Model
@@ -186,10 +186,6 @@ def write_class_table(rows: Sequence[Row], methods: Sequence[str] = CLASS_METHOD
     return "\n".join(lines)
 
 
-def _slug(text: str) -> str:
-    return re.sub(r"[^A-Za-z0-9_.-]+", "_", text).strip("_") or "row"
-
-
 def write_figure(row: Row, path: PathLike, views: torch.Tensor = FIGURE_VIEWS) -> Path:
     """A PNG: one line per example of ``row``: input | reconstruction from ``views`` | ground truth
     from the same views (the training image formation, closed form, over white)."""
@@ -221,7 +217,8 @@ def write_report(rows: Sequence[Row], out_dir: PathLike, notes: Sequence[str] = 
     figures = []
     for r in rows:
         if r.examples:
-            figures.append((r, write_figure(r, out / "figures" / f"{_slug(r.method)}_{r.formation.lower()}.png")))
+            stem = f"{readable_stem(r.method, 'row')}_{r.formation.lower()}"
+            figures.append((r, write_figure(r, out / "figures" / f"{stem}.png")))
     lines = ["# Evaluation", ""]
     if rows:
         lines += ["Held-out reconstructions against the ground truth, laid out like Table 2 of the paper. "
@@ -239,12 +236,12 @@ def write_report(rows: Sequence[Row], out_dir: PathLike, notes: Sequence[str] = 
                       "and re-render method, averaged over the runs of each cell (runs: how many entered the "
                       "line). SSIM = 1 − 2 DSSIM of the table above, without the × 10.", "", classes, ""]
     for section in photo_sections:
-        link = None
+        link, stem = None, readable_stem(section.run, "row")
         if section.rows and section.rows[0].examples:
-            section.figure = write_photo_figure(section.rows[0], out / "figures" / f"{_slug(section.run)}_photos.png",
+            section.figure = write_photo_figure(section.rows[0], out / "figures" / f"{stem}_photos.png",
                                                 section.folder)
             link = f"figures/{section.figure.name}"
-        write_judge_figure(section, out / "figures" / f"{_slug(section.run)}_turntable.png")
+        write_judge_figure(section, out / "figures" / f"{stem}_turntable.png")
         lines += section_markdown(section, link)
     for generation in generation_sections:                       # generation runs (.generation_report)
         lines += section_lines(generation, out)

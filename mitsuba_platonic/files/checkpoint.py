@@ -41,10 +41,10 @@ import numpy as np
 import torch
 
 from ..errors import UserError
-from .fileio import atomic_write
+from .fileio import MAX_CHECKPOINT_BYTES, InputFileRefused, atomic_write, check_input_file
 from .pickle_scan import foreign_objects
 
-__all__ = ["RunError", "UnsafeCheckpoint", "DamagedCheckpoint", "NotACheckpoint", "CHECKPOINT_VERSION", "Checkpoint", "save_checkpoint",
+__all__ = ["RunError", "UnsafeCheckpoint", "DamagedCheckpoint", "NotACheckpoint", "OversizedCheckpoint", "CHECKPOINT_VERSION", "Checkpoint", "save_checkpoint",
            "load_checkpoint", "checkpoint_files", "load_latest_checkpoint", "read_checkpoint", "objects_to_convert", "convert_checkpoint",
            "load_weights", "saved_config_dict"]
 
@@ -66,6 +66,15 @@ class DamagedCheckpoint(RunError):
 
 class NotACheckpoint(RunError):
     """A file that is no checkpoint at all (a config, an image) where one was expected."""
+
+
+class OversizedCheckpoint(RunError):
+    """A checkpoint file larger than :data:`~mitsuba_platonic.files.fileio.MAX_CHECKPOINT_BYTES`
+    (``size`` bytes), refused before a byte of it is read."""
+
+    def __init__(self, message: str, size: int):
+        super().__init__(message)
+        self.size = size
 
 
 class UnsafeCheckpoint(RunError):
@@ -162,12 +171,20 @@ def load_checkpoint(path: Path, device: torch.device = torch.device("cpu")) -> D
     """The raw contents of one checkpoint file, unpickled safely (``weights_only=True``: tensors and
     plain data, no code runs); not checked otherwise (see :func:`load_latest_checkpoint`).
 
-    Raises :class:`RunError` if there is no file, :class:`UnsafeCheckpoint` (one line naming the
-    file, the object and how to convert a trusted file) if it names any other Python object, and
-    torch's own errors for a torn or corrupt file.
+    Raises :class:`RunError` if there is no file, or it is no regular file (a folder, a FIFO) or
+    larger than :data:`~mitsuba_platonic.files.fileio.MAX_CHECKPOINT_BYTES` (checked before a byte
+    is read), :class:`UnsafeCheckpoint` (one line naming the file, the object and how to convert a
+    trusted file) if it names any other Python object, and torch's own errors for a torn or corrupt file.
     """
-    if not path.is_file():
-        raise RunError(f"no checkpoint at {path}")
+    try:
+        check_input_file(path, "checkpoint", MAX_CHECKPOINT_BYTES)   # a regular file of a bounded size
+    except FileNotFoundError:
+        raise RunError(f"no checkpoint at {path}") from None
+    except InputFileRefused as e:
+        if e.reason == "not_a_file":
+            raise NotACheckpoint(f"no checkpoint at {path}: {e}") from None
+        raise OversizedCheckpoint(f"{e}: expected a checkpoint platonic train wrote (tens to hundreds of MB)",
+                                  path.stat().st_size) from None
     with open(path, "rb") as f:
         head = f.read(4)
     if head and not head.startswith((_ZIP_MAGIC, b"\x80")):
@@ -474,6 +491,8 @@ def _reason(e: BaseException) -> str:
         return "empty" if "is empty" in str(e) else "truncated or damaged"
     if isinstance(e, NotACheckpoint):
         return "not a checkpoint file"
+    if isinstance(e, OversizedCheckpoint):
+        return f"{e.size:,} bytes, more than the {MAX_CHECKPOINT_BYTES:,} a checkpoint may be"
     return _one_line(e)
 
 

@@ -40,7 +40,7 @@ from ..errors import UserError
 
 __all__ = ["atomic_write", "temporary_name", "remove_temporaries", "interrupt_behind", "LinkRefused", "confined",
            "check_path", "open_file", "make_folder", "remove", "write_text", "InputFileRefused", "check_input_file",
-           "read_input_file", "read_input_text", "MAX_TEXT_BYTES", "MAX_IMAGE_BYTES"]
+           "read_input_file", "read_input_text", "MAX_TEXT_BYTES", "MAX_IMAGE_BYTES", "MAX_CHECKPOINT_BYTES"]
 
 PathLike = Union[str, Path]
 
@@ -225,6 +225,11 @@ def write_text(path: PathLike, text: str) -> Path:
 MAX_TEXT_BYTES = 16 * 2 ** 20
 #: The largest image file a command reads: 1 GiB (Pillow refuses more than 179 megapixels anyway).
 MAX_IMAGE_BYTES = 2 ** 30
+#: The largest checkpoint a command reads: 16 GiB, a training state of 4 billion float32 numbers
+#: (networks and both optimisers' moments): far beyond any PlatonicGAN configuration, which save tens
+#: to hundreds of MB; torch.load holds every tensor in memory, so a larger file would end in an
+#: out-of-memory kill instead of one line.
+MAX_CHECKPOINT_BYTES = 16 * 2 ** 30
 
 
 class InputFileRefused(UserError):

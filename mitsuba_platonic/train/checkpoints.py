@@ -22,6 +22,7 @@ from ..config import Config
 from ..config.loading import config_difference, saved_config
 from ..files.checkpoint import CHECKPOINT_VERSION, RunError, load_latest_checkpoint, load_weights, save_checkpoint
 from ..files.fileio import remove
+from ..files.no_room import no_room, what_to_free
 
 __all__ = ["Checkpoints", "non_finite", "same_settings"]
 
@@ -82,6 +83,22 @@ class Checkpoints:
             return "nothing was saved (no checkpoint had been written yet)"
         return f"nothing was saved: {self.path} still holds step {self.step}"
 
+    def go_on(self) -> str:
+        """How to continue once the cause is mended: ``--resume`` from the step kept, or start again."""
+        if self.step is None:
+            return "run the same command again"
+        return f"run the same command with --resume to go on from step {self.step}"
+
+    def no_room(self, e: BaseException) -> str:
+        """For a full disk behind ``e`` (:func:`~mitsuba_platonic.files.no_room.no_room`): ``; <which disk,
+        what to free, how to go on>``; else ''."""
+        full = no_room(e)
+        if full is None:
+            return ""
+        keep = self.cfg.run.keep_checkpoints
+        fewer = f"run.keep_checkpoints={keep - 1} keeps fewer step_*.pt" if keep > 1 else "older runs"
+        return f"; {what_to_free(full, free=f'other runs and collections; {fewer}', then=self.go_on())}"
+
     def held(self) -> str:
         """``<the newest good checkpoint> holds step <its step>``."""
         return f"{self.path} holds step {self.step}"
@@ -102,6 +119,6 @@ class Checkpoints:
             save_checkpoint(numbered, payload)
         except OSError as e:                                 # a full disk: the old files are whole (atomic)
             held = self.held() if self.step == step else self.kept()
-            raise RunError(f"step {step}: the checkpoint could not be written ({e}); {held}") from None
+            raise RunError(f"step {step}: the checkpoint could not be written ({e}); {held}{self.no_room(e)}") from None
         for old in sorted(self.folder.glob("step_*.pt"))[:-self.cfg.run.keep_checkpoints]:
             remove(old)

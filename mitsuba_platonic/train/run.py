@@ -121,6 +121,18 @@ def _warn_ignored_settings(cfg: Config) -> None:
                       f"{'them' if len(ignored) > 1 else 'it'}", stacklevel=2)
 
 
+def _warn_batch_beyond_images(cfg: Config, n_images: int) -> None:
+    """Warn (naming the counts) where ``train.batch_size`` exceeds the ``n_images`` training images:
+    a step draws its batch with replacement, so the batch repeats images (each with its own views)."""
+    batch = cfg.train.batch_size
+    if batch > n_images:
+        warnings.warn(f"train.batch_size: {batch} is more than the {n_images} training image"
+                      f"{'s' if n_images != 1 else ''}; a step draws its batch with replacement, so each image "
+                      f"comes about {batch / n_images:.3g} times in every batch (under other random views), at the cost of "
+                      f"{batch / n_images:.3g} batches of {n_images}; expected at most {n_images} (or add images)",
+                      stacklevel=3)
+
+
 def _train(cfg: Config, run_dir: Path, resume: bool, progress: bool, stop_at: Optional[int],
            rank: int, world: int, local_rank: int, config_file: Optional[Path] = None) -> Path:
 
@@ -131,6 +143,8 @@ def _train(cfg: Config, run_dir: Path, resume: bool, progress: bool, stop_at: Op
     if world > 1:
         dist.barrier()                                       # rank 0 checked the folder first
     data = _training_data(cfg, run_dir, resume, progress, rank, world)
+    if rank == 0:
+        _warn_batch_beyond_images(cfg, len(data.images))
     trainer = Trainer(cfg, data, device, rank, world)
     checkpoints = Checkpoints(run_dir, cfg)                  # and the newest good one on disk
     start = checkpoints.resume(trainer, device, warn=rank == 0) if resume else 0
@@ -213,7 +227,7 @@ def _close_loop(cfg: Config, clean: bool, step: int, rank: int, world: int, trai
                     samples(step)
         except OSError as e:                                 # the final samples on a full disk
             clean = False
-            raise RunError(f"after step {step}: {e}; {checkpoints.held()}") from None
+            raise RunError(f"after step {step}: {e}; {checkpoints.held()}{checkpoints.no_room(e)}") from None
         except BaseException:
             clean = False
             raise
@@ -258,7 +272,7 @@ def _say_what_failed(e: BaseException, where: str, trainer: Trainer, checkpoints
     if isinstance(e, RunError):
         return
     if isinstance(e, (UserError, OSError)):                  # the user's input, a full disk: one line
-        raise RunError(f"training failed {where}: {e}; {checkpoints.kept()}") from e
+        raise RunError(f"training failed {where}: {e}; {checkpoints.kept()}{checkpoints.no_room(e)}") from e
     bad = non_finite(trainer.state_dict()) if isinstance(e, ValueError) else None
     if bad is not None:                                      # a diverged run (NaN or Inf in the weights), not a bug
         raise RunError(f"training failed {where}: {e} (the training state is not finite: NaN or Inf in "

@@ -338,7 +338,7 @@ class ClientView:
             choices = [str(r) for r in resolutions_for(n)]
             self.resolution = gui.add_dropdown("resolution", choices, initial_value=choices[0],
                                                hint="image pixels per side")
-            self.spp = gui.add_slider("path tracer spp", min=1, max=64, step=1, initial_value=INITIAL_SPP)
+            self.spp = gui.add_slider("path tracer spp", min=1, max=MAX_SPP, step=1, initial_value=INITIAL_SPP)
             self.low = gui.add_checkbox("low resolution while moving", initial_value=True,
                                         hint="a quarter of the resolution (at least the volume's) while the camera moves")
             for handle in (self.formation, self.resolution, self.spp, self.low):

@@ -21,11 +21,11 @@
 from __future__ import annotations
 
 import math
-import re
 import time
+from contextlib import contextmanager
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Dict, List, Optional, Sequence, Tuple, Union
+from typing import Dict, Iterator, List, Optional, Sequence, Tuple, Union
 
 import numpy as np
 import torch
@@ -34,7 +34,9 @@ from PIL import Image
 
 from ..errors import UserError
 from ..export import extract_mesh, save_ply
-from ..files.fileio import atomic_write
+from ..files.fileio import atomic_write, confined
+from ..files.names import readable_name
+from ..files.outputs import output_lock
 from ..files.volume_io import save_volume
 from ..render import RenderSettings, render_with
 from ..render.window import Window, window_or_none
@@ -469,26 +471,33 @@ def open_source(source: PathLike, photo: Optional[PathLike] = None, array: Optio
 
 # --------------------------------------------------------------------------- exports
 
-_UNSAFE = re.compile(r"[^A-Za-z0-9_+-]")
-
-
 def clean_name(text: str, default: str = "view") -> str:
-    """A page's name for an export → a plain file stem: letters, digits and ``_ + -`` only (every other
-    character, the path separators and dots included, becomes ``_``), at most 64 characters."""
-    name = _UNSAFE.sub("_", str(text).strip())[:64].strip("_")
+    """A page's name for an export → a plain file stem: letters and digits of any script and ``_ + -``
+    only (:func:`~mitsuba_platonic.files.names.readable_name`: every other character, the path
+    separators and dots included, becomes ``_``), at most 64 characters."""
+    name = readable_name(str(text).strip(), keep="_+-")[:64].strip("_")
     return name or default
 
 
 class Exports:
-    """Files the page asks for, inside ``folder`` only (created on the first export)."""
+    """Files the page asks for, inside ``folder`` only (created on the first export). Each export
+    holds the folder's lock (:func:`~mitsuba_platonic.files.outputs.output_lock`) while it picks its
+    free name and writes, so that two viewers (or another command) exporting into one ``--out``
+    never take the same name; one that finds the folder held says so in one line, on the page,
+    and writes nothing. Nothing is written through a link inside the folder
+    (:func:`~mitsuba_platonic.files.fileio.confined`)."""
 
     def __init__(self, folder: PathLike):
         self.folder = Path(folder)
 
+    @contextmanager
+    def _writing(self) -> Iterator[None]:
+        with confined(self.folder), output_lock(self.folder, "view"):
+            yield
+
     def _free(self, stem: str, exts: Tuple[str, ...]) -> Path:
         """``folder/stem`` (``stem_2``, ``stem_3``, … where an earlier export holds any of ``exts``),
-        checked to lie inside ``folder``."""
-        self.folder.mkdir(parents=True, exist_ok=True)
+        checked to lie inside ``folder``; call it under :meth:`_writing`."""
         base, k = clean_name(stem), 1
         name = base
         while any((self.folder / (name + e)).exists() for e in exts):
@@ -501,17 +510,19 @@ class Exports:
 
     def png(self, frame: Frame, name: str = "view") -> Path:
         """The frame as ``name.png`` (8-bit sRGB, as shown)."""
-        path = self._free(name, (".png",)).with_suffix(".png")
-        atomic_write(path, lambda tmp: Image.fromarray(frame.image).save(tmp, format="PNG"))
+        with self._writing():
+            path = self._free(name, (".png",)).with_suffix(".png")
+            atomic_write(path, lambda tmp: Image.fromarray(frame.image).save(tmp, format="PNG"))
         return path
 
     def volume(self, volume: torch.Tensor, name: str = "volume", level: float = 0.5) -> List[Path]:
         """``name.npz`` and ``name.vol`` (:func:`~mitsuba_platonic.files.volume_io.save_volume`) and a marching-cubes
         mesh ``name.ply`` at ``level`` (none where the density never crosses it)."""
-        stem = self._free(name, (".npz", ".vol", ".ply"))
-        written = save_volume(volume, stem)
-        try:
-            mesh = extract_mesh(volume, level=level)
-        except ValueError:
-            return written
-        return written + [save_ply(mesh, stem.with_name(stem.name + ".ply"))]
+        with self._writing():
+            stem = self._free(name, (".npz", ".vol", ".ply"))
+            written = save_volume(volume, stem)
+            try:
+                mesh = extract_mesh(volume, level=level)
+            except ValueError:
+                return written
+            return written + [save_ply(mesh, stem.with_name(stem.name + ".ply"))]
