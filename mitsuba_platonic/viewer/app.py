@@ -44,14 +44,18 @@ page's path trace never holds another page's frames (they render in this process
 While the camera keeps moving (a message within :data:`SETTLE_S`), the thread renders a
 low-resolution frame (a quarter of the resolution, at least the volume's; the same resolution
 with "low resolution while moving" off), sent as JPEG; once it rests, the full one, as PNG.
-Frames are drawn as the scene's background image, padded with the background grey to the
-canvas' aspect so that the square render keeps its shape (viser stretches the image over the
-canvas), centred, its side the canvas' shorter side.
+Frames are rendered at the canvas' aspect (:func:`~.scene.frame_size`: the resolution R along its
+shorter side, the orthographic window widened along the longer one, :func:`~.scene.tiles`) and
+drawn as the scene's background image, which viser stretches over the canvas: nothing is
+stretched but by the frame's rounding to whole pixels. A page's first frame waits for the browser
+to report its canvas, and for the canvas' size to hold (:data:`CANVAS_SETTLE_S`: the page docks its
+control panel beside the canvas after it first reports). The frame line and the settings line
+both print the W×H rendered.
 
 The GUI: renderer, formation, resolution, the path tracer's spp, buttons that orbit the camera by
 fixed angles (and the front view), zoom it by 2 about its look-at point, pan it by a quarter of
 the frame (and reset both), the frame time and the renderer's settings (a line of text the tests
-read: ``frame N: T ms, full|moving, R×R px, az A° el E°, zoom M×, centre (X, Y)``), the source's
+read: ``frame N: T ms, full|moving, W×H px, az A° el E°, zoom M×, centre (X, Y)``), the source's
 inputs (a reconstruction run: previous/next held-out input, shown beside the view) or latents (a
 generation run: seed, new latent, a walk to a second seed), and exports into the output folder.
 
@@ -99,6 +103,11 @@ VIEW_SNAP = 1e-6
 #: not the user's and are not drawn. After this many seconds from the connection every report counts,
 #: echoed or not.
 CONNECT_S = 1.0
+#: A page's frames wait this long from its connection for the browser to report its canvas' size
+#: (with its first camera), so that its first frame has the canvas' aspect; then a square one is drawn.
+CANVAS_S = 10.0
+#: A canvas' size must hold this long before a frame is rendered for it (:meth:`ClientView._canvas_settled`).
+CANVAS_SETTLE_S = 1.0
 #: The page's controls as it opens: the renderer and the path tracer's spp (the formation: the
 #: volume's richest, EA or AO; the resolution: the volume's).
 INITIAL_RENDERER, INITIAL_SPP = "closed form", 4
@@ -244,11 +253,12 @@ class ViewerApp:
             view.stop()
 
     def _warm_up(self) -> None:
-        """Render the first frame a page asks for (:func:`initial_key`) while the browser loads the
-        page, and encode it once as the page does (viser's PNG and JPEG encoders load their
-        libraries on first use): the page's own request then finds the frame done
-        (:meth:`frame_for`), or waits on the render lock for it, instead of paying torch's and the
-        encoder's first calls after the page connects."""
+        """Render the first frame a page asks for (:func:`initial_key`, a square canvas's) while the
+        browser loads the page, and encode it once as the page does (viser's PNG and JPEG encoders
+        load their libraries on first use): the page's own request then finds the frame done
+        (:meth:`frame_for`; a square canvas) or renders its own at its canvas' aspect with torch,
+        the resampled volume (cached) and the encoders warm, instead of paying their first calls
+        after the page connects."""
         try:
             frame = self.frame_for(initial_key(self.scene))
             from viser._image_encoding import cv2_imencode_with_fallback   # lazy: viser's own encoder, warmed only
@@ -305,6 +315,7 @@ class ClientView:
         self.limits = (0.01, 1e4)                          # the browser's dolly limits as set (viser's defaults)
         self.connected = time.monotonic()
         self.placed = False                                # has the page reported the initial camera yet?
+        self.canvas, self.canvas_at = None, 0.0             # the canvas' size (pixels) last seen, and since when
         self._gui()
         # the camera viser connects a page with is the browser's default, before it takes the initial one
         # (DISTANCE, FOV): draw the initial camera until the page says where it is
@@ -525,6 +536,19 @@ class ClientView:
 
     # -- frames -----------------------------------------------------------------------------------
 
+    def _canvas_settled(self) -> bool:
+        """Whether this page's canvas has a size (the browser reports it with its first camera; a
+        square one is assumed :data:`CANVAS_S` after the connection) that has held for
+        :data:`CANVAS_SETTLE_S`: the page lays its panel out after it first reports (the canvas
+        narrows), and a resized window reports many sizes; the frame is for the one it rests at."""
+        cam = self.client.camera
+        size, now = (cam.image_width, cam.image_height), time.monotonic()
+        if size != self.canvas:
+            self.canvas, self.canvas_at = size, now
+        if not (size[0] > 0 and size[1] > 0):
+            return now - self.connected >= CANVAS_S
+        return now - self.canvas_at >= CANVAS_SETTLE_S
+
     def _request(self) -> Tuple:
         with self.lock:
             view, moving = tuple(float(x) for x in self.view), time.monotonic() - self.last_move < SETTLE_S
@@ -547,6 +571,8 @@ class ClientView:
             if self.stopped:
                 return
             request = None
+            if not self._canvas_settled():
+                continue
             try:
                 request = self._request()
                 if request[0][1] == "path tracer":
