@@ -6,9 +6,9 @@ The set-up installs Chromium with ``apt-get install -y chromium`` where it is mi
 tests skip, saying why, only where it cannot be installed (no apt-get, not root, no package). Every
 wait is bounded (:data:`WAIT_MS`); the server is stopped with SIGINT (Ctrl-C: it ends by the signal, 130 to a shell) at the end.
 
-Tolerance of the screenshot against the closed form: the page draws the R×R frame (enlarged by
-whole pixels, then stretched over the canvas' square by WebGL); the screenshot is read at the
-centres of the R×R cells, where the drawn texture takes its pixel's value, and must match the
+Tolerance of the screenshot against the closed form: the page draws the W×H frame (the canvas'
+aspect, R its shorter side) stretched over the canvas by WebGL; the screenshot is read at the
+centres of the pixels of its central R×R square (the square frame), where the drawn texture takes its pixel's value, and must match the
 closed form's 8-bit sRGB frame within :data:`TOLERANCE` levels on average and
 :data:`TOLERANCE_MAX` at 95 % of the pixels (measured with software WebGL: identical); the same
 comparison against the view 30° away must fail by far, so the check sees which view is shown.
@@ -38,6 +38,7 @@ import sys
 import threading
 import time
 from pathlib import Path
+from typing import Optional
 
 import numpy as np
 import pytest
@@ -52,15 +53,17 @@ from tiny_shapes import TINY
 
 viser = pytest.importorskip("viser", reason="the 'viewer' extra is not installed (pip install -e '.[viewer]')")
 
-from mitsuba_platonic.viewer.scene import (Exports, clean_name, open_source, render_frame,  # noqa: E402
-                                           resolutions_for, to_display)
+from mitsuba_platonic.viewer.scene import (DEFAULT_RESOLUTION, Exports, clean_name, open_source,  # noqa: E402
+                                           render_frame, resolutions_for, to_display)
 
 ROOT = Path(__file__).resolve().parents[1]
 N = 16
 WAIT_MS = 30_000                      # one wait for the page (the marcher's first frame traces its kernel)
 TOLERANCE = 1.0                       # mean |Δ| in 8-bit sRGB levels (measured: 0, the same pixels)
 TOLERANCE_MAX = 3.0                   # at the 95th percentile
-FRAME = re.compile(r"frame (\d+): ([0-9.]+) ms, (full|moving|progressive), (\d+)×\d+ px, az (-?[0-9.]+)° el (-?[0-9.]+)°")
+#: A frame line; group 4 is the frame's height, its resolution R on the tests' canvases (wider than tall).
+FRAME = re.compile(r"frame (\d+): ([0-9.]+) ms, (full|moving|progressive), \d+×(\d+) px, az (-?[0-9.]+)° el (-?[0-9.]+)°")
+SIZE = re.compile(r"(\d+)×(\d+) px")
 WINDOW = re.compile(r"zoom ([0-9.]+)×, centre \(([-+][0-9.]+), ([-+][0-9.]+)\)")
 #: √(silhouette area ratio) / zoom − 1: measured 1.1 % (2× by the button) and 0.8 % (1.36× by the
 #: wheel): the silhouette's whole pixels; allowed 4 %.
@@ -73,8 +76,8 @@ SHIFT_TOLERANCE = 0.6
 DRAG_TOLERANCE = 0.05
 
 
-def closed_form(volume: torch.Tensor, azimuth: float, elevation: float) -> np.ndarray:
-    return render_frame(volume, tuple(from_angles(azimuth, elevation).tolist()), "closed form", "EA").image
+def closed_form(volume: torch.Tensor, azimuth: float, elevation: float, resolution: Optional[int] = None) -> np.ndarray:
+    return render_frame(volume, tuple(from_angles(azimuth, elevation).tolist()), "closed form", "EA", resolution).image
 
 
 # --------------------------------------------------------------------------- without a browser
@@ -224,6 +227,38 @@ def test_a_windowed_frame_is_the_renderers_frame_through_the_window():
     fine = render_frame(v, tuple(w.tolist()), "marcher", "EA", 2 * N, window=window)
     np.testing.assert_array_equal(fine.image, to_display(march_pixels(v[None], w[None], RenderSettings.for_call(
         "mitsuba", "ea"), 2, window)[0]))
+
+
+def test_a_frame_at_the_canvas_aspect_is_the_square_frame_widened_not_stretched():
+    """On a canvas of width/height a the frame is W×H (R the shorter side, W − R even): its central
+    R×R square is the square frame, bit for bit, and the columns beyond it are the renderer's own
+    frame of the window moved sideways by whole pixels (more of the scene, at the same scale),
+    for every renderer; the settings line names W×H, as the page's frame line does."""
+    from mitsuba_platonic.viewer.scene import Window, frame_size, tiles
+
+    assert frame_size(128, 636 / 540) == (150, 128) and frame_size(16, 16 / 9) == (28, 16)
+    assert frame_size(64, 0.5) == (64, 128) and frame_size(64, 1.0) == (64, 64)
+    assert frame_size(16, 100.0) == frame_size(16, 4.0) == (64, 16)          # held to ASPECT_RANGE
+    assert tiles(64, 1.0, None)[0].window is None and len(tiles(64, 1.0, None)) == 1
+    v = test_volume(N, "figure", "ea")[0]
+    w = tuple(from_angles(30.0, 20.0).tolist())
+    window = Window(2.0, (0.1, -0.2))
+    for renderer, r in (("closed form", 2 * N), ("marcher", 2 * N), ("single scattering", N)):
+        square = render_frame(v, w, renderer, "EA", r, window=window)
+        wide = render_frame(v, w, renderer, "EA", r, window=window, aspect=16 / 9)
+        width, height = frame_size(r, 16 / 9)
+        assert wide.image.shape == (height, width, 3) and f"{width}×{height} px" in wide.settings
+        x0 = (width - r) // 2
+        np.testing.assert_array_equal(wide.image[:, x0:x0 + r], square.image)
+        shift = x0 * 2.0 / (window.zoom * r)                              # the left edge: x0 pixels further left
+        left = render_frame(v, w, renderer, "EA", r, window=Window(2.0, (0.1 - shift, -0.2))).image
+        np.testing.assert_array_equal(wide.image[:, :r], left)
+        assert not np.array_equal(wide.image[:, :r], square.image)
+        tall = render_frame(v, w, renderer, "EA", r, window=window, aspect=0.6)
+        width, height = frame_size(r, 0.6)
+        y0 = (height - r) // 2
+        assert tall.image.shape == (height, width, 3)
+        np.testing.assert_array_equal(tall.image[y0:y0 + r], square.image)
 
 
 def test_the_path_workers_passes_average_to_the_path_tracers_frame():
@@ -522,10 +557,11 @@ def test_the_server_renders_the_first_frame_while_the_page_loads(volume_file, tm
     try:
         app.warming.join(timeout=300)
         key = initial_key(app.scene)
-        assert key == ((0.0, 0.0, 1.0), "closed form", "EA", N, 4, 0, None)
+        assert key == ((0.0, 0.0, 1.0), "closed form", "EA", DEFAULT_RESOLUTION, 4, 0, None, 1.0)
         assert app.last is not None and app.last[0] == key
         assert app.frame_for(key) is app.last[1]
-        np.testing.assert_array_equal(app.last[1].image, closed_form(read_volume_file(volume_file)[0], 0.0, 0.0))
+        np.testing.assert_array_equal(app.last[1].image, closed_form(read_volume_file(volume_file)[0], 0.0, 0.0,
+                                                                     DEFAULT_RESOLUTION))
     finally:
         app.stop()
     front = np.array([0.0, 0.0, 1.0])
@@ -631,16 +667,19 @@ def _frame(page, pattern: str = "full") -> re.Match:
 
 
 def _shown(page, r: int) -> np.ndarray:
-    """The R×R frame as drawn: the canvas' centred square, read at its R×R cell centres, once two
-    screenshots 0.3 s apart agree (the page fades in, and the canvas paints after the text updates;
-    at most 20 tries)."""
+    """The frame's central R×R square as drawn (the square frame: the W×H frame the line names is
+    drawn over the whole canvas), read at its pixels' centres, once two screenshots 0.3 s apart agree
+    (the page fades in, and the canvas paints after the text updates; at most 20 tries)."""
     from PIL import Image
 
+    closers = page.locator(".mantine-Notification-closeButton")     # software WebGL's notice covers the canvas' corner
+    for i in range(closers.count()):
+        closers.nth(i).click()
+    w, h = (int(g) for g in SIZE.search(page.get_by_text(re.compile(r"^frame \d+: ")).inner_text()).groups())
     box = page.locator("canvas").first.bounding_box()
-    side = min(box["width"], box["height"])
-    x0, y0 = box["x"] + (box["width"] - side) / 2, box["y"] + (box["height"] - side) / 2
-    centres = (np.arange(r) + 0.5) * side / r
-    ys, xs = np.floor(y0 + centres).astype(int), np.floor(x0 + centres).astype(int)
+    cells = np.arange(r) + 0.5
+    xs = np.floor(box["x"] + ((w - r) // 2 + cells) * box["width"] / w).astype(int)
+    ys = np.floor(box["y"] + ((h - r) // 2 + cells) * box["height"] / h).astype(int)
     last = None
     for _ in range(20):
         time.sleep(0.3)
@@ -685,10 +724,11 @@ def _choose(page, which: int, option: str) -> None:
 def test_the_page_shows_the_closed_form_and_follows_the_camera(page, server, volume_file):
     volume = read_volume_file(volume_file)[0]
     m = _frame(page, r"az 0\.0° el 0\.0°")
-    assert int(m.group(4)) == N
+    r = 8 * N
+    assert int(m.group(4)) == r == DEFAULT_RESOLUTION                     # 128²: the page's default
     first = time.monotonic() - server.started
-    shown = _shown(page, N)
-    front, side = closed_form(volume, 0.0, 0.0), closed_form(volume, 30.0, 0.0)
+    shown = _shown(page, r)
+    front, side = closed_form(volume, 0.0, 0.0, r), closed_form(volume, 30.0, 0.0, r)
     mean, p95 = _difference(shown, front)
     assert mean <= TOLERANCE and p95 <= TOLERANCE_MAX, (mean, p95)
     assert _views_apart(shown, side)                                         # the check tells views apart
@@ -698,19 +738,42 @@ def test_the_page_shows_the_closed_form_and_follows_the_camera(page, server, vol
 
     page.get_by_role("button", name="azimuth +30").click()
     _frame(page, r"az 30\.0° el 0\.0°")
-    moved = _shown(page, N)
+    moved = _shown(page, r)
     mean, p95 = _difference(moved, side)
     assert mean <= TOLERANCE and p95 <= TOLERANCE_MAX, (mean, p95)
     assert _views_apart(moved, shown)
 
     page.get_by_role("button", name="elevation +15").click()
     _frame(page, r"az 30\.0° el 15\.0°")
-    mean, p95 = _difference(_shown(page, N), closed_form(volume, 30.0, 15.0))
+    mean, p95 = _difference(_shown(page, r), closed_form(volume, 30.0, 15.0, r))
     assert mean <= TOLERANCE and p95 <= TOLERANCE_MAX, (mean, p95)
+
+
+def test_the_canvas_sits_beside_the_controls_and_its_frame_has_its_aspect(browser, server):
+    """At 960×540 the control panel is docked beside the canvas, not over it (the canvas ends where
+    the panel begins), and the frame is rendered at the canvas' aspect (W×H within a pixel of it,
+    R = 128 along the shorter side), the frame line and the settings line naming the same W×H."""
+    page = browser.new_page(viewport={"width": 960, "height": 540})
+    page.set_default_timeout(WAIT_MS)
+    try:
+        page.goto(server.url)
+        _frame(page)
+        canvas = page.locator("canvas").first.bounding_box()
+        panel = page.get_by_role("button", name="azimuth +30").bounding_box()
+        assert canvas["x"] + canvas["width"] <= panel["x"], (canvas, panel)
+        assert canvas["width"] > 0.5 * 960 and canvas["height"] == 540, canvas
+        line = page.get_by_text(re.compile(r"^frame \d+: ")).inner_text()
+        width, height = (int(g) for g in SIZE.search(line).groups())
+        assert height == DEFAULT_RESOLUTION, line
+        assert abs(width - height * canvas["width"] / canvas["height"]) <= 1.0, (line, canvas)
+        page.get_by_text(re.compile(rf"^closed form \(.*, {width}×{height} px")).wait_for()
+    finally:
+        page.close()
 
 
 def test_the_path_tracers_frames_take_longer_than_the_marchers(page):
     _frame(page)
+    _choose(page, 2, str(N))                                       # 16² frames: the path tracer's in seconds
     times = {}
     for renderer in ("marcher", "path tracer"):
         _choose(page, 0, renderer)
@@ -736,7 +799,8 @@ def test_the_page_saves_the_view_inside_the_output_folder(page, server):
     saved = server.cwd / "view-exports" / "outside.png"
     assert saved.exists() and not (server.cwd.parent / "outside.png").exists()
     from PIL import Image
-    assert Image.open(saved).size == (N, N)
+    width, height = Image.open(saved).size
+    assert height == DEFAULT_RESOLUTION and width > height            # the frame as drawn: the canvas' aspect
 
 
 def test_dragging_the_canvas_orbits_with_low_resolution_frames_while_moving(page, server, volume_file):
@@ -745,7 +809,7 @@ def test_dragging_the_canvas_orbits_with_low_resolution_frames_while_moving(page
     volume = read_volume_file(volume_file)[0]
     _frame(page)
     _choose(page, 2, str(4 * N))                                     # 64² frames: 16² while moving
-    _frame(page, rf"full, {4 * N}×")
+    _frame(page, rf"full, \d+×{4 * N} px")
     box = page.locator("canvas").first.bounding_box()
     x, y = box["x"] + box["width"] * 0.35, box["y"] + box["height"] * 0.5
     page.mouse.move(x, y)
@@ -758,7 +822,7 @@ def test_dragging_the_canvas_orbits_with_low_resolution_frames_while_moving(page
         seen.add((m.group(3), int(m.group(4))))
     page.mouse.up()
     assert ("moving", N) in seen, seen
-    line, shown = _rest(page, rf"full, {4 * N}×", 4 * N)
+    line, shown = _rest(page, rf"full, \d+×{4 * N} px", 4 * N)
     m = FRAME.search(line)
     az, el = float(m.group(5)), float(m.group(6))
     assert abs(az) > 5.0, (az, el)                                    # the drag turned the camera
@@ -953,8 +1017,17 @@ def _silhouette(image: np.ndarray) -> tuple:
     return float(mask.sum()), np.array([rows.mean(), cols.mean()])
 
 
-def _expected(volume, renderer: str, r: int, window) -> np.ndarray:
-    return render_frame(volume, (0.0, 0.0, 1.0), renderer, "EA", r, window=window).image
+def _expected(volume, renderer: str, r: int, window, page=None) -> np.ndarray:
+    """The renderer's front view through ``window``, the central R×R square of the frame at ``page``'s
+    canvas' aspect (the path tracer's samples follow its square renders: the frame's, not the square
+    frame's), else the square frame."""
+    aspect = 1.0
+    if page is not None:
+        box = page.locator("canvas").first.bounding_box()
+        aspect = round(box["width"] / box["height"], 3)
+    image = render_frame(volume, (0.0, 0.0, 1.0), renderer, "EA", r, window=window, aspect=aspect).image
+    h, w = image.shape[:2]
+    return image[(h - r) // 2:(h - r) // 2 + r, (w - r) // 2:(w - r) // 2 + r]
 
 
 def _same(shown: np.ndarray, expected: np.ndarray, what) -> None:
@@ -981,7 +1054,7 @@ def test_zoom_and_pan_buttons_change_the_frame_as_the_renderer_says(browser, bal
     try:
         _frame(page)
         _choose(page, 2, str(r))
-        _, window = _window_of(page, rf"full, {r}×.*zoom 1\.000×, centre \(\+0\.000, \+0\.000\)")
+        _, window = _window_of(page, rf"full, \d+×{r} px.*zoom 1\.000×, centre \(\+0\.000, \+0\.000\)")
         assert window is None
         shown = _shown(page, r)
         _same(shown, _expected(volume, "closed form", r, None), "whole")
@@ -989,9 +1062,9 @@ def test_zoom_and_pan_buttons_change_the_frame_as_the_renderer_says(browser, bal
         assert abs(centre0 - (r - 1) / 2).max() < SHIFT_TOLERANCE, centre0        # the ball sits in the middle
 
         page.get_by_role("button", name="pan right").click()                # a quarter of the frame: 0.5
-        _window_of(page, rf"full, {r}×.*zoom 1\.000×, centre \(\+0\.500, \+0\.000\)")
+        _window_of(page, rf"full, \d+×{r} px.*zoom 1\.000×, centre \(\+0\.500, \+0\.000\)")
         page.get_by_role("button", name="pan up").click()
-        _, window = _window_of(page, rf"full, {r}×.*zoom 1\.000×, centre \(\+0\.500, \+0\.500\)")
+        _, window = _window_of(page, rf"full, \d+×{r} px.*zoom 1\.000×, centre \(\+0\.500, \+0\.500\)")
         assert window == Window(1.0, (0.5, 0.5))
         panned = _shown(page, r)
         _same(panned, _expected(volume, "closed form", r, window), window)
@@ -1001,11 +1074,11 @@ def test_zoom_and_pan_buttons_change_the_frame_as_the_renderer_says(browser, bal
         assert abs(moved - centre0 - expected).max() < SHIFT_TOLERANCE, (moved - centre0, expected)
 
         page.get_by_role("button", name="reset zoom and pan").click()
-        _window_of(page, rf"full, {r}×.*zoom 1\.000×, centre \(\+0\.000, \+0\.000\)")
+        _window_of(page, rf"full, \d+×{r} px.*zoom 1\.000×, centre \(\+0\.000, \+0\.000\)")
         _same(_shown(page, r), shown, "reset")
 
         page.get_by_role("button", name="zoom in").click()
-        _, window = _window_of(page, rf"full, {r}×.*zoom 2\.000×, centre \(\+0\.000, \+0\.000\)")
+        _, window = _window_of(page, rf"full, \d+×{r} px.*zoom 2\.000×, centre \(\+0\.000, \+0\.000\)")
         assert window == Window(2.0)
         zoomed = _shown(page, r)
         _same(zoomed, _expected(volume, "closed form", r, window), window)
@@ -1017,15 +1090,15 @@ def test_zoom_and_pan_buttons_change_the_frame_as_the_renderer_says(browser, bal
 
         page.get_by_role("button", name="pan left").click()                 # a quarter of the 2× frame: 0.25
         _choose(page, 2, str(N_BALL))                                        # the lit renderers at 32²
-        _, window = _window_of(page, rf"full, {N_BALL}×.*zoom 2\.000×, centre \(-0\.250, \+0\.000\)")
+        _, window = _window_of(page, rf"full, \d+×{N_BALL} px.*zoom 2\.000×, centre \(-0\.250, \+0\.000\)")
         assert window == Window(2.0, (-0.25, 0.0))
         for renderer in ("closed form", "marcher", "single scattering", "path tracer"):   # each draws the window
             if renderer != "closed form":
                 _choose(page, 0, renderer)
                 page.get_by_text(re.compile(rf"^{renderer} \(.*zoom 2×, centre \(-0\.250, \+0\.000\)")).wait_for()
-            _, seen = _window_of(page, rf"full, {N_BALL}×.*zoom 2\.000×, centre \(-0\.250, \+0\.000\)")
+            _, seen = _window_of(page, rf"full, \d+×{N_BALL} px.*zoom 2\.000×, centre \(-0\.250, \+0\.000\)")
             assert seen == window
-            _same(_shown(page, N_BALL), _expected(volume, renderer, N_BALL, window), renderer)
+            _same(_shown(page, N_BALL), _expected(volume, renderer, N_BALL, window, page), renderer)
     finally:
         page.close()
 
@@ -1042,7 +1115,7 @@ def test_the_wheel_zooms_and_a_right_drag_pans_the_frame(browser, ball_server, b
     try:
         _frame(page)
         _choose(page, 2, str(r))
-        _window_of(page, rf"full, {r}×.*zoom 1\.000×")
+        _window_of(page, rf"full, \d+×{r} px.*zoom 1\.000×")
         area0, centre0 = _silhouette(_shown(page, r))
         box = page.locator("canvas").first.bounding_box()
         x, y = box["x"] + box["width"] / 2, box["y"] + box["height"] / 2
@@ -1050,7 +1123,7 @@ def test_the_wheel_zooms_and_a_right_drag_pans_the_frame(browser, ball_server, b
         for _ in range(6):
             page.mouse.wheel(0, -100)                                        # towards the ball
             time.sleep(0.2)
-        line, zoomed = _rest(page, rf"full, {r}×.*zoom (?!1\.000)", r)     # the dolly's smoothing settles
+        line, zoomed = _rest(page, rf"full, \d+×{r} px.*zoom (?!1\.000)", r)     # the dolly's smoothing settles
         window = _window_in(line)
         assert window is not None and 1.1 < window.zoom < 4.0 and window.centre == (0.0, 0.0), window
         _same(zoomed, _expected(volume, "closed form", r, window), window)
@@ -1065,7 +1138,7 @@ def test_the_wheel_zooms_and_a_right_drag_pans_the_frame(browser, ball_server, b
             page.mouse.move(x + drag[1] * step, y + drag[0] * step)          # drag the scene left and down
             time.sleep(0.05)
         page.mouse.up(button="right")
-        line, shot = _rest(page, rf"full, {r}×.*centre \((?!\+0\.000, \+0\.000)", r)
+        line, shot = _rest(page, rf"full, \d+×{r} px.*centre \((?!\+0\.000, \+0\.000)", r)
         panned = _window_in(line)
         assert panned is not None and panned.centre != (0.0, 0.0), panned
         assert abs(panned.zoom - window.zoom) < 1e-2                          # a pan keeps the distance

@@ -44,14 +44,18 @@ page's path trace never holds another page's frames (they render in this process
 While the camera keeps moving (a message within :data:`SETTLE_S`), the thread renders a
 low-resolution frame (a quarter of the resolution, at least the volume's; the same resolution
 with "low resolution while moving" off), sent as JPEG; once it rests, the full one, as PNG.
-Frames are drawn as the scene's background image, padded with the background grey to the
-canvas' aspect so that the square render keeps its shape (viser stretches the image over the
-canvas), centred, its side the canvas' shorter side.
+Frames are rendered at the canvas' aspect (:func:`~.scene.frame_size`: the resolution R along its
+shorter side, the orthographic window widened along the longer one, :func:`~.scene.tiles`) and
+drawn as the scene's background image, which viser stretches over the canvas: nothing is
+stretched but by the frame's rounding to whole pixels. A page's first frame waits for the browser
+to report its canvas, and for the canvas' size to hold (:data:`CANVAS_SETTLE_S`: the page docks its
+control panel beside the canvas after it first reports). The frame line and the settings line
+both print the W×H rendered.
 
 The GUI: renderer, formation, resolution, the path tracer's spp, buttons that orbit the camera by
 fixed angles (and the front view), zoom it by 2 about its look-at point, pan it by a quarter of
 the frame (and reset both), the frame time and the renderer's settings (a line of text the tests
-read: ``frame N: T ms, full|moving, R×R px, az A° el E°, zoom M×, centre (X, Y)``), the source's
+read: ``frame N: T ms, full|moving, W×H px, az A° el E°, zoom M×, centre (X, Y)``), the source's
 inputs (a reconstruction run: previous/next held-out input, shown beside the view) or latents (a
 generation run: seed, new latent, a walk to a second seed), and exports into the output folder.
 
@@ -79,14 +83,14 @@ import viser
 from ..errors import UserError
 from ..views import camera_frames, from_angles, to_angles
 from ..render.window import window_or_none
-from .scene import (BACKGROUND, PASS_SPP, WINDOW_SNAP, ZOOM_RANGE, Exports, Frame, Scene, Window, camera_window,
-                    formations_for, formations_of, passes_for, plan_frame, render_frame, renderers_for, resolutions_for, to_display,
-                    zoom_distance)
+from .scene import (ASPECT_RANGE, PASS_SPP, WINDOW_SNAP, ZOOM_RANGE, Exports, Frame, Scene, Window, camera_window,
+                    default_resolution, formations_for, formations_of, passes_for, plan_frame, render_frame,
+                    renderers_for, resolutions_for, to_display, zoom_distance)
 from .worker import PathWorker
 from .start import DISTANCE, FOV, address, start_server, stop_server
 
 __all__ = ["ViewerApp", "SETTLE_S", "MAX_SPP", "MAX_SEED", "MAX_COORDINATE", "log_ignored", "checked_seed",
-           "checked_camera", "pad_to_aspect"]
+           "checked_camera", "checked_aspect"]
 
 #: A camera at rest this long gets its full-resolution frame.
 SETTLE_S = 0.2
@@ -99,29 +103,32 @@ VIEW_SNAP = 1e-6
 #: not the user's and are not drawn. After this many seconds from the connection every report counts,
 #: echoed or not.
 CONNECT_S = 1.0
+#: A page's frames wait this long from its connection for the browser to report its canvas' size
+#: (with its first camera), so that its first frame has the canvas' aspect; then a square one is drawn.
+CANVAS_S = 10.0
+#: A canvas' size must hold this long before a frame is rendered for it (:meth:`ClientView._canvas_settled`).
+CANVAS_SETTLE_S = 1.0
 #: The page's controls as it opens: the renderer and the path tracer's spp (the formation: the
 #: volume's richest, EA or AO; the resolution: the volume's).
 INITIAL_RENDERER, INITIAL_SPP = "closed form", 4
 #: The zoom buttons' factor, and the pan buttons' step as a fraction of the frame's width.
 ZOOM_STEP, PAN_STEP = 2.0, 0.25
-#: Frames are enlarged to at least this many pixels a side before they are padded to the canvas' aspect.
-MIN_SHOWN = 256
 #: The path tracer's spp slider's range, which the server holds a page's spp to.
 MAX_SPP = 64
 #: The largest seed a page may ask for: torch's and numpy's generators take a 64-bit signed integer.
 MAX_SEED = 2 ** 63 - 1
 #: The largest camera coordinate (world units; the cube is [−1, 1]³) a page's camera may have.
 MAX_COORDINATE = 1e6
-#: The background grey as an 8-bit sRGB value (what :func:`~.scene.to_display` composites over).
-_BG8 = int(round(255 * (1.055 * BACKGROUND ** (1 / 2.4) - 0.055)))
+#: A canvas' width/height is keyed to this many decimals (the frame's size is whole pixels anyway).
+ASPECT_DIGITS = 3
 
 
-def initial_key(scene: Scene, version: int = 0) -> Tuple:
+def initial_key(scene: Scene, version: int = 0, aspect: float = 1.0) -> Tuple:
     """The frame a page asks for first: the front view through the whole window with the page's
-    initial controls, as :meth:`ClientView._request` keys it."""
+    initial controls on a canvas of ``aspect``, as :meth:`ClientView._request` keys it."""
     c, n = scene.volume.shape[0], scene.volume.shape[-1]
-    return ((0.0, 0.0, 1.0), INITIAL_RENDERER, formations_for(c)[-1], resolutions_for(n)[0], INITIAL_SPP, version,
-            None)
+    return ((0.0, 0.0, 1.0), INITIAL_RENDERER, formations_for(c)[-1], default_resolution(n), INITIAL_SPP, version,
+            None, round(aspect, ASPECT_DIGITS))
 
 
 _last_ignored = {"line": None}
@@ -175,29 +182,23 @@ def _same_camera(view_a: np.ndarray, window_a: Optional[Window], view_b: np.ndar
             and max(abs(a - b) for a, b in zip(window_a.centre, window_b.centre)) <= WINDOW_SNAP)
 
 
-def pad_to_aspect(image: np.ndarray, aspect: float) -> np.ndarray:
-    """A square ``(R, R, 3)`` frame as the background image of a canvas of width/height ``aspect``:
-    enlarged (nearest: each pixel a k×k block) to at least :data:`MIN_SHOWN` pixels a side, so that
-    padding it to the aspect in whole pixels keeps it square on the canvas within 0.2 %, then padded
-    with the background grey on both sides."""
-    r0 = image.shape[0]
-    k = max(1, -(-MIN_SHOWN // r0))
-    if k > 1:
-        image = np.repeat(np.repeat(image, k, 0), k, 1)
-    r = image.shape[0]
-    if not np.isfinite(aspect) or aspect <= 0:
-        return image
-    if aspect >= 1.0:
-        w = max(r, int(round(r * aspect)))
-        out = np.full((r, w, 3), _BG8, np.uint8)
-        x0 = (w - r) // 2
-        out[:, x0:x0 + r] = image
-    else:
-        h = max(r, int(round(r / aspect)))
-        out = np.full((h, r, 3), _BG8, np.uint8)
-        y0 = (h - r) // 2
-        out[y0:y0 + r] = image
-    return out
+def checked_aspect(width: object, height: object) -> float:
+    """A page's canvas (``width`` × ``height`` pixels, as the browser reports it) as the aspect its frames
+    are rendered at: width/height to :data:`ASPECT_DIGITS` decimals, held to :data:`~.scene.ASPECT_RANGE`
+    (one line in the log past it); 1 for a canvas that is not two positive finite numbers (before the
+    browser has said, or a page that sends nonsense)."""
+    try:
+        w, h = float(width), float(height)
+    except (TypeError, ValueError):
+        w = h = math.nan
+    if not (math.isfinite(w) and math.isfinite(h) and w > 0 and h > 0):
+        return 1.0
+    aspect = w / h
+    held = min(max(aspect, ASPECT_RANGE[0]), ASPECT_RANGE[1])
+    if held != aspect:
+        log_ignored(f"a canvas of {width!r}×{height!r} pixels from a page: its frames are rendered at the aspect "
+                    f"{held:g} ({ASPECT_RANGE[0]:g} … {ASPECT_RANGE[1]:g}) and stretched over it")
+    return round(held, ASPECT_DIGITS)
 
 
 def _clamped_choice(value: object, choices: "Sequence[int]", what: str) -> int:
@@ -252,31 +253,31 @@ class ViewerApp:
             view.stop()
 
     def _warm_up(self) -> None:
-        """Render the first frame a page asks for (:func:`initial_key`) while the browser loads the
-        page, and encode it once as the page does (viser's PNG and JPEG encoders load their
-        libraries on first use): the page's own request then finds the frame done
-        (:meth:`frame_for`), or waits on the render lock for it, instead of paying torch's and the
-        encoder's first calls after the page connects."""
+        """Render the first frame a page asks for (:func:`initial_key`, a square canvas's) while the
+        browser loads the page, and encode it once as the page does (viser's PNG and JPEG encoders
+        load their libraries on first use): the page's own request then finds the frame done
+        (:meth:`frame_for`; a square canvas) or renders its own at its canvas' aspect with torch,
+        the resampled volume (cached) and the encoders warm, instead of paying their first calls
+        after the page connects."""
         try:
             frame = self.frame_for(initial_key(self.scene))
             from viser._image_encoding import cv2_imencode_with_fallback   # lazy: viser's own encoder, warmed only
-            image = pad_to_aspect(frame.image, 16 / 9)
             for fmt in ("png", "jpeg"):
-                cv2_imencode_with_fallback(fmt, image, jpeg_quality=90, channel_ordering="rgb")
+                cv2_imencode_with_fallback(fmt, frame.image, jpeg_quality=90, channel_ordering="rgb")
         except Exception:                                  # the page's own request renders it and shows why
             pass
 
     def frame_for(self, key: Tuple) -> Frame:
-        """The frame of ``key`` (view, renderer, formation, resolution, spp, volume version, window):
+        """The frame of ``key`` (view, renderer, formation, resolution, spp, volume version, window, aspect):
         the last frame rendered where it has that key (the warm-up's, another page's, the same
         picture asked for again at rest), else rendered now; one render at a time."""
         with self.render_lock:
             if self.last is not None and self.last[0] == key:
                 return self.last[1]
-            view, renderer, formation, res, spp, _, window = key
+            view, renderer, formation, res, spp, _, window, aspect = key
             with self.scene_lock:
                 version = self.version                       # the volume it renders (a newer one where it changed)
-                frame = render_frame(self.scene.volume, view, renderer, formation, res, spp, window)
+                frame = render_frame(self.scene.volume, view, renderer, formation, res, spp, window, aspect)
             self.last = (key[:5] + (version,) + key[6:], frame)
             return frame
 
@@ -314,6 +315,7 @@ class ClientView:
         self.limits = (0.01, 1e4)                          # the browser's dolly limits as set (viser's defaults)
         self.connected = time.monotonic()
         self.placed = False                                # has the page reported the initial camera yet?
+        self.canvas, self.canvas_at = None, 0.0             # the canvas' size (pixels) last seen, and since when
         self._gui()
         # the camera viser connects a page with is the browser's default, before it takes the initial one
         # (DISTANCE, FOV): draw the initial camera until the page says where it is
@@ -336,8 +338,8 @@ class ClientView:
             self.formation = gui.add_dropdown("formation", formations_for(c), initial_value=formations_for(c)[-1],
                                               hint="VH, AO: density only; EA: colour (the lit renderers form EA)")
             choices = [str(r) for r in resolutions_for(n)]
-            self.resolution = gui.add_dropdown("resolution", choices, initial_value=choices[0],
-                                               hint="image pixels per side")
+            self.resolution = gui.add_dropdown("resolution", choices, initial_value=str(default_resolution(n)),
+                                               hint="the frame's pixels along the canvas' shorter side")
             self.spp = gui.add_slider("path tracer spp", min=1, max=MAX_SPP, step=1, initial_value=INITIAL_SPP)
             self.low = gui.add_checkbox("low resolution while moving", initial_value=True,
                                         hint="a quarter of the resolution (at least the volume's) while the camera moves")
@@ -534,6 +536,19 @@ class ClientView:
 
     # -- frames -----------------------------------------------------------------------------------
 
+    def _canvas_settled(self) -> bool:
+        """Whether this page's canvas has a size (the browser reports it with its first camera; a
+        square one is assumed :data:`CANVAS_S` after the connection) that has held for
+        :data:`CANVAS_SETTLE_S`: the page lays its panel out after it first reports (the canvas
+        narrows), and a resized window reports many sizes; the frame is for the one it rests at."""
+        cam = self.client.camera
+        size, now = (cam.image_width, cam.image_height), time.monotonic()
+        if size != self.canvas:
+            self.canvas, self.canvas_at = size, now
+        if not (size[0] > 0 and size[1] > 0):
+            return now - self.connected >= CANVAS_S
+        return now - self.canvas_at >= CANVAS_SETTLE_S
+
     def _request(self) -> Tuple:
         with self.lock:
             view, moving = tuple(float(x) for x in self.view), time.monotonic() - self.last_move < SETTLE_S
@@ -544,8 +559,10 @@ class ClientView:
         low = max(n, full // 4) if self.low.value else full
         res, quality = (low, "moving") if moving else (full, "full")
         spp = int(_clamped_choice(self.spp.value, range(1, MAX_SPP + 1), "path tracer spp"))
-        key = (view, self.renderer.value, self.formation.value, res, spp, self.app.version, window)
-        return key, self._lens()[1], quality
+        cam = self.client.camera
+        aspect = checked_aspect(cam.image_width, cam.image_height)
+        key = (view, self.renderer.value, self.formation.value, res, spp, self.app.version, window, aspect)
+        return key, aspect, quality
 
     def _loop(self) -> None:
         while not self.stopped:
@@ -554,6 +571,8 @@ class ClientView:
             if self.stopped:
                 return
             request = None
+            if not self._canvas_settled():
+                continue
             try:
                 request = self._request()
                 if request[0][1] == "path tracer":
@@ -584,18 +603,19 @@ class ClientView:
 
     def _show(self, frame: Frame, key: Tuple, aspect: float, quality: str, note: str = "") -> None:
         """Draw ``frame`` (rendered for ``key``) and write its frame and settings lines."""
-        view, renderer, _, res, _, _, window = key
-        # full frames lossless (PNG, what the tests compare), the others as JPEG (a tenth of the encoding time)
-        self.client.scene.set_background_image(pad_to_aspect(frame.image, aspect),
-                                               format="png" if quality == "full" else "jpeg", jpeg_quality=90)
+        view, renderer, _, res, _, _, window, _ = key
+        # the frame is rendered at the canvas' aspect (scene.tiles): viser stretches it over the canvas as it is.
+        # Full frames lossless (PNG, what the tests compare), the others as JPEG (a tenth of the encoding time)
+        self.client.scene.set_background_image(frame.image, format="png" if quality == "full" else "jpeg",
+                                               jpeg_quality=90)
         self.count += 1
         self.frame = frame
         if quality == "full":
             self.times[renderer] = frame.seconds
         az, el = (float(a) for a in to_angles(torch.tensor(view)))
         zoom, (cx, cy) = (1.0, (0.0, 0.0)) if window is None else (window.zoom, window.centre)
-        res = frame.resolution
-        self.info.content = (f"frame {self.count}: {1000 * frame.seconds:.1f} ms, {quality}, {res}×{res} px, "
+        height, width = frame.image.shape[:2]
+        self.info.content = (f"frame {self.count}: {1000 * frame.seconds:.1f} ms, {quality}, {width}×{height} px, "
                              f"az {az:.1f}° el {el:.1f}°, zoom {zoom:.3f}×, centre ({cx:+.3f}, {cy:+.3f}){note}")
         self.settings.content = frame.settings + (" (the path tracer's preview while its passes render)"
                                                   if note.startswith(", path tracer's preview") else "")
@@ -619,10 +639,9 @@ class ClientView:
         preview; for a new request (a camera, a setting, a volume), the preview at once and pass 0 queued;
         for a pass come back, the running mean of the passes so far drawn and the next pass queued."""
         key, aspect, quality = request
-        view, _, _, res, spp, version, window = key
+        view, _, _, res, spp, version, window, _ = key
         n = self.app.scene.volume.shape[-1]
-        preview = ((view, "closed form", "EA", n, spp, version,
-                    window), aspect, "moving")
+        preview = ((view, "closed form", "EA", n, spp, version, window, aspect), aspect, "moving")
         if quality == "moving":
             self._drop_trace()
             if preview != self.shown:
@@ -642,7 +661,7 @@ class ClientView:
                 volume, version_now = self.app.scene.volume, self.app.version
             if version_now != version:
                 return                                      # the next request has the new volume
-            trace.future = self.app.worker.submit(self, volume, version, view, res, trace.done, window)
+            trace.future = self.app.worker.submit(self, volume, version, view, res, trace.done, window, aspect)
             trace.future.add_done_callback(lambda _: self.wake.set())
             return
         if not trace.future.done():
@@ -655,7 +674,7 @@ class ClientView:
         trace.total = pass_image if trace.total is None else trace.total + pass_image
         trace.done += 1
         trace.seconds += seconds
-        plan = plan_frame(self.app.scene.volume, "path tracer", "EA", res, spp, window)
+        plan = plan_frame(self.app.scene.volume, "path tracer", "EA", res, spp, window, aspect)
         frame = Frame(to_display(trace.total / trace.done), trace.seconds, plan.line, view, "path tracer", "EA",
                       plan.resolution, window_or_none(window))
         last = trace.done == trace.passes

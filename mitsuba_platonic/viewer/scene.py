@@ -47,7 +47,7 @@ from .start import check_source, volume_title
 __all__ = ["RENDERERS", "FORMATIONS", "BACKGROUND", "Frame", "Scene", "Exports", "open_source", "render_frame",
            "formations_for", "formations_of", "renderers_for", "resolutions_for", "to_display", "clean_name", "camera_window",
            "zoom_distance", "ZOOM_RANGE", "Window", "PASS_SPP", "Plan", "plan_frame", "path_pass",
-           "passes_for"]
+           "passes_for", "DEFAULT_RESOLUTION", "ASPECT_RANGE", "default_resolution", "frame_size", "Tile", "tiles"]
 
 #: The renderers the page offers: label → backend (mitsuba_platonic.render.BACKENDS).
 RENDERERS: Dict[str, str] = {"closed form": "closed_form", "marcher": "mitsuba",
@@ -60,6 +60,12 @@ _LIT = ("scatter_march", "physical")
 BACKGROUND = 0.08
 #: Largest image resolution the page offers (the marcher's 512² frame of a 64³ volume: 8×8 rays per voxel).
 MAX_RESOLUTION = 512
+#: The resolution a page opens with (the choice of :func:`resolutions_for` nearest to it): the
+#: frame's shorter side in pixels.
+DEFAULT_RESOLUTION = 128
+#: The canvas aspects (width/height) frames are rendered at: a canvas past them gets the nearest one
+#: (and its frame is stretched over it).
+ASPECT_RANGE = (0.25, 4.0)
 #: Largest image the renderers other than the marcher render (they render the volume resampled to
 #: R³: the closed form takes about 13 s for 256² on 2 cores); a larger choice renders at this one.
 MAX_RESAMPLED = 128
@@ -108,7 +114,7 @@ def to_display(image: torch.Tensor) -> np.ndarray:
 
 @dataclass
 class Frame:
-    """One rendered view: ``image`` ``(R, R, 3)`` uint8 sRGB, ``seconds`` of rendering (from the call to
+    """One rendered view: ``image`` ``(H, W, 3)`` uint8 sRGB (R×R on a square canvas; R the ``resolution``), ``seconds`` of rendering (from the call to
     the displayable image), ``settings`` (what the renderer was told, one line) and the ``view``."""
 
     image: np.ndarray
@@ -142,6 +148,65 @@ def _at_resolution(volume: torch.Tensor, r: int) -> torch.Tensor:
 def resolutions_for(n: int) -> List[int]:
     """The image resolutions offered for an N³ volume: kN for k = 1, 2, 4, 8 up to :data:`MAX_RESOLUTION`."""
     return [k * n for k in (1, 2, 4, 8) if k * n <= MAX_RESOLUTION] or [n]
+
+
+def default_resolution(n: int) -> int:
+    """The resolution an N³ volume's page opens with: the choice nearest :data:`DEFAULT_RESOLUTION`."""
+    return min(resolutions_for(n), key=lambda r: (abs(r - DEFAULT_RESOLUTION), r))
+
+
+def _checked_aspect(aspect: float) -> float:
+    if isinstance(aspect, bool) or not isinstance(aspect, (int, float)) or not 0.0 < aspect < math.inf:
+        raise UserError(f"aspect: expected a finite width/height > 0, got {aspect!r}")
+    return min(max(float(aspect), ASPECT_RANGE[0]), ASPECT_RANGE[1])
+
+
+def frame_size(resolution: int, aspect: float = 1.0) -> Tuple[int, int]:
+    """(width, height) in pixels of the frame of ``resolution`` R on a canvas of width/height
+    ``aspect`` (held to :data:`ASPECT_RANGE`): R along the shorter side, the longer one
+    R + 2 round((R·a′ − R)/2), a′ = max(a, 1/a), the nearest size to the aspect with the same parity
+    as R, so that the frame's central R×R square lies on whole pixels (it is the square frame)."""
+    a = _checked_aspect(aspect)
+    r = int(resolution)
+    longer = r + 2 * int(round((r * max(a, 1.0 / a) - r) / 2.0))
+    return (longer, r) if a >= 1.0 else (r, longer)
+
+
+@dataclass(frozen=True)
+class Tile:
+    """One square R×R render of a frame: its ``window`` (None: the full one) and where its pixels go
+    in the frame (``row``, ``column`` of its top-left pixel)."""
+
+    window: Optional[Window]
+    row: int
+    column: int
+
+
+def tiles(resolution: int, aspect: float = 1.0, window: Optional[Window] = None) -> List[Tile]:
+    """The square renders that make the frame of ``resolution`` R on a canvas of ``aspect``
+    (:func:`frame_size` W×H): the orthographic window widened along the longer side, as ⌈W/R⌉ (or
+    ⌈H/R⌉) R×R renders side by side, overlapping where they must, each through ``window`` (zoom m,
+    centre c) moved by whole pixels along the longer side. Pixel j of the frame's row sees
+    x = c_x + p (j + ½ − W/2), p = 2/(m R) (the square frame's pitch), so the frame's central R×R
+    square is the square frame and nothing is stretched; a square canvas has the one tile
+    ``window`` itself."""
+    w, h = frame_size(resolution, aspect)
+    r = int(resolution)
+    base = window_or_none(window) or Window()
+    pitch = 2.0 * base.half_width / r
+    longer = max(w, h)
+    count = -(-longer // r)
+    starts = [0] if count == 1 else [int(round(t * (longer - r) / (count - 1))) for t in range(count)]
+    out = []
+    for s in starts:
+        shift = pitch * (s + r / 2.0 - longer / 2.0)             # the tile's centre from the frame's, world units
+        cx, cy = base.centre
+        if w >= h:
+            centre, row, column = (cx + shift, cy), 0, s
+        else:
+            centre, row, column = (cx, cy - shift), s, 0          # rows run down, up runs up
+        out.append(Tile(window_or_none(Window(base.zoom, centre)), row, column))
+    return out
 
 
 def _lens_scale(fov: float, aspect: float) -> float:
@@ -214,11 +279,17 @@ class Plan:
     k: int
     settings: RenderSettings
     line: str
+    width: int = 0
+    height: int = 0
+    tiles: Tuple[Tile, ...] = ()
 
 
 def plan_frame(volume: torch.Tensor, renderer: str, formation: str, resolution: Optional[int], spp: int,
-               window: Optional[Window]) -> Plan:
-    """Check a frame's request (:func:`render_frame`'s arguments) and say how it is rendered."""
+               window: Optional[Window], aspect: float = 1.0) -> Plan:
+    """Check a frame's request (:func:`render_frame`'s arguments) and say how it is rendered: the
+    square renders (:func:`tiles`) of the frame's W×H pixels (:func:`frame_size` of the resolution
+    rendered, R×R on a square canvas)."""
+    aspect = _checked_aspect(aspect)
     if renderer not in RENDERERS:
         raise UserError(f"renderer: expected one of {list(RENDERERS)}, got {renderer!r}")
     if formation not in FORMATIONS:
@@ -237,7 +308,8 @@ def plan_frame(volume: torch.Tensor, renderer: str, formation: str, resolution: 
         k = max(1, MAX_RESAMPLED // n)
         capped, r = f" (asked {r}², the {renderer} renders at most {max(n, k * n)}² here)", k * n
     options: Dict[str, object] = {}
-    shown = [f"{renderer} ({backend})", model.upper(), f"{r}×{r} px{capped}"]
+    width, height = frame_size(r, aspect)
+    shown = [f"{renderer} ({backend})", model.upper(), f"{width}×{height} px{capped}"]
     if backend == "mitsuba":
         shown.append(f"volume {n}³, step 1 voxel" + (f", {k}×{k} rays per voxel-sized pixel" if k > 1 else ""))
     else:
@@ -253,7 +325,10 @@ def plan_frame(volume: torch.Tensor, renderer: str, formation: str, resolution: 
     window = window_or_none(window)
     if window is not None:
         shown.append(f"zoom {window.zoom:.3g}×, centre ({window.centre[0]:+.3f}, {window.centre[1]:+.3f})")
-    return Plan(backend, model, r, k, RenderSettings.for_call(backend, model, **options), ", ".join(shown))
+    if width != height:
+        shown.append(f"{len(tiles(r, aspect, window))} renders of {r}×{r} side by side")
+    return Plan(backend, model, r, k, RenderSettings.for_call(backend, model, **options), ", ".join(shown),
+                width, height, tuple(tiles(r, aspect, window)))
 
 
 def _unit(view: Tuple[float, float, float]) -> torch.Tensor:
@@ -269,20 +344,36 @@ def _prepared(volume: torch.Tensor, plan: Plan) -> torch.Tensor:
     return v.contiguous()
 
 
+def _assemble(plan: Plan, render) -> torch.Tensor:
+    """The frame ``(C, H, W)`` of ``plan`` from ``render(window)`` → ``(C, R, R)``, one call per tile."""
+    out = None
+    r = plan.resolution
+    for tile in plan.tiles:
+        image = render(tile.window)
+        if len(plan.tiles) == 1:
+            return image
+        if out is None:
+            out = image.new_zeros((image.shape[0], plan.height, plan.width))
+        out[:, tile.row:tile.row + r, tile.column:tile.column + r] = image
+    return out
+
+
 def path_pass(volume: torch.Tensor, view: Tuple[float, float, float], resolution: Optional[int] = None,
-              index: int = 0, window: Optional[Window] = None) -> torch.Tensor:
+              index: int = 0, window: Optional[Window] = None, aspect: float = 1.0) -> torch.Tensor:
     """Pass ``index`` of the path tracer's frame: :data:`PASS_SPP` spp under the sky of seed 0, the
     samples of seed ``index`` (:func:`~mitsuba_platonic.render.mitsuba.physical.render_physical_ad`'s
-    ``sample_seed``), as the linear premultiplied RGBA ``(4, R, R)``. The frame of S spp is the mean
-    of passes 0 … S/PASS_SPP − 1, summed in that order (:func:`render_frame`)."""
+    ``sample_seed``), as the linear premultiplied RGBA ``(4, H, W)`` (:func:`frame_size` on a canvas
+    of ``aspect``). The frame of S spp is the mean of passes 0 … S/PASS_SPP − 1, summed in that
+    order (:func:`render_frame`)."""
     from ..render.mitsuba.physical import render_physical_ad           # lazy: Mitsuba, on the path tracer's first pass
 
-    plan = plan_frame(volume, "path tracer", "EA", resolution, PASS_SPP, window)
+    plan = plan_frame(volume, "path tracer", "EA", resolution, PASS_SPP, window, aspect)
     s = plan.settings
+    prepared = _prepared(volume, plan)
     with torch.no_grad():
-        return render_physical_ad(_prepared(volume, plan), _unit(view), lighting=s.lighting, spp=PASS_SPP,
-                                  max_depth=s.max_depth, seed=0, filter=s.filter, window=window_or_none(window),
-                                  sample_seed=int(index))[0]
+        return _assemble(plan, lambda tile: render_physical_ad(
+            prepared, _unit(view), lighting=s.lighting, spp=PASS_SPP, max_depth=s.max_depth, seed=0,
+            filter=s.filter, window=tile, sample_seed=int(index))[0])
 
 
 def passes_for(spp: int) -> int:
@@ -292,15 +383,17 @@ def passes_for(spp: int) -> int:
 
 def render_frame(volume: torch.Tensor, view: Tuple[float, float, float], renderer: str = "closed form",
                  formation: str = "EA", resolution: Optional[int] = None, spp: int = 4,
-                 window: Optional[Window] = None) -> Frame:
+                 window: Optional[Window] = None, aspect: float = 1.0) -> Frame:
     """Render the ``(C, N, N, N)`` ``volume`` (checked when it was opened) from the unit ``view`` ω.
 
     ``renderer``: a label of :data:`RENDERERS`; ``formation``: one of :data:`FORMATIONS` (a lit
     renderer always forms EA); ``resolution``: the image's R = kN, k a positive int (default N);
     ``spp``: the path tracer's samples per pixel; ``window``: the orthographic camera's zoom and pan
     (:class:`~mitsuba_platonic.render.window.Window`, every renderer; None: the whole cube's
-    cross-section, the frame as without a window, bit for bit). The random sky of the lit
-    renderers is the one of seed 0 (the same in every frame).
+    cross-section, the frame as without a window, bit for bit); ``aspect``: the canvas' width/height,
+    the frame W×H of :func:`frame_size` (R along the shorter side) made of the square renders of
+    :func:`tiles` (1: the one square frame). The random sky of the lit renderers is the one of seed 0
+    (the same in every frame).
 
     At k > 1 the marcher keeps its k² regular sub-pixel rays per pixel apart
     (:func:`~mitsuba_platonic.render.drjit.marcher.march_pixels`: the same kernel, k² times the rays); the
@@ -312,7 +405,7 @@ def render_frame(volume: torch.Tensor, view: Tuple[float, float, float], rendere
 
     what the page shows once its last pass has arrived.
     """
-    plan = plan_frame(volume, renderer, formation, resolution, spp, window)
+    plan = plan_frame(volume, renderer, formation, resolution, spp, window, aspect)
     window = window_or_none(window)
     w = _unit(view)
     start = time.perf_counter()
@@ -320,14 +413,16 @@ def render_frame(volume: torch.Tensor, view: Tuple[float, float, float], rendere
         if plan.backend == "physical":
             total = None
             for i in range(passes_for(spp)):
-                image = path_pass(volume, view, plan.resolution, i, window)
+                image = path_pass(volume, view, plan.resolution, i, window, aspect)
                 total = image if total is None else total + image
             image = total / passes_for(spp)
         elif plan.backend == "mitsuba" and plan.k > 1:
             from ..render.drjit.marcher import march_pixels          # lazy: imports Dr.Jit, on the marcher's first frame
-            image = march_pixels(_prepared(volume, plan), w, plan.settings, plan.k, window)[0]
+            prepared = _prepared(volume, plan)
+            image = _assemble(plan, lambda tile: march_pixels(prepared, w, plan.settings, plan.k, tile)[0])
         else:
-            image = render_with(_prepared(volume, plan), w, plan.settings, 0, window)[0]
+            prepared = _prepared(volume, plan)
+            image = _assemble(plan, lambda tile: render_with(prepared, w, plan.settings, 0, tile)[0])
         image = to_display(image)
     seconds = time.perf_counter() - start
     return Frame(image, seconds, plan.line, tuple(float(x) for x in w[0]), renderer, formation, plan.resolution,

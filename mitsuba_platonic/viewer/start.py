@@ -8,8 +8,9 @@ browser loads the page (:mod:`mitsuba_platonic.cli.viewer`).
 - :func:`check_port`: a busy ``--port`` as a one-line error (viser would quietly take the next one).
 - :func:`check_source`: SOURCE's one-line errors (missing, neither file nor folder, ``--photo``
   with a file, a damaged volume file), and a volume file's checked array, read with numpy alone.
-- :func:`start_server`: the viser server with the initial camera (:data:`DISTANCE`, :data:`FOV`)
-  and no page content yet; a page that connects now waits, empty, until
+- :func:`start_server`: the viser server with the initial camera (:data:`DISTANCE`, :data:`FOV`),
+  its control panel docked to the right of the canvas (the canvas is the rest of the window, so
+  the controls never cover the object), and no page content yet; a page that connects now waits, empty, until
   :class:`~.app.ViewerApp` registers its connect handler (viser calls it then for the pages
   already connected) and renders the first frame.
 """
@@ -100,6 +101,7 @@ def start_server(host: str = "127.0.0.1", port: int = 8080):
     if port and server.get_port() != port:               # taken between the check and the bind
         stop_server(server)
         raise UserError(f"--port {port}: {host}:{port} is in use; choose another --port (0 picks a free one)")
+    server.gui.main_panel.dock_right()                   # the controls beside the canvas, not over the object
     server.scene.set_up_direction("+y")
     server.initial_camera.position = (0.0, 0.0, DISTANCE)
     server.initial_camera.look_at = (0.0, 0.0, 0.0)

@@ -58,8 +58,8 @@ class _Pipe:
 
 
 def serve(conn: Any) -> None:
-    """The child's loop: ``(volume array or None, view, resolution, index, window)`` → ``(image, seconds)``
-    (the linear ``(4, R, R)`` float32 pass), or ``(None, why)``; ends on None or a closed pipe."""
+    """The child's loop: ``(volume array or None, view, resolution, index, window, aspect)`` →
+    ``(image, seconds)`` (the linear ``(4, H, W)`` float32 pass, :func:`~.scene.path_pass`), or ``(None, why)``; ends on None or a closed pipe."""
     signal.signal(signal.SIGINT, signal.SIG_IGN)          # Ctrl-C is the server's to answer
     try:
         os.nice(NICE)
@@ -76,12 +76,12 @@ def serve(conn: Any) -> None:
             return
         if message is None:
             return
-        array, view, resolution, index, window = message
+        array, view, resolution, index, window, aspect = message
         if array is not None:
             volume = torch.from_numpy(array)
         try:
             start = time.perf_counter()
-            image = path_pass(volume, view, resolution, index, window)
+            image = path_pass(volume, view, resolution, index, window, aspect)
             conn.send((image.float().cpu().numpy(), time.perf_counter() - start))
         except Exception as e:                             # the page shows it; the worker serves on
             conn.send((None, f"{type(e).__name__}: {e}"))
@@ -101,15 +101,15 @@ class PathWorker:
         self._thread.start()
 
     def submit(self, page: object, volume, version: int, view: Tuple[float, float, float], resolution: int,
-               index: int, window) -> Future:
-        """Queue pass ``index`` of ``page``'s frame (replacing the page's queued pass): a Future of
-        ``(image (4, R, R) float32, seconds)``."""
+               index: int, window, aspect: float = 1.0) -> Future:
+        """Queue pass ``index`` of ``page``'s frame on a canvas of ``aspect`` (replacing the page's
+        queued pass): a Future of ``(image (4, H, W) float32, seconds)``."""
         future: Future = Future()
         with self._cond:
             old = self._slots.pop(page, None)
             if old is not None:
                 old[1].cancel()
-            self._slots[page] = ((volume, version, view, resolution, index, window), future)
+            self._slots[page] = ((volume, version, view, resolution, index, window, aspect), future)
             self._cond.notify()
         return future
 
@@ -141,12 +141,12 @@ class PathWorker:
                 page, (job, future) = self._slots.popitem(last=False)   # the oldest slot: round-robin
             if not future.set_running_or_notify_cancel():
                 continue
-            volume, version, view, resolution, index, window = job
+            volume, version, view, resolution, index, window, aspect = job
             try:
                 if not self._alive():
                     self._start()
                 array = None if self._sent == version else np.ascontiguousarray(volume.numpy())
-                self._conn.send((array, view, resolution, index, window))
+                self._conn.send((array, view, resolution, index, window, aspect))
                 self._sent = version
                 image, result = self._conn.recv()
             except (EOFError, OSError, pickle.UnpicklingError) as e:
