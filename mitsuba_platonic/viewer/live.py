@@ -111,8 +111,8 @@ class RunWatcher:
                 self.on_model(model)                       # refuses a model of another kind of run
             except Exception as e:                         # torn, corrupt, not a checkpoint: keep the model shown
                 self.failed = (f"{e}" if isinstance(e, UserError) else f"{type(e).__name__}: {e}").splitlines()[0]
-                print(f"platonic view: the run's new {self.path} was not taken ({self.failed}); still showing "
-                      f"step {self.step}", file=sys.stderr, flush=True)
+                print(f"platonic view: the run's new checkpoints/last.pt was not taken ({self.failed}); still "
+                      f"showing step {self.step}", file=sys.stderr, flush=True)
             else:
                 self.step, self.failed, took, changed = int(getattr(model, "step", self.step)), None, True, True
         if changed:
