@@ -661,6 +661,91 @@ def test_the_colour_scales_numbers_are_the_difference_arrays_range():
         compare(a, b[:, :-1], "difference")
 
 
+class SocketPage:
+    """A page without a browser: a websocket client of viser's own protocol that reports one camera
+    (the initial one, on a ``width`` × ``height`` canvas) and reads nothing of what it is sent; the
+    server makes its real ClientHandle and the app its ClientView (GUI, render thread), as for a tab."""
+
+    def __init__(self, app, width: int = 1400, height: int = 600):
+        import msgspec
+        from viser._messages import ViewerCameraMessage
+        from websockets.sync.client import connect
+
+        from mitsuba_platonic.viewer.start import DISTANCE, FOV
+        self.ws = connect(f"ws://127.0.0.1:{app.port}", subprotocols=[f"viser-v{viser.__version__}"])
+        self.closed = threading.Event()
+        threading.Thread(target=self._drain, daemon=True).start()
+        camera = ViewerCameraMessage(wxyz=(1.0, 0.0, 0.0, 0.0), position=(0.0, 0.0, DISTANCE), fov=FOV, near=0.01,
+                                     far=100.0, image_height=height, image_width=width, look_at=(0.0, 0.0, 0.0),
+                                     up_direction=(0.0, 1.0, 0.0))
+        self.ws.send(msgspec.msgpack.encode(camera.as_serializable_dict()))
+        deadline = time.monotonic() + 60
+        while not app.clients and time.monotonic() < deadline:
+            time.sleep(0.05)
+        assert app.clients, "the server made no ClientView for the socket page"
+        self.view = next(iter(app.clients.values()))
+
+    def _drain(self) -> None:
+        while not self.closed.is_set():
+            try:
+                self.ws.recv(timeout=0.2)
+            except TimeoutError:
+                continue
+            except Exception:
+                return
+
+    def wait(self, condition, seconds: float = 120.0) -> bool:
+        deadline = time.monotonic() + seconds
+        while not condition() and time.monotonic() < deadline:
+            time.sleep(0.05)
+        return condition()
+
+    def close(self) -> None:
+        self.closed.set()
+        self.ws.close()
+
+
+def test_a_page_in_compare_mode_draws_the_difference_through_the_colour_scale(volume_file, tmp_path):
+    """A page (a socket page: viser's GUI and the app's render thread, no browser) that chooses
+    "closed form vs marcher" as a difference draws |A − B| of the two renderers' frames at its camera
+    and canvas through the colour scale, prints the scale's range, shows the bar and disables the
+    renderer control; "side by side" draws A | B without the bar; "off" draws the one renderer again."""
+    from mitsuba_platonic.viewer.app import ViewerApp, checked_aspect
+    from mitsuba_platonic.viewer.compare import compare
+
+    volume = read_volume_file(volume_file)[0]
+    app = ViewerApp(open_source(volume_file), tmp_path / "exports", port=0)
+    page = None
+    try:
+        page = SocketPage(app)
+        v = page.view
+        assert page.wait(lambda: v.count >= 1 and ", full," in v.info.content), v.info.content
+        v.resolution.value = str(2 * N)                    # the marcher's 2×2 rays per voxel: the two differ
+        v.compare.value, v.layout.value = "closed form vs marcher", "difference"
+        assert page.wait(lambda: "compare closed form vs marcher (difference)" in v.info.content
+                         and f"×{2 * N} px" in v.info.content), v.info.content
+        aspect = checked_aspect(1400, 600)
+        a = render_frame(volume, (0.0, 0.0, 1.0), "closed form", "EA", 2 * N, 4, None, aspect).image
+        b = render_frame(volume, (0.0, 0.0, 1.0), "marcher", "EA", 2 * N, 4, None, aspect).image
+        expected = compare(a, b, "difference")
+        np.testing.assert_array_equal(v.comparison.difference, expected.difference)
+        np.testing.assert_array_equal(v.frame.image, expected.image)
+        lo, hi = (float(x) for x in SCALE.search(v.scale.content).groups())
+        assert (lo, hi) == (float(expected.magnitude.min()), float(expected.magnitude.max())) and hi > 0
+        assert v.scale.visible and v.scale_bar.visible and v.renderer.disabled
+        v.layout.value = "side by side"
+        assert page.wait(lambda: "compare closed form vs marcher (side by side)" in v.info.content), v.info.content
+        assert v.frame.image.shape[1] > v.frame.image.shape[0] and not v.scale_bar.visible and v.scale.visible
+        v.compare.value = "off"
+        assert page.wait(lambda: v.frame is not None and "compare" not in v.info.content), v.info.content
+        assert not v.scale.visible and not v.renderer.disabled
+        np.testing.assert_array_equal(v.frame.image, a)
+    finally:
+        if page is not None:
+            page.close()
+        app.stop()
+
+
 def _replace(path: Path, data: bytes) -> None:
     """Write ``data`` as ``path`` at once (a rename), as training saves a checkpoint: the watcher never sees half."""
     tmp = path.with_name(path.name + ".writing")
@@ -672,7 +757,8 @@ def test_a_live_run_follows_its_new_checkpoint_and_keeps_its_model_past_a_torn_o
     """``platonic view RUN`` on a run still training: a torn last.pt is one line in the log, tried once,
     and the model shown stays; a new last.pt (a later step, other weights) is taken within 10 s (the
     watcher looks every POLL_S = 2 s): the server reports its step and scalars.csv's latest losses,
-    and the scene shows the new model's volume (every page renders again: the version moves)."""
+    and the scene shows the new model's volume (every page renders again: the version moves); an
+    open page's run line and title say so."""
     from mitsuba_platonic.files.checkpoint import load_checkpoint, save_checkpoint
     from mitsuba_platonic.model import Model
     from mitsuba_platonic.viewer.app import ViewerApp
@@ -681,9 +767,12 @@ def test_a_live_run_follows_its_new_checkpoint_and_keeps_its_model_past_a_torn_o
     shutil.copytree(runs["generation"], run)
     last = run / "checkpoints" / "last.pt"
     app = ViewerApp(open_source(run), tmp_path / "exports", port=0)
+    page = None
     try:
         live, model, version = app.live, app.scene.model, app.version
         assert live is not None and live.step == 1 and "model of step 1" in live.line()
+        page = SocketPage(app)                             # a page open on the run: its run line follows
+        assert page.view.run_line.content == live.line()
 
         def wait(condition) -> bool:
             deadline = time.monotonic() + 10.0
@@ -715,7 +804,11 @@ def test_a_live_run_follows_its_new_checkpoint_and_keeps_its_model_past_a_torn_o
         assert app.scene.model.step == 5 and app.scene.title.endswith("(step 5)") and app.version == version + 1
         torch.testing.assert_close(app.scene.volume, Model.from_checkpoint(run).generate(1, seed=0)[0])
         assert not torch.allclose(app.scene.volume, model.generate(1, seed=0)[0])
+        assert page.wait(lambda: page.view.run_line.content == live.line(), 10.0), page.view.run_line.content
+        assert "(step 5)" in page.view.title.content
     finally:
+        if page is not None:
+            page.close()
         app.stop()
 
 

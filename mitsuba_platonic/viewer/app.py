@@ -124,6 +124,8 @@ MAX_SEED = 2 ** 63 - 1
 MAX_COORDINATE = 1e6
 #: A canvas' width/height is keyed to this many decimals (the frame's size is whole pixels anyway).
 ASPECT_DIGITS = 3
+#: How long :meth:`ViewerApp.stop` waits for the frames in flight to finish (seconds).
+STOP_WAIT_S = 60.0
 #: The compare control's first choice: one renderer, the renderer control's.
 COMPARE_OFF = "off"
 
@@ -328,10 +330,19 @@ class ViewerApp:
             view.wake.set()
 
     def stop(self) -> None:
+        """Stop the watcher, the pages' render threads (a frame in flight is let finish, up to
+        :data:`STOP_WAIT_S`: a thread killed inside torch at the interpreter's exit aborts it) and
+        the worker, then the server."""
         if self.live is not None:
             self.live.stop()
-        for view in list(self.clients.values()):
+        views = list(self.clients.values())
+        for view in views:
             view.stop()
+        deadline = time.monotonic() + STOP_WAIT_S
+        for view in views:
+            view.thread.join(timeout=max(0.0, deadline - time.monotonic()))
+        if self.live is not None:
+            self.live.join(max(0.0, deadline - time.monotonic()))
         self.worker.stop()
         stop_server(self.server)
 

@@ -121,3 +121,7 @@ class RunWatcher:
 
     def stop(self) -> None:
         self._stop.set()
+
+    def join(self, timeout: float) -> None:
+        """Wait up to ``timeout`` seconds for the thread to end (after :meth:`stop`)."""
+        self._thread.join(timeout=timeout)
