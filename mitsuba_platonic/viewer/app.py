@@ -59,6 +59,17 @@ read: ``frame N: T ms, full|moving, W×H px, az A° el E°, zoom M×, centre (X,
 inputs (a reconstruction run: previous/next held-out input, shown beside the view) or latents (a
 generation run: seed, new latent, a walk to a second seed), and exports into the output folder.
 
+Compare mode (the "compare" control: :data:`~.compare.PAIRS`, "compare as": :data:`~.compare.LAYOUTS`)
+keys the request with the renderer ``("compare", pair, layout)``; :func:`compare_keys` gives the
+keys of frames A and B (one camera, resolution and volume; half the canvas' aspect side by side),
+and :meth:`ClientView._show` draws B with A through :func:`~.compare.compare`, with the colour
+scale's range in numbers and its bar (the difference layout). Frame A is rendered here; frame B
+here too, or, the path tracer, pass by pass in the worker as above, each pass drawn with A. The
+renderer control is disabled meanwhile. A run folder's newest checkpoint is followed
+(:class:`~.live.RunWatcher`, every 2 s in its own thread): a new model's volume replaces the
+scene's under the scene lock and every page renders again; each page's run line shows the step
+and ``scalars.csv``'s latest losses.
+
 What a page sends is checked at the server's boundary (a page can send any number, past what its
 controls allow): a camera whose position or look-at point is not finite or lies beyond
 :data:`MAX_COORDINATE`, a seed that is not an integer in 0 … :data:`MAX_SEED` (as ``generate
