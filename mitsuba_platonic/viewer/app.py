@@ -263,6 +263,7 @@ class ViewerApp:
         self.server = server
         self.host, self.port = host, self.server.get_port()
         self.clients = {}
+        self.closed: list = []                              # closed pages' views whose render may still run
         self.worker = PathWorker()                          # the path tracer's passes, in a process of their own
         self.live: Optional[RunWatcher] = None              # a run folder: its newest checkpoint, followed
         if scene.folder is not None and scene.model is not None:
@@ -286,6 +287,7 @@ class ViewerApp:
         view = self.clients.pop(client.client_id, None)
         if view is not None:
             view.stop()
+            self.closed = [v for v in self.closed if v.thread.is_alive()] + [view]   # stop() waits for its frame
 
     def _warm_up(self) -> None:
         """Render the first frame a page asks for (:func:`initial_key`, a square canvas's) while the
@@ -341,7 +343,7 @@ class ViewerApp:
             view.wake.set()
 
     def stop(self) -> None:
-        """Stop the watcher, the pages' render threads (a frame in flight is let finish, up to
+        """Stop the watcher, the pages' render threads, closed pages' too (a frame in flight is let finish, up to
         :data:`STOP_WAIT_S`: a thread killed inside torch at the interpreter's exit aborts it) and
         the worker, then the server."""
         if self.live is not None:
@@ -349,6 +351,7 @@ class ViewerApp:
         views = list(self.clients.values())
         for view in views:
             view.stop()
+        views += self.closed
         deadline = time.monotonic() + STOP_WAIT_S
         for view in views:
             view.thread.join(timeout=max(0.0, deadline - time.monotonic()))
@@ -400,13 +403,9 @@ class ClientView:
         self.info = gui.add_markdown("frame: waiting for the first frame")
         self.settings = gui.add_markdown("")
         self.scale = gui.add_markdown("", visible=False)
-        self.scale_bar = gui.add_image(colour_bar(), label="|A − B|, low to high", format="png", visible=False)
+        self.scale_bar = None                               # the colour scale's bar: made at the first difference drawn
         with gui.add_folder("Renderer"):
             self.renderer = gui.add_dropdown("renderer", renderers_for(c), initial_value=INITIAL_RENDERER)
-            self.compare = gui.add_dropdown("compare", [COMPARE_OFF] + pairs_for(c), initial_value=COMPARE_OFF,
-                                            hint="two renderers at one camera (the renderer control is unused then)")
-            self.layout = gui.add_dropdown("compare as", list(LAYOUTS), initial_value=LAYOUTS[0],
-                                           hint="side by side, or |A − B| through the colour scale shown above")
             self.formation = gui.add_dropdown("formation", formations_for(c), initial_value=formations_for(c)[-1],
                                               hint="VH, AO: density only; EA: colour (the lit renderers form EA)")
             choices = [str(r) for r in resolutions_for(n)]
@@ -415,6 +414,11 @@ class ClientView:
             self.spp = gui.add_slider("path tracer spp", min=1, max=MAX_SPP, step=1, initial_value=INITIAL_SPP)
             self.low = gui.add_checkbox("low resolution while moving", initial_value=True,
                                         hint="a quarter of the resolution (at least the volume's) while the camera moves")
+            # after the others: the page's dropdowns keep their order (renderer, formation, resolution)
+            self.compare = gui.add_dropdown("compare", [COMPARE_OFF] + pairs_for(c), initial_value=COMPARE_OFF,
+                                            hint="two renderers at one camera (the renderer control is unused then)")
+            self.layout = gui.add_dropdown("compare as", list(LAYOUTS), initial_value=LAYOUTS[0],
+                                           hint="side by side, or |A − B| through the colour scale shown above")
             for handle in (self.formation, self.resolution, self.spp, self.low, self.layout):
                 handle.on_update(lambda _: self.wake.set())
             for handle in (self.renderer, self.compare):
@@ -744,7 +748,12 @@ class ClientView:
     def _show_scale(self, comparison: Optional[Comparison]) -> None:
         """The colour scale's numbers (both layouts) and its bar (the difference's) for ``comparison``, or neither."""
         self.scale.visible = comparison is not None
-        self.scale_bar.visible = comparison is not None and comparison.layout == "difference"
+        bar = comparison is not None and comparison.layout == "difference"
+        if bar and self.scale_bar is None:                 # beside the numbers (no hidden image on other pages)
+            self.scale_bar = self.client.gui.add_image(colour_bar(), label="|A − B|, low to high", format="png",
+                                                       order=self.scale.order + 0.5)
+        if self.scale_bar is not None:
+            self.scale_bar.visible = bar
         if comparison is not None:
             self.scale.content = comparison.line()
 
