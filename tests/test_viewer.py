@@ -573,6 +573,245 @@ def test_the_server_renders_the_first_frame_while_the_page_loads(volume_file, tm
     assert not _same_camera(front, Window(2.0, (0.5, 0.0)), front, Window(2.0, (0.5001, 0.0)))
 
 
+# --------------------------------------------------------------------------- compare mode, live runs (no browser)
+
+#: The colour scale's numbers on the page: "… colour scale: LO (dark) … HI (bright), …".
+SCALE = re.compile(r"colour scale: ([0-9.e+-]+) \(dark\) … ([0-9.e+-]+) \(bright\)")
+
+
+def _compare_page(partner):
+    """A ClientView's compare state alone (no browser, no GUI): frame A drawn, the scale's controls."""
+    from types import SimpleNamespace
+
+    from mitsuba_platonic.viewer import app as A
+    v = object.__new__(A.ClientView)
+    v.partner, v.comparison = partner, None
+    v.scale, v.scale_bar = SimpleNamespace(visible=False, content=""), SimpleNamespace(visible=False)
+    return v
+
+
+@pytest.mark.parametrize("pair, layout", [("closed form vs marcher", "difference"),
+                                          ("closed form vs marcher", "side by side"),
+                                          ("marcher vs path tracer", "difference")])
+def test_compare_mode_draws_the_difference_of_the_two_renderers_at_one_camera(volume_file, tmp_path, pair, layout):
+    """The server's comparison of a pair at a camera (zoomed, panned, a canvas 3:2) is of the two
+    renderers' frames as render_frame gives them at that camera and size: its difference array is
+    |A − B| of them, the page draws A | divider | B side by side or |A − B| through the colour scale,
+    and the numbers the page prints for the scale are the range of the array's per-pixel max."""
+    from mitsuba_platonic.viewer.app import ViewerApp, compare_keys
+    from mitsuba_platonic.viewer.compare import GAP, GAP_GREY, PAIRS
+    from mitsuba_platonic.viewer.scene import Window
+
+    volume = read_volume_file(volume_file)[0]
+    view, window, aspect, res = tuple(from_angles(35.0, 20.0).tolist()), Window(1.5, (0.1, -0.05)), 1.5, 2 * N
+    half = aspect / 2 if layout == "side by side" else aspect
+    a_name, b_name = PAIRS[pair]
+    a = render_frame(volume, view, a_name, "EA", res, 1, window, half).image
+    b = render_frame(volume, view, b_name, "EA", res, 1, window, half).image
+    expected = np.abs(a.astype(np.float32) - b.astype(np.float32))
+    assert expected.max() > 0                              # the two renderers differ here: the test can fail
+
+    app = ViewerApp(open_source(volume_file), tmp_path / "exports", port=0)
+    try:
+        app.warming.join(timeout=300)
+        key = (view, ("compare", pair, layout), "EA", res, 1, app.version, window, aspect)
+        key_a, key_b = compare_keys(key)
+        assert (key_a[1], key_b[1], key_a[7]) == (a_name, b_name, half)
+        frame_a, frame_b, comparison = app.comparison_for(key_a, key_b, layout)
+    finally:
+        app.stop()
+    np.testing.assert_array_equal(comparison.difference, expected)
+    # the page draws B with A (a path trace's passes too) through the same arithmetic
+    page = _compare_page((key_a, frame_a, layout, pair))
+    drawn, note = page._with_partner(frame_b)
+    np.testing.assert_array_equal(page.comparison.difference, expected)
+    magnitude = expected.max(axis=2)
+    if layout == "side by side":
+        gap = np.full((a.shape[0], GAP, 3), GAP_GREY, np.uint8)
+        np.testing.assert_array_equal(drawn.image, np.concatenate([a, gap, b], axis=1))
+        assert not page.scale_bar.visible
+    else:
+        np.testing.assert_array_equal(drawn.image, page.comparison.scale.apply(magnitude))
+        assert drawn.image.shape == a.shape and page.scale_bar.visible
+    lo, hi = (float(x) for x in SCALE.search(page.scale.content).groups())
+    assert (lo, hi) == (float(magnitude.min()), float(magnitude.max())) and page.scale.visible
+    assert note == f", compare {pair} ({layout})"
+
+
+def test_the_colour_scales_numbers_are_the_difference_arrays_range():
+    """The scale runs from the least per-pixel difference (the ramp's first colour) to the largest (its
+    last), and its line prints those two numbers; identical frames are 0 … 0, one colour."""
+    from mitsuba_platonic.viewer.compare import STOPS, compare
+
+    rng = np.random.default_rng(0)
+    b = rng.integers(0, 200, (6, 9, 3), dtype=np.uint8)
+    a = b + 3                                              # a least difference of 3, not 0
+    a[2, 5, 1] = b[2, 5, 1] + 40                           # the largest, 40, in one channel of one pixel
+    c = compare(a, b, "difference")
+    np.testing.assert_array_equal(c.difference, np.abs(a.astype(np.float32) - b.astype(np.float32)))
+    np.testing.assert_array_equal(c.magnitude, c.difference.max(axis=2))
+    lo, hi = (float(x) for x in SCALE.search(c.line()).groups())
+    assert (lo, hi) == (3.0, 40.0) == (float(c.magnitude.min()), float(c.magnitude.max()))
+    np.testing.assert_array_equal(c.image[2, 5], STOPS[-1].astype(np.uint8))
+    np.testing.assert_array_equal(c.image[0, 0], STOPS[0].astype(np.uint8))
+    same = compare(b, b, "difference")
+    assert SCALE.search(same.line()).groups() == ("0", "0")
+    assert (same.image == STOPS[0].astype(np.uint8)).all()
+    with pytest.raises(ValueError, match="one size"):
+        compare(a, b[:, :-1], "difference")
+
+
+class SocketPage:
+    """A page without a browser: a websocket client of viser's own protocol that reports one camera
+    (the initial one, on a ``width`` × ``height`` canvas) and reads nothing of what it is sent; the
+    server makes its real ClientHandle and the app its ClientView (GUI, render thread), as for a tab."""
+
+    def __init__(self, app, width: int = 1400, height: int = 600):
+        import msgspec
+        from viser._messages import ViewerCameraMessage
+        from websockets.sync.client import connect
+
+        from mitsuba_platonic.viewer.start import DISTANCE, FOV
+        self.ws = connect(f"ws://127.0.0.1:{app.port}", subprotocols=[f"viser-v{viser.__version__}"])
+        self.closed = threading.Event()
+        threading.Thread(target=self._drain, daemon=True).start()
+        camera = ViewerCameraMessage(wxyz=(1.0, 0.0, 0.0, 0.0), position=(0.0, 0.0, DISTANCE), fov=FOV, near=0.01,
+                                     far=100.0, image_height=height, image_width=width, look_at=(0.0, 0.0, 0.0),
+                                     up_direction=(0.0, 1.0, 0.0))
+        self.ws.send(msgspec.msgpack.encode(camera.as_serializable_dict()))
+        deadline = time.monotonic() + 60
+        while not app.clients and time.monotonic() < deadline:
+            time.sleep(0.05)
+        assert app.clients, "the server made no ClientView for the socket page"
+        self.view = next(iter(app.clients.values()))
+
+    def _drain(self) -> None:
+        while not self.closed.is_set():
+            try:
+                self.ws.recv(timeout=0.2)
+            except TimeoutError:
+                continue
+            except Exception:
+                return
+
+    def wait(self, condition, seconds: float = 120.0) -> bool:
+        deadline = time.monotonic() + seconds
+        while not condition() and time.monotonic() < deadline:
+            time.sleep(0.05)
+        return condition()
+
+    def close(self) -> None:
+        self.closed.set()
+        self.ws.close()
+
+
+def test_a_page_in_compare_mode_draws_the_difference_through_the_colour_scale(volume_file, tmp_path):
+    """A page (a socket page: viser's GUI and the app's render thread, no browser) that chooses
+    "closed form vs marcher" as a difference draws |A − B| of the two renderers' frames at its camera
+    and canvas through the colour scale, prints the scale's range, shows the bar and disables the
+    renderer control; "side by side" draws A | B without the bar; "off" draws the one renderer again."""
+    from mitsuba_platonic.viewer.app import ViewerApp, checked_aspect
+    from mitsuba_platonic.viewer.compare import compare
+
+    volume = read_volume_file(volume_file)[0]
+    app = ViewerApp(open_source(volume_file), tmp_path / "exports", port=0)
+    page = None
+    try:
+        page = SocketPage(app)
+        v = page.view
+        assert page.wait(lambda: v.count >= 1 and ", full," in v.info.content), v.info.content
+        v.resolution.value = str(2 * N)                    # the marcher's 2×2 rays per voxel: the two differ
+        v.compare.value, v.layout.value = "closed form vs marcher", "difference"
+        assert page.wait(lambda: "compare closed form vs marcher (difference)" in v.info.content
+                         and f"×{2 * N} px" in v.info.content), v.info.content
+        aspect = checked_aspect(1400, 600)
+        a = render_frame(volume, (0.0, 0.0, 1.0), "closed form", "EA", 2 * N, 4, None, aspect).image
+        b = render_frame(volume, (0.0, 0.0, 1.0), "marcher", "EA", 2 * N, 4, None, aspect).image
+        expected = compare(a, b, "difference")
+        np.testing.assert_array_equal(v.comparison.difference, expected.difference)
+        np.testing.assert_array_equal(v.frame.image, expected.image)
+        lo, hi = (float(x) for x in SCALE.search(v.scale.content).groups())
+        assert (lo, hi) == (float(expected.magnitude.min()), float(expected.magnitude.max())) and hi > 0
+        assert v.scale.visible and v.scale_bar.visible and v.renderer.disabled
+        v.layout.value = "side by side"
+        assert page.wait(lambda: "compare closed form vs marcher (side by side)" in v.info.content), v.info.content
+        assert v.frame.image.shape[1] > v.frame.image.shape[0] and not v.scale_bar.visible and v.scale.visible
+        v.compare.value = "off"
+        assert page.wait(lambda: v.frame is not None and "compare" not in v.info.content), v.info.content
+        assert not v.scale.visible and not v.renderer.disabled
+        np.testing.assert_array_equal(v.frame.image, a)
+    finally:
+        if page is not None:
+            page.close()
+        app.stop()
+
+
+def _replace(path: Path, data: bytes) -> None:
+    """Write ``data`` as ``path`` at once (a rename), as training saves a checkpoint: the watcher never sees half."""
+    tmp = path.with_name(path.name + ".writing")
+    tmp.write_bytes(data)
+    tmp.replace(path)
+
+
+def test_a_live_run_follows_its_new_checkpoint_and_keeps_its_model_past_a_torn_one(runs, tmp_path, capsys):
+    """``platonic view RUN`` on a run still training: a torn last.pt is one line in the log, tried once,
+    and the model shown stays; a new last.pt (a later step, other weights) is taken within 10 s (the
+    watcher looks every POLL_S = 2 s): the server reports its step and scalars.csv's latest losses,
+    and the scene shows the new model's volume (every page renders again: the version moves); an
+    open page's run line and title say so."""
+    from mitsuba_platonic.files.checkpoint import load_checkpoint, save_checkpoint
+    from mitsuba_platonic.model import Model
+    from mitsuba_platonic.viewer.app import ViewerApp
+
+    run = tmp_path / "run"
+    shutil.copytree(runs["generation"], run)
+    last = run / "checkpoints" / "last.pt"
+    app = ViewerApp(open_source(run), tmp_path / "exports", port=0)
+    page = None
+    try:
+        live, model, version = app.live, app.scene.model, app.version
+        assert live is not None and live.step == 1 and "model of step 1" in live.line()
+        page = SocketPage(app)                             # a page open on the run: its run line follows
+        assert page.view.run_line.content == live.line()
+
+        def wait(condition) -> bool:
+            deadline = time.monotonic() + 10.0
+            while not condition() and time.monotonic() < deadline:
+                time.sleep(0.05)
+            return condition()
+
+        good = last.read_bytes()
+        capsys.readouterr()
+        _replace(last, good[:len(good) // 2])
+        assert wait(lambda: live.failed is not None), "the watcher did not look at the torn checkpoint"
+        polls = live.polls
+        assert wait(lambda: live.polls >= polls + 2)       # it looked twice more at the same torn file
+        lines = [line for line in capsys.readouterr().err.splitlines() if line.startswith("platonic view:")]
+        assert len(lines) == 1 and lines[0].startswith("platonic view: the run's new checkpoints/last.pt was not "
+                                                       "taken (") and lines[0].endswith("still showing step 1"), lines
+        assert app.scene.model is model and live.step == 1 and app.version == version
+
+        state = load_checkpoint(runs["generation"] / "checkpoints" / "last.pt")
+        state["step"] = 5
+        for name, weight in state["trainer"]["nets"].items():
+            if name.startswith("G.") and weight.is_floating_point():
+                weight.mul_(1.1)
+        with open(run / "scalars.csv", "a") as f:
+            f.write("5,0.5,0.5,1,1,0.25,100\n")
+        save_checkpoint(last, state)
+        assert wait(lambda: live.step == 5), f"the server still reports step {live.step} after 10 s"
+        assert wait(lambda: "step 5: loss_d 0.5, loss_g 0.25" in live.line()), live.line()
+        assert app.scene.model.step == 5 and app.scene.title.endswith("(step 5)") and app.version == version + 1
+        torch.testing.assert_close(app.scene.volume, Model.from_checkpoint(run).generate(1, seed=0)[0])
+        assert not torch.allclose(app.scene.volume, model.generate(1, seed=0)[0])
+        assert page.wait(lambda: page.view.run_line.content == live.line(), 10.0), page.view.run_line.content
+        assert "(step 5)" in page.view.title.content
+    finally:
+        if page is not None:
+            page.close()
+        app.stop()
+
+
 # --------------------------------------------------------------------------- in the browser
 
 
@@ -1233,8 +1472,10 @@ def test_a_pages_seed_outside_the_generators_range_is_refused_with_one_line(caps
     assert drawn == [(A.MAX_SEED, 2, 0.5)]
 
 
-def test_a_pages_spp_and_resolution_past_the_controls_are_held_to_them(capsys):
-    """spp 1e9 (the slider stops at 64) was a Dr.Jit error: it is held to 64, with one line in the log."""
+def test_a_pages_spp_resolution_and_compare_past_the_controls_are_held_to_them(capsys):
+    """spp 1e9 (the slider stops at 64) was a Dr.Jit error: it is held to 64, with one line in the log;
+    a resolution past the choices is held to the nearest; a compare pair the page does not offer is
+    refused with one line (the one renderer drawn), an offered one keys both renderers' frame."""
     import threading
     from types import SimpleNamespace
 
@@ -1244,6 +1485,7 @@ def test_a_pages_spp_and_resolution_past_the_controls_are_held_to_them(capsys):
     v.app = SimpleNamespace(scene=SimpleNamespace(volume=torch.zeros(4, N, N, N)), version=0)
     v.renderer, v.formation, v.low = (SimpleNamespace(value="path tracer"), SimpleNamespace(value="EA"),
                                       SimpleNamespace(value=False))
+    v.compare, v.layout = SimpleNamespace(value=A.COMPARE_OFF), SimpleNamespace(value="side by side")
     v.resolution, v.spp = SimpleNamespace(value=str(N)), SimpleNamespace(value=1e9)
     key, _, _ = v._request()
     assert key[4] == A.MAX_SPP and key[3] == N
@@ -1252,3 +1494,11 @@ def test_a_pages_spp_and_resolution_past_the_controls_are_held_to_them(capsys):
     key, _, _ = v._request()
     assert key[4] == 4 and key[3] == resolutions_for(N)[-1]
     assert "ignored resolution '100000' from a page: held to" in capsys.readouterr().err
+    v.compare = SimpleNamespace(value="marcher vs path tracer")     # a compare request: both renderers in the key
+    key, _, _ = v._request()
+    assert key[1] == ("compare", "marcher vs path tracer", "side by side")
+    v.compare, v.layout = SimpleNamespace(value="closed form vs oracle"), SimpleNamespace(value="side by side")
+    key, _, _ = v._request()                               # a pair the page does not offer: one renderer, one line
+    assert key[1] == "path tracer"
+    assert capsys.readouterr().err == ("platonic view: ignored compare 'closed form vs oracle' from a page: expected "
+                                       "one of ['closed form vs marcher', 'marcher vs path tracer']\n")

@@ -59,6 +59,17 @@ read: ``frame N: T ms, full|moving, W×H px, az A° el E°, zoom M×, centre (X,
 inputs (a reconstruction run: previous/next held-out input, shown beside the view) or latents (a
 generation run: seed, new latent, a walk to a second seed), and exports into the output folder.
 
+Compare mode (the "compare" control: :data:`~.compare.PAIRS`, "compare as": :data:`~.compare.LAYOUTS`)
+keys the request with the renderer ``("compare", pair, layout)``; :func:`compare_keys` gives the
+keys of frames A and B (one camera, resolution and volume; half the canvas' aspect side by side),
+and :meth:`ClientView._show` draws B with A through :func:`~.compare.compare`, with the colour
+scale's range in numbers and its bar (the difference layout). Frame A is rendered here; frame B
+here too, or, the path tracer, pass by pass in the worker as above, each pass drawn with A. The
+renderer control is disabled meanwhile. A run folder's newest checkpoint is followed
+(:class:`~.live.RunWatcher`, every 2 s in its own thread): a new model's volume replaces the
+scene's under the scene lock and every page renders again; each page's run line shows the step
+and ``scalars.csv``'s latest losses.
+
 What a page sends is checked at the server's boundary (a page can send any number, past what its
 controls allow): a camera whose position or look-at point is not finite or lies beyond
 :data:`MAX_COORDINATE`, a seed that is not an integer in 0 … :data:`MAX_SEED` (as ``generate
@@ -79,18 +90,21 @@ from typing import Callable, Optional, Sequence, Tuple
 import numpy as np
 import torch
 import viser
+from PIL import Image
 
 from ..errors import UserError
 from ..views import camera_frames, from_angles, to_angles
 from ..render.window import window_or_none
+from .compare import LAYOUTS, PAIRS, Comparison, colour_bar, compare, half_aspect, pairs_for
+from .live import RunWatcher
 from .scene import (ASPECT_RANGE, PASS_SPP, WINDOW_SNAP, ZOOM_RANGE, Exports, Frame, Scene, Window, camera_window,
-                    default_resolution, formations_for, formations_of, passes_for, plan_frame, render_frame,
+                    default_resolution, formations_for, formations_of, model_of, passes_for, plan_frame, render_frame,
                     renderers_for, resolutions_for, to_display, zoom_distance)
 from .worker import PathWorker
 from .start import DISTANCE, FOV, address, start_server, stop_server
 
 __all__ = ["ViewerApp", "SETTLE_S", "MAX_SPP", "MAX_SEED", "MAX_COORDINATE", "log_ignored", "checked_seed",
-           "checked_camera", "checked_aspect"]
+           "checked_camera", "checked_aspect", "compare_keys", "COMPARE_OFF"]
 
 #: A camera at rest this long gets its full-resolution frame.
 SETTLE_S = 0.2
@@ -121,6 +135,10 @@ MAX_SEED = 2 ** 63 - 1
 MAX_COORDINATE = 1e6
 #: A canvas' width/height is keyed to this many decimals (the frame's size is whole pixels anyway).
 ASPECT_DIGITS = 3
+#: How long :meth:`ViewerApp.stop` waits for the frames in flight to finish (seconds).
+STOP_WAIT_S = 60.0
+#: The compare control's first choice: one renderer, the renderer control's.
+COMPARE_OFF = "off"
 
 
 def initial_key(scene: Scene, version: int = 0, aspect: float = 1.0) -> Tuple:
@@ -201,6 +219,19 @@ def checked_aspect(width: object, height: object) -> float:
     return round(held, ASPECT_DIGITS)
 
 
+def compare_keys(key: Tuple) -> Tuple[Tuple, Tuple]:
+    """A compare request's ``key`` (its renderer ``("compare", pair, layout)``, its aspect the canvas')
+    → the keys of frames A and B: the pair's renderers at the one camera, resolution and volume, at
+    the layout's aspect (:func:`~.compare.half_aspect`), the lit renderer's formation EA where the
+    pair has one (A forms what B forms)."""
+    view, (_, pair, layout), formation, res, spp, version, window, aspect = key
+    a, b = PAIRS[pair]
+    formation = formation if formation in formations_of(b, 4) else "EA"
+    half = round(half_aspect(layout, aspect), ASPECT_DIGITS)
+    return ((view, a, formation, res, spp, version, window, half),
+            (view, b, formation, res, spp, version, window, half))
+
+
 def _clamped_choice(value: object, choices: "Sequence[int]", what: str) -> int:
     """A page's ``value`` held to the nearest of ``choices`` (ascending ints; the first for a value that
     is no number), with one line in the log where it was not one of them."""
@@ -232,7 +263,12 @@ class ViewerApp:
         self.server = server
         self.host, self.port = host, self.server.get_port()
         self.clients = {}
+        self.closed: list = []                              # closed pages' views whose render may still run
         self.worker = PathWorker()                          # the path tracer's passes, in a process of their own
+        self.live: Optional[RunWatcher] = None              # a run folder: its newest checkpoint, followed
+        if scene.folder is not None and scene.model is not None:
+            self.live = RunWatcher(scene.folder, scene.model.step, scene.stamp, lambda path: model_of(path)[0],
+                                   self._take_model, self._run_changed)
         self.warming = threading.Thread(target=self._warm_up, name="warm-up", daemon=True)
         self.warming.start()
         # viser calls the connect handler for the pages connected already too (those that opened the
@@ -251,6 +287,7 @@ class ViewerApp:
         view = self.clients.pop(client.client_id, None)
         if view is not None:
             view.stop()
+            self.closed = [v for v in self.closed if v.thread.is_alive()] + [view]   # stop() waits for its frame
 
     def _warm_up(self) -> None:
         """Render the first frame a page asks for (:func:`initial_key`, a square canvas's) while the
@@ -281,6 +318,22 @@ class ViewerApp:
             self.last = (key[:5] + (version,) + key[6:], frame)
             return frame
 
+    def comparison_for(self, key_a: Tuple, key_b: Tuple, layout: str) -> Tuple[Frame, Frame, Comparison]:
+        """Frames A and B of ``key_a`` and ``key_b`` (:meth:`frame_for`, :func:`compare_keys`) and their
+        comparison in ``layout`` (:func:`~.compare.compare`: what the page draws, and |A − B|)."""
+        frame_a, frame_b = self.frame_for(key_a), self.frame_for(key_b)
+        return frame_a, frame_b, compare(frame_a.image, frame_b.image, layout)
+
+    def _take_model(self, model) -> None:
+        """The run's newer checkpoint (the watcher's thread): its volume in place of the shown one."""
+        with self.scene_lock:
+            self.scene.use_model(model)
+        self.volume_changed()
+
+    def _run_changed(self) -> None:
+        for view in list(self.clients.values()):
+            view.refresh_run()
+
     def volume_changed(self) -> None:
         """The scene's volume changed (another input or latent): every page renders again."""
         with self.scene_lock:
@@ -290,8 +343,20 @@ class ViewerApp:
             view.wake.set()
 
     def stop(self) -> None:
-        for view in list(self.clients.values()):
+        """Stop the watcher, the pages' render threads, closed pages' too (a frame in flight is let finish, up to
+        :data:`STOP_WAIT_S`: a thread killed inside torch at the interpreter's exit aborts it) and
+        the worker, then the server."""
+        if self.live is not None:
+            self.live.stop()
+        views = list(self.clients.values())
+        for view in views:
             view.stop()
+        views += self.closed
+        deadline = time.monotonic() + STOP_WAIT_S
+        for view in views:
+            view.thread.join(timeout=max(0.0, deadline - time.monotonic()))
+        if self.live is not None:
+            self.live.join(max(0.0, deadline - time.monotonic()))
         self.worker.stop()
         stop_server(self.server)
 
@@ -312,6 +377,9 @@ class ClientView:
         self.frame: Optional[Frame] = None
         self.times = {}                                    # renderer → last full frame's seconds
         self.trace: Optional[_Trace] = None                # the path trace in progress
+        self.partner: Optional[Tuple[Tuple, Frame, str, str]] = None   # compare: (A's key, A's frame, layout, pair)
+        self.comparison: Optional[Comparison] = None      # compare: the last comparison drawn
+        self.mode: Optional[Tuple] = None                  # the compare choice of the last request (None: off)
         self.limits = (0.01, 1e4)                          # the browser's dolly limits as set (viser's defaults)
         self.connected = time.monotonic()
         self.placed = False                                # has the page reported the initial camera yet?
@@ -330,9 +398,12 @@ class ClientView:
     def _gui(self) -> None:
         gui, scene = self.client.gui, self.app.scene
         c, n = scene.volume.shape[0], scene.volume.shape[-1]
-        gui.add_markdown(f"**{scene.title}**" + "".join(f"\n\n{note}" for note in scene.notes))
+        self.title = gui.add_markdown(self._title_text())
+        self.run_line = gui.add_markdown(self.app.live.line(), visible=True) if self.app.live is not None else None
         self.info = gui.add_markdown("frame: waiting for the first frame")
         self.settings = gui.add_markdown("")
+        self.scale = gui.add_markdown("", visible=False)
+        self.scale_bar = None                               # the colour scale's bar: made at the first difference drawn
         with gui.add_folder("Renderer"):
             self.renderer = gui.add_dropdown("renderer", renderers_for(c), initial_value=INITIAL_RENDERER)
             self.formation = gui.add_dropdown("formation", formations_for(c), initial_value=formations_for(c)[-1],
@@ -343,9 +414,15 @@ class ClientView:
             self.spp = gui.add_slider("path tracer spp", min=1, max=MAX_SPP, step=1, initial_value=INITIAL_SPP)
             self.low = gui.add_checkbox("low resolution while moving", initial_value=True,
                                         hint="a quarter of the resolution (at least the volume's) while the camera moves")
-            for handle in (self.formation, self.resolution, self.spp, self.low):
+            # after the others: the page's dropdowns keep their order (renderer, formation, resolution)
+            self.compare = gui.add_dropdown("compare", [COMPARE_OFF] + pairs_for(c), initial_value=COMPARE_OFF,
+                                            hint="two renderers at one camera (the renderer control is unused then)")
+            self.layout = gui.add_dropdown("compare as", list(LAYOUTS), initial_value=LAYOUTS[0],
+                                           hint="side by side, or |A − B| through the colour scale shown above")
+            for handle in (self.formation, self.resolution, self.spp, self.low, self.layout):
                 handle.on_update(lambda _: self.wake.set())
-            self.renderer.on_update(lambda _: self._offer_formations())
+            for handle in (self.renderer, self.compare):
+                handle.on_update(lambda _: self._offer_formations())
         with gui.add_folder("Camera"):
             for label, daz, delv in (("azimuth -30", -30.0, 0.0), ("azimuth +30", 30.0, 0.0),
                                      ("elevation -15", 0.0, -15.0), ("elevation +15", 0.0, 15.0)):
@@ -367,7 +444,9 @@ class ClientView:
     def _offer_formations(self) -> None:
         """Offer the formations the chosen renderer renders (:func:`~.scene.formations_of`): the lit ones
         EA only (they offered VH and AO and drew EA), the others the volume's."""
-        offered = formations_of(self.renderer.value, self.app.scene.volume.shape[0])
+        pair = PAIRS.get(self.compare.value)
+        self.renderer.disabled = pair is not None
+        offered = formations_of(self.renderer.value if pair is None else pair[1], self.app.scene.volume.shape[0])
         if tuple(self.formation.options) != tuple(offered):
             keep = self.formation.value if self.formation.value in offered else offered[-1]
             self.formation.options = offered
@@ -394,6 +473,16 @@ class ClientView:
                 for handle in (self.seed, self.seed_b, self.walk):
                     handle.on_update(lambda _: self._latent())
 
+    def _title_text(self) -> str:
+        scene = self.app.scene
+        return f"**{scene.title}**" + "".join(f"\n\n{note}" for note in scene.notes)
+
+    def refresh_run(self) -> None:
+        """The run line (the step shown, the latest losses) and the title, after the run changed."""
+        if self.run_line is not None:
+            self.run_line.content = self.app.live.line()
+        self.title.content = self._title_text()
+
     def _input_text(self) -> str:
         scene = self.app.scene
         if not scene.input_names:
@@ -402,6 +491,7 @@ class ClientView:
 
     def refresh_source(self) -> None:
         scene = self.app.scene
+        self.title.content = self._title_text()
         if self.input_image is not None and scene.input is not None:
             self.input_image.image = np.repeat(np.repeat(scene.input, 4, 0), 4, 1)
             self.input_label.content = self._input_text()
@@ -561,7 +651,16 @@ class ClientView:
         spp = int(_clamped_choice(self.spp.value, range(1, MAX_SPP + 1), "path tracer spp"))
         cam = self.client.camera
         aspect = checked_aspect(cam.image_width, cam.image_height)
-        key = (view, self.renderer.value, self.formation.value, res, spp, self.app.version, window, aspect)
+        renderer = self.renderer.value
+        pair, layout = self.compare.value, self.layout.value
+        if pair != COMPARE_OFF:
+            if pair not in pairs_for(self.app.scene.volume.shape[0]):
+                log_ignored(f"compare {pair!r} from a page: expected one of {pairs_for(self.app.scene.volume.shape[0])}")
+            elif layout not in LAYOUTS:
+                log_ignored(f"compare as {layout!r} from a page: expected one of {list(LAYOUTS)}")
+            else:
+                renderer = ("compare", pair, layout)
+        key = (view, renderer, self.formation.value, res, spp, self.app.version, window, aspect)
         return key, aspect, quality
 
     def _loop(self) -> None:
@@ -575,6 +674,14 @@ class ClientView:
                 continue
             try:
                 request = self._request()
+                mode = request[0][1] if isinstance(request[0][1], tuple) else None
+                if mode != self.mode:                      # into, out of, or between comparisons: all anew
+                    self._drop_trace()
+                    self.mode, self.shown, self.partner = mode, None, None
+                    self._show_scale(None)
+                if mode is not None:
+                    self._compare(request)
+                    continue
                 if request[0][1] == "path tracer":
                     self._trace(request)
                     continue
@@ -601,8 +708,61 @@ class ClientView:
         self._show(frame, key, aspect, quality, note)
         self.shown = request
 
+    def _compare(self, request: Tuple) -> None:
+        """One step of a comparison (:func:`compare_keys`): frame A rendered here (kept while B's path
+        trace runs), frame B rendered here or traced pass by pass in the worker (:meth:`_trace`, each
+        pass drawn with A); :meth:`_show` draws the two in the layout."""
+        key, aspect, quality = request
+        _, pair, layout = key[1]
+        key_a, key_b = compare_keys(key)
+        if key_b[1] != "path tracer":
+            self._drop_trace()
+            if request == self.shown:
+                return
+            frame_a, frame_b, _ = self.app.comparison_for(key_a, key_b, layout)
+            if self.stopped:
+                return
+            self.partner = (key_a, frame_a, layout, pair)
+            self._show(frame_b, key_b, key_b[7], quality)
+            self.shown = request
+            return
+        if self.partner is None or self.partner[0] != key_a:
+            self.partner = (key_a, self.app.frame_for(key_a), layout, pair)
+        self._trace((key_b, key_b[7], quality))
+
+    def _with_partner(self, frame: Frame) -> Tuple[Frame, str]:
+        """Compare mode: frame B drawn with A (:data:`partner`) in the layout, and the frame line's note;
+        a preview of another size than A (the path tracer's closed form) is scaled to A's, nearest pixel."""
+        _, frame_a, layout, pair = self.partner
+        image = frame.image
+        if image.shape != frame_a.image.shape:
+            h, w = frame_a.image.shape[:2]
+            image = np.asarray(Image.fromarray(image).resize((w, h), Image.NEAREST))
+        self.comparison = compare(frame_a.image, image, layout)
+        self._show_scale(self.comparison)
+        both = Frame(self.comparison.image, frame_a.seconds + frame.seconds,
+                     f"A: {frame_a.settings} | B: {frame.settings}", frame.view, pair, frame.formation,
+                     frame.resolution, frame.window)
+        return both, f", compare {pair} ({layout})"
+
+    def _show_scale(self, comparison: Optional[Comparison]) -> None:
+        """The colour scale's numbers (both layouts) and its bar (the difference's) for ``comparison``, or neither."""
+        self.scale.visible = comparison is not None
+        bar = comparison is not None and comparison.layout == "difference"
+        if bar and self.scale_bar is None:                 # beside the numbers (no hidden image on other pages)
+            self.scale_bar = self.client.gui.add_image(colour_bar(), label="|A − B|, low to high", format="png",
+                                                       order=self.scale.order + 0.5)
+        if self.scale_bar is not None:
+            self.scale_bar.visible = bar
+        if comparison is not None:
+            self.scale.content = comparison.line()
+
     def _show(self, frame: Frame, key: Tuple, aspect: float, quality: str, note: str = "") -> None:
-        """Draw ``frame`` (rendered for ``key``) and write its frame and settings lines."""
+        """Draw ``frame`` (rendered for ``key``; in compare mode frame B, drawn with A) and write its
+        frame and settings lines."""
+        if self.partner is not None:
+            frame, pair_note = self._with_partner(frame)
+            note = pair_note + note
         view, renderer, _, res, _, _, window, _ = key
         # the frame is rendered at the canvas' aspect (scene.tiles): viser stretches it over the canvas as it is.
         # Full frames lossless (PNG, what the tests compare), the others as JPEG (a tenth of the encoding time)
@@ -618,7 +778,7 @@ class ClientView:
         self.info.content = (f"frame {self.count}: {1000 * frame.seconds:.1f} ms, {quality}, {width}×{height} px, "
                              f"az {az:.1f}° el {el:.1f}°, zoom {zoom:.3f}×, centre ({cx:+.3f}, {cy:+.3f}){note}")
         self.settings.content = frame.settings + (" (the path tracer's preview while its passes render)"
-                                                  if note.startswith(", path tracer's preview") else "")
+                                                  if ", path tracer's preview" in note else "")
 
     # -- the path tracer: passes in the worker, each shown ------------------------------------------
 

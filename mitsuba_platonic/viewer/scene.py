@@ -21,6 +21,7 @@
 from __future__ import annotations
 
 import math
+import re
 import time
 from contextlib import contextmanager
 from dataclasses import dataclass, field
@@ -42,12 +43,14 @@ from ..render import RenderSettings, render_with
 from ..render.window import Window, window_or_none
 from ..views import camera_frames
 from ..volume import CHANNELS
+from .live import stamp
 from .start import check_source, volume_title
 
 __all__ = ["RENDERERS", "FORMATIONS", "BACKGROUND", "Frame", "Scene", "Exports", "open_source", "render_frame",
            "formations_for", "formations_of", "renderers_for", "resolutions_for", "to_display", "clean_name", "camera_window",
            "zoom_distance", "ZOOM_RANGE", "Window", "PASS_SPP", "Plan", "plan_frame", "path_pass",
-           "passes_for", "DEFAULT_RESOLUTION", "ASPECT_RANGE", "default_resolution", "frame_size", "Tile", "tiles"]
+           "passes_for", "DEFAULT_RESOLUTION", "ASPECT_RANGE", "default_resolution", "frame_size", "Tile", "tiles",
+           "model_of"]
 
 #: The renderers the page offers: label → backend (mitsuba_platonic.render.BACKENDS).
 RENDERERS: Dict[str, str] = {"closed form": "closed_form", "marcher": "mitsuba",
@@ -450,6 +453,31 @@ class Scene:
     seeds: Tuple[int, int] = (0, 1)
     walk: float = 0.0
     notes: List[str] = field(default_factory=list)
+    folder: Optional[Path] = None
+    stamp: Optional[Tuple[int, int]] = None
+
+    # -- a run: a newer checkpoint ------------------------------------------------------------
+
+    def use_model(self, model) -> None:
+        """Show ``model`` (a newer checkpoint of the run) in place of the current one: the same input,
+        photo or latent (seeds and walk) through it, and its step in the title."""
+        old = self.model
+        if old is None:
+            raise UserError("this source is a volume file; it has no model to replace")
+        shape = lambda m: (m.task, m.resolution, m.channels)  # noqa: E731
+        if shape(model) != shape(old):
+            raise UserError(f"the new checkpoint is of another kind of run (task, resolution, channels "
+                            f"{shape(model)}, shown {shape(old)}); restart platonic view to show it")
+        self.model = model
+        try:
+            if self.inputs is not None and len(self.inputs) > 0:
+                self.show_input(self.input_index)
+            else:
+                self.show_latent(self.seeds[0], self.seeds[1] if self.walk > 0 else None, self.walk)
+        except BaseException:
+            self.model = old
+            raise
+        self.title = re.sub(r"\(step \d+\)$", f"(step {model.step})", self.title)
 
     # -- reconstruction: held-out inputs ------------------------------------------------------
 
@@ -528,15 +556,29 @@ def open_source(source: PathLike, photo: Optional[PathLike] = None, array: Optio
     if array is not None:
         volume = torch.from_numpy(array)
         return Scene(volume=volume, kind="volume", title=volume_title(path, volume.shape))
+    seen = stamp(path / "checkpoints" / "last.pt")           # before reading it: a newer one is followed
+    model, cfg = model_of(path)
+    scene = _run_scene(path, photo, model, cfg)
+    scene.folder, scene.stamp = path, seen
+    return scene
+
+
+def model_of(source: PathLike):
+    """A run folder (its newest loadable checkpoint) or one checkpoint file → (model, its config);
+    the checkpoint's own one-line errors (:class:`~mitsuba_platonic.files.checkpoint.RunError`)."""
     # lazy, the three: checkpoints, configs and networks are for run folders only (a volume file's
     # first frame waits for none of them)
     from ..files.checkpoint import read_checkpoint                  # lazy: runs only
     from ..config.loading import checkpoint_config, model_from_checkpoint   # lazy: runs only
     from ..model import Model                                 # lazy: runs only
 
-    ckpt = read_checkpoint(path)
+    ckpt = read_checkpoint(source)
     cfg = checkpoint_config(ckpt)
-    model = model_from_checkpoint(Model, ckpt, cfg)
+    return model_from_checkpoint(Model, ckpt, cfg), cfg
+
+
+def _run_scene(path: Path, photo: Optional[PathLike], model, cfg) -> Scene:
+    """The scene of a run's ``model`` (module docstring): its held-out inputs, ``photo``, or latents."""
     step = f"step {model.step}"
     if model.task != "reconstruction":
         if photo is not None:
