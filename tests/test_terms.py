@@ -20,8 +20,7 @@ from mitsuba_platonic.train.terms import G_TERMS, active_terms, g_terms
 from mitsuba_platonic.views import sample_views, to_angles
 
 PRIORS = {"colour_tv": "colour_tv", "colour_offset": "colour_offset", "depth_spread": "depth_spread",
-          "turn": "turn", "mirror": "mirror", "solidity": "solidity", "colour_match": "colour_match",
-          "pose": "pose_weight"}
+          "turn": "turn", "solidity": "solidity", "colour_match": "colour_match", "pose": "pose_weight"}
 
 
 def _train(**kw) -> TrainConfig:
@@ -57,7 +56,7 @@ def test_the_registry_names_config_keys_and_step_fields_that_exist():
         assert term.weight is None or term.weight in keys, term
         assert set(term.reads) <= fields, term
     assert [t.name for t in G_TERMS] == ["adv2d", "adv3d", "adv3d", "colour_tv", "colour_offset", "depth_spread",
-                                         "turn", "mirror", "solidity", "colour_match", "rec3d", "rec", "pose", "light"]
+                                         "turn", "solidity", "colour_match", "rec3d", "rec", "pose", "light"]
 
 
 @pytest.mark.parametrize("mode,task,target", list(itertools.product(MODES, TASKS, ("image", "volume"))))
@@ -224,41 +223,6 @@ def test_turn_compares_the_opacity_with_itself_turned_by_the_steps_angle_per_vol
     value = _value("turn", train, StepState(step, None, v=v), seed=seed, rank=rank)
     assert float(value) == pytest.approx(2.0 * expected, rel=1e-9)
     assert float(_value("turn", train, StepState(step + 1, None, v=v), seed=seed)) != float(value)   # a new angle each step
-
-
-def _mirrored_by_hand(a: np.ndarray, ψ: float, c: tuple) -> np.ndarray:
-    """α ``(D, H, W)`` mirrored about the vertical plane through world (x, z) = ``c`` with world normal
-    (sin ψ, 0, cos ψ): world x = grid x, world z = −(grid z), voxel-centre coordinates in [−1, 1];
-    trilinear (bilinear in d, w) with zeros outside."""
-    D, H, W = a.shape
-
-    def at(i, j, k):
-        return a[i, j, k] if 0 <= i < D and 0 <= j < H and 0 <= k < W else 0.0
-
-    out = np.zeros_like(a)
-    n = (math.sin(ψ), math.cos(ψ))
-    for d, h, w in np.ndindex(D, H, W):
-        x, z = (2 * w + 1) / W - 1, -((2 * d + 1) / D - 1)
-        k = 2 * ((x - c[0]) * n[0] + (z - c[1]) * n[1])
-        xs, zs = x - k * n[0], -(z - k * n[1])
-        fw, fd = ((xs + 1) * W - 1) / 2, ((zs + 1) * D - 1) / 2
-        w0, d0 = math.floor(fw), math.floor(fd)
-        tw, td = fw - w0, fd - d0
-        out[d, h, w] = sum(at(d0 + i, h, w0 + j) * (td if i else 1 - td) * (tw if j else 1 - tw)
-                           for i in (0, 1) for j in (0, 1))
-    return out
-
-
-def test_mirror_compares_the_opacity_with_itself_mirrored_about_each_volumes_plane():
-    from mitsuba_platonic.train.mirror import MirrorPlanes
-    v = _rand(2, 4, 4, 3, 4, seed=8)
-    ψ, c = [0.4, 2.1], [(0.1, -0.2), (-0.15, 0.05)]
-    planes = MirrorPlanes(torch.tensor(ψ, dtype=torch.float64), torch.tensor(c, dtype=torch.float64), torch.zeros(2))
-    a = v[:, 3].numpy()
-    m = [_mirrored_by_hand(a[b], ψ[b], c[b]) for b in range(2)]
-    expected = sum(np.abs(a[b] - m[b]).sum() for b in range(2)) / sum((a[b] + m[b]).sum() for b in range(2))
-    value = _value("mirror", _train(mirror=1.5, pose="elevation"), StepState(0, None, v=v, planes=planes))
-    assert float(value) == pytest.approx(1.5 * expected, rel=1e-9)
 
 
 def test_solidity_is_the_opacity_missing_under_each_rays_hull_of_surfaces():

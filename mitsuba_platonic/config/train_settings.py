@@ -20,7 +20,7 @@ from typing import List, Optional, Union
 from ..settings_checks import ConfigError, check_elevation, choice, non_negative, positive
 from ..views import DISTRIBUTIONS
 
-__all__ = ["TrainConfig", "TASKS", "MODES", "MODES_3D", "REC_TARGETS", "REC_LOSSES", "REC_CHANNELS", "POSES", "VIEW_FRAMES", "LIGHTS", "PRGAN",
+__all__ = ["TrainConfig", "TASKS", "MODES", "MODES_3D", "REC_TARGETS", "REC_LOSSES", "REC_CHANNELS", "POSES", "LIGHTS", "PRGAN",
            "LOSS_WEIGHTS", "LOSSES", "ROLLS", "AUGMENTS", "PHOTO_AUGMENTS"]
 
 #: What E/G learn: reconstruct the input image, or generate from z ~ N(0, I).
@@ -41,13 +41,11 @@ REC_LOSSES = ("l2", "l1")
 REC_CHANNELS = ("all", "alpha")
 #: train.pose: G's volume in the input camera's frame, or upright and tilted by an elevation E reads
 POSES = ("input", "elevation")
-#: train.view_frame: the random views' azimuths about the input camera, or about each volume's mirror plane
-VIEW_FRAMES = ("camera", "mirror")
 #: train.light: where the light of the input view's render comes from
 LIGHTS = ("prior", "head")
 #: The weights of the loss terms: each ≥ 0 (0: the term is off), checked by name.
 LOSS_WEIGHTS = ("gp_weight", "rec_weight", "weight_3d", "pose_weight", "r1_weight", "colour_tv",
-                "colour_match", "colour_offset", "depth_spread", "turn", "solidity", "mirror")
+                "colour_match", "colour_offset", "depth_spread", "turn", "solidity")
 #: How messages name ``train.mode: prgan``.
 PRGAN = "the PrGAN-style baseline ('prgan')"
 #: The GAN losses of :func:`~mitsuba_platonic.train.losses.d_loss` / ``g_loss`` (anything but the first is WGAN-GP).
@@ -138,16 +136,6 @@ class TrainConfig:
     turn: the weight of the prior that the object is probably round about its vertical axis, its upright
     opacity against itself turned by a random angle (train.pose 'elevation'; 0: none; 1 in the photo
     configs; set it to 0 for a class that is not round: :func:`mitsuba_platonic.train.losses.turn`).
-    view_frame: where the random views' azimuths are drawn (train.pose 'elevation'): 'camera', uniform about
-    the upright object, whatever the photos' cameras were; 'mirror', about each volume's vertical plane of
-    mirror symmetry, at the angles to their planes that the batch's input cameras have, so that a collection
-    photographed from the sides is judged from the sides (:mod:`mitsuba_platonic.train.mirror`).
-    view_frame_after: the steps drawn in the 'camera' frame before the 'mirror' frame takes over: until G has
-    built a solid object its plane is the input card's, parallel to the photo, and every photo would read as
-    a side view (0: from the first step).
-    mirror: the weight of the prior that the object is probably mirror-symmetric about some vertical plane,
-    its upright opacity against itself mirrored about its most nearly symmetric plane (train.pose
-    'elevation'; 0: none; true of round classes and of most others: :func:`mitsuba_platonic.train.mirror.mirror_loss`).
     solidity: the weight of the prior that along each input ray the object is solid between its first and
     its last surface (reconstruction, platonic mode, orthographic camera; 0: none; 1 in the photo configs:
     :func:`mitsuba_platonic.train.losses.solidity`).
@@ -190,9 +178,6 @@ class TrainConfig:
     colour_offset: float = 0.0
     depth_spread: float = 0.0
     turn: float = 0.0
-    view_frame: str = "camera"
-    view_frame_after: int = 0
-    mirror: float = 0.0
     solidity: float = 0.0
     ema: Optional[float] = None
     d_augment: List[str] = field(default_factory=list)
@@ -238,12 +223,6 @@ class TrainConfig:
         if self.turn > 0 and self.pose != "elevation":
             raise ConfigError("train.turn: the prior turns G's volume by a random angle about the object's vertical, which "
                               f"only an upright volume has, so it needs train.pose 'elevation', got {self.pose!r}")
-        choice("train.view_frame", self.view_frame, VIEW_FRAMES)
-        non_negative("train.view_frame_after", self.view_frame_after)
-        for key, on in (("view_frame", self.view_frame != "camera"), ("mirror", self.mirror > 0)):
-            if on and self.pose != "elevation":
-                raise ConfigError(f"train.{key}: the mirror plane is a vertical plane of G's upright volume, which only "
-                                  f"train.pose 'elevation' builds, got pose {self.pose!r}")
         for key in ("lr_g", "lr_e", "lr_d"):
             if not getattr(self, key) > 0:
                 raise ConfigError(f"train.{key}: expected a positive learning rate, got {getattr(self, key)!r}")

@@ -114,14 +114,7 @@ def priors_used(cfg: Any) -> List[Prior]:
     if t.pose == "elevation":
         out.append(Prior("train.pose", "elevation", "the object stands upright and each photo looks at it from an "
                          "elevation a pose head reads; G builds it in its own upright frame"))
-    if t.mirror > 0:
-        out.append(Prior("train.mirror", t.mirror, "the object is mirror-symmetric about some vertical plane: its "
-                         "upright opacity is held to itself mirrored about its most nearly symmetric plane"))
-    if t.task == "reconstruction" and t.mode in ("platonic", "platonic3d") and t.view_frame == "mirror":
-        out.append(Prior("train.view_frame", "mirror", f"the random views the critic judges ({_band(t)}) stand at "
-                         "the angles to each object's mirror plane that the photos' cameras have to theirs: the "
-                         "photos are taken as showing the class as the critic should see it"))
-    elif t.task == "reconstruction" and t.mode in ("platonic", "platonic3d"):
+    if t.task == "reconstruction" and t.mode in ("platonic", "platonic3d"):
         out.append(Prior("train.view_distribution", _band(t), "the random views the critic judges against the photos "
                          "are drawn at every azimuth: the photos are taken as showing the class from every side, "
                          "the sides as often as the front"))

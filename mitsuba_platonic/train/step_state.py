@@ -5,7 +5,7 @@ the images the critic sees (:class:`StepState`), filled stage by stage by
 
 Randomness: the batch, the views, the noise and the roll angles come from one generator seeded by
 (run seed, step), drawn in a fixed order; what is drawn elsewhere in the step (the photos'
-augmentation, D's augmentation, the turn prior's angles, the mirror frame's draws, the renderer's seed) comes from a stream of
+augmentation, D's augmentation, the turn prior's angles, the renderer's seed) comes from a stream of
 its own, seeded by (run seed, step, tag, rank), so adding a draw to one stream never moves another.
 """
 
@@ -17,12 +17,10 @@ from typing import Dict, Optional
 import numpy as np
 import torch
 
-from .mirror import MirrorPlanes
-
-__all__ = ["StepState", "side_seed", "side_generator", "RENDER", "D_AUGMENT", "PHOTO_AUGMENT", "TURN", "MIRROR"]
+__all__ = ["StepState", "side_seed", "side_generator", "RENDER", "D_AUGMENT", "PHOTO_AUGMENT", "TURN"]
 
 #: The tags of the step's side streams (:func:`side_seed`).
-RENDER, D_AUGMENT, PHOTO_AUGMENT, TURN, MIRROR = 7, 11, 13, 17, 19
+RENDER, D_AUGMENT, PHOTO_AUGMENT, TURN = 7, 11, 13, 17
 
 
 def side_seed(run_seed: int, step: int, tag: int, rank: int) -> int:
@@ -50,8 +48,7 @@ class StepState:
       None; ``real_volumes`` D3's ground-truth batch (3D modes) or None;
     - generated: ``z`` = E(x) or z_prior; ``v`` G's volumes; ``offsets`` ℓ, G's colour offsets from the
       photo's (``model.photo_colour``) or None; ``v_view`` the volume of each random view (b K);
-      ``v_input`` the input view's volume (b; with ``train.pose: elevation`` tilted by θ̂); ``planes``
-      each volume's mirror plane (``train.view_frame: mirror`` or ``train.mirror``, :mod:`.mirror`) or None;
+      ``v_input`` the input view's volume (b; with ``train.pose: elevation`` tilted by θ̂);
     - rendered: ``seed`` the renderer's; ``i_view`` = R(ω, v_view); ``i_front`` = R(ω₀, v_input) or None;
     - the critics': ``fake_d`` the rendered views as D sees them (rolled, augmented); ``d3_verdict``
       G's 3D adversarial loss under D3's updated weights (3D modes) or None;
@@ -74,7 +71,6 @@ class StepState:
     offsets: Optional[torch.Tensor] = None
     v_view: Optional[torch.Tensor] = None
     v_input: Optional[torch.Tensor] = None
-    planes: Optional[MirrorPlanes] = None
     seed: Optional[int] = None
     i_view: Optional[torch.Tensor] = None
     i_front: Optional[torch.Tensor] = None

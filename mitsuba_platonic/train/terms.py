@@ -21,7 +21,6 @@ colour_tv                 ``colour_tv``    Σ w_ij ‖c_i − c_j‖₁ / (3 Σ 
 colour_offset             ``colour_offset`` Σ ρ ‖ℓ‖₁ / (3 Σ ρ) (:func:`.losses.colour_offset`)
 depth_spread              ``depth_spread`` the rays' weight distortion of v_input (:func:`.losses.depth_spread`)
 turn                      ``turn``         Σ |α − T_φ α| / Σ (α + T_φ α), φ ~ U[0, 2π) per volume (:func:`.losses.turn`)
-mirror                    ``mirror``       Σ |α − M_ψ α| / Σ (α + M_ψ α), ψ each volume's plane (:func:`.mirror.mirror_loss`)
 solidity                  ``solidity``     Σ relu(h − α) / Σ h along v_input's rays (:func:`.losses.solidity`)
 colour_match              ``colour_match`` mean |c̄(I_view) − c̄(x)| (:func:`.losses.colour_match`)
 rec3d                     ``rec_weight``   mean (v_input − v*)², v* the image's truth in its camera's frame
@@ -51,7 +50,6 @@ from ..config.train_settings import TrainConfig
 from ..render.pytorch.single_scatter import SKY_SHARE, sample_lights, sky_share
 from ..views import to_angles
 from .losses import colour_match, colour_offset, colour_tv, depth_spread, g_loss, solidity, turn
-from .mirror import MirrorPlanes, mirror_loss
 from .renderer import in_camera
 from .step_state import TURN, StepState, side_generator
 
@@ -130,10 +128,6 @@ def _turn(ctx: StepContext, v: torch.Tensor, step: int) -> torch.Tensor:
     return turn(v, φ.to(v.device))
 
 
-def _mirror(ctx: StepContext, v: torch.Tensor, planes: MirrorPlanes) -> torch.Tensor:
-    return mirror_loss(v, planes)
-
-
 def _solidity(ctx: StepContext, v_input: torch.Tensor) -> torch.Tensor:
     return solidity(v_input)
 
@@ -195,7 +189,6 @@ G_TERMS: Tuple[Term, ...] = (
     Term("colour_offset", "colour_offset", _prior("colour_offset"), ("v", "offsets"), _colour_offset),
     Term("depth_spread", "depth_spread", _prior("depth_spread"), ("v_input",), _depth_spread),
     Term("turn", "turn", _prior("turn"), ("v", "step"), _turn),
-    Term("mirror", "mirror", _prior("mirror"), ("v", "planes"), _mirror),
     Term("solidity", "solidity", _prior("solidity"), ("v_input",), _solidity),
     Term("colour_match", "colour_match", _prior("colour_match"), ("i_view", "x"), _colour_match),
     Term("rec3d", "rec_weight", lambda t: t.task == "reconstruction" and t.rec_target == "volume",

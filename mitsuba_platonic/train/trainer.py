@@ -113,8 +113,7 @@ from .data import TrainingData
 from .losses import d_loss, gradient_penalty, hard_accuracy_counts, r1_penalty, soft_accuracy_counts
 from .renderer import make_lit_renderer, make_renderer
 from .image_roll import input_frame_roll, roll
-from .mirror import fold_to_normal, mirror_frame_views, mirror_planes
-from .step_state import D_AUGMENT, MIRROR, PHOTO_AUGMENT, RENDER, StepState, side_generator, side_seed
+from .step_state import D_AUGMENT, PHOTO_AUGMENT, RENDER, StepState, side_generator, side_seed
 from .terms import active_terms, g_terms
 
 __all__ = ["Trainer", "TASKS", "MODES", "MODES_3D", "REC_TARGETS", "POSES", "ring_views"]
@@ -325,20 +324,6 @@ class Trainer(BaselineModes):
             self._ring_generate(s)
         else:
             self._volumes(s)
-            self._mirror_frame(s)
-
-    def _mirror_frame(self, s: StepState) -> None:
-        """Each volume's mirror plane (``train.view_frame: mirror`` or ``train.mirror``), and with
-        'mirror' the random views redrawn about the planes (train/mirror.py), from the mirror stream."""
-        t = self.cfg.train
-        if t.view_frame == "camera" and not t.mirror > 0:
-            return
-        s.planes = mirror_planes(s.v)
-        s.out["mirror_beta"] = self.global_mean(torch.rad2deg(fold_to_normal(s.planes.ψ)).mean())   # the photos' mean |β|, degrees
-        s.out["mirror_asymmetry"] = self.global_mean(s.planes.asymmetry.mean())
-        if t.view_frame == "mirror" and s.step >= t.view_frame_after:
-            g = side_generator(self.cfg.run.seed, s.step, MIRROR, self.rank)
-            s.views = mirror_frame_views(s.views, s.planes.ψ, g)
 
     def _volumes(self, s: StepState) -> None:
         """v = G(z) (``model.photo_colour``: with colour offsets ℓ from the photo's), each volume once
