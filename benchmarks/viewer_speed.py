@@ -45,19 +45,20 @@ import torch
 from mitsuba_platonic.views import from_angles
 from mitsuba_platonic.volume import test_volume
 
+#: The canvas the server-side timing renders for: the page's frames are W×H at the canvas' aspect.
+ASPECT = 16 / 9
 FRAME = re.compile(r"frame (\d+): ([0-9.]+) ms, (full|moving), (\d+)×\d+ px")
 
 
 def server_side(volume: torch.Tensor, pixels: int, frames: int = 40) -> None:
     from viser._image_encoding import cv2_imencode_with_fallback
 
-    from mitsuba_platonic.viewer.app import pad_to_aspect
     from mitsuba_platonic.viewer.scene import render_frame
 
     def one(i: int, fmt: str) -> float:
         t = time.perf_counter()
-        frame = render_frame(volume, tuple(from_angles(3.0 * i, 20.0).tolist()), "marcher", "EA", pixels)
-        cv2_imencode_with_fallback(fmt, pad_to_aspect(frame.image, 16 / 9), jpeg_quality=90, channel_ordering="rgb")
+        frame = render_frame(volume, tuple(from_angles(3.0 * i, 20.0).tolist()), "marcher", "EA", pixels, aspect=ASPECT)
+        cv2_imencode_with_fallback(fmt, frame.image, jpeg_quality=90, channel_ordering="rgb")
         return time.perf_counter() - t
 
     start = time.perf_counter()
@@ -68,12 +69,13 @@ def server_side(volume: torch.Tensor, pixels: int, frames: int = 40) -> None:
         total = []
         for i in range(1, frames + 1):
             t = time.perf_counter()
-            frame = render_frame(volume, tuple(from_angles(3.0 * i, 20.0).tolist()), "marcher", "EA", pixels)
+            frame = render_frame(volume, tuple(from_angles(3.0 * i, 20.0).tolist()), "marcher", "EA", pixels,
+                                 aspect=ASPECT)
             render.append(time.perf_counter() - t)
-            cv2_imencode_with_fallback(fmt, pad_to_aspect(frame.image, 16 / 9), jpeg_quality=90,
-                                       channel_ordering="rgb")
+            cv2_imencode_with_fallback(fmt, frame.image, jpeg_quality=90, channel_ordering="rgb")
             total.append(time.perf_counter() - t)
-        print(f"server: marcher at {volume.shape[-1]}³, {pixels}×{pixels} px, {frames} views 3° apart: render "
+        h, w = frame.image.shape[:2]
+        print(f"server: marcher at {volume.shape[-1]}³, {w}×{h} px (a 16:9 canvas), {frames} views 3° apart: render "
               f"{1000 * np.median(render):.0f} ms median, with the page's {fmt.upper()} "
               f"{1000 * np.median(total):.0f} ms → {1 / np.median(total):.1f} frames/s")
 
@@ -187,7 +189,7 @@ def in_browser(source: Path, pixels: int, seconds: float, window: Tuple[int, int
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("--resolution", type=int, default=32, help="test volume N (default: 32)")
-    parser.add_argument("--pixels", type=int, default=256, help="image pixels per side (a multiple of N)")
+    parser.add_argument("--pixels", type=int, default=256, help="the frame's shorter side in pixels (a multiple of N; the server-side timing renders a 16:9 frame)")
     parser.add_argument("--seconds", type=float, default=5.0, help="length of each drag in the browser")
     parser.add_argument("--source", default=None, help="a volume file or run folder instead of the test volume")
     parser.add_argument("--window", type=window_size, default=(1280, 720),
