@@ -15,7 +15,7 @@ from typing import Optional
 
 from ..errors import Interrupted, stop_words
 from ..files.fileio import interrupt_behind
-from ..files.no_room import full_disk_line, no_room
+from ..runtime.no_room import full_disk_line, no_room
 from .args import PROG
 
 __all__ = ["STARTING", "one_line", "interrupt_message", "error_message", "interrupt_behind", "printable_streams",

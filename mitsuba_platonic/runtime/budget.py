@@ -18,7 +18,7 @@ from typing import Callable, List, Optional, Tuple, Union
 
 from ..errors import UserError
 
-__all__ = ["available_memory", "free_disk", "check_fits", "gigabytes", "memory_check"]
+__all__ = ["available_memory", "existing_folder", "free_disk", "check_fits", "gigabytes", "memory_check"]
 
 
 def available_memory() -> Tuple[Optional[int], str]:
@@ -49,12 +49,18 @@ def available_memory() -> Tuple[Optional[int], str]:
     return min(found) if found else (None, "unknown")
 
 
-def free_disk(path: Union[str, Path]) -> Tuple[Optional[int], str]:
-    """(bytes free on the file system ``path`` is or would be on, where the number comes from): its
-    nearest existing folder's ``shutil.disk_usage``; ``(None, 'unknown')`` where it cannot be read."""
+def existing_folder(path: Union[str, Path]) -> Path:
+    """``path`` (absolute) or its nearest existing parent: where a file to be written there would live."""
     p = Path(path).absolute()
     while not p.exists() and p != p.parent:
         p = p.parent
+    return p
+
+
+def free_disk(path: Union[str, Path]) -> Tuple[Optional[int], str]:
+    """(bytes free on the file system ``path`` is or would be on, where the number comes from): its
+    nearest existing folder's ``shutil.disk_usage``; ``(None, 'unknown')`` where it cannot be read."""
+    p = existing_folder(path)
     try:
         return shutil.disk_usage(p).free, f"free on the disk of {p}"
     except OSError:

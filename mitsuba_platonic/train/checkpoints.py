@@ -22,7 +22,7 @@ from ..config import Config
 from ..config.loading import config_difference, saved_config
 from ..files.checkpoint import CHECKPOINT_VERSION, RunError, load_latest_checkpoint, load_weights, save_checkpoint
 from ..files.fileio import remove
-from ..files.no_room import no_room, what_to_free
+from ..runtime.no_room import no_room, what_to_free
 
 __all__ = ["Checkpoints", "non_finite", "same_settings"]
 
@@ -90,7 +90,7 @@ class Checkpoints:
         return f"run the same command with --resume to go on from step {self.step}"
 
     def no_room(self, e: BaseException) -> str:
-        """For a full disk behind ``e`` (:func:`~mitsuba_platonic.files.no_room.no_room`): ``; <which disk,
+        """For a full disk behind ``e`` (:func:`~mitsuba_platonic.runtime.no_room.no_room`): ``; <which disk,
         what to free, how to go on>``; else ''."""
         full = no_room(e)
         if full is None:

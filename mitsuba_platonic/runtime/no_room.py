@@ -12,9 +12,10 @@ from __future__ import annotations
 
 import errno
 import os
-import shutil
 from pathlib import Path
 from typing import Optional
+
+from .budget import existing_folder, free_disk, gigabytes
 
 __all__ = ["NO_ROOM", "no_room", "what_to_free", "full_disk_line"]
 
@@ -36,17 +37,7 @@ def no_room(e: Optional[BaseException]) -> Optional[OSError]:
 
 def _folder(e: OSError) -> Path:
     """The nearest existing folder of the file ``e`` names (the working folder if it names none)."""
-    p = Path(os.path.abspath(e.filename)).parent if e.filename else Path.cwd()
-    while not p.exists() and p != p.parent:
-        p = p.parent
-    return p
-
-
-def _size(n: int) -> str:
-    for unit, scale in (("GB", 1e9), ("MB", 1e6), ("kB", 1e3)):
-        if n >= scale:
-            return f"{n / scale:.3g} {unit}"
-    return f"{n} bytes"
+    return existing_folder(Path(os.path.abspath(e.filename)).parent if e.filename else Path.cwd())
 
 
 def what_to_free(e: OSError, free: str = "", then: str = "run the same command again") -> str:
@@ -54,10 +45,8 @@ def what_to_free(e: OSError, free: str = "", then: str = "run the same command a
     elsewhere; then <then>``: the advice for the full-disk ``e`` (:func:`no_room`); ``free`` names
     what the command's own files there are that could go."""
     folder = _folder(e)
-    try:
-        left = f"{_size(shutil.disk_usage(folder).free)} free now"
-    except OSError:
-        left = "free space unknown"
+    free_bytes, _ = free_disk(folder)
+    left = "free space unknown" if free_bytes is None else f"{gigabytes(free_bytes)} free now"
     quota = "its disk quota is used up" if e.errno == errno.EDQUOT else "is full"
     holding = f"the disk holding {folder} {quota}" if e.errno != errno.EDQUOT else f"{folder}: {quota}"
     return f"{holding} ({left}): free space on it{f' ({free})' if free else ''}, or write elsewhere; then {then}"
