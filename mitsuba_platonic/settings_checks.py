@@ -15,7 +15,7 @@ from typing import Any, Sequence
 from .errors import UserError
 from .views import DISTRIBUTIONS, sample_views
 
-__all__ = ["ConfigError", "choice", "positive", "non_negative", "check_elevation", "quoted", "QUOTE_LIMIT"]
+__all__ = ["ConfigError", "choice", "positive", "non_negative", "check_elevation", "cut", "quoted", "QUOTE_LIMIT"]
 
 #: The most characters a message quotes of a value: a YAML alias bomb (a few lines that expand to
 #: millions of items) is named by its beginning, not printed whole.
@@ -30,11 +30,16 @@ class ConfigError(UserError):
     """A bad configuration; the message names the key."""
 
 
+def cut(text: str, limit: int = QUOTE_LIMIT) -> str:
+    """``text`` as written, at most ``limit`` characters (``…`` where cut): a user's words in a message."""
+    return text if len(text) <= limit else text[:limit - 1] + "…"
+
+
 def quoted(value: Any, limit: int = QUOTE_LIMIT) -> str:
     """``repr(value)`` for a message, at most ``limit`` characters (``…`` where cut), built without
     the whole repr of a huge value (nested lists a YAML alias expands are shortened level by level)."""
     text = _REPR.repr(value) if isinstance(value, (list, tuple, dict, set, frozenset)) else repr(value)
-    return text if len(text) <= limit else text[:limit - 1] + "…"
+    return cut(text, limit)
 
 
 def choice(key: str, value: Any, choices: Sequence[Any]) -> None:

@@ -12,6 +12,7 @@ from pathlib import Path
 from typing import Callable, List, Mapping, Optional, Sequence
 
 from ..errors import UserError
+from ..settings_checks import cut
 
 __all__ = ["PROG", "CLIError", "positive_int", "non_negative_int", "resolution", "positive_float", "seed",
            "MAX_SEED", "parse_models", "check_out_folder", "check_settings_once"]
@@ -76,10 +77,6 @@ def check_out_folder(out: Path) -> None:
         raise CLIError(f"--out {str(out)!r} exists and is not a folder")
 
 
-#: How long a ``--set`` item is quoted in a message at most (the rest cut, with an ellipsis).
-_QUOTED = 80
-
-
 def check_settings_once(sets: Optional[Sequence[str]], flags: Mapping[str, str]) -> None:
     """Refuse a config key that a flag and a ``--set`` item both give (``flags``: key → the flag as
     given, ``{'run.steps': '--steps 5'}``), naming both: one of them would win without a word. (Two
@@ -88,5 +85,4 @@ def check_settings_once(sets: Optional[Sequence[str]], flags: Mapping[str, str])
     for item in sets or ():
         key = item.split("=", 1)[0].strip() if "=" in item else None
         if key in flags:
-            shown = item if len(item) <= _QUOTED else item[:_QUOTED - 1] + "…"
-            raise CLIError(f"{key}: given twice, by {flags[key]} and by --set {shown}; expected one of them")
+            raise CLIError(f"{key}: given twice, by {flags[key]} and by --set {cut(item)}; expected one of them")

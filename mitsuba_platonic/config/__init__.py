@@ -41,7 +41,7 @@ from pydantic_core import SchemaValidator, core_schema
 from ..data.settings import DataConfig
 from ..networks.settings import ModelConfig
 from ..render.settings import LIT, SINGLE_SCATTERING, RenderSettings as RenderConfig
-from ..settings_checks import QUOTE_LIMIT, ConfigError, quoted
+from ..settings_checks import ConfigError, cut, quoted
 from ..views import DEFAULT_ELEVATION
 from .files import config_file, load_yaml, read_config_file, yaml_problem
 from .run_settings import RunConfig
@@ -230,7 +230,7 @@ def apply_overrides(data: Dict[str, Any], overrides: Sequence[str]) -> Dict[str,
         try:
             value = load_yaml(text)
         except yaml.YAMLError as e:
-            key = key if len(key) <= QUOTE_LIMIT else key[:QUOTE_LIMIT - 1] + "…"      # the key as written, cut
+            key = cut(key)                                    # the key as written, cut
             raise ConfigError(f"{key}: could not parse {quoted(text)}: {yaml_problem(e)}") from None
         data.setdefault(parts[0], {})
         if not isinstance(data[parts[0]], dict):
