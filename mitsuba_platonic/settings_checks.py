@@ -4,7 +4,8 @@ Each section of a config (``run``, ``data``, ``model``, ``train``) is a dataclas
 that owns it, with a ``validate()`` of its own; these are the helpers they use, so that every
 message reads the same way: the key first, then what was expected and what was found
 (``train.batch_size: expected a positive value, got 0``). A leaf below every section: it imports
-only the error types and the view conventions, never a section or the config.
+only the error types, and the view conventions inside :func:`check_elevation` (they load torch, and the
+command line quotes a user's words with :func:`cut` before it may load torch), never a section or the config.
 """
 
 from __future__ import annotations
@@ -13,7 +14,6 @@ import reprlib
 from typing import Any, Sequence
 
 from .errors import UserError
-from .views import DISTRIBUTIONS, sample_views
 
 __all__ = ["ConfigError", "choice", "positive", "non_negative", "check_elevation", "cut", "quoted", "QUOTE_LIMIT"]
 
@@ -62,6 +62,7 @@ def non_negative(key: str, value: Any) -> None:
 
 def check_elevation(section: str, distribution: str, elevation: Any) -> None:
     """``<section>.elevation`` fits ``<section>.view_distribution`` (the views' own check, naming the keys)."""
+    from .views import DISTRIBUTIONS, sample_views           # here: views loads torch
     if distribution not in DISTRIBUTIONS:
         return                                               # its own check names it
     if distribution == "sphere" or elevation is None:

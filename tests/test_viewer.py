@@ -929,17 +929,26 @@ def _shown(page, r: int) -> np.ndarray:
     return last
 
 
+#: How long a frame line must stay unchanged after its screenshot for the camera to rest (seconds).
+REST_S = 0.6
+
+
 def _rest(page, pattern: str, r: int) -> tuple:
     """(the frame line matching ``pattern``, its R×R frame as drawn) once the camera rests: the
     line is the same before and after the screenshots agree. viser's orbit controls glide on after
     the mouse stops (their damping), later on a loaded machine, so a line read first may belong to
-    a frame the canvas has already replaced (at most 20 tries)."""
+    a frame the canvas has already replaced (at most 20 tries). Resting is the line unchanged over
+    the screenshot and :data:`REST_S` after it: a wheel's dolly on a loaded CI machine glided on past
+    one screenshot's time (zoom 1.292 read, 1.36 reached)."""
     lines = page.get_by_text(re.compile(r"^frame \d+: "))
     for _ in range(20):
         _frame(page, pattern)
         line = lines.inner_text()
         shot = _shown(page, r)
-        if lines.inner_text() == line and re.search(pattern, line):
+        if lines.inner_text() != line or not re.search(pattern, line):
+            continue
+        time.sleep(REST_S)
+        if lines.inner_text() == line:
             return line, shot
     raise AssertionError(f"the camera did not rest on a frame matching {pattern!r}: last {line!r}")
 
