@@ -219,8 +219,8 @@ class PartClock:
 
     def _bound(self) -> None:
         """Note the sequence number from which the autograd nodes made belong to the part on top
-        (the probe's time is overhead)."""
-        t0 = time.perf_counter()
+        (the probe's time, since the last change, is overhead)."""
+        t0 = self._t
         with torch.enable_grad():
             self._seqs.append(self._probe.view(()).grad_fn._sequence_nr())
         self._owners.append(self._stack[-1])
