@@ -13,7 +13,7 @@ the priors' terms, the pose head, the optimisers and the rest, each forward and 
 (the parts: that class's module docstring). Prints a Markdown table of each part's milliseconds
 per step and share, and how each grew from the resolution before.
 
-``--with-128`` adds 128³ where the memory free allows it (a 128³ step takes minutes on 2 cores).
+``--with-128`` adds 128³ where the memory free allows it (a lower bound: the networks and G's last activations).
 Figures only: nothing is asserted.
 """
 
