@@ -26,9 +26,9 @@ not depend on what the photos show).
 - **renderer**: every call of the rendering layer, forward and adjoint;
 - **priors**: the terms of G's objective that are neither adversarial nor the input view's
   (train/terms.py: colour_tv, colour_offset, depth_spread, turn, solidity, colour_match, pose, light),
-  the pose head's own forward and backward included, E's calls in them excluded (they are E's);
-- **pose**: the pose head's elevation of the input view and the input view's volume tilted to it
-  (``train.pose: elevation``);
+  the calls of E and of the pose head in them excluded (they are E's and pose's);
+- **pose**: every call of the pose head P (``train.pose: elevation``) and the input view's volume
+  tilted to its elevation (``Trainer._input_volume``);
 - **optimiser**: every ``Optimizer.step`` and the moving average's update (``train.ema``);
 - **other**: the rest of the step: the batch's draws and the photos' augmentation, the input
   view's term, the sum of the terms, zeroing the gradients, autograd's engine between nodes.
@@ -41,7 +41,9 @@ thread) and given to the part whose forward created it (by sequence number; a pa
 accumulation to the node that fed it last). The critics' own backward passes run inside D's
 update and are D's. Where the renderer is Dr.Jit's, the clock waits for its launches
 (``dr.sync_thread``) before it reads the time at the end of each render and of each of its
-backward nodes.
+backward nodes. :func:`bench_parts` measures that split per resolution of a packaged config on
+random images and :func:`growth_table` prints it with each part's growth
+(benchmarks/step_growth.py).
 """
 
 from __future__ import annotations
