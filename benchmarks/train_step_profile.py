@@ -22,10 +22,9 @@ import time
 import torch
 from torch.profiler import ProfilerActivity, profile
 
-from mitsuba_platonic.bench.train import StepClock
+from mitsuba_platonic.bench.train import StepClock, image_channels, random_training_data
 from mitsuba_platonic.config import load_config
 from mitsuba_platonic.files.resources import config_path
-from mitsuba_platonic.train.data import TrainingData
 from mitsuba_platonic.train.run import training_threads
 from mitsuba_platonic.train.trainer import Trainer
 
@@ -38,11 +37,10 @@ def main() -> None:
     ap.add_argument("--top", type=int, default=15)
     ap.add_argument("--set", dest="overrides", action="append", default=[], metavar="KEY=VALUE")
     args = ap.parse_args()
-    cfg = load_config(config_path(args.config), args.overrides)
-    r, c = cfg.model.resolution, 1 if cfg.render.model in ("vh", "ao") else 4
-    g = torch.Generator().manual_seed(0)
-    data = TrainingData(torch.rand(64, c, r, r, generator=g) * 0.5, torch.zeros(0, c, r, r))
-    trainer = Trainer(cfg, data, torch.device("cpu"))
+    # data.path: a photo config's folder, never read (the images are random)
+    cfg = load_config(config_path(args.config), ["data.path=unused", *args.overrides])
+    r = cfg.model.resolution
+    trainer = Trainer(cfg, random_training_data(r, image_channels(cfg)), torch.device("cpu"))
     with training_threads(cfg):
         for step in range(args.warmup):
             trainer.step(step)

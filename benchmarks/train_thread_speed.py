@@ -20,16 +20,15 @@ import platform
 import torch
 
 from mitsuba_platonic.bench.timing import best_of
+from mitsuba_platonic.bench.train import random_training_data
 from mitsuba_platonic.config import load_config
-from mitsuba_platonic.train.data import TrainingData
 from mitsuba_platonic.train.run import drjit_threads, training_threads
 from mitsuba_platonic.train.trainer import Trainer
 
 
 def seconds_per_step(r: int, backend: str, threads: str, steps: int, repeats: int) -> float:
     """The best of ``repeats`` runs of ``steps`` training steps, after 5 warm-up steps."""
-    g = torch.Generator().manual_seed(0)
-    data = TrainingData(torch.rand(64, 4, r, r, generator=g) * 0.5, torch.zeros(0, 4, r, r))
+    data = random_training_data(r)
     cfg = load_config(None, [f"model.resolution={r}", "model.width=16", "train.batch_size=8",
                              f"render.backend={backend}", "render.model=ea", "data.formation=ea",
                              f"run.drjit_threads={threads}"])

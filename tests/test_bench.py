@@ -322,3 +322,48 @@ def test_the_step_clock_gives_the_renderer_its_forward_and_backward_and_the_opti
     assert trainer.render is slow_render and trainer.opt_g.step == own_step
     clock.reset()
     assert clock.totals() == {"renderer_forward": 0.0, "renderer_backward": 0.0, "optimiser": 0.0}
+
+
+def test_the_part_clock_splits_a_photo_step_into_its_named_parts():
+    """The photo recipe at 16³, 2 steps: every part of PARTS is timed (> 0), the parts sum to the
+    steps' time less the clock's bookkeeping (≤ the wall time around them), a known sleep in the
+    renderer's and in G's forward and backward lands in that part, and detach gives everything back."""
+    from mitsuba_platonic.bench.train import PARTS, PartClock, random_training_data
+    from mitsuba_platonic.config import load_config
+    from mitsuba_platonic.files.resources import config_path
+    from mitsuba_platonic.train.trainer import Trainer
+
+    assert PARTS == ("G", "E", "D", "renderer", "priors", "pose", "optimiser", "other")   # as docs/training.md names them
+    cfg = load_config(config_path("photos"), ["model.resolution=16", "data.path=unused"])
+    trainer = Trainer(cfg, random_training_data(16), torch.device("cpu"))
+    pause = 0.05
+    own_render = trainer.render
+
+    def slow_render(volume, views, seed):          # the real render between two known sleeps
+        return _SlowIdentity.apply(own_render(_SlowIdentity.apply(volume, pause), views, seed), pause)
+
+    def slow_g(_module, _args, out):                # G's volume through one known sleep, forward and backward
+        return (_SlowIdentity.apply(out[0], pause), *out[1:]) if isinstance(out, tuple) else _SlowIdentity.apply(out, pause)
+    trainer.render = slow_render
+    handle = trainer.nets["G"].register_forward_hook(slow_g)
+    own = (trainer.terms, trainer.opt_g.step, trainer.opt_d.step)
+    clock = PartClock(trainer)
+    t0 = time.perf_counter()
+    for step in range(2):
+        trainer.step(step)
+    wall = time.perf_counter() - t0
+    parts = clock.totals()
+    assert tuple(parts) == PARTS and all(parts[p] > 0 for p in PARTS), parts
+    assert clock.steps == 2 and clock.overhead > 0
+    assert sum(parts.values()) == pytest.approx(clock.wall - clock.overhead, abs=1e-9)
+    assert sum(parts.values()) <= clock.wall <= wall
+    # per step two renders (the random views and the input view), each with two sleeps forward and two backward
+    assert parts["renderer"] >= 2 * 2 * 4 * pause
+    assert parts["G"] >= 2 * 2 * pause              # G's sleep forward and its node's backward
+    clock.detach()
+    handle.remove()
+    assert trainer.render is slow_render and (trainer.terms, trainer.opt_g.step, trainer.opt_d.step) == own
+    assert "step" not in vars(trainer) and "_volumes" not in vars(trainer)
+    assert not trainer.nets["E"]._forward_hooks and not trainer.nets["E"]._forward_pre_hooks
+    trainer.step(2)                                 # detached: untimed
+    assert clock.totals() == parts

@@ -340,7 +340,11 @@ class Trainer(BaselineModes):
         K = cfg.train.random_views
         s.v_view, s.v_input = (s.v.repeat_interleave(K, 0) if K > 1 else s.v), s.v    # K = 1: no copy
         if "P" in self.modules:                              # train.pose: elevation: upright v, seen from θ̂
-            s.v_input = tilt(s.v, self.modules["P"](s.z))
+            s.v_input = self._input_volume(s)
+
+    def _input_volume(self, s: StepState) -> torch.Tensor:
+        """``train.pose: elevation``: the input view's volume, v tilted to the pose head's elevation θ̂ = P(z)."""
+        return tilt(s.v, self.modules["P"](s.z))
 
     # -- 3. render --------------------------------------------------------------------------
 
