@@ -327,9 +327,11 @@ def test_the_step_clock_gives_the_renderer_its_forward_and_backward_and_the_opti
 def test_the_part_clock_splits_a_photo_step_into_its_named_parts():
     """The photo recipe at 16³, 2 steps: every part of PARTS is timed (> 0), the parts sum to the
     steps' time less the clock's bookkeeping (≤ the wall time around them), a known sleep in the
-    renderer's and in G's forward and backward lands in that part, and detach gives everything back."""
-    from mitsuba_platonic.bench.train import PARTS, PartClock, random_training_data
+    renderer's and in G's forward and backward lands in that part, the priors' share is the sum of
+    their terms' (each active prior timed by name), and detach gives everything back."""
+    from mitsuba_platonic.bench.train import PARTS, TERM_PARTS, PartClock, random_training_data
     from mitsuba_platonic.config import load_config
+    from mitsuba_platonic.train.terms import active_terms
     from mitsuba_platonic.files.resources import config_path
     from mitsuba_platonic.train.trainer import Trainer
 
@@ -357,6 +359,9 @@ def test_the_part_clock_splits_a_photo_step_into_its_named_parts():
     assert clock.steps == 2 and clock.overhead > 0
     assert sum(parts.values()) == pytest.approx(clock.wall - clock.overhead, abs=1e-9)
     assert sum(parts.values()) <= clock.wall <= wall
+    priors = clock.priors()                         # the priors by term: every active one but the four of TERM_PARTS
+    assert set(priors) == {t.name for t in active_terms(cfg.train)} - set(TERM_PARTS), priors
+    assert all(v > 0 for v in priors.values()) and sum(priors.values()) == pytest.approx(parts["priors"], abs=1e-12)
     # per step two renders (the random views and the input view), each with two sleeps forward and two backward
     assert parts["renderer"] >= 2 * 2 * 4 * pause
     assert parts["G"] >= 2 * 2 * pause              # G's sleep forward and its node's backward

@@ -61,7 +61,7 @@ from ..train.memory_fit import check_model_fits
 from ..train.run import training_threads
 from ..train.trainer import Trainer
 
-__all__ = ["StepClock", "PartClock", "PARTS", "RENDERERS", "bench_train", "random_training_data", "image_channels",
+__all__ = ["StepClock", "PartClock", "PARTS", "TERM_PARTS", "PRIOR", "RENDERERS", "bench_train", "random_training_data", "image_channels",
            "bench_parts", "growth_table"]
 
 #: The renderers a training row is measured for: (backend, label, extra overrides).
@@ -145,8 +145,10 @@ class StepClock:
 #: The parts of a step :class:`PartClock` times (module docstring), in the order a table lists them.
 PARTS = ("G", "E", "D", "renderer", "priors", "pose", "optimiser", "other")
 
-#: The part a term of G's objective (train/terms.py, by name) is timed in; every other term is a prior.
+#: The part a term of G's objective (train/terms.py, by name) is timed in; every other term is a prior,
+#: timed as ``PRIOR + name`` (``priors:turn``) and summed into "priors" (:meth:`PartClock.totals`).
 TERM_PARTS = {"adv2d": "D", "adv3d": "D", "rec": "other", "rec3d": "other"}
+PRIOR = "priors:"
 
 
 class _TimedTerm:
@@ -191,7 +193,7 @@ class PartClock:
             if name in t.nets:
                 self._hook_module(t.nets[name], part)
         terms = t.terms
-        t.terms = tuple(_TimedTerm(term, self, TERM_PARTS.get(term.name, "priors")) for term in terms)
+        t.terms = tuple(_TimedTerm(term, self, TERM_PARTS.get(term.name, PRIOR + term.name)) for term in terms)
         self._undo.append(lambda: setattr(t, "terms", terms))
 
     def reset(self) -> None:
@@ -202,8 +204,14 @@ class PartClock:
         self._owners: List[str] = []                          # ... and the part from there on
 
     def totals(self) -> Dict[str, float]:
-        """Seconds per part (:data:`PARTS`) since the last ``reset()``."""
-        return dict(self.seconds)
+        """Seconds per part (:data:`PARTS`) since the last ``reset()``; "priors" the sum of :meth:`priors`."""
+        out = {part: self.seconds.get(part, 0.0) for part in PARTS}
+        out["priors"] += sum(self.priors().values())
+        return out
+
+    def priors(self) -> Dict[str, float]:
+        """Seconds per prior term (by its name in train/terms.py) since the last ``reset()``, forward and backward."""
+        return {key[len(PRIOR):]: v for key, v in self.seconds.items() if key.startswith(PRIOR)}
 
     def detach(self) -> None:
         """Give the trainer back its own methods, renderer, optimiser steps, terms and modules."""
@@ -216,7 +224,8 @@ class PartClock:
     def _charge(self) -> None:
         """The time since the last change to the part on top."""
         now = time.perf_counter()
-        self.seconds[self._stack[-1]] += now - self._t
+        part = self._stack[-1]
+        self.seconds[part] = self.seconds.get(part, 0.0) + now - self._t
         self._t = now
 
     def _bound(self) -> None:
@@ -448,6 +457,7 @@ def bench_parts(config: str, resolutions: Sequence[int], steps: int, warmup: int
                 trainer.step(step)
             clock.detach()
         row["parts_s"] = {part: seconds / steps for part, seconds in clock.totals().items()}
+        row["priors_s"] = {term: seconds / steps for term, seconds in clock.priors().items()}
         row["clocked_s_per_step"], row["overhead_s"] = clock.wall / steps, clock.overhead / steps
         log(f"{config} {r}³: {row['s_per_step']:.3f} s/step; " +
             ", ".join(f"{part} {seconds * 1e3:.1f} ms" for part, seconds in row["parts_s"].items()))
@@ -477,4 +487,10 @@ def growth_table(rows: Sequence[Dict[str, Any]]) -> str:
             lines.append(f"| {row['resolution']}³ / {before['resolution']}³ | "
                          f"×{row['s_per_step'] / before['s_per_step']:.2f} | " +
                          " | ".join("–" if x is None else f"×{x:.2f}" for x in ratios) + " |")
+    terms = list(dict.fromkeys(term for row in done for term in row.get("priors_s", {})))
+    if terms:
+        lines += ["", "| the priors, by term | " + " | ".join(f"`{t}`" for t in terms) + " |", "|---|" + "---:|" * len(terms)]
+        for row in done:
+            cells = [f"{row['priors_s'][t] * 1e3:.1f} ms" if t in row["priors_s"] else "–" for t in terms]
+            lines.append(f"| {row['resolution']}³ | " + " | ".join(cells) + " |")
     return "\n".join(lines)
