@@ -521,6 +521,8 @@ def test_a_photo_for_a_generation_run_is_one_line(runs, tmp_path):
     Image.new("RGBA", (N, N), (200, 100, 50, 255)).save(photo)
     code, out, err = run_cli(["view", str(runs["generation"]), "--photo", str(photo), "--port", "0"])
     assert code == 2 and "generation run" in one_line(err, "view", "error") and "--photo" in err
+    code, out, err = run_cli(["view", str(runs["reconstruction"]), "--background", "white", "--port", "0"])
+    assert code == 2 and "--background masks the --photo" in one_line(err, "view", "error")
 
 
 def test_run_sources_step_through_inputs_and_latents(runs, tmp_path, monkeypatch):
@@ -539,6 +541,15 @@ def test_run_sources_step_through_inputs_and_latents(runs, tmp_path, monkeypatch
     Image.fromarray(image).save(photo)
     with_photo = open_source(runs["reconstruction"], photo)
     assert with_photo.input.shape == (N, N, 3) and with_photo.input_names == ["photo.png"]
+    on_white = np.full((N, N, 3), 255, np.uint8)         # an RGB photo on white (the quickstart's inputs)
+    on_white[4:12, 4:12] = (200, 100, 50)
+    Image.fromarray(on_white).save(tmp_path / "white.png")
+    with pytest.raises(UserError, match="no alpha channel"):
+        open_source(runs["reconstruction"], tmp_path / "white.png")
+    masked = open_source(runs["reconstruction"], tmp_path / "white.png", background="white")
+    # the same object, masked on white (its edge softened by the loader): the same background and inside
+    np.testing.assert_array_equal(masked.input[:3], with_photo.input[:3])
+    np.testing.assert_array_equal(masked.input[6:10, 6:10], with_photo.input[6:10, 6:10])
 
     gen = open_source(runs["generation"])
     assert gen.kind == "generation"

@@ -59,6 +59,16 @@ read: ``frame N: T ms, full|moving, W×H px, az A° el E°, zoom M×, centre (X,
 inputs (a reconstruction run: previous/next held-out input, shown beside the view) or latents (a
 generation run: seed, new latent, a walk to a second seed), and exports into the output folder.
 
+Exports (:class:`~.scene.Exports`): the frame as drawn and the volume, at once; a still (the page's
+full frame at the still size, :func:`~.scene.checked_still`, every renderer of it checked to reach
+that size) and a turntable (the page's full frame from :func:`~.scene.turntable_views`, animated
+WebP and PNG frames) in a thread of their own per page (:meth:`ClientView._export`), of the volume
+shown when they started: frame by frame through :meth:`ViewerApp.render_export` (the render lock
+is taken per frame, so the pages' frames come between them), the path tracer's frames pass by pass
+in the worker (the export a slot of its own), a comparison's two frames drawn in its layout. The
+page's export line shows the frame (and pass) in progress; "cancel export", a closed page or the
+server's stop ends it between frames and passes, and nothing is written then.
+
 Compare mode (the "compare" control: :data:`~.compare.PAIRS`, "compare as": :data:`~.compare.LAYOUTS`)
 keys the request with the renderer ``("compare", pair, layout)``; :func:`compare_keys` gives the
 keys of frames A and B (one camera, resolution and volume; half the canvas' aspect side by side),

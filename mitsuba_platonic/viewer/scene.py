@@ -600,8 +600,12 @@ def _held_out(cfg) -> Tuple[Optional[torch.Tensor], List[str], Optional[str]]:
     return data.held_out, names, None
 
 
-def open_source(source: PathLike, photo: Optional[PathLike] = None, array: Optional[np.ndarray] = None) -> Scene:
+def open_source(source: PathLike, photo: Optional[PathLike] = None, array: Optional[np.ndarray] = None,
+                background: Optional[str] = None) -> Scene:
     """SOURCE → :class:`Scene` (module docstring); :class:`UserError` naming what is wrong.
+
+    ``background``: how ``photo`` is masked where it has no alpha channel (the photo loader's,
+    :meth:`~mitsuba_platonic.model.Model.load_image`: None, or ``white``).
 
     ``array``: what :func:`~.start.check_source` returned for this SOURCE, a volume file's checked
     array (not read again); None: SOURCE is checked and read here."""
@@ -613,7 +617,7 @@ def open_source(source: PathLike, photo: Optional[PathLike] = None, array: Optio
         return Scene(volume=volume, kind="volume", title=volume_title(path, volume.shape))
     seen = stamp(path / "checkpoints" / "last.pt")           # before reading it: a newer one is followed
     model, cfg = model_of(path)
-    scene = _run_scene(path, photo, model, cfg)
+    scene = _run_scene(path, photo, model, cfg, background)
     scene.folder, scene.stamp = path, seen
     return scene
 
@@ -632,7 +636,7 @@ def model_of(source: PathLike):
     return model_from_checkpoint(Model, ckpt, cfg), cfg
 
 
-def _run_scene(path: Path, photo: Optional[PathLike], model, cfg) -> Scene:
+def _run_scene(path: Path, photo: Optional[PathLike], model, cfg, background: Optional[str] = None) -> Scene:
     """The scene of a run's ``model`` (module docstring): its held-out inputs, ``photo``, or latents."""
     step = f"step {model.step}"
     if model.task != "reconstruction":
@@ -643,7 +647,7 @@ def _run_scene(path: Path, photo: Optional[PathLike], model, cfg) -> Scene:
         scene.show_latent(0)
         return scene
     if photo is not None:
-        image = model.load_image(photo)                      # the loader's one-line errors (missing, damaged)
+        image = model.load_image(photo, background)          # the loader's one-line errors (missing, damaged)
         scene = Scene(volume=_reconstruct(model, image), kind="reconstruction",
                       title=f"{path.name}: reconstruction of {Path(photo).name} ({step})", model=model,
                       inputs=image, input_names=[Path(photo).name])
