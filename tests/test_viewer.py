@@ -77,7 +77,14 @@ DRAG_TOLERANCE = 0.05
 
 
 def closed_form(volume: torch.Tensor, azimuth: float, elevation: float, resolution: Optional[int] = None) -> np.ndarray:
-    return render_frame(volume, tuple(from_angles(azimuth, elevation).tolist()), "closed form", "EA", resolution).image
+    return closed_form_at(volume, azimuth, elevation, resolution)
+
+
+def closed_form_at(volume: torch.Tensor, azimuth: float, elevation: float, resolution: Optional[int] = None,
+                   aspect: float = 1.0) -> np.ndarray:
+    """The closed form's EA frame at (azimuth, elevation) on a canvas of ``aspect``."""
+    return render_frame(volume, tuple(from_angles(azimuth, elevation).tolist()), "closed form", "EA", resolution,
+                        aspect=aspect).image
 
 
 # --------------------------------------------------------------------------- without a browser
@@ -548,6 +555,8 @@ def test_a_photo_for_a_generation_run_is_one_line(runs, tmp_path):
     Image.new("RGBA", (N, N), (200, 100, 50, 255)).save(photo)
     code, out, err = run_cli(["view", str(runs["generation"]), "--photo", str(photo), "--port", "0"])
     assert code == 2 and "generation run" in one_line(err, "view", "error") and "--photo" in err
+    code, out, err = run_cli(["view", str(runs["reconstruction"]), "--background", "white", "--port", "0"])
+    assert code == 2 and "--background masks the --photo" in one_line(err, "view", "error")
 
 
 def test_run_sources_step_through_inputs_and_latents(runs, tmp_path, monkeypatch):
@@ -566,6 +575,15 @@ def test_run_sources_step_through_inputs_and_latents(runs, tmp_path, monkeypatch
     Image.fromarray(image).save(photo)
     with_photo = open_source(runs["reconstruction"], photo)
     assert with_photo.input.shape == (N, N, 3) and with_photo.input_names == ["photo.png"]
+    on_white = np.full((N, N, 3), 255, np.uint8)         # an RGB photo on white (the quickstart's inputs)
+    on_white[4:12, 4:12] = (200, 100, 50)
+    Image.fromarray(on_white).save(tmp_path / "white.png")
+    with pytest.raises(UserError, match="no alpha channel"):
+        open_source(runs["reconstruction"], tmp_path / "white.png")
+    masked = open_source(runs["reconstruction"], tmp_path / "white.png", background="white")
+    # the same object, masked on white (its edge softened by the loader): the same background and inside
+    np.testing.assert_array_equal(masked.input[:3], with_photo.input[:3])
+    np.testing.assert_array_equal(masked.input[6:10, 6:10], with_photo.input[6:10, 6:10])
 
     gen = open_source(runs["generation"])
     assert gen.kind == "generation"
@@ -778,6 +796,97 @@ def test_a_page_in_compare_mode_draws_the_difference_through_the_colour_scale(vo
         if page is not None:
             page.close()
         app.stop()
+
+
+def test_an_export_is_checked_cancellable_and_draws_the_compare_mode(volume_file, tmp_path):
+    """A socket page's exports: a frame count or still size outside what is offered is one line on
+    the page and nothing is written; a path-traced turntable cancelled after its first frame writes
+    nothing and says how far it got; a still in compare mode ("closed form vs marcher", difference,
+    32 px) is the comparison of the two renderers' frames at the page's camera and canvas."""
+    from mitsuba_platonic.viewer.app import ViewerApp, checked_aspect
+    from mitsuba_platonic.viewer.compare import compare
+
+    volume = read_volume_file(volume_file)[0]
+    out = tmp_path / "exports"
+    app = ViewerApp(open_source(volume_file), out, port=0)
+    page = None
+    try:
+        page = SocketPage(app)
+        v = page.view
+        assert page.wait(lambda: v.count >= 1 and ", full," in v.info.content), v.info.content
+
+        def export(kind: str, says: str) -> str:
+            v._start_export(kind)                          # what its button does
+            assert page.wait(lambda: re.search(says, v.exported.content)
+                             and not (v.export is not None and v.export.is_alive())), v.exported.content
+            return v.exported.content
+
+        for frames in (1, 1000):                         # (viser's number box itself rounds to its step)
+            v.frames.value = frames
+            assert export("turntable", "not saved") == (f"not saved: turntable frames: expected a whole number from 2 "
+                                                        f"to 360, got {frames!r}")
+        v.frames.value = 48
+        v.still_size.value = "24"
+        assert export("still", "not saved").startswith("not saved: still size: expected a multiple of the volume's 16")
+        assert not out.exists()
+
+        v.renderer.value, v.resolution.value = "path tracer", str(N)
+        v._start_export("turntable")
+        assert page.wait(lambda: "frame 2 of 48" in v.exported.content), v.exported.content
+        v.export_cancel.set()                              # what "cancel export" does
+        says = export("turntable", "cancelled")
+        assert re.fullmatch(r"turntable of 48 frames: cancelled after [12] of 48 frames; nothing written", says), says
+        assert not out.exists() or list(out.iterdir()) == []
+
+        v.renderer.value = "closed form"
+        v.compare.value, v.layout.value, v.still_size.value = "closed form vs marcher", "difference", str(2 * N)
+        export("still", r"saved .*view\.png")
+        aspect = checked_aspect(1400, 600)
+        a = render_frame(volume, (0.0, 0.0, 1.0), "closed form", "EA", 2 * N, 4, None, aspect).image
+        b = render_frame(volume, (0.0, 0.0, 1.0), "marcher", "EA", 2 * N, 4, None, aspect).image
+        from PIL import Image
+        np.testing.assert_array_equal(np.asarray(Image.open(out / "view.png")), compare(a, b, "difference").image)
+    finally:
+        if page is not None:
+            page.close()
+        app.stop()
+
+
+def test_a_turntables_views_go_round_the_vertical_and_its_files_hold_its_frames(tmp_path):
+    """turntable_views: F views at azimuths φ₀ + k·360°/F at the view's elevation, the first the view;
+    Exports.turntable: an animated WebP of exactly those pixels and one PNG per frame, never over an
+    earlier export; what is not a turntable of frames is refused."""
+    from PIL import Image, ImageSequence
+
+    from mitsuba_platonic.views import to_angles
+    from mitsuba_platonic.viewer.scene import checked_frames, checked_still, still_sizes, turntable_views
+
+    views = turntable_views(tuple(from_angles(30.0, 20.0).tolist()), 6)
+    az, el = to_angles(torch.tensor(views))
+    torch.testing.assert_close(az, torch.tensor([30.0, 90.0, 150.0, -150.0, -90.0, -30.0], dtype=torch.float64))
+    torch.testing.assert_close(el, torch.full((6,), 20.0, dtype=torch.float64))
+    assert still_sizes(16) == [16, 32, 64, 128, 256, 512, 1024, 2048] and still_sizes(24)[-1] == 1536
+    assert checked_still("512", 16) == 512 and checked_frames(8.0) == 8
+    for bad in (1, 361, 2.5, "many", False, float("nan")):
+        with pytest.raises(UserError, match="turntable frames: expected a whole number from 2 to 360"):
+            checked_frames(bad)
+    for bad in ("520", 4096, 8, True, None):
+        with pytest.raises(UserError, match="still size: expected a multiple of the volume's 16 from 16 to 2048"):
+            checked_still(bad, 16)
+    rng = np.random.default_rng(0)
+    frames = [rng.integers(0, 256, (9, 21, 3), dtype=np.uint8) for _ in range(5)]
+    ex = Exports(tmp_path / "out")
+    first, second = ex.turntable(frames, "spin"), ex.turntable(frames, "spin")
+    assert [p.name for p in first] == ["spin.webp", "spin_frames"] and [p.name for p in second] == ["spin_2.webp",
+                                                                                                    "spin_2_frames"]
+    read = [np.asarray(f.convert("RGB")) for f in ImageSequence.Iterator(Image.open(first[0]))]
+    assert len(read) == 5 and all(np.array_equal(a, b) for a, b in zip(read, frames))
+    assert sorted(p.name for p in first[1].iterdir()) == [f"frame_{k:03d}.png" for k in range(5)]
+    np.testing.assert_array_equal(np.asarray(Image.open(first[1] / "frame_003.png")), frames[3])
+    with pytest.raises(UserError, match="at least two"):
+        ex.turntable(frames[:1], "one")
+    with pytest.raises(UserError, match="of one size"):
+        ex.turntable([frames[0], frames[1][:, :-1]], "two")
 
 
 def _replace(path: Path, data: bytes) -> None:
@@ -1068,14 +1177,19 @@ def test_the_path_tracers_frames_take_longer_than_the_marchers(page):
     assert times["path tracer"] > times["marcher"], times
 
 
+def _fill(page, value: str, text: str) -> None:
+    """Type ``text`` into the page's text or number box that holds ``value`` now, and send it."""
+    box = page.locator(f"input[value='{value}']")
+    box.wait_for()
+    handle = box.element_handle()
+    handle.fill(text)
+    handle.press("Enter")
+    time.sleep(0.5)                                                 # the new value reaches the server
+
+
 def test_the_page_saves_the_view_inside_the_output_folder(page, server):
     _frame(page)
-    box = page.locator("input.mantine-TextInput-input[value='view']")   # the export's "name" text box
-    box.wait_for()
-    name = box.element_handle()
-    name.fill("../../outside")
-    name.press("Enter")
-    time.sleep(0.5)                                                 # the new value reaches the server
+    _fill(page, "view", "../../outside")                            # the export's "name" text box
     page.get_by_role("button", name="save view (PNG)").click()
     page.get_by_text(re.compile(r"saved .*outside\.png")).wait_for()
     saved = server.cwd / "view-exports" / "outside.png"
@@ -1083,6 +1197,55 @@ def test_the_page_saves_the_view_inside_the_output_folder(page, server):
     from PIL import Image
     width, height = Image.open(saved).size
     assert height == DEFAULT_RESOLUTION and width > height            # the frame as drawn: the canvas' aspect
+
+
+def test_the_page_exports_a_turntable_and_a_still_as_the_renderers_render_them(page, server, volume_file):
+    """"save turntable" writes an animated WebP of the frames asked for (8), frame k the renderer's
+    at azimuth φ₀ + k·360°/8 (φ₀ = 30°, the page's), its elevation, resolution and canvas aspect,
+    and the same frames as PNGs; "save still" writes the view at the still size (256: twice the
+    page's largest resolution for a 16³ volume) as the marcher renders it, and refuses a size the
+    closed form cannot reach, in one line, writing nothing."""
+    from PIL import Image, ImageSequence
+
+    from mitsuba_platonic.viewer.scene import MAX_STILL, TURNTABLE_FRAMES
+
+    volume = read_volume_file(volume_file)[0]
+    exports = server.cwd / "view-exports"
+    _frame(page)
+    _choose(page, 2, str(N))                                       # 16² frames: milliseconds each
+    page.get_by_role("button", name="azimuth +30").click()
+    _frame(page, rf"full, \d+×{N} px, az 30\.0° el 0\.0°")
+    box = page.locator("canvas").first.bounding_box()
+    aspect = round(box["width"] / box["height"], 3)
+    _fill(page, "view", "spin")
+    _fill(page, str(TURNTABLE_FRAMES), "8")
+    page.get_by_role("button", name="save turntable (WebP)").click()
+    page.get_by_text(re.compile(r"saved .*spin\.webp.*turntable of 8 frames")).wait_for()
+    animation = Image.open(exports / "spin.webp")
+    frames = [np.asarray(f.convert("RGB")) for f in ImageSequence.Iterator(animation)]
+    assert len(frames) == 8 and animation.info.get("loop") == 0
+    for k, frame in enumerate(frames):
+        expected = closed_form_at(volume, 30.0 + 45.0 * k, 0.0, N, aspect)
+        assert frame.shape == expected.shape and frame.shape[0] == N, (frame.shape, expected.shape)
+        mean, p95 = _difference(frame, expected)
+        assert mean <= TOLERANCE and p95 <= TOLERANCE_MAX, (k, mean, p95)
+        np.testing.assert_array_equal(np.asarray(Image.open(exports / "spin_frames" / f"frame_{k:03d}.png")), frame)
+    assert _views_apart(frames[1], closed_form_at(volume, 30.0, 0.0, N, aspect))   # the check tells frames apart
+
+    _choose(page, 5, "256")                                        # the still size
+    page.get_by_role("button", name="save still (PNG)").click()
+    page.get_by_text(re.compile(r"not saved: a still of 256 px: the closed form renders at most 128 px")).wait_for()
+    assert not (exports / "spin.png").exists()
+    _choose(page, 0, "marcher")
+    _frame(page, r"full, .*az 30\.0° el 0\.0°")
+    page.get_by_role("button", name="save still (PNG)").click()
+    page.get_by_text(re.compile(r"saved .*spin\.png.*still")).wait_for()
+    still = np.asarray(Image.open(exports / "spin.png").convert("RGB"))
+    expected = render_frame(volume, tuple(from_angles(30.0, 0.0).tolist()), "marcher", "EA", 256, aspect=aspect,
+                            most=MAX_STILL).image
+    assert still.shape == expected.shape and still.shape[0] == 256 and still.shape[1] > 256, still.shape
+    mean, p95 = _difference(still, expected)
+    assert mean <= TOLERANCE and p95 <= TOLERANCE_MAX, (mean, p95)
 
 
 def test_dragging_the_canvas_orbits_with_low_resolution_frames_while_moving(page, server, volume_file):

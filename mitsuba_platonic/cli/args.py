@@ -15,7 +15,7 @@ from ..errors import UserError
 from ..settings_checks import cut
 
 __all__ = ["PROG", "CLIError", "positive_int", "non_negative_int", "resolution", "positive_float", "seed",
-           "MAX_SEED", "parse_models", "check_out_folder", "check_settings_once"]
+           "MAX_SEED", "parse_models", "check_out_folder", "check_settings_once", "add_background"]
 
 PROG = "platonic"
 
@@ -69,6 +69,12 @@ def parse_models(text: str) -> List[str]:
     if not models:
         raise CLIError(f"--models {text!r} names no model; expected e.g. vh,ao,ea")
     return models
+
+
+def add_background(p: argparse.ArgumentParser, what: str = "RGB photos") -> None:
+    """``--background white``: mask ``what`` (images without an alpha channel) on a white background
+    (the photo loader's ``background``); ``reconstruct``'s and ``view``'s."""
+    p.add_argument("--background", choices=("white",), default=None, help=f"mask {what} on white")
 
 
 def check_out_folder(out: Path) -> None:

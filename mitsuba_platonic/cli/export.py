@@ -16,7 +16,7 @@ from typing import List
 from ..errors import Interrupted
 from ..files.fileio import confined
 from ..files.outputs import output_lock
-from .args import CLIError, non_negative_int, positive_int, seed
+from .args import CLIError, add_background, non_negative_int, positive_int, seed
 
 __all__ = ["add_reconstruct", "add_generate"]
 
@@ -68,7 +68,7 @@ def add_reconstruct(sub: "argparse._SubParsersAction") -> None:
     p.add_argument("--run", required=True, help="a run folder (with checkpoints/last.pt)")
     p.add_argument("images", nargs="+", help="input images (RGBA PNG, or RGB on white with --background white)")
     p.add_argument("--out", default=None, help="output folder (default: RUN/reconstructions)")
-    p.add_argument("--background", choices=("white",), default=None, help="mask RGB photos on white")
+    add_background(p)
     p.add_argument("--crop", choices=CROPS, default="image")
     p.add_argument("--level", type=float, default=0.5, help="iso-level of the mesh (default: %(default)s)")
     p.add_argument("--overwrite", action="store_true",

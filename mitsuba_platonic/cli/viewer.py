@@ -23,7 +23,7 @@ import sys
 import time
 from pathlib import Path
 
-from .args import CLIError, check_out_folder
+from .args import CLIError, add_background, check_out_folder
 
 __all__ = ["add_view"]
 
@@ -36,6 +36,8 @@ def _cmd_view(args: argparse.Namespace) -> int:
     check_port(args.host, args.port)                       # first: --host resolved and bound, a busy port at once
     out = Path(args.out)
     check_out_folder(out)
+    if args.background is not None and args.photo is None:
+        raise CLIError("--background masks the --photo; pass --photo FILE with it, or leave it out")
     try:
         import viser  # noqa: F401  (only to say what is missing, before any work)
     except ImportError:
@@ -74,7 +76,7 @@ def _open(args: argparse.Namespace, array):
 
     if args.threads:
         torch.set_num_threads(args.threads)
-    return open_source(args.source, args.photo, array)
+    return open_source(args.source, args.photo, array, background=args.background)
 
 
 def add_view(sub: "argparse._SubParsersAction") -> None:
@@ -91,7 +93,9 @@ def add_view(sub: "argparse._SubParsersAction") -> None:
                     "--out, and only there. Needs the 'viewer' extra (viser).")
     p.add_argument("source", metavar="SOURCE", help="a .npz or .vol volume file, or a run folder")
     p.add_argument("--photo", default=None, metavar="FILE",
-                   help="with a reconstruction run as SOURCE: reconstruct this photo and show it beside the view")
+                   help="with a reconstruction run as SOURCE: reconstruct this photo and show it beside the view "
+                        "(RGBA, or RGB on white with --background white)")
+    add_background(p, "an RGB --photo")
     p.add_argument("--host", default="127.0.0.1",
                    help="address to listen on (default: %(default)s, this machine only); pass 0.0.0.0 (or this "
                         "machine's address) to share the page with other machines on purpose: anyone who "

@@ -59,6 +59,16 @@ read: ``frame N: T ms, full|moving, W×H px, az A° el E°, zoom M×, centre (X,
 inputs (a reconstruction run: previous/next held-out input, shown beside the view) or latents (a
 generation run: seed, new latent, a walk to a second seed), and exports into the output folder.
 
+Exports (:class:`~.scene.Exports`): the frame as drawn and the volume, at once; a still (the page's
+full frame at the still size, :func:`~.scene.checked_still`, every renderer of it checked to reach
+that size) and a turntable (the page's full frame from :func:`~.scene.turntable_views`, animated
+WebP and PNG frames) in a thread of their own per page (:meth:`ClientView._export`), of the volume
+shown when they started: frame by frame through :meth:`ViewerApp.render_export` (the render lock
+is taken per frame, so the pages' frames come between them), the path tracer's frames pass by pass
+in the worker (the export a slot of its own), a comparison's two frames drawn in its layout. The
+page's export line shows the frame (and pass) in progress; "cancel export", a closed page or the
+server's stop ends it between frames and passes, and nothing is written then.
+
 Compare mode (the "compare" control: :data:`~.compare.PAIRS`, "compare as": :data:`~.compare.LAYOUTS`)
 keys the request with the renderer ``("compare", pair, layout)``; :func:`compare_keys` gives the
 keys of frames A and B (one camera, resolution and volume; half the canvas' aspect side by side),
@@ -84,8 +94,9 @@ import math
 import sys
 import threading
 import time
+from concurrent.futures import CancelledError, TimeoutError as FutureTimeout
 from pathlib import Path
-from typing import Callable, Optional, Sequence, Tuple
+from typing import Callable, List, Optional, Sequence, Tuple
 
 import numpy as np
 import torch
@@ -97,10 +108,11 @@ from ..views import camera_frames, from_angles, to_angles
 from ..render.window import window_or_none
 from .compare import LAYOUTS, PAIRS, Comparison, colour_bar, compare, half_aspect, pairs_for
 from .live import RunWatcher
-from .scene import (ASPECT_RANGE, PASS_SPP, WINDOW_SNAP, ZOOM_RANGE, Exports, Frame, Scene, Window, camera_window,
-                    default_resolution, formations_for, formations_of, model_of, passes_for, plan_frame, render_frame,
-                    renderers_for, resolutions_for, to_display, zoom_distance)
-from .worker import PathWorker
+from .scene import (ASPECT_RANGE, MAX_RESAMPLED, MAX_STILL, MAX_TURNTABLE_FRAMES, PASS_SPP, TURNTABLE_FRAMES, WINDOW_SNAP, ZOOM_RANGE,
+                    Exports, Frame, Scene, Window, camera_window, checked_frames, checked_still, default_resolution,
+                    formations_for, formations_of, model_of, passes_for, plan_frame, render_frame, renderers_for,
+                    resolutions_for, still_sizes, to_display, turntable_views, zoom_distance)
+from .worker import PathWorker, WorkerError
 from .start import DISTANCE, FOV, address, start_server, stop_server
 
 __all__ = ["ViewerApp", "SETTLE_S", "MAX_SPP", "MAX_SEED", "MAX_COORDINATE", "log_ignored", "checked_seed",
@@ -125,6 +137,8 @@ CANVAS_SETTLE_S = 1.0
 #: The page's controls as it opens: the renderer and the path tracer's spp (the formation: the
 #: volume's richest, EA or AO; the resolution: the volume's).
 INITIAL_RENDERER, INITIAL_SPP = "closed form", 4
+#: The still size a page offers first (the choice of :func:`~.scene.still_sizes` nearest to it), pixels.
+STILL_SIZE = 1024
 #: The zoom buttons' factor, and the pan buttons' step as a fraction of the frame's width.
 ZOOM_STEP, PAN_STEP = 2.0, 0.25
 #: The path tracer's spp slider's range, which the server holds a page's spp to.
@@ -287,7 +301,7 @@ class ViewerApp:
         view = self.clients.pop(client.client_id, None)
         if view is not None:
             view.stop()
-            self.closed = [v for v in self.closed if v.thread.is_alive()] + [view]   # stop() waits for its frame
+            self.closed = [v for v in self.closed if v.busy()] + [view]   # stop() waits for its frame and its export
 
     def _warm_up(self) -> None:
         """Render the first frame a page asks for (:func:`initial_key`, a square canvas's) while the
@@ -317,6 +331,14 @@ class ViewerApp:
                 frame = render_frame(self.scene.volume, view, renderer, formation, res, spp, window, aspect)
             self.last = (key[:5] + (version,) + key[6:], frame)
             return frame
+
+    def render_export(self, volume: torch.Tensor, key: Tuple) -> Frame:
+        """The frame of ``key`` (as :meth:`frame_for`'s, at a resolution up to :data:`~.scene.MAX_STILL`)
+        of ``volume`` (an export's, taken when it started), rendered now, one render at a time with the
+        pages' frames (it neither uses nor replaces the last frame)."""
+        view, renderer, formation, res, spp, _, window, aspect = key
+        with self.render_lock:
+            return render_frame(volume, view, renderer, formation, res, spp, window, aspect, MAX_STILL)
 
     def comparison_for(self, key_a: Tuple, key_b: Tuple, layout: str) -> Tuple[Frame, Frame, Comparison]:
         """Frames A and B of ``key_a`` and ``key_b`` (:meth:`frame_for`, :func:`compare_keys`) and their
@@ -353,8 +375,8 @@ class ViewerApp:
             view.stop()
         views += self.closed
         deadline = time.monotonic() + STOP_WAIT_S
-        for view in views:
-            view.thread.join(timeout=max(0.0, deadline - time.monotonic()))
+        for thread in [t for view in views for t in view.threads()]:
+            thread.join(timeout=max(0.0, deadline - time.monotonic()))
         if self.live is not None:
             self.live.join(max(0.0, deadline - time.monotonic()))
         self.worker.stop()
@@ -384,6 +406,9 @@ class ClientView:
         self.connected = time.monotonic()
         self.placed = False                                # has the page reported the initial camera yet?
         self.canvas, self.canvas_at = None, 0.0             # the canvas' size (pixels) last seen, and since when
+        self.export: Optional[threading.Thread] = None      # the still or turntable export in progress
+        self.export_cancel = threading.Event()
+        self.export_lock = threading.Lock()
         self._gui()
         # the camera viser connects a page with is the browser's default, before it takes the initial one
         # (DISTANCE, FOV): draw the initial camera until the page says where it is
@@ -439,6 +464,18 @@ class ClientView:
             self.name = gui.add_text("name", initial_value="view", hint="a file name inside the output folder")
             gui.add_button("save view (PNG)").on_click(lambda _: self._export_png())
             gui.add_button("save volume (.npz .vol .ply)").on_click(lambda _: self._export_volume())
+            sizes = still_sizes(n)
+            self.still_size = gui.add_dropdown("still size", [str(s) for s in sizes],
+                                               initial_value=str(min(sizes, key=lambda s: (abs(s - STILL_SIZE), s))),
+                                               hint=f"the still's pixels along the shorter side, up to {MAX_STILL} (past "
+                                                    f"{MAX_RESAMPLED}: the marcher only)")
+            gui.add_button("save still (PNG)").on_click(lambda _: self._start_export("still"))
+            self.frames = gui.add_number("turntable frames", initial_value=TURNTABLE_FRAMES, min=2,
+                                         max=MAX_TURNTABLE_FRAMES, step=1,
+                                         hint="frames of a whole turn about the vertical, at the page's resolution")
+            gui.add_button("save turntable (WebP)").on_click(lambda _: self._start_export("turntable"))
+            self.cancel_button = gui.add_button("cancel export", disabled=True)
+            self.cancel_button.on_click(lambda _: self.export_cancel.set())
             self.exported = gui.add_markdown(f"into `{self.app.exports.folder}`")
 
     def _offer_formations(self) -> None:
@@ -639,9 +676,12 @@ class ClientView:
             return now - self.connected >= CANVAS_S
         return now - self.canvas_at >= CANVAS_SETTLE_S
 
-    def _request(self) -> Tuple:
+    def _request(self, at_rest: bool = False) -> Tuple:
+        """(the key of the frame this page asks for now, its canvas' aspect, 'full' or 'moving');
+        ``at_rest``: the full frame, moving or not (an export's)."""
         with self.lock:
-            view, moving = tuple(float(x) for x in self.view), time.monotonic() - self.last_move < SETTLE_S
+            view = tuple(float(x) for x in self.view)
+            moving = not at_rest and time.monotonic() - self.last_move < SETTLE_S
             window = self.window
         n = self.app.scene.volume.shape[-1]
         choices = resolutions_for(n)
@@ -868,10 +908,136 @@ class ClientView:
             return
         self.exported.content = "saved " + ", ".join(f"`{p}`" for p in paths)
 
+    # -- exports: a still at its size, a turntable; rendered in a thread of their own -----------------
+
+    def _start_export(self, kind: str) -> None:
+        """Start the ``kind`` ('still' or 'turntable') export of this page's view as it is now
+        (:meth:`_export_job`) in a thread of its own, unless one runs; a request it refuses is one
+        line on the page."""
+        with self.export_lock:
+            if self.export is not None and self.export.is_alive():
+                self.exported.content = "an export is running: wait for it, or cancel it"
+                return
+            try:
+                job = self._export_job(kind)
+            except UserError as e:
+                self.exported.content = f"not saved: {e}"
+                return
+            self.export_cancel = cancel = threading.Event()
+            self.cancel_button.disabled = False
+            self.export = threading.Thread(target=self._export, args=(job, cancel), name=f"export-{self.client.client_id}",
+                                           daemon=True)
+            self.export.start()
+
+    def _export_job(self, kind: str) -> "_Export":
+        """What an export renders: this page's full frame as it is now (camera, renderer or compare
+        mode, formation, spp, canvas' aspect) of the volume shown now; a still at the still size
+        (:func:`~.scene.checked_still`, every renderer of it checked to reach it), a turntable at the
+        page's resolution from :func:`~.scene.turntable_views` (:func:`~.scene.checked_frames`)."""
+        key, _, _ = self._request(at_rest=True)
+        with self.app.scene_lock:
+            volume, version = self.app.scene.volume, self.app.version
+        key = key[:5] + (version,) + key[6:]
+        if kind == "turntable":
+            return _Export(kind, self.name.value, volume, key, turntable_views(key[0], checked_frames(self.frames.value)))
+        size = checked_still(self.still_size.value, volume.shape[-1])
+        key = key[:3] + (size,) + key[4:]
+        for k in compare_keys(key) if isinstance(key[1], tuple) else (key,):
+            view, renderer, formation, _, spp, _, window, aspect = k
+            reached = plan_frame(volume, renderer, formation, size, spp, window, aspect, MAX_STILL).resolution
+            if reached != size:
+                raise UserError(f"a still of {size} px: the {renderer} renders at most {reached} px here (it renders "
+                                f"the volume resampled to R³); the marcher renders up to {MAX_STILL}: choose it, or a "
+                                f"still size up to {reached}")
+        return _Export(kind, self.name.value, volume, key, [key[0]])
+
+    def _export(self, job: "_Export", cancel: threading.Event) -> None:
+        """Render ``job``'s frames one by one (each a render of its own: the pages' frames come
+        between them), its progress on the page, stopped by ``cancel`` between frames and passes
+        (nothing written then); then write them into the output folder (:class:`~.scene.Exports`)."""
+        n, frames, start = len(job.views), [], time.monotonic()
+        what = "still" if job.kind == "still" else f"turntable of {n} frames"
+        try:
+            for i, view in enumerate(job.views):
+                progress = f"{what}: frame {i + 1} of {n}" if n > 1 else f"{what}: rendering"
+                self.exported.content = progress + " … (cancel export stops it)"
+                frames.append(self._export_frame(job, (view,) + job.key[1:], cancel, progress))
+            if cancel.is_set():
+                raise _Cancelled
+            if job.kind == "still":
+                paths = [self.app.exports.png(frames[0], job.name)]
+            else:
+                paths = self.app.exports.turntable([f.image for f in frames], job.name)
+            height, width = frames[0].image.shape[:2]
+            self.exported.content = (f"saved " + ", ".join(f"`{p}`" for p in paths) + f": {what}, {width}×{height} px, "
+                                     f"{time.monotonic() - start:.1f} s; {frames[0].settings}")
+        except _Cancelled:
+            self.exported.content = f"{what}: cancelled after {len(frames)} of {n} frames; nothing written"
+        except (UserError, OSError, WorkerError) as e:
+            self.exported.content = f"not saved: {e}"
+        except Exception as e:                              # the page stays up; the error shows there
+            self.exported.content = f"not saved: {type(e).__name__}: {e}"
+        finally:
+            self.app.worker.cancel(job)
+            self.cancel_button.disabled = True
+
+    def _export_frame(self, job: "_Export", key: Tuple, cancel: threading.Event, progress: str) -> Frame:
+        """An export's frame of ``key``: rendered here (:meth:`ViewerApp.render_export`), the path
+        tracer's pass by pass in the worker (the mean of the passes: :func:`~.scene.render_frame`'s
+        frame), a comparison's two frames drawn in its layout (:func:`~.compare.compare`)."""
+        if cancel.is_set():
+            raise _Cancelled
+        view, renderer, _, res, spp, version, window, aspect = key
+        if isinstance(renderer, tuple):
+            a, b = (self._export_frame(job, k, cancel, progress) for k in compare_keys(key))
+            return Frame(compare(a.image, b.image, renderer[2]).image, a.seconds + b.seconds,
+                         f"A: {a.settings} | B: {b.settings}", a.view, renderer[1], a.formation, a.resolution, a.window)
+        if renderer != "path tracer":
+            return self.app.render_export(job.volume, key)
+        plan = plan_frame(job.volume, "path tracer", "EA", res, spp, window, aspect)
+        total, seconds, passes = None, 0.0, passes_for(spp)
+        for i in range(passes):
+            self.exported.content = f"{progress}, path tracer pass {i + 1} of {passes} … (cancel export stops it)"
+            future = self.app.worker.submit(job, job.volume, version, view, res, i, window, aspect)
+            while True:
+                try:
+                    image, took = future.result(timeout=0.2)
+                    break
+                except FutureTimeout:
+                    if cancel.is_set():
+                        raise _Cancelled from None
+                except CancelledError:                      # the worker stopped (the server stops)
+                    raise _Cancelled from None
+            total = torch.from_numpy(image) if total is None else total + torch.from_numpy(image)
+            seconds += took
+        return Frame(to_display(total / passes), seconds, plan.line, view, "path tracer", "EA", plan.resolution,
+                     window_or_none(window))
+
+    def threads(self) -> list:
+        """This page's threads that may still be rendering: its frames', its export's."""
+        return [self.thread] + ([self.export] if self.export is not None else [])
+
+    def busy(self) -> bool:
+        return any(t.is_alive() for t in self.threads())
+
     def stop(self) -> None:
         self.stopped = True
         self._drop_trace()
+        self.export_cancel.set()
         self.wake.set()
+
+
+class _Cancelled(Exception):
+    """An export stopped by its page (the cancel button, the page closed, the server stopping)."""
+
+
+class _Export:
+    """An export in progress: its ``kind`` ('still', 'turntable'), file ``name``, the ``volume`` shown
+    when it started, the ``key`` of its first frame (:meth:`ClientView._request`'s) and its ``views``.
+    Its identity is its slot in the path tracer's worker."""
+
+    def __init__(self, kind: str, name: str, volume: torch.Tensor, key: Tuple, views: List):
+        self.kind, self.name, self.volume, self.key, self.views = kind, name, volume, key, views
 
 
 class _Trace:

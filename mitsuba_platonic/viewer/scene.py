@@ -13,9 +13,11 @@
   renderer; :func:`camera_window` makes it from the browser's perspective camera (its distance from
   its look-at point and its field of view give the scale, the look-at point the centre), so that
   the frame moves and scales under the mouse as viser's own camera does.
-- :class:`Exports`: the PNG of a frame and the volume (``.npz`` + ``.vol``, a ``.ply`` mesh) written
-  into one output folder, under names cleaned of path characters and never over an earlier file:
-  nothing the page sends can name a file outside that folder.
+- :class:`Exports`: the PNG of a frame (the view as drawn, or a still at a chosen size up to
+  :data:`MAX_STILL`), a turntable (:func:`turntable_views`: an animated lossless WebP and its
+  frames as PNGs) and the volume (``.npz`` + ``.vol``, a ``.ply`` mesh) written into one output
+  folder, under names cleaned of path characters and never over an earlier file: nothing the page
+  sends can name a file outside that folder.
 """
 
 from __future__ import annotations
@@ -41,7 +43,7 @@ from ..files.outputs import output_lock
 from ..files.volume_io import save_volume
 from ..render import RenderSettings, render_with
 from ..render.window import Window, window_or_none
-from ..views import camera_frames
+from ..views import camera_frames, to_angles, turntable
 from ..volume import CHANNELS
 from .live import stamp
 from .start import check_source, volume_title
@@ -50,7 +52,8 @@ __all__ = ["RENDERERS", "FORMATIONS", "BACKGROUND", "Frame", "Scene", "Exports",
            "formations_for", "formations_of", "renderers_for", "resolutions_for", "to_display", "clean_name", "camera_window",
            "zoom_distance", "ZOOM_RANGE", "Window", "PASS_SPP", "Plan", "plan_frame", "path_pass",
            "passes_for", "DEFAULT_RESOLUTION", "ASPECT_RANGE", "default_resolution", "frame_size", "Tile", "tiles",
-           "model_of"]
+           "model_of", "MAX_STILL", "still_sizes", "checked_still", "TURNTABLE_FRAMES", "MAX_TURNTABLE_FRAMES",
+           "FRAME_MS", "checked_frames", "turntable_views"]
 
 #: The renderers the page offers: label → backend (mitsuba_platonic.render.BACKENDS).
 RENDERERS: Dict[str, str] = {"closed form": "closed_form", "marcher": "mitsuba",
@@ -63,6 +66,13 @@ _LIT = ("scatter_march", "physical")
 BACKGROUND = 0.08
 #: Largest image resolution the page offers (the marcher's 512² frame of a 64³ volume: 8×8 rays per voxel).
 MAX_RESOLUTION = 512
+#: Largest still the page exports (pixels along the frame's shorter side; the marcher's 2048 × 3641
+#: frame of a 16:9 canvas: about 3 s on 2 cores). Only the marcher renders past :data:`MAX_RESAMPLED`.
+MAX_STILL = 2048
+#: A turntable's frames: the page's first choice, and the most it exports.
+TURNTABLE_FRAMES, MAX_TURNTABLE_FRAMES = 48, 360
+#: How long each frame of a turntable's animation is shown (milliseconds: 48 frames turn once in 3.84 s).
+FRAME_MS = 80
 #: The resolution a page opens with (the choice of :func:`resolutions_for` nearest to it): the
 #: frame's shorter side in pixels.
 DEFAULT_RESOLUTION = 128
@@ -170,6 +180,49 @@ def _at_resolution(volume: torch.Tensor, r: int, model: str) -> torch.Tensor:
 def resolutions_for(n: int) -> List[int]:
     """The image resolutions offered for an N³ volume: kN for k = 1, 2, 4, 8 up to :data:`MAX_RESOLUTION`."""
     return [k * n for k in (1, 2, 4, 8) if k * n <= MAX_RESOLUTION] or [n]
+
+
+def still_sizes(n: int) -> List[int]:
+    """The still sizes offered for an N³ volume (pixels along the shorter side): kN for k = 1, 2, 4, …
+    up to :data:`MAX_STILL` (a multiple of N: the marcher's k × k rays per voxel-sized pixel)."""
+    return [n << j for j in range(32) if n << j <= MAX_STILL] or [n]
+
+
+def checked_still(size: object, n: int) -> int:
+    """A still's ``size`` for an N³ volume as an int kN (k ≥ 1) up to :data:`MAX_STILL`, else a
+    :class:`UserError` saying what is expected."""
+    try:
+        number = float(size)
+    except (TypeError, ValueError):
+        number = math.nan
+    if isinstance(size, bool) or not number.is_integer() or number % n or not n <= number <= max(n, MAX_STILL):
+        raise UserError(f"still size: expected a multiple of the volume's {n} from {n} to {max(n, MAX_STILL)} "
+                        f"pixels (the frame's shorter side), got {size!r}")
+    return int(number)
+
+
+def checked_frames(frames: object) -> int:
+    """A turntable's frame count as an int from 2 to :data:`MAX_TURNTABLE_FRAMES`, else a :class:`UserError`."""
+    try:
+        number = float(frames)
+    except (TypeError, ValueError):
+        number = math.nan
+    if isinstance(frames, bool) or not number.is_integer() or not 2 <= number <= MAX_TURNTABLE_FRAMES:
+        raise UserError(f"turntable frames: expected a whole number from 2 to {MAX_TURNTABLE_FRAMES}, got {frames!r}")
+    return int(number)
+
+
+def turntable_views(view: Tuple[float, float, float], frames: int) -> List[Tuple[float, float, float]]:
+    """The views of a turntable of ``frames`` frames from ``view`` ω (azimuth φ₀, elevation θ,
+    :func:`~mitsuba_platonic.views.to_angles`) around the vertical (+y):
+
+        ω_k = ω(φ₀ + k · 360°/F, θ),   k = 0 … F − 1      (:func:`~mitsuba_platonic.views.turntable`)
+
+    the first the view itself (to float32). A frame's window (zoom m, centre (c_x, c_y) on the camera
+    plane) is kept: the camera and its look-at point turn together about the cube's vertical axis."""
+    frames = checked_frames(frames)
+    phi, theta = (float(a) for a in to_angles(torch.tensor(view, dtype=torch.float64)))
+    return [tuple(float(x) for x in w) for w in turntable(frames, elevation=theta, start=phi)]
 
 
 def default_resolution(n: int) -> int:
@@ -307,10 +360,11 @@ class Plan:
 
 
 def plan_frame(volume: torch.Tensor, renderer: str, formation: str, resolution: Optional[int], spp: int,
-               window: Optional[Window], aspect: float = 1.0) -> Plan:
-    """Check a frame's request (:func:`render_frame`'s arguments) and say how it is rendered: the
-    square renders (:func:`tiles`) of the frame's W×H pixels (:func:`frame_size` of the resolution
-    rendered, R×R on a square canvas)."""
+               window: Optional[Window], aspect: float = 1.0, most: int = MAX_RESOLUTION) -> Plan:
+    """Check a frame's request (:func:`render_frame`'s arguments; ``most``: the largest resolution
+    taken, :data:`MAX_RESOLUTION` for the page's frames, :data:`MAX_STILL` for a still) and say how
+    it is rendered: the square renders (:func:`tiles`) of the frame's W×H pixels (:func:`frame_size`
+    of the resolution rendered, R×R on a square canvas)."""
     aspect = _checked_aspect(aspect)
     if renderer not in RENDERERS:
         raise UserError(f"renderer: expected one of {list(RENDERERS)}, got {renderer!r}")
@@ -322,8 +376,8 @@ def plan_frame(volume: torch.Tensor, renderer: str, formation: str, resolution: 
     if CHANNELS[model] == 4 and c != 4:
         raise UserError(f"{renderer} {model.upper()}: the volume has no colour (C = {c}); use VH or AO")
     r = n if resolution is None else int(resolution)
-    if r % n or not n <= r <= max(n, MAX_RESOLUTION):
-        raise UserError(f"resolution: expected a multiple of the volume's {n} up to {MAX_RESOLUTION} pixels, got {r}")
+    if r % n or not n <= r <= max(n, most):
+        raise UserError(f"resolution: expected a multiple of the volume's {n} up to {most} pixels, got {r}")
     k = r // n
     capped = ""
     if backend != "mitsuba" and r > max(n, MAX_RESAMPLED):
@@ -405,7 +459,7 @@ def passes_for(spp: int) -> int:
 
 def render_frame(volume: torch.Tensor, view: Tuple[float, float, float], renderer: str = "closed form",
                  formation: str = "EA", resolution: Optional[int] = None, spp: int = 4,
-                 window: Optional[Window] = None, aspect: float = 1.0) -> Frame:
+                 window: Optional[Window] = None, aspect: float = 1.0, most: int = MAX_RESOLUTION) -> Frame:
     """Render the ``(C, N, N, N)`` ``volume`` (checked when it was opened) from the unit ``view`` ω.
 
     ``renderer``: a label of :data:`RENDERERS`; ``formation``: one of :data:`FORMATIONS` (a lit
@@ -414,7 +468,8 @@ def render_frame(volume: torch.Tensor, view: Tuple[float, float, float], rendere
     (:class:`~mitsuba_platonic.render.window.Window`, every renderer; None: the whole cube's
     cross-section, the frame as without a window, bit for bit); ``aspect``: the canvas' width/height,
     the frame W×H of :func:`frame_size` (R along the shorter side) made of the square renders of
-    :func:`tiles` (1: the one square frame). The random sky of the lit renderers is the one of seed 0
+    :func:`tiles` (1: the one square frame); ``most``: the largest resolution taken (:func:`plan_frame`:
+    a still's is :data:`MAX_STILL`). The random sky of the lit renderers is the one of seed 0
     (the same in every frame).
 
     At k > 1 the marcher keeps its k² regular sub-pixel rays per pixel apart
@@ -427,7 +482,7 @@ def render_frame(volume: torch.Tensor, view: Tuple[float, float, float], rendere
 
     what the page shows once its last pass has arrived.
     """
-    plan = plan_frame(volume, renderer, formation, resolution, spp, window, aspect)
+    plan = plan_frame(volume, renderer, formation, resolution, spp, window, aspect, most)
     window = window_or_none(window)
     w = _unit(view)
     start = time.perf_counter()
@@ -564,8 +619,12 @@ def _held_out(cfg) -> Tuple[Optional[torch.Tensor], List[str], Optional[str]]:
     return data.held_out, names, None
 
 
-def open_source(source: PathLike, photo: Optional[PathLike] = None, array: Optional[np.ndarray] = None) -> Scene:
+def open_source(source: PathLike, photo: Optional[PathLike] = None, array: Optional[np.ndarray] = None,
+                background: Optional[str] = None) -> Scene:
     """SOURCE → :class:`Scene` (module docstring); :class:`UserError` naming what is wrong.
+
+    ``background``: how ``photo`` is masked where it has no alpha channel (the photo loader's,
+    :meth:`~mitsuba_platonic.model.Model.load_image`: None, or ``white``).
 
     ``array``: what :func:`~.start.check_source` returned for this SOURCE, a volume file's checked
     array (not read again); None: SOURCE is checked and read here."""
@@ -577,7 +636,7 @@ def open_source(source: PathLike, photo: Optional[PathLike] = None, array: Optio
         return Scene(volume=volume, kind="volume", title=volume_title(path, volume.shape))
     seen = stamp(path / "checkpoints" / "last.pt")           # before reading it: a newer one is followed
     model, cfg = model_of(path)
-    scene = _run_scene(path, photo, model, cfg)
+    scene = _run_scene(path, photo, model, cfg, background)
     scene.folder, scene.stamp = path, seen
     return scene
 
@@ -596,7 +655,7 @@ def model_of(source: PathLike):
     return model_from_checkpoint(Model, ckpt, cfg), cfg
 
 
-def _run_scene(path: Path, photo: Optional[PathLike], model, cfg) -> Scene:
+def _run_scene(path: Path, photo: Optional[PathLike], model, cfg, background: Optional[str] = None) -> Scene:
     """The scene of a run's ``model`` (module docstring): its held-out inputs, ``photo``, or latents."""
     step = f"step {model.step}"
     if model.task != "reconstruction":
@@ -607,7 +666,7 @@ def _run_scene(path: Path, photo: Optional[PathLike], model, cfg) -> Scene:
         scene.show_latent(0)
         return scene
     if photo is not None:
-        image = model.load_image(photo)                      # the loader's one-line errors (missing, damaged)
+        image = model.load_image(photo, background)          # the loader's one-line errors (missing, damaged)
         scene = Scene(volume=_reconstruct(model, image), kind="reconstruction",
                       title=f"{path.name}: reconstruction of {Path(photo).name} ({step})", model=model,
                       inputs=image, input_names=[Path(photo).name])
@@ -633,6 +692,10 @@ def clean_name(text: str, default: str = "view") -> str:
     separators and dots included, becomes ``_``), at most 64 characters."""
     name = readable_name(str(text).strip(), keep="_+-")[:64].strip("_")
     return name or default
+
+
+def _write_png(path: Path, image: np.ndarray) -> None:
+    atomic_write(path, lambda tmp: Image.fromarray(image).save(tmp, format="PNG"))
 
 
 class Exports:
@@ -665,11 +728,30 @@ class Exports:
         return self.folder / name
 
     def png(self, frame: Frame, name: str = "view") -> Path:
-        """The frame as ``name.png`` (8-bit sRGB, as shown)."""
+        """The frame as ``name.png`` (8-bit sRGB, as shown; a still: the frame rendered at its size)."""
         with self._writing():
             path = self._free(name, (".png",)).with_suffix(".png")
-            atomic_write(path, lambda tmp: Image.fromarray(frame.image).save(tmp, format="PNG"))
+            _write_png(path, frame.image)
         return path
+
+    def turntable(self, images: Sequence[np.ndarray], name: str = "turntable", frame_ms: int = FRAME_MS) -> List[Path]:
+        """A turntable's frames ``(H, W, 3)`` uint8 (one size, at least two) as ``name.webp``, an
+        endlessly looping animated WebP of ``frame_ms`` milliseconds a frame, lossless (each frame's
+        pixels as rendered), and as ``name_frames/frame_000.png`` … (for a video tool); the frames
+        are written first, the animation last, each file whole."""
+        pil = [Image.fromarray(np.asarray(i)) for i in images]
+        if len(pil) < 2 or len({p.size for p in pil}) != 1 or any(p.mode != "RGB" for p in pil):
+            raise UserError(f"turntable: expected at least two (H, W, 3) uint8 frames of one size, got "
+                            f"{sorted({(p.mode, p.size) for p in pil})} × {len(pil)}")
+        with self._writing():
+            stem = self._free(name, (".webp", "_frames"))
+            frames = stem.with_name(stem.name + "_frames")
+            for k, image in enumerate(images):
+                _write_png(frames / f"frame_{k:03d}.png", np.asarray(image))
+            path = stem.with_name(stem.name + ".webp")
+            atomic_write(path, lambda tmp: pil[0].save(tmp, format="WEBP", save_all=True, append_images=pil[1:],
+                                                       duration=int(frame_ms), loop=0, lossless=True))
+        return [path, frames]
 
     def volume(self, volume: torch.Tensor, name: str = "volume", level: float = 0.5) -> List[Path]:
         """``name.npz`` and ``name.vol`` (:func:`~mitsuba_platonic.files.volume_io.save_volume`) and a marching-cubes
