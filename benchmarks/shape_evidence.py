@@ -25,7 +25,7 @@ band), written as an RGBA PNG and loaded with every other through the photo load
 on such a folder computes; a folder is loaded the same way. One row per collection: U per seed
 (a folder has one), their mean, the mean of A and of the spread, and the verdict at the threshold;
 then the largest U of a round collection and the smallest of one that is not, seed by seed.
-About 2 minutes on 2 shared cores at nice 19 at the defaults. Figures only; the table is in
+About 1 min 10 s on 2 shared cores at nice 19 at the defaults. Figures only; the table is in
 docs/evaluation.md, "Shape priors and the collection's evidence".
 """
 

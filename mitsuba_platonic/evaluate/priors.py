@@ -33,10 +33,9 @@ over the whole area; an animal's head is small against its body and legs, which 
 mirror image about the body's centre, so A stays low on animals from the side (0.36, as on the
 procedural trees). The body and legs still fix c* at the body's centre, and above ȳ the head is a
 large part of what is left: U is large. The collection's figure is the **median of U over its
-photos** (robust to the few lopsided instances of a round class, and to the symmetric end-on views
-that make up part of a collection taken from every side); the collection contradicts a round prior
-when it exceeds :data:`UPPER_THRESHOLD` (and it has at least :data:`MIN_PHOTOS` photos). The mean of
-A is reported beside it, not judged.
+photos** (robust to the few strongly lopsided instances of a round class); the collection
+contradicts a round prior when it exceeds :data:`UPPER_THRESHOLD` (and it has at least
+:data:`MIN_PHOTOS` photos). The mean of A is reported beside it, not judged.
 
 Beside them, the spread of the silhouettes' width over height, σ_x / σ_y (the opacity-weighted
 standard deviations of the column and the row), as the standard deviation over the photos of
@@ -68,8 +67,8 @@ __all__ = ["Prior", "RoundEvidence", "priors_used", "round_priors", "mirror_asym
            "UPPER_THRESHOLD", "AXIS_SEARCH", "MIN_PHOTOS", "ROUND_OFF", "WARNING"]
 
 #: The median upper asymmetry U above which a collection contradicts a round prior (module docstring):
-#: every round collection measured lies at or below THRESHOLD_ROUND_MAX, every one that is not at or
-#: above THRESHOLD_NOT_MAX (docs/evaluation.md).
+#: every round collection measured lies at or below 0.19, every one that is not at or above 0.33, at
+#: 32² (and at 16² and 64²; docs/evaluation.md).
 UPPER_THRESHOLD = 0.25
 #: Half-pixel steps either side of the centroid over which the mirror line is searched (2 pixels).
 AXIS_SEARCH = 4
