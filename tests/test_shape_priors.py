@@ -1,6 +1,6 @@
 """The shape priors a photo run used and the collection's evidence about roundness
-(mitsuba_platonic.evaluate.priors): the priors read off a config, the mirror asymmetry and the
-width / height of silhouettes with known answers, the warning where a round prior meets photos
+(mitsuba_platonic.evaluate.priors): the priors read off a config, the mirror asymmetry, the upper
+asymmetry and the width / height of silhouettes with known answers, the warning where a round prior meets photos
 that are not round, and that warning in ``platonic quickstart --photos``'s report and console
 (tiny sizes: 16² photos, 16³ volumes, 2 steps)."""
 
@@ -58,23 +58,55 @@ def _flag(size=32, left=True):
     return s if left else s.flip(-1)
 
 
-def _brute_asymmetry(s, search=P.AXIS_SEARCH):
-    """A(S) by its definition, one pixel at a time: min over mirror lines c of Σ|S(y, x) − S(y, 2c − x)| / Σ S."""
+def _brute_asymmetries(s, search=P.AXIS_SEARCH):
+    """A(S) and U(S) by their definitions, one pixel at a time: the mirror line c* minimising
+    Σ|S(y, x) − S(y, 2c − x)| / Σ S (the leftmost of a tie), then the same sum over the rows y < ȳ
+    about c*, over their Σ S."""
     h, w = s.shape
     area = float(s.sum())
     xbar = float((s.sum(0) * torch.arange(w, dtype=torch.float64)).sum()) / area
+    ybar = float((s.sum(1) * torch.arange(h, dtype=torch.float64)).sum()) / area
     centre = round(2 * xbar) / 2                                   # x̄ to the nearest half pixel
-    best = math.inf
+    best, upper = math.inf, None
     for k in range(-search, search + 1):
         c = centre + k / 2
-        total = 0.0
+        total = top = 0.0
         for y in range(h):
             for x in range(w):
                 xm = 2 * c - x
                 other = float(s[y, int(xm)]) if 0 <= xm < w else 0.0
                 total += abs(float(s[y, x]) - other)
-        best = min(best, total / area)
-    return best
+                top += abs(float(s[y, x]) - other) if y < ybar else 0.0
+        if total / area < best:
+            best, upper = total / area, top / float(s[:math.ceil(ybar)].sum())
+    return best, upper
+
+
+def _lathe(size=32, axis=13.5, soft=False, seed=0):
+    """A body of revolution's silhouette: each row a span centred on one vertical line ``axis`` (a
+    column or between two), of a random half-width per row (a vase's profile), with soft ends if ``soft``."""
+    rng = np.random.default_rng(seed)
+    s = torch.zeros(size, size, dtype=torch.float64)
+    off = (torch.arange(size, dtype=torch.float64) - axis).abs()
+    for y in range(4, size - 3):
+        half = int(rng.integers(1, 9))
+        s[y, off <= half - 0.5] = 1.0
+        if soft:
+            s[y, (off > half - 0.5) & (off <= half + 0.5)] = float(rng.uniform(0.1, 0.9))
+    return s
+
+
+def _animal(size=32, left=False):
+    """A side view: a body 20 × 8 (rows 12–19, columns 6–25) on four legs 2 × 8 (rows 20–27,
+    columns 6–7, 11–12, 19–20, 24–25), both their own mirror image about column 15.5, and a head
+    5 × 4 (rows 7–11, columns 22–25) above the body's right end: 244 pixels, the centroid row
+    4164 / 244 ≈ 17.07, above it the head's 20 and the body's rows 12–17, 120."""
+    s = torch.zeros(size, size, dtype=torch.float64)
+    s[12:20, 6:26] = 1.0
+    for c in (6, 11, 19, 24):
+        s[20:28, c:c + 2] = 1.0
+    s[7:12, 22:26] = 1.0
+    return s.flip(-1) if left else s
 
 
 def test_mirror_asymmetry_of_symmetric_and_lopsided_silhouettes():
@@ -86,12 +118,41 @@ def test_mirror_asymmetry_of_symmetric_and_lopsided_silhouettes():
     rng = np.random.default_rng(0)
     for _ in range(3):                                            # soft random masks against the definition
         s = torch.tensor(rng.uniform(0, 1, (12, 12)) * (rng.uniform(0, 1, (12, 12)) > 0.5))
-        assert float(P.mirror_asymmetry(s)[0]) == pytest.approx(_brute_asymmetry(s), abs=1e-12)
+        assert float(P.mirror_asymmetry(s)[0]) == pytest.approx(_brute_asymmetries(s)[0], abs=1e-12)
     assert math.isnan(float(P.mirror_asymmetry(torch.zeros(8, 8))[0]))
     with pytest.raises(UserError, match="values in"):
         P.mirror_asymmetry(torch.full((8, 8), 2.0))
     with pytest.raises(UserError, match="masks"):
         P.mirror_asymmetry(torch.zeros(8))
+
+
+def test_upper_asymmetry_of_a_lathe_a_flag_and_an_animal():
+    # a body of revolution: every row centred on its axis, whatever its profile, hard or soft edged
+    lathes = torch.stack([_lathe(), _lathe(axis=17.0, seed=1), _lathe(soft=True, seed=2),
+                          _lathe(axis=16.0, soft=True, seed=3)])
+    assert torch.equal(P.upper_asymmetry(lathes), torch.zeros(4, dtype=torch.float64))
+    assert torch.equal(P.mirror_asymmetry(lathes), torch.zeros(4, dtype=torch.float64))
+    # the flag (centroid row 3588 / 168 ≈ 21.36): above it the block's 40 and the bar's rows 20–21, 32;
+    # about the bar's centre the block's 40 and their 40 mirrored differ
+    assert P.upper_asymmetry(torch.stack([_flag(), _flag(left=False)])).tolist() == \
+        pytest.approx([80 / 72, 80 / 72], abs=1e-12)
+    # the animal: body and legs fix the line at column 15.5; the head's 20 pixels and their 20 mirrored
+    # are 40 / 244 of the whole (A), 40 / 140 of the part above the centroid row (U)
+    animal = torch.stack([_animal(), _animal(left=True)])
+    assert P.mirror_asymmetry(animal).tolist() == pytest.approx([40 / 244] * 2, abs=1e-12)
+    assert P.upper_asymmetry(animal).tolist() == pytest.approx([40 / 140] * 2, abs=1e-12)
+    assert 40 / 140 > P.UPPER_THRESHOLD                            # not round, though A is low
+    rng = np.random.default_rng(0)
+    for _ in range(4):                                            # soft random masks against the definition
+        s = torch.tensor(rng.uniform(0, 1, (12, 12)) * (rng.uniform(0, 1, (12, 12)) > 0.5))
+        assert float(P.upper_asymmetry(s)[0]) == pytest.approx(_brute_asymmetries(s)[1], abs=1e-12)
+    one_row = torch.zeros(8, 8, dtype=torch.float64)               # no row above the centroid row
+    one_row[3, 2:6] = 1.0
+    u = P.upper_asymmetry(torch.stack([torch.zeros(8, 8, dtype=torch.float64), one_row]))
+    assert math.isnan(float(u[0])) and math.isnan(float(u[1]))
+    assert float(P.mirror_asymmetry(one_row)[0]) == 0.0
+    with pytest.raises(UserError, match="values in"):
+        P.upper_asymmetry(torch.full((8, 8), -0.5))
 
 
 def test_aspect_of_ellipses_and_the_spread_of_a_set():
@@ -106,27 +167,40 @@ def test_aspect_of_ellipses_and_the_spread_of_a_set():
     expected = float(np.std(np.log(ratios)))
     assert e_var.aspect_spread == pytest.approx(expected, abs=0.03) and expected > 0.4
     assert e_const.asymmetry == 0.0 and e_var.asymmetry == 0.0     # ellipses are their own mirror images
+    assert e_const.upper_asymmetry == 0.0 and e_var.upper_asymmetry == 0.0
 
 
 def test_the_warning_fires_for_a_round_prior_on_lopsided_photos_only():
     photos = P.priors_used(_photos_config())
     off = P.priors_used(_photos_config(*OFF))
-    lopsided = P.round_evidence(torch.stack([_flag(left=i % 2 == 0) for i in range(10)])[:, None])
+    lopsided = P.round_evidence(torch.stack([_animal(left=i % 2 == 0) for i in range(10)])[:, None])
     rounded = P.round_evidence(torch.stack([_ellipse(32, 6 + i, 9) for i in range(10)])[:, None])
-    few = P.round_evidence(torch.stack([_flag() for _ in range(P.MIN_PHOTOS - 1)]))
-    assert lopsided.not_round and lopsided.asymmetry == pytest.approx(80 / 168) and lopsided.photos == 10
+    few = P.round_evidence(torch.stack([_animal() for _ in range(P.MIN_PHOTOS - 1)]))
+    assert lopsided.not_round and lopsided.photos == 10
+    assert lopsided.upper_asymmetry == pytest.approx(40 / 140) and lopsided.asymmetry == pytest.approx(40 / 244)
     assert not rounded.not_round and not few.not_round and not few.decided
+    # the median, not the mean: 4 lopsided of 9 (U 40 / 140) and 5 lathes (0) is round
+    mixed = P.round_evidence(torch.stack([_animal()] * 4 + [_lathe(seed=i) for i in range(5)]))
+    assert mixed.upper_asymmetry == 0.0 and mixed.decided and not mixed.not_round
     (line,) = P.contradictions(photos, lopsided)
-    assert line.startswith(P.WARNING) and "0.48" in line and "0.45" in line and "10 photos" in line
+    assert line.startswith(P.WARNING) and "0.29" in line and "0.25" in line and "10 photos" in line
+    assert "median" in line
     assert "--set train.turn=0 --set model.texture_turns=1 --set model.offsets_behind=true" in line
     assert P.contradictions(off, lopsided) == [] and P.contradictions(photos, rounded) == []
     assert P.contradictions(photos, few) == []
     text = "\n".join(P.priors_markdown(photos, lopsided))
     assert text.startswith("## Shape priors this run used") and "| `train.turn` | 1 |" in text
+    assert "upper mirror asymmetry 0.29" in text and "mirror asymmetry, 0.16 (mean)" in text
     assert "not round" in text and line in text
     assert P.warning_lines(text) == [line.replace("**", "").replace("`", "")]
     assert P.warning_lines("\n".join(P.priors_markdown(photos, rounded))) == []
-    assert P.priors_results(photos, lopsided)["warnings"] == [line]
+    results = P.priors_results(photos, lopsided)
+    assert results["warnings"] == [line]
+    assert results["round_evidence"]["upper_asymmetry"] == pytest.approx(40 / 140)
+    assert results["round_evidence"]["not_round"] is True and results["round_evidence"]["threshold"] == 0.25
+    empty = P.round_evidence(torch.zeros(0, 16, 16))
+    assert empty.photos == 0 and empty.upper_asymmetry is None and not empty.decided
+    assert "No silhouette in the photos to measure." in P.priors_markdown(photos, empty)
 
 
 def _lopsided_photo(seed, size=24):
