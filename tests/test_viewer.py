@@ -840,11 +840,11 @@ def test_the_input_camera_is_the_elevation_the_pose_head_reads_and_the_input_is_
     reads from the input (a run with train.pose: input: 0°, the front view; a --photo: P's reading of
     the photo). A socket page's "input's camera" draws that view at zoom 1 without pan, the frame
     render_frame gives there; "input beside the frame" draws the input at the frame's height by the
-    nearest pixel | the divider | the frame rendered at the canvas' aspect less one."""
+    nearest pixel | the divider | the frame rendered at the canvas' aspect less one, and a still so too."""
     from PIL import Image
 
     from mitsuba_platonic.viewer.app import ViewerApp, checked_aspect
-    from mitsuba_platonic.viewer.compare import GAP, GAP_GREY
+    from mitsuba_platonic.viewer.compare import GAP, GAP_GREY, input_beside
 
     monkeypatch.chdir(pose_run.parent.parent.parent)       # data.cache is relative to where training ran
     scene, theta = _pose_scene(pose_run)
@@ -890,6 +890,12 @@ def test_the_input_camera_is_the_elevation_the_pose_head_reads_and_the_input_is_
         assert (drawn[:, h:h + GAP] == GAP_GREY).all()
         np.testing.assert_array_equal(drawn[:, h + GAP:], frame)
         assert f"input beside ({scene.input_names[0]}, {N}×{N} → {h}×{h} px)" in v.info.content
+        v.still_size.value = str(2 * N)                    # a still draws the input beside it too
+        v._start_export("still")
+        assert page.wait(lambda: "saved" in v.exported.content and not v.export.is_alive()), v.exported.content
+        still = render_frame(scene.volume, view, "closed form", "EA", 2 * N, 4, None, round(aspect - 1.0, 3)).image
+        np.testing.assert_array_equal(np.asarray(Image.open(tmp_path / "exports" / "view.png")),
+                                      input_beside(scene.input, still))
         v.beside.value = False
         assert page.wait(lambda: "input beside" not in v.info.content and ", full," in v.info.content)
         np.testing.assert_array_equal(v.frame.image, direct)
