@@ -798,6 +798,113 @@ def test_a_page_in_compare_mode_draws_the_difference_through_the_colour_scale(vo
         app.stop()
 
 
+@pytest.fixture(scope="module")
+def pose_run(tmp_path_factory, tiny_class):
+    """A reconstruction run of one step with a pose head (``train.pose: elevation``), 16³."""
+    from mitsuba_platonic.config import load_config
+    from mitsuba_platonic.train import run as R
+
+    tmp = tmp_path_factory.mktemp("pose-run")
+    cfg = load_config(None, [
+        f"run.out_dir={tmp}/runs", "run.name=pose", "run.steps=1", "run.sample_every=1000", "run.checkpoint_every=1000",
+        f"data.cache={tmp}/data", f"data.shape_class={TINY}", "data.n_shapes=4", "data.views_per_shape=2",
+        "data.split=0.5", f"model.resolution={N}", "model.width=4", "model.latent=8", "model.norm=batch",
+        "train.batch_size=2", "train.task=reconstruction", "train.pose=elevation", "train.pose_weight=1.0"])
+    return R.train(cfg, progress=False)
+
+
+#: The pose head's bias the input-camera tests give a one-step run (whose head still reads about 0°,
+#: the front view): P then reads about 90° · tanh(0.4) ≈ 34° from every input.
+POSE_BIAS = 0.4
+
+
+def _pose_scene(pose_run):
+    """The pose run's scene, its head's bias set to :data:`POSE_BIAS` and its first input reconstructed
+    again; and θ̂ as the model's own networks read it from that input, in degrees (eval mode: E's
+    BatchNorm on its running statistics)."""
+    scene = open_source(pose_run)
+    with torch.no_grad():
+        scene.model.P.bias.fill_(POSE_BIAS)
+    scene.show_input(0)
+    model = scene.model
+    E, P = model.E.eval(), model.P.eval()
+    with torch.no_grad():
+        theta = math.degrees(float(P(E(scene.inputs[:1].to(model.device)))[0]))
+    assert abs(theta) > 10.0                                # not the front view: the test tells them apart
+    return scene, theta
+
+
+def test_the_input_camera_is_the_elevation_the_pose_head_reads_and_the_input_is_drawn_beside(
+        pose_run, runs, tmp_path, monkeypatch):
+    """A run with a pose head shows G's upright volume, so its input's camera is ω(0°, θ̂), θ̂ what P
+    reads from the input (a run with train.pose: input: 0°, the front view; a --photo: P's reading of
+    the photo). A socket page's "input's camera" draws that view at zoom 1 without pan, the frame
+    render_frame gives there; "input beside the frame" draws the input at the frame's height by the
+    nearest pixel | the divider | the frame rendered at the canvas' aspect less one, and a still so too."""
+    from PIL import Image
+
+    from mitsuba_platonic.viewer.app import ViewerApp, checked_aspect
+    from mitsuba_platonic.viewer.compare import GAP, GAP_GREY, input_beside
+
+    monkeypatch.chdir(pose_run.parent.parent.parent)       # data.cache is relative to where training ran
+    scene, theta = _pose_scene(pose_run)
+    assert scene.input_camera() == (0.0, pytest.approx(theta, abs=1e-4))
+    photo = tmp_path / "photo.png"
+    rgba = np.zeros((N, N, 4), np.uint8)
+    rgba[3:13, 5:11] = (200, 100, 50, 255)
+    Image.fromarray(rgba).save(photo)
+    with_photo = open_source(pose_run, photo)
+    model = with_photo.model
+    with torch.no_grad():
+        read = math.degrees(float(model.P.eval()(model.E.eval()(model.load_image(photo).to(model.device)))[0]))
+    assert with_photo.input_camera() == (0.0, pytest.approx(read, abs=1e-4))
+    monkeypatch.chdir(runs["reconstruction"].parent.parent.parent)
+    assert open_source(runs["reconstruction"]).input_camera() == (0.0, 0.0)      # train.pose: input
+    assert open_source(runs["generation"]).input_camera() is None
+
+    monkeypatch.chdir(pose_run.parent.parent.parent)
+    app = ViewerApp(scene, tmp_path / "exports", port=0)
+    page = None
+    try:
+        page = SocketPage(app)
+        v = page.view
+        assert page.wait(lambda: v.count >= 1 and ", full," in v.info.content), v.info.content
+        v.input_camera()                                   # what its button does
+        line = rf"az 0\.0° el {theta:.1f}°, zoom 1\.000×, centre \(\+0\.000, \+0\.000\)"
+        assert page.wait(lambda: re.search(line + ".*", v.info.content) and ", full," in v.info.content), v.info.content
+        view = tuple(from_angles(0.0, theta).tolist())
+        aspect = checked_aspect(1400, 600)
+        direct = render_frame(scene.volume, view, "closed form", "EA", DEFAULT_RESOLUTION, 4, None, aspect).image
+        np.testing.assert_array_equal(v.frame.image, direct)
+        assert not np.array_equal(direct, closed_form_at(scene.volume, 0.0, 0.0, DEFAULT_RESOLUTION, aspect))
+
+        v.beside.value = True
+        assert page.wait(lambda: "input beside (" in v.info.content and ", full," in v.info.content), v.info.content
+        frame = render_frame(scene.volume, view, "closed form", "EA", DEFAULT_RESOLUTION, 4, None,
+                             round(aspect - 1.0, 3)).image
+        h, w = frame.shape[:2]
+        drawn = v.frame.image
+        assert drawn.shape == (h, h + GAP + w, 3) and re.search(line, v.info.content), v.info.content
+        resized = np.asarray(Image.fromarray(scene.input).resize((h, h), Image.NEAREST))   # PIL's own nearest
+        np.testing.assert_array_equal(drawn[:, :h], resized)
+        assert (drawn[:, h:h + GAP] == GAP_GREY).all()
+        np.testing.assert_array_equal(drawn[:, h + GAP:], frame)
+        assert f"input beside ({scene.input_names[0]}, {N}×{N} → {h}×{h} px)" in v.info.content
+        v.still_size.value = str(2 * N)                    # a still draws the input beside it too
+        v._start_export("still")
+        assert page.wait(lambda: "saved" in v.exported.content and not v.export.is_alive()), v.exported.content
+        still = render_frame(scene.volume, view, "closed form", "EA", 2 * N, 4, None, round(aspect - 1.0, 3)).image
+        np.testing.assert_array_equal(np.asarray(Image.open(tmp_path / "exports" / "view.png")),
+                                      input_beside(scene.input, still))
+        v.beside.value = False
+        assert page.wait(lambda: "input beside" not in v.info.content and ", full," in v.info.content)
+        np.testing.assert_array_equal(v.frame.image, direct)
+    finally:
+        if page is not None:
+            page.close()
+        app.stop()
+
+
 def test_an_export_is_checked_cancellable_and_draws_the_compare_mode(volume_file, tmp_path):
     """A socket page's exports: a frame count or still size outside what is offered is one line on
     the page and nothing is written; a path-traced turntable cancelled after its first frame writes
@@ -1406,6 +1513,38 @@ def test_a_reconstruction_run_steps_through_its_held_out_inputs(browser, runs, t
         app.stop()
 
 
+def test_the_input_camera_button_shows_the_input_view_the_pose_head_reads(browser, pose_run, tmp_path, monkeypatch):
+    """The page of a run with a pose head (served in this process): "input's camera" prints az 0° and
+    el θ̂ (what P reads from the input) at zoom 1, centred, and draws the frame render_frame gives there."""
+    from mitsuba_platonic.viewer.app import ViewerApp
+
+    monkeypatch.chdir(pose_run.parent.parent.parent)
+    scene, theta = _pose_scene(pose_run)
+    app = ViewerApp(scene, tmp_path / "exports", port=0)
+    try:
+        page = browser.new_page(viewport={"width": 1400, "height": 600})
+        page.set_default_timeout(WAIT_MS)
+        page.goto(app.url)
+        _frame(page, r"az 0\.0° el 0\.0°")
+        page.get_by_role("button", name="input's camera").click()
+        line, shown = _rest(page, rf"full, .* az 0\.0° el {theta:.1f}°, zoom 1\.000×, centre \(\+0\.000, \+0\.000\)",
+                            DEFAULT_RESOLUTION)
+        v = next(iter(app.clients.values()))
+        aspect = v._request()[1]
+        direct = render_frame(scene.volume, tuple(from_angles(0.0, theta).tolist()), "closed form", "EA",
+                              DEFAULT_RESOLUTION, 4, None, aspect).image
+        np.testing.assert_array_equal(v.frame.image, direct)          # the frame the server drew
+        h, w = direct.shape[:2]
+        r = DEFAULT_RESOLUTION
+        square = direct[(h - r) // 2:(h - r) // 2 + r, (w - r) // 2:(w - r) // 2 + r]
+        _same(shown, square, "input's camera")                         # and what the page shows
+        front = render_frame(scene.volume, (0.0, 0.0, 1.0), "closed form", "EA", r, 4, None, aspect).image
+        assert _difference(square, front[(h - r) // 2:(h - r) // 2 + r, (w - r) // 2:(w - r) // 2 + r])[0] > 2 * TOLERANCE
+        page.close()
+    finally:
+        app.stop()
+
+
 # --------------------------------------------------------------------------- zoom and pan in the browser
 
 #: The ball's volume: 32³ (a smooth silhouette), its frames 64² (R = 2N).
@@ -1693,6 +1832,7 @@ def test_a_pages_spp_resolution_and_compare_past_the_controls_are_held_to_them(c
                                       SimpleNamespace(value=False))
     v.compare, v.layout = SimpleNamespace(value=A.COMPARE_OFF), SimpleNamespace(value="side by side")
     v.resolution, v.spp = SimpleNamespace(value=str(N)), SimpleNamespace(value=1e9)
+    v.beside = None                                        # a volume file: no input to draw beside the frame
     key, _, _ = v._request()
     assert key[4] == A.MAX_SPP and key[3] == N
     assert capsys.readouterr().err == f"platonic view: ignored path tracer spp {1e9!r} from a page: held to 64 (1 … 64)\n"

@@ -59,6 +59,15 @@ read: ``frame N: T ms, full|moving, W×H px, az A° el E°, zoom M×, centre (X,
 inputs (a reconstruction run: previous/next held-out input, shown beside the view) or latents (a
 generation run: seed, new latent, a walk to a second seed), and exports into the output folder.
 
+The input large and at its own camera (a reconstruction run's input or ``--photo``): "input
+beside the frame" (off at first) renders the frame at the canvas' aspect less one
+(:func:`~.compare.beside_aspect`) and draws the input at the frame's height beside it, a divider
+between (:func:`~.compare.input_beside`, compare mode's side-by-side composition), the frame line
+saying ``input beside (NAME, R×R → H×H px)``; "input's camera" moves the browser's camera to the
+input's view ω(0°, θ̂) (:meth:`~.scene.Scene.input_camera`: θ̂ the elevation the run's pose head
+reads from the input, the volume shown being G's upright one; 0° for ``train.pose: input``) at
+zoom 1 without pan, as "reset zoom and pan" places it.
+
 Exports (:class:`~.scene.Exports`): the frame as drawn and the volume, at once; a still (the page's
 full frame at the still size, :func:`~.scene.checked_still`, every renderer of it checked to reach
 that size) and a turntable (the page's full frame from :func:`~.scene.turntable_views`, animated
@@ -94,6 +103,7 @@ import math
 import sys
 import threading
 import time
+from dataclasses import replace
 from concurrent.futures import CancelledError, TimeoutError as FutureTimeout
 from pathlib import Path
 from typing import Callable, List, Optional, Sequence, Tuple
@@ -106,7 +116,7 @@ from PIL import Image
 from ..errors import UserError
 from ..views import camera_frames, from_angles, to_angles
 from ..render.window import window_or_none
-from .compare import LAYOUTS, PAIRS, Comparison, colour_bar, compare, half_aspect, pairs_for
+from .compare import GAP, LAYOUTS, PAIRS, Comparison, beside_aspect, colour_bar, compare, half_aspect, input_beside, pairs_for
 from .live import RunWatcher
 from .scene import (ASPECT_RANGE, MAX_RESAMPLED, MAX_STILL, MAX_TURNTABLE_FRAMES, PASS_SPP, TURNTABLE_FRAMES, WINDOW_SNAP, ZOOM_RANGE,
                     Exports, Frame, Scene, Window, camera_window, checked_frames, checked_still, default_resolution,
@@ -401,7 +411,7 @@ class ClientView:
         self.trace: Optional[_Trace] = None                # the path trace in progress
         self.partner: Optional[Tuple[Tuple, Frame, str, str]] = None   # compare: (A's key, A's frame, layout, pair)
         self.comparison: Optional[Comparison] = None      # compare: the last comparison drawn
-        self.mode: Optional[Tuple] = None                  # the compare choice of the last request (None: off)
+        self.mode: Optional[Tuple] = None                  # the last request's (compare choice or None, input beside)
         self.limits = (0.01, 1e4)                          # the browser's dolly limits as set (viser's defaults)
         self.connected = time.monotonic()
         self.placed = False                                # has the page reported the initial camera yet?
@@ -492,7 +502,7 @@ class ClientView:
 
     def source_gui(self, gui) -> None:
         scene = self.app.scene
-        self.input_image = None
+        self.input_image = self.beside = None
         if scene.input is not None:
             with gui.add_folder("Input"):
                 self.input_image = gui.add_image(np.repeat(np.repeat(scene.input, 4, 0), 4, 1), label="input",
@@ -501,6 +511,12 @@ class ClientView:
                 if scene.inputs is not None and len(scene.inputs) > 1:
                     gui.add_button("previous input").on_click(lambda _: self._step_input(-1))
                     gui.add_button("next input").on_click(lambda _: self._step_input(+1))
+                self.beside = gui.add_checkbox("input beside the frame", initial_value=False,
+                                               hint="the input at the frame's height, beside it on the canvas")
+                self.beside.on_update(lambda _: self.wake.set())
+                gui.add_button("input's camera", hint="the input's own view: azimuth 0, the elevation the model "
+                                                      "reads from it; zoom 1, no pan").on_click(
+                    lambda _: self.input_camera())
         if scene.kind == "generation" or (scene.kind == "reconstruction" and scene.inputs is None):
             with gui.add_folder("Latent"):
                 self.seed = gui.add_number("seed", initial_value=scene.seeds[0], min=0, step=1)
@@ -656,6 +672,15 @@ class ClientView:
             self.set_view(az + daz, max(-89.0, min(89.0, el + delv)))
         return orbit
 
+    def input_camera(self) -> None:
+        """Move this browser's camera to the input's own view (:meth:`~.scene.Scene.input_camera`) at
+        zoom 1, centred (nothing where no input is shown)."""
+        with self.app.scene_lock:
+            angles = self.app.scene.input_camera()
+        if angles is not None:
+            self.move_camera(np.zeros(3), zoom_distance(1.0, *self._lens()),
+                             from_angles(*angles).double().numpy())
+
     def set_view(self, azimuth: float, elevation: float) -> None:
         """Move this browser's camera to ω(azimuth, elevation) around its look-at point, at its distance."""
         look, d = self._place()
@@ -691,6 +716,8 @@ class ClientView:
         spp = int(_clamped_choice(self.spp.value, range(1, MAX_SPP + 1), "path tracer spp"))
         cam = self.client.camera
         aspect = checked_aspect(cam.image_width, cam.image_height)
+        if self._beside():                                 # the input takes a square of the frame's height
+            aspect = round(beside_aspect(aspect, ASPECT_RANGE[0]), ASPECT_DIGITS)
         renderer = self.renderer.value
         pair, layout = self.compare.value, self.layout.value
         if pair != COMPARE_OFF:
@@ -703,6 +730,10 @@ class ClientView:
         key = (view, renderer, self.formation.value, res, spp, self.app.version, window, aspect)
         return key, aspect, quality
 
+    def _beside(self) -> bool:
+        """Whether the input is drawn beside the frame (its checkbox, where an input is shown)."""
+        return self.beside is not None and bool(self.beside.value) and self.app.scene.input is not None
+
     def _loop(self) -> None:
         while not self.stopped:
             self.wake.wait(timeout=SETTLE_S / 2)
@@ -714,12 +745,12 @@ class ClientView:
                 continue
             try:
                 request = self._request()
-                mode = request[0][1] if isinstance(request[0][1], tuple) else None
+                mode = (request[0][1] if isinstance(request[0][1], tuple) else None, self._beside())
                 if mode != self.mode:                      # into, out of, or between comparisons: all anew
                     self._drop_trace()
                     self.mode, self.shown, self.partner = mode, None, None
                     self._show_scale(None)
-                if mode is not None:
+                if mode[0] is not None:
                     self._compare(request)
                     continue
                 if request[0][1] == "path tracer":
@@ -785,6 +816,16 @@ class ClientView:
                      frame.resolution, frame.window)
         return both, f", compare {pair} ({layout})"
 
+    def _with_input(self, frame: Frame) -> Tuple[Frame, str]:
+        """The input at ``frame``'s height beside it (:func:`~.compare.input_beside`), and the frame line's note."""
+        with self.app.scene_lock:
+            scene = self.app.scene
+            image, name = scene.input, scene.input_names[scene.input_index] if scene.input_names else "input"
+        drawn = input_beside(image, frame.image)
+        height, width = frame.image.shape[:2]
+        return replace(frame, image=drawn), (f", input beside ({name}, {image.shape[1]}×{image.shape[0]} → "
+                                             f"{drawn.shape[1] - width - GAP}×{height} px)")
+
     def _show_scale(self, comparison: Optional[Comparison]) -> None:
         """The colour scale's numbers (both layouts) and its bar (the difference's) for ``comparison``, or neither."""
         self.scale.visible = comparison is not None
@@ -803,6 +844,9 @@ class ClientView:
         if self.partner is not None:
             frame, pair_note = self._with_partner(frame)
             note = pair_note + note
+        if self._beside():
+            frame, beside_note = self._with_input(frame)
+            note = beside_note + note
         view, renderer, _, res, _, _, window, _ = key
         # the frame is rendered at the canvas' aspect (scene.tiles): viser stretches it over the canvas as it is.
         # Full frames lossless (PNG, what the tests compare), the others as JPEG (a tenth of the encoding time)
@@ -937,9 +981,11 @@ class ClientView:
         key, _, _ = self._request(at_rest=True)
         with self.app.scene_lock:
             volume, version = self.app.scene.volume, self.app.version
+            beside = self.app.scene.input if self._beside() else None
         key = key[:5] + (version,) + key[6:]
         if kind == "turntable":
-            return _Export(kind, self.name.value, volume, key, turntable_views(key[0], checked_frames(self.frames.value)))
+            return _Export(kind, self.name.value, volume, key, turntable_views(key[0], checked_frames(self.frames.value)),
+                           beside)
         size = checked_still(self.still_size.value, volume.shape[-1])
         key = key[:3] + (size,) + key[4:]
         for k in compare_keys(key) if isinstance(key[1], tuple) else (key,):
@@ -949,7 +995,7 @@ class ClientView:
                 raise UserError(f"a still of {size} px: the {renderer} renders at most {reached} px here (it renders "
                                 f"the volume resampled to R³); the marcher renders up to {MAX_STILL}: choose it, or a "
                                 f"still size up to {reached}")
-        return _Export(kind, self.name.value, volume, key, [key[0]])
+        return _Export(kind, self.name.value, volume, key, [key[0]], beside)
 
     def _export(self, job: "_Export", cancel: threading.Event) -> None:
         """Render ``job``'s frames one by one (each a render of its own: the pages' frames come
@@ -961,7 +1007,10 @@ class ClientView:
             for i, view in enumerate(job.views):
                 progress = f"{what}: frame {i + 1} of {n}" if n > 1 else f"{what}: rendering"
                 self.exported.content = progress + " … (cancel export stops it)"
-                frames.append(self._export_frame(job, (view,) + job.key[1:], cancel, progress))
+                frame = self._export_frame(job, (view,) + job.key[1:], cancel, progress)
+                if job.input is not None:                  # the input beside the frame, as the page draws it
+                    frame = replace(frame, image=input_beside(job.input, frame.image))
+                frames.append(frame)
             if cancel.is_set():
                 raise _Cancelled
             if job.kind == "still":
@@ -1033,11 +1082,13 @@ class _Cancelled(Exception):
 
 class _Export:
     """An export in progress: its ``kind`` ('still', 'turntable'), file ``name``, the ``volume`` shown
-    when it started, the ``key`` of its first frame (:meth:`ClientView._request`'s) and its ``views``.
-    Its identity is its slot in the path tracer's worker."""
+    when it started, the ``key`` of its first frame (:meth:`ClientView._request`'s), its ``views`` and
+    the ``input`` drawn beside each frame (None: none). Its identity is its slot in the path tracer's worker."""
 
-    def __init__(self, kind: str, name: str, volume: torch.Tensor, key: Tuple, views: List):
+    def __init__(self, kind: str, name: str, volume: torch.Tensor, key: Tuple, views: List,
+                 input: Optional[np.ndarray] = None):
         self.kind, self.name, self.volume, self.key, self.views = kind, name, volume, key, views
+        self.input = input
 
 
 class _Trace:

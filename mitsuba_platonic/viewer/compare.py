@@ -17,18 +17,27 @@ form against the marcher, the marcher against the path tracer) and shows them in
   so the darkest colour is the least difference in the frame and the brightest the largest.
 
 The difference and its range are worked out in both layouts (the halves have one size); only the
-difference layout draws it. Nothing here renders: :mod:`.app` hands in the frames. numpy only.
+difference layout draws it.
+
+The input beside the frame (:func:`input_beside`, a reconstruction's input or photo against the
+frame) is the same side-by-side composition: the input, scaled to the frame's height H by the
+nearest pixel (source row ⌊(i + ½) R / H⌋ of an R-pixel input, columns alike: each input pixel a
+block, nothing blurred), the divider, the frame. :func:`beside_aspect` gives the frame's aspect
+a − 1 on a canvas of aspect a, so that the square input and the frame fill the canvas together.
+
+Nothing here renders: :mod:`.app` hands in the frames. numpy only.
 """
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 from typing import Dict, List, Tuple
 
 import numpy as np
 
 __all__ = ["PAIRS", "LAYOUTS", "GAP", "STOPS", "pairs_for", "half_aspect", "difference", "ColourScale", "colour_bar",
-           "side_by_side", "Comparison", "compare"]
+           "side_by_side", "Comparison", "compare", "beside_aspect", "nearest", "input_beside"]
 
 #: The pairs the page offers: label → (renderer A, renderer B), labels of :data:`~.scene.RENDERERS`.
 PAIRS: Dict[str, Tuple[str, str]] = {"closed form vs marcher": ("closed form", "marcher"),
@@ -113,6 +122,32 @@ def side_by_side(a: np.ndarray, b: np.ndarray) -> np.ndarray:
         raise ValueError(f"frames A and B: expected one height, got {a.shape[0]} and {b.shape[0]}")
     gap = np.full((a.shape[0], GAP, 3), GAP_GREY, np.uint8)
     return np.concatenate([a, gap, b], axis=1)
+
+
+def beside_aspect(aspect: float, least: float) -> float:
+    """The aspect (width/height) a frame is rendered at with the square input beside it on a canvas
+    of ``aspect``: a − 1 (the input takes a square of the frame's height), at least ``least`` (the
+    renderers' narrowest; on a canvas narrower than 1 + ``least`` the two are stretched over it)."""
+    if not (math.isfinite(aspect) and aspect > 0):
+        raise ValueError(f"aspect: expected a positive number, got {aspect!r}")
+    return max(float(least), float(aspect) - 1.0)
+
+
+def nearest(image: np.ndarray, height: int, width: int) -> np.ndarray:
+    """``(h, w, 3)`` uint8 → ``(height, width, 3)`` by the nearest pixel: output row i takes source row
+    ⌊(i + ½) h / height⌋ (columns alike)."""
+    a = _image(image, "image")
+    rows = ((np.arange(int(height)) + 0.5) * a.shape[0] / int(height)).astype(np.int64)
+    cols = ((np.arange(int(width)) + 0.5) * a.shape[1] / int(width)).astype(np.int64)
+    return a[rows][:, cols]
+
+
+def input_beside(input_image: np.ndarray, frame: np.ndarray) -> np.ndarray:
+    """The input (``(R, R', 3)`` uint8) at the frame's height H | divider | the frame (:func:`side_by_side`):
+    the input scaled by :func:`nearest` to H rows and R'·H/R columns (rounded; H × H for a square input)."""
+    a, f = _image(input_image, "input"), _image(frame, "frame")
+    h = f.shape[0]
+    return side_by_side(nearest(a, h, max(1, round(a.shape[1] * h / a.shape[0]))), f)
 
 
 @dataclass

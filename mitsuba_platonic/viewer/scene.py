@@ -514,7 +514,11 @@ class Scene:
     """What the viewer shows: ``volume`` ``(C, N, N, N)`` (the current one), ``kind`` ('volume',
     'reconstruction', 'generation'), ``title``, and for a run its ``model``, held-out ``inputs``
     ``(M, C, R, R)`` with their ``input_names`` (reconstruction), the displayed ``input`` image
-    (an input or the photo, ``(R, R, 3)`` uint8) and a note on what was found (``notes``)."""
+    (an input or the photo, ``(R, R, 3)`` uint8), the elevation θ̂ in degrees at which that input's
+    camera sees the volume shown (``input_elevation``: the volume is G's upright one,
+    :meth:`~mitsuba_platonic.model.Model.reconstruct_upright`, so the input camera is ω(0°, θ̂), θ̂
+    what the pose head P reads from the input for ``train.pose: elevation``, 0 for ``train.pose:
+    input``) and a note on what was found (``notes``)."""
 
     volume: torch.Tensor
     kind: str
@@ -524,6 +528,7 @@ class Scene:
     input_names: List[str] = field(default_factory=list)
     input: Optional[np.ndarray] = None
     input_index: int = 0
+    input_elevation: float = 0.0
     seeds: Tuple[int, int] = (0, 1)
     walk: float = 0.0
     notes: List[str] = field(default_factory=list)
@@ -561,8 +566,13 @@ class Scene:
             raise UserError("this source has no held-out inputs to step through")
         self.input_index = index % len(self.inputs)
         image = self.inputs[self.input_index:self.input_index + 1]
-        self.volume = _reconstruct(self.model, image)
+        self.volume, self.input_elevation = _reconstruct(self.model, image)
         self.input = to_display(image[0])
+
+    def input_camera(self) -> Optional[Tuple[float, float]]:
+        """The input's own camera as (azimuth, elevation) in degrees, (0, θ̂) (the class docstring),
+        or None where no input is shown (a volume file, a generation run, G(z) in place of inputs)."""
+        return None if self.input is None else (0.0, self.input_elevation)
 
     # -- generation: latents ------------------------------------------------------------------
 
@@ -575,8 +585,11 @@ class Scene:
         self.volume = _decode(self.model, z)
 
 
-def _reconstruct(model, image: torch.Tensor) -> torch.Tensor:
-    return model.reconstruct_upright(image.to(model.device))[0][0].detach().float().cpu().clamp(0.0, 1.0)
+def _reconstruct(model, image: torch.Tensor) -> Tuple[torch.Tensor, float]:
+    """G(E(x)) of one image ``(1, C, R, R)`` upright ``(C, R, R, R)``, and the elevation θ̂ (degrees)
+    of its camera there (0 without a pose head)."""
+    volumes, elevations = model.reconstruct_upright(image.to(model.device))
+    return volumes[0].detach().float().cpu().clamp(0.0, 1.0), float(elevations[0])
 
 
 def _latent(model, seed: int) -> torch.Tensor:
@@ -667,10 +680,10 @@ def _run_scene(path: Path, photo: Optional[PathLike], model, cfg, background: Op
         return scene
     if photo is not None:
         image = model.load_image(photo, background)          # the loader's one-line errors (missing, damaged)
-        scene = Scene(volume=_reconstruct(model, image), kind="reconstruction",
+        scene = Scene(volume=torch.zeros(0), kind="reconstruction",
                       title=f"{path.name}: reconstruction of {Path(photo).name} ({step})", model=model,
                       inputs=image, input_names=[Path(photo).name])
-        scene.input = to_display(image[0])
+        scene.show_input(0)
         return scene
     inputs, names, why = _held_out(cfg)
     scene = Scene(volume=torch.zeros(0), kind="reconstruction", title=f"{path.name}: reconstruction ({step})",
