@@ -47,7 +47,7 @@ from mitsuba_platonic.volume import test_volume
 
 #: The canvas the server-side timing renders for: the page's frames are W×H at the canvas' aspect.
 ASPECT = 16 / 9
-FRAME = re.compile(r"frame (\d+): ([0-9.]+) ms, (full|moving), (\d+)×\d+ px")
+FRAME = re.compile(r"frame (\d+): ([0-9.]+) ms, (full|moving), \d+×(\d+) px")
 
 
 def server_side(volume: torch.Tensor, pixels: int, frames: int = 40) -> None:
@@ -102,7 +102,8 @@ RAF_COUNTER = """() => { if (window.__drawn === undefined) { window.__drawn = 0;
 
 
 def frame_line(page):
-    """The page's frame line (``frame N: T ms, full|moving, R×R px, …``) as a :data:`FRAME` match, or None."""
+    """The page's frame line (``frame N: T ms, full|moving, W×R px, …``: R the resolution, along the
+    landscape canvas' height) as a :data:`FRAME` match, or None."""
     return FRAME.search(page.get_by_text(re.compile(r"^frame \d+:")).inner_text())
 
 
@@ -142,7 +143,7 @@ def in_browser(source: Path, pixels: int, seconds: float, window: Tuple[int, int
             page.get_by_role("option", name="marcher", exact=True).click()
             page.get_by_role("combobox").nth(2).click()
             page.get_by_role("option", name=str(pixels), exact=True).click()
-            page.get_by_text(re.compile(rf"^frame \d+: .*full, {pixels}×")).wait_for()
+            page.get_by_text(re.compile(rf"^frame \d+: .*full, \d+×{pixels} px")).wait_for()
             for low in (True, False):
                 if not low:
                     page.get_by_text("low resolution while moving").click()
