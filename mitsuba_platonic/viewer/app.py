@@ -116,7 +116,8 @@ from PIL import Image
 from ..errors import UserError
 from ..views import camera_frames, from_angles, to_angles
 from ..render.window import window_or_none
-from .compare import GAP, LAYOUTS, PAIRS, Comparison, beside_aspect, colour_bar, compare, half_aspect, input_beside, pairs_for
+from .compare import (GAP, LAYOUTS, PAIRS, Comparison, beside_aspect, colour_bar, compare, half_aspect, input_beside, nearest,
+                      pairs_for)
 from .live import RunWatcher
 from .scene import (ASPECT_RANGE, MAX_RESAMPLED, MAX_STILL, MAX_TURNTABLE_FRAMES, PASS_SPP, TURNTABLE_FRAMES, WINDOW_SNAP, ZOOM_RANGE,
                     Exports, Frame, Scene, Window, camera_window, checked_frames, checked_still, default_resolution,
@@ -149,6 +150,15 @@ CANVAS_SETTLE_S = 1.0
 INITIAL_RENDERER, INITIAL_SPP = "closed form", 4
 #: The still size a page offers first (the choice of :func:`~.scene.still_sizes` nearest to it), pixels.
 STILL_SIZE = 1024
+#: How many times larger the panel shows the input than its pixels.
+PANEL_INPUT_SCALE = 4
+
+
+def _panel_input(image: np.ndarray) -> np.ndarray:
+    """The input as the panel shows it: each pixel a :data:`PANEL_INPUT_SCALE`-wide block (:func:`~.compare.nearest`)."""
+    return nearest(image, PANEL_INPUT_SCALE * image.shape[0], PANEL_INPUT_SCALE * image.shape[1])
+
+
 #: The zoom buttons' factor, and the pan buttons' step as a fraction of the frame's width.
 ZOOM_STEP, PAN_STEP = 2.0, 0.25
 #: The path tracer's spp slider's range, which the server holds a page's spp to.
@@ -505,7 +515,7 @@ class ClientView:
         self.input_image = self.beside = None
         if scene.input is not None:
             with gui.add_folder("Input"):
-                self.input_image = gui.add_image(np.repeat(np.repeat(scene.input, 4, 0), 4, 1), label="input",
+                self.input_image = gui.add_image(_panel_input(scene.input), label="input",
                                                  format="png")
                 self.input_label = gui.add_markdown(self._input_text())
                 if scene.inputs is not None and len(scene.inputs) > 1:
@@ -546,7 +556,7 @@ class ClientView:
         scene = self.app.scene
         self.title.content = self._title_text()
         if self.input_image is not None and scene.input is not None:
-            self.input_image.image = np.repeat(np.repeat(scene.input, 4, 0), 4, 1)
+            self.input_image.image = _panel_input(scene.input)
             self.input_label.content = self._input_text()
 
     def _step_input(self, step: int) -> None:
