@@ -13,7 +13,9 @@ printed before torch is imported (:mod:`mitsuba_platonic.viewer.start`; the comm
 ``view`` without the other commands' modules, :func:`mitsuba_platonic.cli.build_parser`), and
 the scene is made; a page that connects meanwhile waits for it and then gets its GUI and the first
 frame (:class:`~mitsuba_platonic.viewer.app.ViewerApp`, which renders that frame at once). A run
-folder is opened (torch, its checkpoint) before the address, whose line names the run's step.
+folder likewise: the address first, then torch, the checkpoint, the model and the held-out inputs
+load while the browser loads the page (a second line names the run's step once it is open; a
+checkpoint that cannot be read is still the one-line error, exit 2, after the address).
 """
 
 from __future__ import annotations
@@ -44,18 +46,19 @@ def _cmd_view(args: argparse.Namespace) -> int:
         raise CLIError("the viewer needs the 'viewer' extra: pip install 'mitsuba-platonic[viewer]' "
                        "(or pip install -e '.[viewer]' in a checkout)") from None
     array = check_source(args.source, args.photo)          # a volume file's array (numpy), None for a run folder
-    scene = None if array is not None else _open(args, None)
     server = start_server(args.host, args.port)
     app = None
     try:
-        title = volume_title(args.source, array.shape) if scene is None else scene.title
+        title = volume_title(args.source, array.shape) if array is not None else \
+            f"{Path(args.source).name} (a run folder: its checkpoint loads now)"
         url = address(args.host, server.get_port())
         print(f"platonic view: {title} at {url} (Ctrl-C stops it; exports go to {out})", flush=True)
         if args.host not in ("127.0.0.1", "localhost", "::1"):
             print(f"platonic view: --host {args.host}: reachable from other machines on that network",
                   file=sys.stderr, flush=True)
-        if scene is None:
-            scene = _open(args, array)                     # torch loads while the browser loads the page
+        scene = _open(args, array)                         # torch loads while the browser loads the page
+        if array is None:
+            print(f"platonic view: {scene.title}", flush=True)
         from ..viewer.app import ViewerApp
 
         app = ViewerApp(scene, out, host=args.host, port=args.port, server=server)

@@ -52,7 +52,7 @@ __all__ = ["RENDERERS", "FORMATIONS", "BACKGROUND", "Frame", "Scene", "Exports",
            "formations_for", "formations_of", "renderers_for", "resolutions_for", "to_display", "clean_name", "camera_window",
            "zoom_distance", "ZOOM_RANGE", "Window", "PASS_SPP", "Plan", "plan_frame", "path_pass",
            "passes_for", "DEFAULT_RESOLUTION", "ASPECT_RANGE", "default_resolution", "frame_size", "Tile", "tiles",
-           "model_of", "MAX_STILL", "still_sizes", "checked_still", "TURNTABLE_FRAMES", "MAX_TURNTABLE_FRAMES",
+           "model_of", "prepare_volume", "MAX_STILL", "still_sizes", "checked_still", "TURNTABLE_FRAMES", "MAX_TURNTABLE_FRAMES",
            "FRAME_MS", "checked_frames", "turntable_views"]
 
 #: The renderers the page offers: label → backend (mitsuba_platonic.render.BACKENDS).
@@ -412,8 +412,9 @@ def _unit(view: Tuple[float, float, float]) -> torch.Tensor:
     return (w / w.norm()).to(torch.float32)
 
 
-def _prepared(volume: torch.Tensor, plan: Plan) -> torch.Tensor:
-    """The volume as the plan's renderer takes it: ``(1, C', R', R', R')``."""
+def prepare_volume(volume: torch.Tensor, plan: Plan) -> torch.Tensor:
+    """The volume as the plan's renderer takes it: ``(1, C', R', R', R')`` (a resampled one cached:
+    the viewer's warm-up calls it for the first full frame's plan)."""
     v = volume[None] if plan.backend == "mitsuba" else _at_resolution(volume, plan.resolution, plan.model)
     if CHANNELS[plan.model] == 1 and volume.shape[0] == 4:
         v = v[:, 3:]
@@ -445,7 +446,7 @@ def path_pass(volume: torch.Tensor, view: Tuple[float, float, float], resolution
 
     plan = plan_frame(volume, "path tracer", "EA", resolution, PASS_SPP, window, aspect)
     s = plan.settings
-    prepared = _prepared(volume, plan)
+    prepared = prepare_volume(volume, plan)
     with torch.no_grad():
         return _assemble(plan, lambda tile: render_physical_ad(
             prepared, _unit(view), lighting=s.lighting, spp=PASS_SPP, max_depth=s.max_depth, seed=0,
@@ -495,10 +496,10 @@ def render_frame(volume: torch.Tensor, view: Tuple[float, float, float], rendere
             image = total / passes_for(spp)
         elif plan.backend == "mitsuba" and plan.k > 1:
             from ..render.drjit.marcher import march_pixels          # lazy: imports Dr.Jit, on the marcher's first frame
-            prepared = _prepared(volume, plan)
+            prepared = prepare_volume(volume, plan)
             image = _assemble(plan, lambda tile: march_pixels(prepared, w, plan.settings, plan.k, tile)[0])
         else:
-            prepared = _prepared(volume, plan)
+            prepared = prepare_volume(volume, plan)
             image = _assemble(plan, lambda tile: render_with(prepared, w, plan.settings, 0, tile)[0])
         image = to_display(image)
     seconds = time.perf_counter() - start

@@ -1,8 +1,9 @@
 """Colour and mask: decoded codes → premultiplied linear RGBA at the photo's own size.
 
 **Colour.** sRGB-encoded codes ``q`` (0 … 2^bits − 1) are decoded to linear RGB with
-colour-science, ``c = colour.cctf_decoding(q / (2^bits − 1), "sRGB")`` (through the package's
-one sRGB decoder, :func:`mitsuba_platonic.images.srgb_to_linear`), tabulated once per bit depth
+the package's one sRGB decoder, ``c = srgb_to_linear(q / (2^bits − 1))``
+(:func:`mitsuba_platonic.images.srgb_to_linear`: colour-science's ``cctf_decoding(…, "sRGB")``
+bit for bit, without importing it), tabulated once per bit depth
 (a 256- or 65 536-entry look-up table, so decoding is exact and fast). Alpha is linear coverage
 in every format and is only scaled, ``α = a / (2^bits − 1)``.
 
@@ -73,7 +74,7 @@ MIN_REGION = 5e-4
 def srgb_decoding_table(bit_depth: int) -> np.ndarray:
     """Linear values of all sRGB codes ``q`` of a bit depth ``b``.
 
-    ``srgb_to_linear(q / (2^b − 1))`` (colour-science's ``cctf_decoding``) for
+    ``srgb_to_linear(q / (2^b − 1))`` (colour-science's ``cctf_decoding``, bit for bit) for
     ``q = 0 … 2^b − 1``.
 
     Returns a read-only float32 array of ``2**bit_depth`` entries; index it with integer codes.
@@ -200,8 +201,6 @@ def premultiplied_linear(decoded: DecodedImage, *, background: Optional[str] = N
         ImageRejected: ``no_alpha`` (no real transparency and ``background`` is None) or
             ``fully_transparent`` (the mask is empty, before or after cleaning).
     """
-    from scipy import ndimage  # lazy: scipy is slow to import
-
     codes = decoded.pixels
     max_value = decoded.max_value
     table = srgb_decoding_table(decoded.bit_depth)
@@ -214,6 +213,7 @@ def premultiplied_linear(decoded: DecodedImage, *, background: Optional[str] = N
         if clean:
             alpha[~clean_mask(alpha_codes > 0)] = 0.0
         if erode > 0:
+            from scipy import ndimage  # lazy: scipy is slow to import (half a second), and only this needs it
             alpha = ndimage.minimum_filter(alpha, size=2 * int(erode) + 1, mode="nearest")
         if not alpha.any():
             raise ImageRejected("fully_transparent",
