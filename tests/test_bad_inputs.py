@@ -301,3 +301,29 @@ def test_quickstart_steps_and_a_set_of_run_steps_are_refused_naming_both(tmp_pat
     assert one_line(err, "quickstart", kind="error") == ("platonic quickstart: error: run.steps: given twice, by "
                                                          "--steps 5 and by --set run.steps=10; expected one of them")
     assert not (tmp_path / "q").exists()
+
+
+def test_a_run_name_longer_than_a_folder_name_is_refused_in_a_short_line():
+    """A 10 MB ``run.name`` reached the file system, whose ``File name too long`` quoted it whole (a
+    10 MB error line); a name of more than 255 bytes (UTF-8: 128 'ü' are 256) is refused by the
+    config, quoted in a few dozen characters. 255 bytes is still a name."""
+    load_config(None, ["run.name=" + "a" * 255])
+    for name in ("a" * 10 ** 6, "ü" * 128):
+        with pytest.raises(ConfigError) as e:
+            load_config(None, [f"run.name={name}"])
+        assert str(e.value).startswith("run.name: expected a folder name of at most 255 bytes") and len(str(e.value)) < 200
+
+
+def test_an_os_error_on_a_huge_path_is_quoted_short_in_its_line():
+    """An ``OSError`` that reaches the command line keeps Python's wording, its path cut to a few
+    hundred characters (a path made of a user's long words was a line as long)."""
+    import argparse
+    import errno
+
+    from mitsuba_platonic.cli.exits import error_message
+
+    args = argparse.Namespace(command="train")
+    line = error_message(args, OSError(errno.ENAMETOOLONG, "File name too long", "/tmp/" + "a" * 10 ** 6))
+    assert line.startswith("platonic train: error: [Errno 36] File name too long: '/tmp/aaa") and len(line) < 300, line
+    short = FileNotFoundError(errno.ENOENT, "No such file or directory", "x.yaml")
+    assert error_message(args, short) == f"platonic train: error: {short}"

@@ -16,6 +16,7 @@ from typing import Optional
 from ..errors import Interrupted, stop_words
 from ..files.fileio import interrupt_behind
 from ..runtime.no_room import full_disk_line, no_room
+from ..settings_checks import quoted
 from .args import PROG
 
 __all__ = ["STARTING", "one_line", "interrupt_message", "error_message", "interrupt_behind", "printable_streams",
@@ -44,7 +45,17 @@ def error_message(args: Optional[argparse.Namespace], e: BaseException) -> str:
     ``OSError`` no command explained) also what was kept and what to free where."""
     full = no_room(e) if isinstance(e, OSError) else None
     more = f"; {full_disk_line(full)}" if full is not None else ""
-    return f"{PROG} {getattr(args, 'command', None)}: error: {one_line(e)}{more}"
+    return f"{PROG} {getattr(args, 'command', None)}: error: {one_line(os_error_text(e))}{more}"
+
+
+def os_error_text(e: BaseException) -> object:
+    """An ``OSError`` from a file or disk as Python words it (``[Errno 36] File name too long: 'PATH'``)
+    but with each path quoted at most a few hundred characters (:func:`~mitsuba_platonic.settings_checks.quoted`):
+    a path made of a user's 10 MB name was a 10 MB line. Anything else as it is."""
+    if not isinstance(e, OSError) or e.errno is None or e.strerror is None or e.filename is None:
+        return e
+    paths = " -> ".join(quoted(p) for p in (e.filename, e.filename2) if p is not None)
+    return f"[Errno {e.errno}] {e.strerror}: {paths}"
 
 
 def printable_streams() -> None:

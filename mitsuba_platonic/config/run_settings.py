@@ -63,8 +63,18 @@ class RunConfig:
         return self
 
 
+#: The longest folder name in bytes (UTF-8) that Linux's, macOS's and Windows' file systems all take (NAME_MAX).
+MAX_NAME_BYTES = 255
+
+
 def _folder_name(key: str, value: str) -> None:
-    """One path component: no separator, not '.' or '..', not empty (so the run stays in out_dir)."""
+    """One path component: no separator, not '.' or '..', not empty (so the run stays in out_dir), and
+    at most :data:`MAX_NAME_BYTES` bytes in UTF-8 (a longer one was the file system's ``File name too
+    long`` when the run folder was made, quoting the whole name)."""
     seps = {"/", "\\"} | ({os.sep, os.altsep} - {None})
     if not value or value in (".", "..") or any(sep in value for sep in seps) or "\0" in value:
         raise ConfigError(f"{key}: expected a single folder name (no '/', '..' or absolute path), got {quoted(value)}")
+    size = len(value.encode("utf-8", "surrogatepass")) if isinstance(value, str) else 0
+    if size > MAX_NAME_BYTES:
+        raise ConfigError(f"{key}: expected a folder name of at most {MAX_NAME_BYTES} bytes (UTF-8), got one of "
+                          f"{size:,} bytes: {quoted(value, 60)}")
