@@ -101,7 +101,7 @@ def add_train(sub: "argparse._SubParsersAction") -> None:
                                    "with --set section.key=value. Writes a run folder with the resolved "
                                    "config, checkpoints, logs and samples (only into a new or empty folder or one of "
                                    "its own runs; the --config file is never written). Ctrl-C, SIGTERM or SIGHUP saves a "
-                                   "checkpoint and ends the process by that signal (exit status 130 or 143); "
+                                   "checkpoint and ends the process by that signal (exit status 130, 143 or 129); "
                                    "--resume continues exactly. Data parallel: torchrun --nproc-per-node N "
                                    "-m mitsuba_platonic.cli train ...")
     p.add_argument("--config", default=None,
