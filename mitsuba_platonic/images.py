@@ -261,7 +261,7 @@ def linear_to_srgb(x: np.ndarray) -> np.ndarray:
         V = 12.92 L   (L ≤ 0.0031308),    V = 1.055 L^(1/2.4) − 0.055   (otherwise)
 
     in float64, the very operations of colour-science's ``cctf_encoding(L, "sRGB")`` (bit for bit,
-    tests/test_images.py), without importing it (about 2 s on 2 cores: it imports matplotlib)."""
+    tests/test_photos.py), without importing it (about 2 s on 2 cores: it imports matplotlib)."""
     lin = np.clip(np.asarray(x, dtype=np.float64), 0.0, 1.0)
     return np.where(lin <= 0.0031308, lin * 12.92, 1.055 * np.abs(lin) ** np.float64(1 / 2.4) - 0.055)
 
@@ -273,7 +273,7 @@ def srgb_to_linear(x: np.ndarray) -> np.ndarray:
         L = ((V + 0.055) / 1.055)^2.4   (otherwise)
 
     in float64, the very operations of colour-science's ``cctf_decoding(V, "sRGB")`` (bit for bit,
-    tests/test_images.py), without importing it."""
+    tests/test_photos.py), without importing it."""
     v = np.clip(np.asarray(x, dtype=np.float64), 0.0, 1.0)
     return np.where(_SRGB_KNEE >= v, v / 12.92, np.abs((v + 0.055) / 1.055) ** np.float64(2.4))
 

@@ -191,7 +191,11 @@ def initial_key(scene: Scene, version: int = 0, aspect: float = 1.0) -> Tuple:
 def first_look_key(scene: Scene, version: int = 0, aspect: float = 1.0) -> Tuple:
     """A page's first look, drawn while its canvas settles: :func:`initial_key` at the volume's
     resolution N (the closed form renders the volume itself, no resampling: a few milliseconds)."""
-    key = initial_key(scene, version, aspect)
+    return at_volume_resolution(initial_key(scene, version, aspect), scene)
+
+
+def at_volume_resolution(key: Tuple, scene: Scene) -> Tuple:
+    """``key`` (a frame's key: view, renderer, formation, resolution, …) at the volume's own resolution N."""
     return key[:3] + (scene.volume.shape[-1],) + key[4:]
 
 
@@ -808,7 +812,7 @@ class ClientView:
             key, aspect, _ = self._request()
             if key[1] != INITIAL_RENDERER:
                 return
-            self._render((key[:3] + (self.app.scene.volume.shape[-1],) + key[4:], aspect, "moving"),
+            self._render((at_volume_resolution(key, self.app.scene), aspect, "moving"),
                          ", first look while the canvas settles")
         except Exception:                                  # the full frame's request shows what is wrong
             pass
