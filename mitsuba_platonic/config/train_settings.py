@@ -18,7 +18,8 @@ from dataclasses import dataclass, field
 from typing import List, Optional, Union
 
 from ..settings_checks import ConfigError, check_elevation, choice, non_negative, positive
-from ..views import DISTRIBUTIONS
+from ..errors import UserError
+from ..views import DISTRIBUTIONS, check_azimuth_width
 
 __all__ = ["TrainConfig", "TASKS", "MODES", "MODES_3D", "REC_TARGETS", "REC_LOSSES", "REC_CHANNELS", "POSES", "LIGHTS", "PRGAN",
            "LOSS_WEIGHTS", "LOSSES", "ROLLS", "AUGMENTS", "PHOTO_AUGMENTS"]
@@ -73,6 +74,9 @@ class TrainConfig:
     (docs/training.md, "The measurements").
     view_distribution, elevation: p_view, where the random views are drawn; for photos, the band the
     photos' cameras were in ('band', [-10, 40]).
+    azimuth_width: null (every azimuth), or W in degrees (0 < W <= 90; reconstruction, 'sphere' or 'band'): the
+    random views' azimuths within ±W of the input camera's and of its back, half each, so that a collection
+    photographed mostly from the sides is judged where its cameras stood (:func:`mitsuba_platonic.views.sample_views`).
     pose, pose_weight: where G's volume stands, 'input' (in the input camera's frame, the paper's view-space
     reconstruction, where G builds every object upright whatever the elevation) | 'elevation'
     (reconstruction, mode 'platonic'): G builds the object upright in its own frame, a pose head reads the
@@ -155,6 +159,7 @@ class TrainConfig:
     random_views: int = 1
     view_distribution: str = "sphere"
     elevation: Optional[Union[float, List[float]]] = None
+    azimuth_width: Optional[float] = None
     loss: str = "nonsaturating"
     gp_weight: float = 10.0
     rec_weight: float = 5.0
@@ -196,6 +201,15 @@ class TrainConfig:
         choice("train.task", self.task, TASKS)
         choice("train.mode", self.mode, MODES)
         choice("train.view_distribution", self.view_distribution, DISTRIBUTIONS)
+        if self.azimuth_width is not None:
+            try:
+                check_azimuth_width(self.azimuth_width, "train.azimuth_width")
+            except UserError as e:
+                raise ConfigError(str(e)) from None
+            if self.task != "reconstruction" or self.view_distribution not in ("sphere", "band"):
+                raise ConfigError(f"train.azimuth_width: the windows about the input camera need task "
+                                  f"'reconstruction' and view_distribution 'sphere' or 'band'; got task "
+                                  f"{self.task!r}, view_distribution {self.view_distribution!r}")
         choice("train.loss", self.loss, LOSSES)
         positive("train.batch_size", self.batch_size)
         positive("train.random_views", self.random_views)

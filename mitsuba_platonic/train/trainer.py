@@ -252,6 +252,8 @@ class Trainer(BaselineModes):
         if t.view_distribution != "sphere":
             e = t.elevation if t.elevation is not None else DEFAULT_ELEVATION[t.view_distribution]
             kwargs["elevation"] = tuple(e) if isinstance(e, list) else e
+        if getattr(t, "azimuth_width", None) is not None:
+            kwargs["azimuth_width"] = t.azimuth_width
         return sample_views(n, t.view_distribution, seed=g, **kwargs)
 
     def _all_sum(self, x: torch.Tensor) -> torch.Tensor:
