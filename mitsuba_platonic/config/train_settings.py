@@ -74,6 +74,7 @@ class TrainConfig:
     (docs/training.md, "The measurements").
     view_distribution, elevation: p_view, where the random views are drawn; for photos, the band the
     photos' cameras were in ('band', [-10, 40]).
+    azimuth_share: with azimuth_width, the share of the random views drawn in its windows (the rest at every azimuth).
     azimuth_width: null (every azimuth), or W in degrees (0 < W <= 90; reconstruction, 'sphere' or 'band'): the
     random views' azimuths within ±W of the input camera's and of its back, half each, so that a collection
     photographed mostly from the sides is judged where its cameras stood (:func:`mitsuba_platonic.views.sample_views`).
@@ -160,6 +161,7 @@ class TrainConfig:
     view_distribution: str = "sphere"
     elevation: Optional[Union[float, List[float]]] = None
     azimuth_width: Optional[float] = None
+    azimuth_share: float = 1.0
     loss: str = "nonsaturating"
     gp_weight: float = 10.0
     rec_weight: float = 5.0
@@ -201,6 +203,8 @@ class TrainConfig:
         choice("train.task", self.task, TASKS)
         choice("train.mode", self.mode, MODES)
         choice("train.view_distribution", self.view_distribution, DISTRIBUTIONS)
+        if not 0.0 <= self.azimuth_share <= 1.0:
+            raise ConfigError(f"train.azimuth_share: expected a share in [0, 1], got {self.azimuth_share!r}")
         if self.azimuth_width is not None:
             try:
                 check_azimuth_width(self.azimuth_width, "train.azimuth_width")
