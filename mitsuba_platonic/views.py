@@ -63,7 +63,6 @@ __all__ = [
     "SIDE_AZIMUTHS",
     "DEFAULT_SIDE_WIDTH",
     "check_side_width",
-    "check_azimuth_width",
     "CAMERAS",
     "lens",
 ]
@@ -138,19 +137,13 @@ def _generator(seed: Seed) -> torch.Generator:
     return g
 
 
-def _window_azimuths(u: torch.Tensor, width: float, centres: Tuple[float, float]) -> torch.Tensor:
-    """Azimuths (radians) uniform on [c₀ − W, c₀ + W] ∪ [c₁ − W, c₁ + W] (degrees ``centres`` c₀, c₁, half-width
-    ``width`` W) from uniforms ``u`` in [0, 1): u < ½ → c₀ + (4u − 1) W, else c₁ + (4u − 3) W (each window
-    half the mass)."""
+def _side_azimuths(u: torch.Tensor, width: float) -> torch.Tensor:
+    """Azimuths (radians) uniform on [90° − W, 90° + W] ∪ [−90° − W, −90° + W] from uniforms ``u`` in
+    [0, 1): u < ½ → 90° + (4u − 1) W, else −90° + (4u − 3) W (each window half the mass)."""
     first = u < 0.5
     offset = torch.where(first, 4.0 * u - 1.0, 4.0 * u - 3.0) * width
-    centre = torch.where(first, torch.full_like(u, centres[0]), torch.full_like(u, centres[1]))
-    return torch.deg2rad(centre + offset)
-
-
-def _side_azimuths(u: torch.Tensor, width: float) -> torch.Tensor:
-    """The 'sides' azimuths: :func:`_window_azimuths` about :data:`SIDE_AZIMUTHS` (±90°)."""
-    return _window_azimuths(u, width, SIDE_AZIMUTHS)
+    side = torch.where(first, torch.full_like(u, SIDE_AZIMUTHS[0]), torch.full_like(u, SIDE_AZIMUTHS[1]))
+    return torch.deg2rad(side + offset)
 
 
 def check_side_width(width: object) -> float:
@@ -163,21 +156,9 @@ def check_side_width(width: object) -> float:
     return float(width)
 
 
-def check_azimuth_width(width: object, name: str = "azimuth_width") -> float:
-    """``width`` as a float if it is a number of degrees in (0, 90] (the half-width W of the windows about
-    the input camera's azimuth and its back), else a :class:`~mitsuba_platonic.errors.UserError` naming
-    ``name`` and what was expected."""
-    if isinstance(width, bool) or not isinstance(width, (int, float)) or not math.isfinite(width) \
-            or not 0.0 < float(width) <= 90.0:
-        raise UserError(f"{name}: expected the half-width W of the azimuth windows about the input camera "
-                        f"(0°) and its back (180°), in degrees with 0 < W <= 90 (90: every azimuth), got {width!r}")
-    return float(width)
-
-
 def sample_views(n: int, distribution: str = "sphere", seed: Seed = 0,
                  elevation: Tuple[float, float] | float = (-90.0, 90.0),
-                 side_width: Optional[float] = None,
-                 azimuth_width: Optional[float] = None) -> torch.Tensor:
+                 side_width: Optional[float] = None) -> torch.Tensor:
     """Draw ``n`` random views, deterministic under ``seed`` (an int or a ``torch.Generator``).
 
     ``distribution``:
@@ -191,24 +172,16 @@ def sample_views(n: int, distribution: str = "sphere", seed: Seed = 0,
         views in each window, W = ``side_width`` degrees (default :data:`DEFAULT_SIDE_WIDTH`,
         0 < W ≤ 90); y as the band's, ``elevation = (θ_lo, θ_hi)``.
 
-    ``side_width`` is read by ``"sides"`` only (``ValueError`` for the others). ``azimuth_width`` W (degrees,
-    0 < W ≤ 90; ``"sphere"`` and ``"band"`` only) keeps φ within ±W of the input camera's azimuth 0° and of
-    its back 180°, half the views in each window, as :func:`_window_azimuths` draws them (the critic's views
-    of a reconstruction where the photos' cameras are: ``train.azimuth_width``). Returns ``(n, 3)`` float32
-    unit vectors.
+    ``side_width`` is read by ``"sides"`` only (``ValueError`` for the others). Returns ``(n, 3)``
+    float32 unit vectors.
     """
     if not isinstance(n, int) or n < 0:
         raise UserError(f"n must be a non-negative int, got {n!r}")
     if side_width is not None and distribution != "sides":
         raise UserError(f"side_width is read by the 'sides' distribution only; {distribution!r} would ignore it")
-    if azimuth_width is not None and distribution not in ("sphere", "band"):
-        raise UserError(f"azimuth_width is read by the 'sphere' and 'band' distributions only; "
-                        f"{distribution!r} would ignore it")
     g = _generator(seed)
     u = torch.rand(n, generator=g, dtype=torch.float64)
     phi = u * (2.0 * math.pi)
-    if azimuth_width is not None:
-        phi = _window_azimuths(u, check_azimuth_width(azimuth_width), (0.0, 180.0))
     if distribution == "sphere":
         lo, hi = -1.0, 1.0
     elif distribution in ("band", "sides"):

@@ -68,14 +68,3 @@ def test_quoted_keeps_short_values_whole_and_cuts_long_ones():
     assert quoted("eight") == "'eight'" and quoted([1, 2]) == "[1, 2]"
     long = quoted("x" * 1000)
     assert len(long) == QUOTE_LIMIT and long.endswith("…")
-
-
-def test_azimuth_width_is_read_from_the_photo_config_and_refused_where_it_would_mean_nothing(tmp_path):
-    from mitsuba_platonic.config import config_file
-    cfg = load_config(config_file("photos"), ["data.path=unused", "train.azimuth_width=60"])
-    assert cfg.train.azimuth_width == 60.0 and cfg.train.view_distribution == "band"
-    assert load_config(config_file("photos"), ["data.path=unused"]).train.azimuth_width is None          # every azimuth by default
-    with pytest.raises(ConfigError, match=r"train.azimuth_width: expected the half-width W.*got 120"):
-        load_config(config_file("photos"), ["data.path=unused", "train.azimuth_width=120"])
-    with pytest.raises(ConfigError, match=r"train.azimuth_width: .*task 'reconstruction'.*got task 'generation'"):
-        load_config(None, ["train.task=generation", "train.azimuth_width=60"])

@@ -476,19 +476,3 @@ def test_a_batch_within_the_training_images_is_not_warned(tmp_path):
         warnings.simplefilter("always")
         R.train(_cfg(tmp_path, "run.steps=1", "train.batch_size=10"), progress=False)
     assert not [w for w in caught if "train.batch_size" in str(w.message)]
-
-
-def test_the_trainer_draws_its_random_views_within_the_azimuth_windows_it_is_given():
-    """``train.azimuth_width`` reaches the critic's random views: the photo recipe at 16³ with W = 30
-    draws every azimuth within 30° of the input camera's or its back's, and elevations in its band."""
-    from mitsuba_platonic.bench.train import random_training_data
-    from mitsuba_platonic.files.resources import config_path
-    from mitsuba_platonic.views import to_angles
-
-    cfg = load_config(config_path("photos"), ["model.resolution=16", "data.path=unused", "train.azimuth_width=30"])
-    trainer = Trainer(cfg, random_training_data(16), torch.device("cpu"))
-    az, el = to_angles(trainer._views(4000, torch.Generator().manual_seed(1)))
-    near = torch.minimum(az.abs(), 180.0 - az.abs())                # from 0° or from 180°
-    assert float(near.max()) <= 30.0 + 1e-3 and float(near.mean()) > 10.0
-    lo, hi = cfg.train.elevation
-    assert float(el.min()) >= lo - 1e-3 and float(el.max()) <= hi + 1e-3

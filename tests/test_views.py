@@ -145,36 +145,3 @@ def test_sides_needs_a_band_and_only_sides_reads_a_width():
     for other in ("sphere", "band", "ring"):
         with pytest.raises(ValueError, match="side_width is read by the 'sides' distribution only"):
             V.sample_views(3, other, elevation=20.0 if other == "ring" else (0.0, 30.0), side_width=30.0)
-
-
-@pytest.mark.parametrize("distribution,width", [("band", 60.0), ("sphere", 20.0), ("band", 90.0)])
-def test_azimuth_width_keeps_azimuths_within_w_of_the_input_camera_and_its_back(distribution, width):
-    n = 20000
-    kwargs = {"elevation": (-10.0, 40.0)} if distribution == "band" else {}
-    v = V.sample_views(n, distribution, seed=5, azimuth_width=width, **kwargs)
-    assert torch.allclose(v.norm(dim=1), torch.ones(n), atol=1e-6)
-    az, el = V.to_angles(v)
-    if distribution == "band":
-        assert el.min() >= -10.0 - 1e-3 and el.max() <= 40.0 + 1e-3
-    off_front = torch.remainder(az + 180.0, 360.0) - 180.0        # from the input camera, 0°
-    off_back = torch.remainder(az, 360.0) - 180.0                 # from its back, 180°
-    front = off_front.abs() <= off_back.abs()
-    assert float(torch.minimum(off_front.abs(), off_back.abs()).max()) <= width + 1e-3
-    assert abs(float(front.float().mean()) - 0.5) < 4 * math.sqrt(0.25 / n)
-    for offsets in (off_front[front], off_back[~front]):          # uniform within each window
-        counts = torch.histc(offsets, bins=10, min=-width, max=width)
-        expected = len(offsets) / 10
-        assert float((counts - expected).abs().max()) < 5 * math.sqrt(expected)
-    # the elevations are drawn as without the windows: the same y for the same seed
-    plain = V.sample_views(n, distribution, seed=5, **kwargs)
-    assert torch.equal(v[:, 1], plain[:, 1])
-
-
-@pytest.mark.parametrize("width", [0.0, -1.0, 91.0, float("nan"), True, "60"])
-def test_azimuth_width_refuses_a_bad_width_and_the_distributions_that_would_ignore_it(width):
-    with pytest.raises(ValueError, match=r"azimuth_width: expected the half-width W.*0 < W <= 90"):
-        V.sample_views(3, "band", elevation=(0.0, 30.0), azimuth_width=width)
-    with pytest.raises(ValueError, match="azimuth_width is read by the 'sphere' and 'band' distributions only"):
-        V.sample_views(3, "ring", elevation=20.0, azimuth_width=60.0)
-    with pytest.raises(ValueError, match="azimuth_width is read by the 'sphere' and 'band' distributions only"):
-        V.sample_views(3, "sides", elevation=(0.0, 30.0), azimuth_width=60.0)

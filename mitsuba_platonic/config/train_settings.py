@@ -18,8 +18,7 @@ from dataclasses import dataclass, field
 from typing import List, Optional, Union
 
 from ..settings_checks import ConfigError, check_elevation, choice, non_negative, positive
-from ..errors import UserError
-from ..views import DISTRIBUTIONS, check_azimuth_width
+from ..views import DISTRIBUTIONS
 
 __all__ = ["TrainConfig", "TASKS", "MODES", "MODES_3D", "REC_TARGETS", "REC_LOSSES", "REC_CHANNELS", "POSES", "LIGHTS", "PRGAN",
            "LOSS_WEIGHTS", "LOSSES", "ROLLS", "AUGMENTS", "PHOTO_AUGMENTS"]
@@ -74,10 +73,6 @@ class TrainConfig:
     (docs/training.md, "The measurements").
     view_distribution, elevation: p_view, where the random views are drawn; for photos, the band the
     photos' cameras were in ('band', [-10, 40]).
-    azimuth_share: with azimuth_width, the share of the random views drawn in its windows (the rest at every azimuth).
-    azimuth_width: null (every azimuth), or W in degrees (0 < W <= 90; reconstruction, 'sphere' or 'band'): the
-    random views' azimuths within ±W of the input camera's and of its back, half each, so that a collection
-    photographed mostly from the sides is judged where its cameras stood (:func:`mitsuba_platonic.views.sample_views`).
     pose, pose_weight: where G's volume stands, 'input' (in the input camera's frame, the paper's view-space
     reconstruction, where G builds every object upright whatever the elevation) | 'elevation'
     (reconstruction, mode 'platonic'): G builds the object upright in its own frame, a pose head reads the
@@ -160,8 +155,6 @@ class TrainConfig:
     random_views: int = 1
     view_distribution: str = "sphere"
     elevation: Optional[Union[float, List[float]]] = None
-    azimuth_width: Optional[float] = None
-    azimuth_share: float = 1.0
     loss: str = "nonsaturating"
     gp_weight: float = 10.0
     rec_weight: float = 5.0
@@ -203,17 +196,6 @@ class TrainConfig:
         choice("train.task", self.task, TASKS)
         choice("train.mode", self.mode, MODES)
         choice("train.view_distribution", self.view_distribution, DISTRIBUTIONS)
-        if not 0.0 <= self.azimuth_share <= 1.0:
-            raise ConfigError(f"train.azimuth_share: expected a share in [0, 1], got {self.azimuth_share!r}")
-        if self.azimuth_width is not None:
-            try:
-                check_azimuth_width(self.azimuth_width, "train.azimuth_width")
-            except UserError as e:
-                raise ConfigError(str(e)) from None
-            if self.task != "reconstruction" or self.view_distribution not in ("sphere", "band"):
-                raise ConfigError(f"train.azimuth_width: the windows about the input camera need task "
-                                  f"'reconstruction' and view_distribution 'sphere' or 'band'; got task "
-                                  f"{self.task!r}, view_distribution {self.view_distribution!r}")
         choice("train.loss", self.loss, LOSSES)
         positive("train.batch_size", self.batch_size)
         positive("train.random_views", self.random_views)

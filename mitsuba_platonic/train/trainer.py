@@ -252,13 +252,6 @@ class Trainer(BaselineModes):
         if t.view_distribution != "sphere":
             e = t.elevation if t.elevation is not None else DEFAULT_ELEVATION[t.view_distribution]
             kwargs["elevation"] = tuple(e) if isinstance(e, list) else e
-        if getattr(t, "azimuth_width", None) is not None:
-            windowed = sample_views(n, t.view_distribution, seed=g, azimuth_width=t.azimuth_width, **kwargs)
-            if t.azimuth_share >= 1.0:
-                return windowed
-            every = sample_views(n, t.view_distribution, seed=g, **kwargs)
-            pick = torch.rand(n, generator=g) < t.azimuth_share          # each view in the windows with that chance
-            return torch.where(pick[:, None], windowed, every)
         return sample_views(n, t.view_distribution, seed=g, **kwargs)
 
     def _all_sum(self, x: torch.Tensor) -> torch.Tensor:
