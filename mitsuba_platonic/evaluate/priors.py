@@ -299,8 +299,8 @@ def contradictions(priors: Sequence[Prior], evidence: RoundEvidence) -> List[str
             f"\"Shape priors and the collection's evidence\"): a body longer than it is wide (an animal, a vehicle, a "
             f"chair, an aeroplane) or photos taken mostly from the side. With these priors every reconstruction "
             f"comes out turned on a lathe, as broad end-on as from the side; do not trust its sides. Turning the round "
-            f"priors off (`{sets}`) was measured no better on the photo suite's animals and aeroplanes, and worse on "
-            f"the aeroplanes (docs/training.md, \"What the photo recipe assumes\")."]
+            f"priors off (`{sets}`) was measured no better on the photo suite's animals and worse on its "
+            f"aeroplanes (docs/training.md, \"What the photo recipe assumes\")."]
 
 
 def _value(v: Any) -> str:
