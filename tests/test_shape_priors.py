@@ -42,6 +42,12 @@ def test_photos_yaml_lists_its_round_priors_and_the_three_flags_remove_them():
     assert plain == {"train.view_distribution"}
 
 
+def test_read_azimuths_replace_every_azimuth_in_the_list_of_what_the_views_assume():
+    listed = {p.key: p for p in P.priors_used(_photos_config("train.azimuth=read"))}
+    assert "train.view_distribution" not in listed and not listed["train.azimuth"].round
+    assert listed["train.azimuth"].value == "read" and "band -10°…40°" in listed["train.azimuth"].assumes
+
+
 def _ellipse(size, rx, ry, cx=None, cy=None):
     y, x = np.mgrid[0:size, 0:size] + 0.5
     cx = size / 2 if cx is None else cx
