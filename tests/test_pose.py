@@ -232,8 +232,8 @@ def test_read_azimuths_turn_each_view_to_a_readings_difference_and_keep_its_elev
                             nets={"A": _Readings(φ)}, azimuth_bank=torch.tensor([2.5], dtype=torch.float64))
     views = sample_views(6, "band", seed=1, elevation=(-10.0, 40.0))
     pick = torch.tensor([0.0, 0.3, 0.55, 0.8, 0.99, 0.1])    # bank [2.5, φ₀, φ₁, φ₂]: entries 0, 1, 2, 3, 3, 0
-    s = SimpleNamespace(z=torch.zeros(3, 4), views=views, azimuth_u=torch.stack([pick, torch.zeros(6)]),
-                        step=step, head_views=None, out={})
+    s = SimpleNamespace(z=torch.zeros(3, 4), views=views, azimuth_u=torch.stack([pick, torch.full((6,), 0.5)]),
+                        step=step, head_views=None)
     turned = Trainer._read_azimuths(owner, s)
     bank = [2.5] + φ
     assert torch.equal(s.head_views, views) and torch.allclose(owner.azimuth_bank, torch.tensor(bank, dtype=torch.float64))
@@ -246,34 +246,3 @@ def test_read_azimuths_turn_each_view_to_a_readings_difference_and_keep_its_elev
     for k, j in enumerate([0, 1, 2, 3, 3, 0]):
         ψ = math.degrees(bank[j] - φ[k // 2])
         assert abs((float(az[k]) - ψ + 180.0) % 360.0 - 180.0) < 1e-3, (k, float(az[k]), ψ)
-
-
-@pytest.mark.parametrize("bank,share", [([0.0, math.pi, 0.5 * math.pi, -0.5 * math.pi], 1.0),   # round the circle
-                                        ([1.0, 1.0, 1.0, 1.0], 0.0),                           # every photo alike
-                                        ([0.0, 0.0, 0.5 * math.pi, 0.5 * math.pi], 0.0),       # R̄ = 0.71
-                                        ([0.0, math.pi, math.acos(0.4), -math.acos(0.4)], 0.5)])  # R̄ = 0.2
-def test_read_views_fall_back_to_every_azimuth_as_the_readings_bunch(bank, share):
-    """The share of read views (after the ramp) is clamp((R₁ − R̄) / (R₁ − R₀), 0, 1), R̄ = |mean e^{iφ̂}| over
-    the bank and (R₀, R₁) = (0.1, 0.3): every view read where the readings balance round the circle, none
-    where they bunch (every photo read alike: a round class, whose head reads nothing), between otherwise;
-    views beyond the share keep p_view's azimuth."""
-    from mitsuba_platonic.train.trainer import AZIMUTH_BALANCE
-    assert AZIMUTH_BALANCE == (0.1, 0.3)
-    from types import SimpleNamespace
-    from mitsuba_platonic.views import sample_views, to_angles
-    φ = bank[-2:]                                            # the batch's two readings, the bank's last
-    owner = SimpleNamespace(cfg=SimpleNamespace(train=SimpleNamespace(random_views=1), run=SimpleNamespace(steps=100)),
-                            nets={"A": _Readings(φ)}, azimuth_bank=torch.tensor(bank[:-2], dtype=torch.float64))
-    views = sample_views(2, "band", seed=3, elevation=(-10.0, 40.0))
-    chance = torch.tensor([max(share - 1e-3, 0.0), share + 1e-3])    # under the share: read; over: p_view's
-    s = SimpleNamespace(z=torch.zeros(2, 4), views=views, azimuth_u=torch.stack([torch.zeros(2), chance]),
-                        step=100, head_views=None, out={})
-    turned = Trainer._read_azimuths(owner, s)
-    assert s.out["azimuth_read"] == pytest.approx(share, abs=1e-6)       # float32 readings
-    az, az0 = to_angles(turned)[0], to_angles(views)[0]
-    ψ = math.degrees(bank[0] - φ[0])                         # pick 0: the bank's first reading
-    assert abs((float(az[1]) - float(az0[1]) + 180.0) % 360.0 - 180.0) < 1e-3     # over the share: kept
-    if share > 1e-3:
-        assert abs((float(az[0]) - ψ + 180.0) % 360.0 - 180.0) < 1e-3, (float(az[0]), ψ)
-    else:
-        assert abs((float(az[0]) - float(az0[0]) + 180.0) % 360.0 - 180.0) < 1e-3

@@ -169,16 +169,13 @@ def _azimuth(ctx: StepContext, i_head: torch.Tensor, head_views: torch.Tensor, z
     φ_ω their azimuths about the upright object from the input camera's, z the inputs' codes (detached):
     the azimuth head learns that a render turned by φ_ω reads φ_ω more than the photo it was built from,
     so its readings of two photos differ by the turn between their cameras. A constant head scores
-    1 − cos φ_ω, not 0: nothing collapses. Logs ``loss_azimuth`` and ``azimuth_skill`` = 1 − L / mean (1 − cos φ_ω),
-    the share of a constant head's error the head removes (1: reads every turn, 0 or less: reads none)."""
+    1 − cos φ_ω, not 0: nothing collapses. Logs ``loss_azimuth``."""
     K = ctx.cfg.train.random_views
     φ_ω = to_angles(head_views, degrees=False)[0].to(ctx.device, i_head.dtype)
     codes = torch.cat([ctx.modules["E"](i_head), z.detach().repeat_interleave(K, 0)])
     φ_view, φ_input = ctx.modules["A"](codes).split(len(i_head))     # one use of A (DDP)
     loss = (1.0 - torch.cos(φ_view - φ_input - φ_ω)).mean()
-    floor = (1.0 - torch.cos(φ_ω)).mean()                           # what a head reading every render alike scores
     out["loss_azimuth"] = ctx.global_mean(loss)
-    out["azimuth_skill"] = 1.0 - out["loss_azimuth"] / max(ctx.global_mean(floor), 1e-6)
     return loss
 
 

@@ -120,10 +120,6 @@ __all__ = ["Trainer", "TASKS", "MODES", "MODES_3D", "REC_TARGETS", "POSES", "rin
 
 #: ``train.azimuth: read``: how many of the latest photo readings a view's partner azimuth is drawn from
 AZIMUTH_BANK = 256
-#: ``train.azimuth: read``: the readings' mean resultant length R̄ below which every view is read, and above which
-#: none is (linearly between): on the suite, R̄ ≤ 0.15 on both animal collections once the head has learnt,
-#: 0.25–0.5 on the round mushrooms, 0.4–0.7 on the aeroplanes (lab/photo-any-class.md, sixth round)
-AZIMUTH_BALANCE = (0.1, 0.3)
 #: ``train.azimuth: read``: the share of the run's steps over which read azimuths replace p_view's
 #: (linearly from none to all): the head reads nothing useful before G's renders have taught it
 AZIMUTH_RAMP = 0.25
@@ -348,8 +344,7 @@ class Trainer(BaselineModes):
         """``train.azimuth: read``: the random views turned to azimuths photos of the collection were taken
         from, relative to the input's. A reads the batch's azimuths φ̂ (held constant), which join the
         last :data:`AZIMUTH_BANK` readings; a view of photo i gets, with chance min(1, step / (
-        :data:`AZIMUTH_RAMP` · steps)) · clamp((R₁ − R̄) / (R₁ − R₀), 0, 1), R̄ the readings' mean resultant length
-        and (R₀, R₁) :data:`AZIMUTH_BALANCE`, the azimuth φ̂_j − φ̂_i of a reading j drawn from them, and keeps
+        :data:`AZIMUTH_RAMP` · steps)), the azimuth φ̂_j − φ̂_i of a reading j drawn from them, and keeps
         p_view's otherwise (the head reads nothing before it has learnt), its elevation always. p_view's
         views are kept as ``head_views``: the head is taught on renders from them (:meth:`_render`), never on
         the read ones, where a head that reads every photo alike would see only its own 0° and be right."""
@@ -361,11 +356,6 @@ class Trainer(BaselineModes):
         φ_j = self.azimuth_bank[(pick * len(self.azimuth_bank)).long().clamp(max=len(self.azimuth_bank) - 1)]
         ψ = torch.rad2deg(φ_j - φ.repeat_interleave(K))
         ramp = min(1.0, s.step / max(1.0, AZIMUTH_RAMP * self.cfg.run.steps))
-        # R̄ = |mean e^{iφ̂}| over the bank: 0 where the readings balance round the circle (every side, or two
-        # opposite sides), 1 where every photo reads alike (a head that reads nothing, as on a round class)
-        R̄ = float(torch.polar(torch.ones_like(self.azimuth_bank), self.azimuth_bank).mean().abs())
-        ramp *= min(1.0, max(0.0, (AZIMUTH_BALANCE[1] - R̄) / (AZIMUTH_BALANCE[1] - AZIMUTH_BALANCE[0])))
-        s.out["azimuth_read"] = ramp
         s.head_views = s.views                               # p_view's: the head learns on every azimuth
         az, el = to_angles(s.views)
         return from_angles(torch.where(chance < ramp, ψ, az), el)
