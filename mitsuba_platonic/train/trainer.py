@@ -108,6 +108,7 @@ from ..render.pytorch.closed_form import tilt
 from ..render.pytorch.single_scatter import daylights
 from ..views import DEFAULT_ELEVATION, from_angles, front_view, sample_views, to_angles
 from .augment import augment, augment_photos
+from .azimuth_choice import choose_azimuth
 from .baselines import BaselineModes, ring_views
 from .data import TrainingData
 from .losses import d_loss, gradient_penalty, hard_accuracy_counts, r1_penalty, soft_accuracy_counts
@@ -136,6 +137,8 @@ class Trainer(BaselineModes):
         if cfg.train.batch_size % world:
             raise ConfigError(f"train.batch_size: {cfg.train.batch_size} must be divisible by the "
                               f"number of processes ({world})")
+        # train.azimuth: auto: read or every azimuth, chosen from the photos' silhouettes before any network is built
+        cfg, self.azimuth_evidence = choose_azimuth(cfg, torch.cat([data.images, data.held_out]))
         needs_3d = cfg.train.mode in MODES_3D
         if needs_3d and data.volumes is None:
             raise ValueError(f"train.mode {cfg.train.mode!r} needs ground-truth volumes")
