@@ -166,13 +166,15 @@ def _azimuth(ctx: StepContext, i_head: torch.Tensor, head_views: torch.Tensor, z
              out: Dict[str, float]) -> torch.Tensor:
     """mean (1 − cos(A(E(I)) − A(z) − φ_ω)) over G's renders I = ``i_head`` (no gradient) from ``head_views``
     (p_view's, every azimuth),
-    φ_ω their azimuths about the upright object from the input camera's, z the inputs' codes (detached):
-    the azimuth head learns that a render turned by φ_ω reads φ_ω more than the photo it was built from,
+    φ_ω their azimuths about the upright object from the input camera's, z the inputs' codes (detached), E(I) read with no gradient, so the term trains A alone and E's codes
+    are shaped by the reconstruction, not by the reading: the azimuth head learns that a render turned by φ_ω reads φ_ω more than the photo it was built from,
     so its readings of two photos differ by the turn between their cameras. A constant head scores
     1 − cos φ_ω, not 0: nothing collapses. Logs ``loss_azimuth``."""
     K = ctx.cfg.train.random_views
     φ_ω = to_angles(head_views, degrees=False)[0].to(ctx.device, i_head.dtype)
-    codes = torch.cat([ctx.modules["E"](i_head), z.detach().repeat_interleave(K, 0)])
+    with torch.no_grad():                                            # the term trains A alone, not E
+        read = ctx.modules["E"](i_head)
+    codes = torch.cat([read, z.detach().repeat_interleave(K, 0)])
     φ_view, φ_input = ctx.modules["A"](codes).split(len(i_head))     # one use of A (DDP)
     loss = (1.0 - torch.cos(φ_view - φ_input - φ_ω)).mean()
     out["loss_azimuth"] = ctx.global_mean(loss)
