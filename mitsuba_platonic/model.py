@@ -45,7 +45,7 @@ from .config.loading import load_model
 from .data.photos import decode_image, prepare_image
 from .errors import UserError
 from .runtime import budget
-from .networks.nets import AzimuthHead, Encoder, Generator, LightHead, NetConfig, PoseHead, init_weights
+from .networks.nets import Encoder, Generator, LightHead, NetConfig, PoseHead, init_weights
 from .networks.photo_colours import photo_volume
 from .render.pytorch.closed_form import tilt
 from .render.settings import RenderSettings
@@ -67,8 +67,7 @@ def net_config(cfg: Any) -> NetConfig:
     (:meth:`~mitsuba_platonic.networks.settings.ModelConfig.net_config`), with the channels of its
     image formation, the PrGAN view code and the pose and light heads its train section asks for."""
     return cfg.model.net_config(CHANNELS[cfg.render.model], view_codes=view_codes(cfg),
-                                pose=cfg.train.pose == "elevation", light=cfg.train.light == "head",
-                                azimuth=cfg.train.azimuth == "read")
+                                pose=cfg.train.pose == "elevation", light=cfg.train.light == "head")
 
 
 def critic_config(cfg: Any) -> NetConfig:
@@ -118,8 +117,6 @@ class Model(nn.Module):
         self.P: Optional[PoseHead] = PoseHead(net.latent) if net.pose else None
         #: the light head (``train.light: head``), else None
         self.L: Optional[LightHead] = LightHead(net.latent) if net.light else None
-        #: the azimuth head (``train.azimuth: read``), else None
-        self.A: Optional[AzimuthHead] = AzimuthHead(net.latent) if net.azimuth else None
         if init:
             self.apply(init_weights)
 
@@ -254,16 +251,6 @@ class Model(nn.Module):
             raise UserError("this model estimates no elevation: it was trained with train.pose: input "
                             "(its reconstructions are in the input camera's frame as they come)")
         return self._eval(lambda: torch.rad2deg(self.P(self.E(images.to(self.device)))))
-
-    @torch.no_grad()
-    def estimate_azimuth(self, images: torch.Tensor) -> torch.Tensor:
-        """The input cameras' azimuths φ̂ in degrees, ``(B,)``, in the frame a model trained with
-        ``train.azimuth: read`` shares between its objects (only their differences mean anything);
-        a :class:`~mitsuba_platonic.errors.UserError` for a model without an azimuth head."""
-        self._needs_encoder()
-        if self.A is None:
-            raise UserError("this model reads no azimuth: it was trained with train.azimuth: every")
-        return self._eval(lambda: torch.rad2deg(self.A(self.E(images.to(self.device)))))
 
     @torch.no_grad()
     def estimate_light(self, images: torch.Tensor) -> Tuple[torch.Tensor, torch.Tensor]:

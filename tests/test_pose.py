@@ -198,51 +198,7 @@ def test_a_model_read_from_a_run_reconstructs_in_the_input_frame_and_estimates_t
     (["train.pose_weight=1.0"], "train.pose_weight: .*expected 0"),
     (["train.pose=elevation", "train.pose_weight=-1"], "train.pose_weight: expected a non-negative"),
     (["train.pose=object"], "train.pose: expected one of"),
-    (["train.azimuth=read"], "train.azimuth: 'read'.*pose 'input'"),
-    (["train.pose=elevation", "train.azimuth=read"], "train.azimuth: 'read'.*pose_weight 0"),
-    (["train.pose=elevation", "train.pose_weight=1", "train.azimuth=sides"], "train.azimuth: expected one of"),
 ])
 def test_config_rejects_a_pose_it_cannot_train(overrides, match):
     with pytest.raises(ConfigError, match=match):
         load_config(None, overrides)
-
-
-class _Readings(torch.nn.Module):
-    """An azimuth head that answers given readings (radians), one per photo, whatever the code."""
-
-    def __init__(self, φ):
-        super().__init__()
-        self.φ = torch.tensor(φ, dtype=torch.float64)
-
-    def forward(self, z):
-        return self.φ[: len(z)].to(z.dtype)
-
-
-@pytest.mark.parametrize("step,read", [(0, False), (500, True)])
-def test_read_azimuths_turn_each_view_to_a_readings_difference_and_keep_its_elevation(step, read):
-    """train.azimuth: read: a view of photo i is turned to φ̂_j − φ̂_i, j a reading of the bank, once the
-    ramp allows (step 500 of 2000 with AZIMUTH_RAMP = 0.25: every view); before, p_view's view is kept;
-    the head's views are always p_view's."""
-    from types import SimpleNamespace
-    from mitsuba_platonic.train.trainer import AZIMUTH_RAMP
-    from mitsuba_platonic.views import sample_views, to_angles
-    assert AZIMUTH_RAMP * 2000 <= 500
-    φ = [0.3, -2.0, 1.1]                                     # three photos, K = 2 views each
-    owner = SimpleNamespace(cfg=SimpleNamespace(train=SimpleNamespace(random_views=2), run=SimpleNamespace(steps=2000)),
-                            nets={"A": _Readings(φ)}, azimuth_bank=torch.tensor([2.5], dtype=torch.float64))
-    views = sample_views(6, "band", seed=1, elevation=(-10.0, 40.0))
-    pick = torch.tensor([0.0, 0.3, 0.55, 0.8, 0.99, 0.1])    # bank [2.5, φ₀, φ₁, φ₂]: entries 0, 1, 2, 3, 3, 0
-    s = SimpleNamespace(z=torch.zeros(3, 4), views=views, azimuth_u=torch.stack([pick, torch.full((6,), 0.5)]),
-                        step=step, head_views=None)
-    turned = Trainer._read_azimuths(owner, s)
-    bank = [2.5] + φ
-    assert torch.equal(s.head_views, views) and torch.allclose(owner.azimuth_bank, torch.tensor(bank, dtype=torch.float64))
-    az, el = to_angles(turned)
-    az0, el0 = to_angles(views)
-    assert torch.allclose(el, el0, atol=1e-4)
-    if not read:
-        assert torch.allclose(az, az0, atol=1e-4)
-        return
-    for k, j in enumerate([0, 1, 2, 3, 3, 0]):
-        ψ = math.degrees(bank[j] - φ[k // 2])
-        assert abs((float(az[k]) - ψ + 180.0) % 360.0 - 180.0) < 1e-3, (k, float(az[k]), ψ)

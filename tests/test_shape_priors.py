@@ -7,7 +7,6 @@ that are not round, and that warning in ``platonic quickstart --photos``'s repor
 import math
 
 import numpy as np
-import yaml
 import pytest
 import torch
 from PIL import Image
@@ -30,11 +29,9 @@ def test_photos_yaml_lists_its_round_priors_and_the_three_flags_remove_them():
     assert {k for k, p in listed.items() if p.round} == {"train.turn", "model.texture_turns", "model.offsets_behind"}
     assert listed["train.turn"].value == 1.0 and listed["model.texture_turns"].value == 4
     assert listed["model.offsets_behind"].value is False
-    for key in ("train.solidity", "train.pose", "train.azimuth", "train.colour_match", "model.photo_texture"):
+    for key in ("train.solidity", "train.pose", "train.view_distribution", "train.colour_match", "model.photo_texture"):
         assert key in listed and not listed[key].round, key
-    assert listed["train.azimuth"].value == "auto" and "band -10°…40°" in listed["train.azimuth"].assumes
-    every = {p.key: p for p in P.priors_used(_photos_config("train.azimuth=every"))}     # what auto chooses on round photos
-    assert "train.azimuth" not in every and every["train.view_distribution"].value == "band -10°…40°"
+    assert listed["train.view_distribution"].value == "band -10°…40°"
     assert all(p.assumes for p in listed.values())
     off = P.priors_used(_photos_config(*OFF))
     assert P.round_priors(off) == [] and not {"train.turn", "model.texture_turns", "model.offsets_behind"} & \
@@ -43,12 +40,6 @@ def test_photos_yaml_lists_its_round_priors_and_the_three_flags_remove_them():
     assert tuple(OFF) == P.ROUND_OFF                                  # the overrides the warning names
     plain = {p.key for p in P.priors_used(load_config(None, []))}    # the procedural default: no shape prior but D's views
     assert plain == {"train.view_distribution"}
-
-
-def test_read_azimuths_replace_every_azimuth_in_the_list_of_what_the_views_assume():
-    listed = {p.key: p for p in P.priors_used(_photos_config("train.azimuth=read"))}
-    assert "train.view_distribution" not in listed and not listed["train.azimuth"].round
-    assert listed["train.azimuth"].value == "read" and "band -10°…40°" in listed["train.azimuth"].assumes
 
 
 def _ellipse(size, rx, ry, cx=None, cy=None):
@@ -251,8 +242,3 @@ def test_quickstart_warns_where_its_round_priors_meet_lopsided_photos(tmp_path):
     assert stdout.rstrip().splitlines()[-1] == "platonic quickstart: " + P.warning_lines(warning)[0]
     evaluation = (tmp_path / "q" / "evaluation" / "report.md").read_text()   # platonic evaluate's report too
     assert "### Shape priors this run used" in evaluation and warning in evaluation
-    # train.azimuth: auto chose read on these lopsided photos, said so, and the run's config keeps the choice
-    (saved,) = list((tmp_path / "q").rglob("config.yaml"))
-    assert yaml.safe_load(saved.read_text())["train"]["azimuth"] == "read"
-    assert "train.azimuth: auto → read (the photos' median upper mirror asymmetry" in err
-    assert "| `train.azimuth` | read |" in report

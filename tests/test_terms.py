@@ -56,7 +56,7 @@ def test_the_registry_names_config_keys_and_step_fields_that_exist():
         assert term.weight is None or term.weight in keys, term
         assert set(term.reads) <= fields, term
     assert [t.name for t in G_TERMS] == ["adv2d", "adv3d", "adv3d", "colour_tv", "colour_offset", "depth_spread",
-                                         "turn", "solidity", "colour_match", "rec3d", "rec", "pose", "azimuth", "light"]
+                                         "turn", "solidity", "colour_match", "rec3d", "rec", "pose", "light"]
 
 
 @pytest.mark.parametrize("mode,task,target", list(itertools.product(MODES, TASKS, ("image", "volume"))))
@@ -292,55 +292,6 @@ def test_pose_teaches_the_head_the_elevations_of_gs_renders_and_not_g():
     assert float(value.detach()) == pytest.approx(2.0 * expected, rel=1e-9) and out["loss_pose"] == pytest.approx(expected)
     value.backward()
     assert i_view.grad is None and E.weight.grad.abs().sum() > 0 and P.weight.grad.abs().sum() > 0
-
-
-class _Identity(nn.Module):
-    """E that hands on its input's flattened values, for a head that reads them directly."""
-
-    def forward(self, x):
-        return x.flatten(1)
-
-
-def _azimuth_value(A, i_head, head_views, z, K):
-    out = {}
-    train = _train(pose="elevation", pose_weight=2.0, azimuth="read", random_views=K)
-    value = _value("azimuth", train, StepState(0, None, i_head=i_head, head_views=head_views, z=z, out=out),
-                   modules={"E": _Identity(), "A": A})
-    return value, out
-
-
-def _codes(azimuths_deg):
-    """Codes (B, 2) = (cos α, sin α): an AzimuthHead with W = I, b = 0 reads α from them exactly."""
-    a = torch.deg2rad(torch.tensor(azimuths_deg, dtype=torch.float64))
-    return torch.stack([a.cos(), a.sin()], 1)
-
-
-def test_azimuth_is_zero_for_a_head_that_reads_the_turn_between_a_render_and_its_photo():
-    from mitsuba_platonic.networks.nets import AzimuthHead
-    α = [30.0, -120.0]                                       # the photos' cameras in the objects' shared frame
-    views = sample_views(4, "band", seed=3, elevation=(-10.0, 40.0))          # K = 2 views per photo
-    ψ = to_angles(views)[0]
-    z = _codes(α).requires_grad_(True)
-    i_head = _codes([α[i // 2] + float(ψ[i]) for i in range(4)]).view(4, 2, 1, 1)   # renders read at α + ψ
-    A = AzimuthHead(2).double()
-    with torch.no_grad():
-        A.weight.copy_(torch.eye(2, dtype=torch.float64))
-        A.bias.zero_()
-    value, out = _azimuth_value(A, i_head, views, z, K=2)
-    assert float(value.detach()) == pytest.approx(0.0, abs=1e-12) and out["loss_azimuth"] == pytest.approx(0.0, abs=1e-12)
-
-
-def test_azimuth_of_a_head_that_reads_every_photo_alike_is_the_mean_of_one_minus_cos_of_the_turns():
-    from mitsuba_platonic.networks.nets import AzimuthHead
-    views = sample_views(3, "band", seed=8, elevation=(-10.0, 40.0))
-    i_head = _rand(3, 2, 1, 1, seed=14)
-    z = _rand(3, 2, seed=15).requires_grad_(True)
-    A = AzimuthHead(2).double()                             # W = 0, b = (1, 0): every reading 0°
-    value, out = _azimuth_value(A, i_head, views, z, K=1)
-    expected = sum(1.0 - math.cos(math.atan2(float(views[i, 0]), float(views[i, 2]))) for i in range(3)) / 3
-    assert out["loss_azimuth"] == pytest.approx(expected, rel=1e-9) and float(value.detach()) == pytest.approx(2 * expected)
-    value.backward()
-    assert z.grad is None and A.weight.grad.abs().sum() > 0     # the head learns; the photos' codes are held
 
 
 class _LightHead(nn.Module):

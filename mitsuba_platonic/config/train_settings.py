@@ -20,7 +20,7 @@ from typing import List, Optional, Union
 from ..settings_checks import ConfigError, check_elevation, choice, non_negative, positive
 from ..views import DISTRIBUTIONS
 
-__all__ = ["TrainConfig", "TASKS", "MODES", "MODES_3D", "REC_TARGETS", "REC_LOSSES", "REC_CHANNELS", "POSES", "AZIMUTHS", "LIGHTS", "PRGAN",
+__all__ = ["TrainConfig", "TASKS", "MODES", "MODES_3D", "REC_TARGETS", "REC_LOSSES", "REC_CHANNELS", "POSES", "LIGHTS", "PRGAN",
            "LOSS_WEIGHTS", "LOSSES", "ROLLS", "AUGMENTS", "PHOTO_AUGMENTS"]
 
 #: What E/G learn: reconstruct the input image, or generate from z ~ N(0, I).
@@ -41,10 +41,6 @@ REC_LOSSES = ("l2", "l1")
 REC_CHANNELS = ("all", "alpha")
 #: train.pose: G's volume in the input camera's frame, or upright and tilted by an elevation E reads
 POSES = ("input", "elevation")
-#: train.azimuth: the random views' azimuths about the upright object, every one (p_view's) or read:
-#: differences of the azimuths an azimuth head reads off the collection's photos; or auto: read where the
-#: collection's silhouettes say the class is not round, every one where they say it is (train/azimuth_choice.py)
-AZIMUTHS = ("every", "read", "auto")
 #: train.light: where the light of the input view's render comes from
 LIGHTS = ("prior", "head")
 #: The weights of the loss terms: each ≥ 0 (0: the term is off), checked by name.
@@ -85,15 +81,6 @@ class TrainConfig:
     choices"; docs/training.md, "The measurements"); pose_weight: λ of the term that teaches the head the elevations of
     G's own renders from those random views (0: none; only with 'elevation';
     docs/training.md, "The measurements").
-    azimuth: the random views' azimuths about the upright object (``pose: elevation``), 'every' (p_view's,
-    uniform) | 'read': an azimuth head A reads each photo's azimuth φ̂ from E's code, taught (with λ
-    ``pose_weight``) the relative azimuths of G's own renders, and a random view of photo i's volume is
-    drawn at φ̂_j − φ̂_i for a photo j of the recent batches: the views photos of the collection were
-    taken from, relative to this one's (lab/photo-any-class.md, fifth round) | 'auto' (``photos.yaml``): 'read'
-    where the photos' silhouettes (training and held out) contradict a round class (their median upper mirror asymmetry
-    above 0.25: docs/evaluation.md, "Shape priors and the collection's evidence"), 'every' otherwise, chosen
-    before the first step and written so into the run's ``config.yaml`` (:mod:`mitsuba_platonic.train.azimuth_choice`;
-    docs/training.md, "What the photo recipe assumes"; lab/photo-any-class.md, sixth round).
     rec_weight: λ of the input-view (reconstruction) term (the shipped configs: 10; the photo configs: 20,
     against the turn's pull towards round).
     rec_target: what that term compares, 'image' (the input image with the render of v at the input view:
@@ -185,7 +172,6 @@ class TrainConfig:
     d_roll: str = "none"
     pose: str = "input"
     pose_weight: float = 0.0
-    azimuth: str = "every"
     r1_weight: float = 0.0
     colour_tv: float = 0.0
     colour_match: float = 0.0
@@ -234,11 +220,6 @@ class TrainConfig:
         elif self.pose_weight > 0:
             raise ConfigError("train.pose_weight: the pose term trains the elevation head of train.pose "
                               f"'elevation'; with pose {self.pose!r} expected 0, got {self.pose_weight!r}")
-        choice("train.azimuth", self.azimuth, AZIMUTHS)
-        if self.azimuth != "every" and (self.pose != "elevation" or not self.pose_weight > 0):
-            raise ConfigError(f"train.azimuth: {self.azimuth!r} turns the random views about the upright object and teaches "
-                              "its head with the pose term, so it needs train.pose 'elevation' and "
-                              f"train.pose_weight > 0, got pose {self.pose!r}, pose_weight {self.pose_weight!r}")
         if self.turn > 0 and self.pose != "elevation":
             raise ConfigError("train.turn: the prior turns G's volume by a random angle about the object's vertical, which "
                               f"only an upright volume has, so it needs train.pose 'elevation', got {self.pose!r}")

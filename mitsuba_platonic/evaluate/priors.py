@@ -127,17 +127,7 @@ def priors_used(cfg: Any) -> List[Prior]:
     if t.pose == "elevation":
         out.append(Prior("train.pose", "elevation", "the object stands upright and each photo looks at it from an "
                          "elevation a pose head reads; G builds it in its own upright frame"))
-    if t.task == "reconstruction" and t.mode in ("platonic", "platonic3d") and t.azimuth == "auto":
-        out.append(Prior("train.azimuth", "auto", "the random views the critic judges against the photos are drawn "
-                         f"at the elevations of the {_band(t)}; where the photos' silhouettes say the class is not "
-                         "round, at the turns an azimuth head reads between the photos' cameras ('read'), and at every "
-                         "azimuth where they say it is round ('every'): a run's config.yaml says which it chose"))
-    elif t.task == "reconstruction" and t.mode in ("platonic", "platonic3d") and t.azimuth == "read":
-        out.append(Prior("train.azimuth", "read", "the random views the critic judges against the photos are "
-                         f"drawn at the elevations of the {_band(t)} and at the turns between the collection's "
-                         "photos' cameras, as an azimuth head reads them: a collection taken from the sides is "
-                         "judged from the sides, one taken from every side from everywhere"))
-    elif t.task == "reconstruction" and t.mode in ("platonic", "platonic3d"):
+    if t.task == "reconstruction" and t.mode in ("platonic", "platonic3d"):
         out.append(Prior("train.view_distribution", _band(t), "the random views the critic judges against the photos "
                          "are drawn at every azimuth: the photos are taken as showing the class from every side, "
                          "the sides as often as the front"))

@@ -36,7 +36,7 @@ from .net_settings import NetSettings
 from .photo_colours import COLOUR_MIN
 
 __all__ = ["NORMS", "UPSAMPLES", "INITS", "PRECISIONS", "NetConfig", "Encoder", "Generator", "Discriminator",
-           "VolumeDiscriminator", "PoseHead", "AzimuthHead", "LightHead", "ResizeConv3d", "init_weights", "init_critic_he", "init_he"]
+           "VolumeDiscriminator", "PoseHead", "LightHead", "ResizeConv3d", "init_weights", "init_critic_he", "init_he"]
 
 NORMS = ("batch", "instance", "none")
 #: How G doubles its resolution: the paper's transposed convolution (k4, s2, p1), or a nearest
@@ -78,7 +78,6 @@ class NetConfig(NetSettings):
     ``train.mode: prgan``: a one-hot of one of 8 ring views); 0: none, G sees z only.
     pose: whether a :class:`PoseHead` reads the input camera's elevation from z (``train.pose: elevation``).
     light: whether a :class:`LightHead` reads the photo's light from z (``train.light: head``).
-    azimuth: whether an :class:`AzimuthHead` reads the input camera's azimuth from z (``train.azimuth: read``).
 
     A config's model section builds it (:meth:`~mitsuba_platonic.networks.settings.ModelConfig.net_config`)."""
 
@@ -87,7 +86,6 @@ class NetConfig(NetSettings):
     view_codes: int = 0
     pose: bool = False
     light: bool = False
-    azimuth: bool = False
 
     def validate(self) -> "NetConfig":
         if self.resolution not in RESOLUTIONS:
@@ -111,8 +109,6 @@ class NetConfig(NetSettings):
             raise ValueError(f"pose must be True or False, got {self.pose!r}")
         if not isinstance(self.light, bool):
             raise ValueError(f"light must be True or False, got {self.light!r}")
-        if not isinstance(self.azimuth, bool):
-            raise ValueError(f"azimuth must be True or False, got {self.azimuth!r}")
         if self.precision not in PRECISIONS:
             raise ValueError(f"precision must be one of {PRECISIONS}, got {self.precision!r}")
         if not isinstance(self.photo_colour, bool):
@@ -371,28 +367,6 @@ class PoseHead(nn.Module):
             raise ValueError(f"P expects codes (B, {self.weight.shape[0]}), got {tuple(z.shape)}")
         return (math.pi / 2) * torch.tanh(z @ self.weight + self.bias)
 
-
-class AzimuthHead(nn.Module):
-    """A: E's code z ``(B, latent)`` → the azimuth φ̂ ``(B,)`` in radians of the input camera about
-    the object's vertical, in a frame the collection's objects share,
-
-        (c, s) = W z + b,    φ̂ = atan2(s, c)
-
-    W starts at 0 and b at (1, 0) (every reading 0°). Nothing fixes the frame's origin: only
-    differences of readings mean anything, and ``train.azimuth: read`` teaches it differences,
-    those of G's renders from known relative azimuths (:mod:`mitsuba_platonic.train.terms`).
-    """
-
-    def __init__(self, latent: int):
-        super().__init__()
-        self.weight = nn.Parameter(torch.zeros(2, latent))
-        self.bias = nn.Parameter(torch.tensor([1.0, 0.0]))
-
-    def forward(self, z: torch.Tensor) -> torch.Tensor:
-        if z.dim() != 2 or z.shape[1] != self.weight.shape[1]:
-            raise ValueError(f"A expects codes (B, {self.weight.shape[1]}), got {tuple(z.shape)}")
-        c, s = (z @ self.weight.T + self.bias).unbind(1)
-        return torch.atan2(s, c)
 
 
 class LightHead(nn.Module):

@@ -74,15 +74,13 @@ class ModelConfig(NetSettings):
                               "model.photo_texture: true")
         return self
 
-    def net_config(self, channels: int, view_codes: int = 0, pose: bool = False, light: bool = False,
-                   azimuth: bool = False) -> NetConfig:
+    def net_config(self, channels: int, view_codes: int = 0, pose: bool = False, light: bool = False) -> NetConfig:
         """E's and G's shapes and arithmetic: this section's :data:`NET_KEYS`, with ``channels`` for the volumes
         and images (1 or 4: the image formation's), ``view_codes`` (the length of the view code
-        appended to z, 0: none), ``pose`` (a pose head), ``light`` (a light head) and ``azimuth`` (an azimuth head), which the
+        appended to z, 0: none), ``pose`` (a pose head) and ``light`` (a light head), which the
         config's other sections decide."""
         return NetConfig(**{key: getattr(self, key) for key in NET_KEYS}, volume_channels=channels,
-                         image_channels=channels, view_codes=view_codes, pose=pose, light=light,
-                         azimuth=azimuth).validate()
+                         image_channels=channels, view_codes=view_codes, pose=pose, light=light).validate()
 
     def critic_config(self, net: NetConfig) -> NetConfig:
         """The critics' (D's, D3's) shapes: ``net`` (:meth:`net_config`'s) at ``critic_width`` when it is set."""

@@ -33,7 +33,6 @@ from ..files.outputs import output_lock
 from ..files.resources import config_path
 from ..model import Model
 from ..train import run as training_run
-from ..train.folder import read_run_config
 from ..train.memory_fit import check_model_fits
 from .procedural import QUICKSTART_PARTS, claim_quickstart_folder, stopped
 
@@ -104,7 +103,6 @@ def _run_photo_quickstart(photos: Path, out: Path, cfg: Any, run_dir: Path, trai
     evaluation = evaluation_report.evaluate_runs([run_dir], out / "evaluation", progress=progress)
     results = json.loads((evaluation.parent / "results.json").read_text())
     model = Model.from_checkpoint(run_dir)
-    chosen = read_run_config(run_dir / "config.yaml")        # the run's own: what train.azimuth: auto chose
 
     recon_dir = out / "reconstructions"
     written = [str(p) for p in export_held_out(model, held, recon_dir)]
@@ -117,7 +115,7 @@ def _run_photo_quickstart(photos: Path, out: Path, cfg: Any, run_dir: Path, trai
              f"{cfg.render.backend}, {t_train:.0f} s",
              f"- input view (the photo is the truth there): MAE {means['input_view_mae']:.4f}, silhouette IoU "
              f"{means['input_view_iou']:.3f}; {cards['not_cards']} of {cards['n']} reconstructions are not front cards",
-             "", *priors_markdown(priors_used(chosen), round_evidence(torch.cat([train_photos, held]))),
+             "", *priors_markdown(priors_used(cfg), round_evidence(torch.cat([train_photos, held]))),
              "## Judged from every side", "",
              "Accuracy of a fresh critic telling the held-out photos from renders of their reconstructions, per "
              "band of turntable angle from the input view: 0.5, the renders pass for photos; 1, they never do. "

@@ -124,16 +124,9 @@ def prepare_run_folder(run_dir: Path, cfg: Config, resume: bool, config_file: Op
         if diff is not None:
             raise RunError(f"--resume: the {diff.split('.')[0]} settings differ from {run_dir}/config.yaml "
                            f"({diff}); an exact continuation needs the same config (only run.* may change)")
-    write_run_config(run_dir, cfg, config_file)
-
-
-def write_run_config(run_dir: Path, cfg: Config, config_file: Optional[Path] = None) -> None:
-    """``cfg`` as ``run_dir/config.yaml`` (atomically: ``--resume`` and ``load_run`` read it), unless that
-    file is ``config_file``, the user's ``--config``, which is never written."""
-    if _same_file(config_file, run_dir / "config.yaml"):
-        return
-    text = yaml.safe_dump(cfg.to_dict(), sort_keys=False)
-    atomic_write(run_dir / "config.yaml", lambda p: p.write_text(text))
+    if not _same_file(config_file, run_dir / "config.yaml"):
+        text = yaml.safe_dump(cfg.to_dict(), sort_keys=False)
+        atomic_write(run_dir / "config.yaml", lambda p: p.write_text(text))
 
 
 def _same_file(a: Optional[Path], b: Path) -> bool:

@@ -48,8 +48,6 @@ renderer; rank 0 writes checkpoints, logs and samples.
 
 from __future__ import annotations
 
-import copy
-import sys
 import time
 import warnings
 from pathlib import Path
@@ -68,9 +66,7 @@ from ..model import Model
 from ..runtime.progress import progress_bar
 from .data import TrainingData, load_training_data
 from .memory_fit import check_model_fits
-from .folder import (RUN_MARKER, RUN_PARTS, claim_run_folder, prepare_run_folder, read_run_config, run_lock,
-                     write_run_config)
-from .azimuth_choice import choice_line
+from .folder import RUN_MARKER, RUN_PARTS, claim_run_folder, prepare_run_folder, read_run_config, run_lock
 from .checkpoints import Checkpoints, non_finite
 from .logs import SAMPLE_VIEWS, ScalarLog, write_samples
 from .compute import SERIAL_MARCHER_MAX_RESOLUTION, distributed, drjit_threads, run_device, training_threads
@@ -141,8 +137,6 @@ def _train(cfg: Config, run_dir: Path, resume: bool, progress: bool, stop_at: Op
            rank: int, world: int, local_rank: int, config_file: Optional[Path] = None) -> Path:
 
     device = run_device(cfg, local_rank)
-    if resume and cfg.train.azimuth == "auto":
-        cfg = _resumed_choice(cfg, run_dir)
     if rank == 0:
         _warn_ignored_settings(cfg)
         prepare_run_folder(run_dir, cfg, resume, config_file)
@@ -152,12 +146,6 @@ def _train(cfg: Config, run_dir: Path, resume: bool, progress: bool, stop_at: Op
     if rank == 0:
         _warn_batch_beyond_images(cfg, len(data.images))
     trainer = Trainer(cfg, data, device, rank, world)
-    if trainer.cfg is not cfg:                               # train.azimuth: auto, chosen from the photos
-        cfg = trainer.cfg
-        if rank == 0:
-            print(f"platonic train: {choice_line(cfg.train.azimuth, trainer.azimuth_evidence)}", file=sys.stderr,
-                  flush=True)
-            write_run_config(run_dir, cfg, config_file)      # the run is what was chosen: --resume, evaluate, view
     checkpoints = Checkpoints(run_dir, cfg)                  # and the newest good one on disk
     start = checkpoints.resume(trainer, device, warn=rank == 0) if resume else 0
     pool = data.held_out if len(data.held_out) else data.images
@@ -256,21 +244,6 @@ def _close_loop(cfg: Config, clean: bool, step: int, rank: int, world: int, trai
         if clean:
             dist.barrier()                                   # rank 0 has written the last checkpoint
         dist.destroy_process_group()
-
-
-def _resumed_choice(cfg: Config, run_dir: Path) -> Config:
-    """``--resume`` with ``train.azimuth: auto``: the choice the run made before (its ``config.yaml``; the
-    same photos give the same evidence), so that the configs compare equal; ``cfg`` as it is where that
-    file cannot be read (the folder's checks then say why)."""
-    try:
-        saved = read_run_config(run_dir / "config.yaml").train.azimuth
-    except RunError:
-        return cfg
-    if saved not in ("read", "every"):
-        return cfg
-    chosen = copy.deepcopy(cfg)
-    chosen.train.azimuth = saved
-    return chosen
 
 
 def _training_data(cfg: Config, run_dir: Path, resume: bool, progress: bool, rank: int, world: int) -> TrainingData:

@@ -45,10 +45,7 @@ class StepState:
       (augmented with ``train.photo_augment``); ``z_prior`` (B, latent) z ~ N(0, I) (global);
       ``views`` (b K, 3) the random views ω ~ p_view (PrGAN: ring views, ``ring_k`` their indices);
       ``eps`` (b K,) WGAN-GP's ε; ``roll_real``/``roll_fake`` D's in-plane angles (``train.d_roll``) or
-      None; ``real_volumes`` D3's ground-truth batch (3D modes) or None; ``azimuth_u`` (2, b K) uniform
-      draws that pick each view's partner photo and whether its azimuth is read (``train.azimuth: read``) or None,
-      and ``head_views`` (b K, 3) the views p_view drew before they were read, from which ``i_head`` = R(ω, v_view)
-      (detached) teaches the azimuth head;
+      None; ``real_volumes`` D3's ground-truth batch (3D modes) or None;
     - generated: ``z`` = E(x) or z_prior; ``v`` G's volumes; ``offsets`` ℓ, G's colour offsets from the
       photo's (``model.photo_colour``) or None; ``v_view`` the volume of each random view (b K);
       ``v_input`` the input view's volume (b; with ``train.pose: elevation`` tilted by θ̂);
@@ -69,9 +66,6 @@ class StepState:
     roll_real: Optional[torch.Tensor] = None
     roll_fake: Optional[torch.Tensor] = None
     real_volumes: Optional[torch.Tensor] = None
-    azimuth_u: Optional[torch.Tensor] = None
-    head_views: Optional[torch.Tensor] = None
-    i_head: Optional[torch.Tensor] = None
     z: Optional[torch.Tensor] = None
     v: Optional[torch.Tensor] = None
     offsets: Optional[torch.Tensor] = None

@@ -27,7 +27,6 @@ rec3d                     ``rec_weight``   mean (v_input − v*)², v* the image
 rec                       ``rec_weight``   mean (I_front − x)² (``rec_loss: l1``: mean |I_front − x|;
                                            ``rec_channels: alpha``: the opacity channel alone)
 pose                      ``pose_weight``  mean (P(E(I_view)) − asin ω_y)², I_view detached
-azimuth (``read``)        ``pose_weight``  mean (1 − cos(A(E(I_head)) − A(z) − φ_ω)), I_head = R(ω ~ p_view, v), z detached
 light                     (none)           mean (1 − L_ω(E(I_view)) · ω_s^cam) + mean ((L_s(E(I_view)) − s)/(s₁ − s₀))²
 ========================  ===============  ====================================================================
 
@@ -162,25 +161,6 @@ def _pose(ctx: StepContext, i_view: torch.Tensor, views: torch.Tensor, out: Dict
     return loss
 
 
-def _azimuth(ctx: StepContext, i_head: torch.Tensor, head_views: torch.Tensor, z: torch.Tensor,
-             out: Dict[str, float]) -> torch.Tensor:
-    """mean (1 − cos(A(E(I)) − A(z) − φ_ω)) over G's renders I = ``i_head`` (no gradient) from ``head_views``
-    (p_view's, every azimuth),
-    φ_ω their azimuths about the upright object from the input camera's, z the inputs' codes (detached), E(I) read with no gradient, so the term trains A alone and E's codes
-    are shaped by the reconstruction, not by the reading: the azimuth head learns that a render turned by φ_ω reads φ_ω more than the photo it was built from,
-    so its readings of two photos differ by the turn between their cameras. A constant head scores
-    1 − cos φ_ω, not 0: nothing collapses. Logs ``loss_azimuth``."""
-    K = ctx.cfg.train.random_views
-    φ_ω = to_angles(head_views, degrees=False)[0].to(ctx.device, i_head.dtype)
-    with torch.no_grad():                                            # the term trains A alone, not E
-        read = ctx.modules["E"](i_head)
-    codes = torch.cat([read, z.detach().repeat_interleave(K, 0)])
-    φ_view, φ_input = ctx.modules["A"](codes).split(len(i_head))     # one use of A (DDP)
-    loss = (1.0 - torch.cos(φ_view - φ_input - φ_ω)).mean()
-    out["loss_azimuth"] = ctx.global_mean(loss)
-    return loss
-
-
 def _light(ctx: StepContext, i_view: torch.Tensor, views: torch.Tensor, seed: int,
            out: Dict[str, float]) -> torch.Tensor:
     """L_light over G's renders ``i_view`` (detached) from ``views``, lit by the prior's lights for
@@ -216,8 +196,6 @@ G_TERMS: Tuple[Term, ...] = (
     Term("rec", "rec_weight", lambda t: _with_images(t) and t.task == "reconstruction" and t.rec_target == "image",
          ("i_front", "x", "out"), _rec),
     Term("pose", "pose_weight", _prior("pose_weight"), ("i_view", "views", "out"), _pose),
-    Term("azimuth", "pose_weight", lambda t: _with_images(t) and t.azimuth == "read",
-         ("i_head", "head_views", "z", "out"), _azimuth),
     Term("light", None, lambda t: _with_images(t) and t.light == "head", ("i_view", "views", "seed", "out"), _light),
 )
 

@@ -106,9 +106,8 @@ from ..networks.nets import Discriminator, VolumeDiscriminator, init_critic_he, 
 from ..networks.photo_colours import photo_volume
 from ..render.pytorch.closed_form import tilt
 from ..render.pytorch.single_scatter import daylights
-from ..views import DEFAULT_ELEVATION, from_angles, front_view, sample_views, to_angles
+from ..views import DEFAULT_ELEVATION, front_view, sample_views, to_angles
 from .augment import augment, augment_photos
-from .azimuth_choice import choose_azimuth
 from .baselines import BaselineModes, ring_views
 from .data import TrainingData
 from .losses import d_loss, gradient_penalty, hard_accuracy_counts, r1_penalty, soft_accuracy_counts
@@ -118,12 +117,6 @@ from .step_state import D_AUGMENT, PHOTO_AUGMENT, RENDER, StepState, side_genera
 from .terms import active_terms, g_terms
 
 __all__ = ["Trainer", "TASKS", "MODES", "MODES_3D", "REC_TARGETS", "POSES", "ring_views"]
-
-#: ``train.azimuth: read``: how many of the latest photo readings a view's partner azimuth is drawn from
-AZIMUTH_BANK = 256
-#: ``train.azimuth: read``: the share of the run's steps over which read azimuths replace p_view's
-#: (linearly from none to all): the head reads nothing useful before G's renders have taught it
-AZIMUTH_RAMP = 0.25
 
 
 class Trainer(BaselineModes):
@@ -137,8 +130,6 @@ class Trainer(BaselineModes):
         if cfg.train.batch_size % world:
             raise ConfigError(f"train.batch_size: {cfg.train.batch_size} must be divisible by the "
                               f"number of processes ({world})")
-        # train.azimuth: auto: read or every azimuth, chosen from the photos' silhouettes before any network is built
-        cfg, self.azimuth_evidence = choose_azimuth(cfg, torch.cat([data.images, data.held_out]))
         needs_3d = cfg.train.mode in MODES_3D
         if needs_3d and data.volumes is None:
             raise ValueError(f"train.mode {cfg.train.mode!r} needs ground-truth volumes")
@@ -162,9 +153,6 @@ class Trainer(BaselineModes):
         self.ring = ring_views(cfg.train.elevation if cfg.train.elevation is not None else 0.0) \
             if cfg.train.mode == "prgan" else None
         self.terms = active_terms(cfg.train)
-        #: train.azimuth: read: the latest readings φ̂ of photos, radians (not in the checkpoint: refilled in
-        #: AZIMUTH_BANK / batch_size steps after a resume)
-        self.azimuth_bank = torch.zeros(0, dtype=torch.float64)
 
     def _networks(self, needs_3d: bool) -> nn.ModuleDict:
         """E, G (``model``), D, the heads and D3, initialised from the run's seed: one draw for all,
@@ -176,8 +164,6 @@ class Trainer(BaselineModes):
         nets = {"E": self.model.E, "G": self.model.G, "D": Discriminator(critic)}
         if self.model.P is not None:                         # train.pose: elevation (starts at 0°)
             nets["P"] = self.model.P
-        if self.model.A is not None:                         # train.azimuth: read (starts at 0°)
-            nets["A"] = self.model.A
         if self.model.L is not None:                         # train.light: head (starts at a sun overhead)
             nets["L"] = self.model.L
         if needs_3d:
@@ -202,7 +188,7 @@ class Trainer(BaselineModes):
         groups = [{"params": self.nets["G"].parameters(), "lr": t.lr_g}]
         if t.task == "reconstruction":
             groups.append({"params": self.nets["E"].parameters(), "lr": t.lr_e})
-        for head in ("P", "A", "L"):                         # the pose, azimuth and light heads learn with E
+        for head in ("P", "L"):                              # the pose and light heads learn with E
             if head in self.nets:
                 groups.append({"params": self.nets[head].parameters(), "lr": t.lr_e})
         self.opt_g = torch.optim.Adam(groups, betas=betas)
@@ -311,8 +297,6 @@ class Trainer(BaselineModes):
         s.roll_real, s.roll_fake = self._roll_angles(g, s.views)
         if "D3" in self.nets:                                # 'platonic3d'
             s.real_volumes = self._real_volumes(g)
-        if "A" in self.nets:                                 # train.azimuth: read (drawn last: other runs' draws stay)
-            s.azimuth_u = self._shard(torch.rand(2, B * K, generator=g).T).T
         return s
 
     def _roll_angles(self, g: torch.Generator, views: torch.Tensor) -> Tuple[Optional[torch.Tensor], Optional[torch.Tensor]]:
@@ -336,32 +320,10 @@ class Trainer(BaselineModes):
         self.nets.train()
         rec = self.cfg.train.task == "reconstruction"
         s.z = self.modules["E"](s.x) if rec else self._shard(s.z_prior).to(self.device)
-        if s.azimuth_u is not None:
-            s.views = self._read_azimuths(s)
         if s.ring_k is not None:
             self._ring_generate(s)
         else:
             self._volumes(s)
-
-    def _read_azimuths(self, s: StepState) -> torch.Tensor:
-        """``train.azimuth: read``: the random views turned to azimuths photos of the collection were taken
-        from, relative to the input's. A reads the batch's azimuths φ̂ (held constant), which join the
-        last :data:`AZIMUTH_BANK` readings; a view of photo i gets, with chance min(1, step / (
-        :data:`AZIMUTH_RAMP` · steps)), the azimuth φ̂_j − φ̂_i of a reading j drawn from them, and keeps
-        p_view's otherwise (the head reads nothing before it has learnt), its elevation always. p_view's
-        views are kept as ``head_views``: the head is taught on renders from them (:meth:`_render`), never on
-        the read ones, where a head that reads every photo alike would see only its own 0° and be right."""
-        K = self.cfg.train.random_views
-        with torch.no_grad():                                # the plain module: DDP sees one use of A
-            φ = self.nets["A"](s.z.detach()).cpu().double()
-        self.azimuth_bank = torch.cat([self.azimuth_bank, φ])[-AZIMUTH_BANK:]
-        pick, chance = s.azimuth_u
-        φ_j = self.azimuth_bank[(pick * len(self.azimuth_bank)).long().clamp(max=len(self.azimuth_bank) - 1)]
-        ψ = torch.rad2deg(φ_j - φ.repeat_interleave(K))
-        ramp = min(1.0, s.step / max(1.0, AZIMUTH_RAMP * self.cfg.run.steps))
-        s.head_views = s.views                               # p_view's: the head learns on every azimuth
-        az, el = to_angles(s.views)
-        return from_angles(torch.where(chance < ramp, ψ, az), el)
 
     def _volumes(self, s: StepState) -> None:
         """v = G(z) (``model.photo_colour``: with colour offsets ℓ from the photo's), each volume once
@@ -392,9 +354,6 @@ class Trainer(BaselineModes):
         t = self.cfg.train
         s.seed = side_seed(self.cfg.run.seed, s.step, RENDER, self.rank) >> 2
         s.i_view = self.render(s.v_view, s.views.to(self.device), s.seed)
-        if s.head_views is not None:                         # train.azimuth: read: the head's renders, at every azimuth
-            with torch.no_grad():
-                s.i_head = self.render(s.v_view.detach(), s.head_views.to(self.device), s.seed + 2)
         if t.task != "reconstruction" or t.rec_target != "image":
             return
         front = front_view(s.x.shape[0]).to(self.device)
