@@ -53,8 +53,8 @@ browser to report its canvas, and for the canvas' size to hold (:data:`CANVAS_SE
 docks its control panel beside the canvas after it first reports); meanwhile, once the canvas has
 a size, the page shows its first look: the closed form at the volume's resolution N at that
 canvas' aspect (a few ms, "moving" on the frame line, ``first look while the canvas settles``),
-so that a frame is drawn a quarter of a second and a full frame's render (the closed form at 128²
-of a 32³ volume resamples it to 128³: 0.5–2 s on 2 cores) sooner. The frame line and the settings line
+so that a frame is drawn about a second and a full frame's render (the closed form at 128² of a
+32³ volume resamples it to 128³: 0.5–2 s on 2 cores) sooner. The frame line and the settings line
 both print the W×H rendered.
 
 The GUI: renderer, formation, resolution, the path tracer's spp, buttons that orbit the camera by
@@ -148,11 +148,8 @@ CONNECT_S = 1.0
 #: A page's frames wait this long from its connection for the browser to report its canvas' size
 #: (with its first camera), so that its first frame has the canvas' aspect; then a square one is drawn.
 CANVAS_S = 10.0
-#: A canvas' size must hold this long before a frame is rendered for it (:meth:`ClientView._canvas_settled`):
-#: long enough to see a resized window come to rest. Headless Chromium at 1280×720 and 960×540 reported
-#: one size only, the canvas beside the docked panel, so each second here was a second added to the
-#: first full frame (at 1.0 s the first full frame came 4.99–5.30 s after the command, idle, on 2 cores).
-CANVAS_SETTLE_S = 0.25
+#: A canvas' size must hold this long before a frame is rendered for it (:meth:`ClientView._canvas_settled`).
+CANVAS_SETTLE_S = 1.0
 #: The page's controls as it opens: the renderer and the path tracer's spp (the formation: the
 #: volume's richest, EA or AO; the resolution: the volume's).
 INITIAL_RENDERER, INITIAL_SPP = "closed form", 4
